@@ -1,0 +1,263 @@
+"""The Gymnasium env a compiled spec becomes."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+from typing import Any, SupportsFloat
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from visualenv.compiler.program import Program, compile_spec
+from visualenv.errors import SpecError, StepError, did_you_mean
+from visualenv.expr.functions import RandomSource
+from visualenv.render.base import RenderPlan, Renderer, observation_space, create_renderer
+from visualenv.spec.loader import LoadedSpec, load_spec
+
+
+class VisualEnv(gym.Env):
+    """A Gymnasium env compiled from a visualenv spec.
+
+    ## Observation space
+    With a renderer (the default when the spec has an ``observation``): what the
+    spec's camera sees, ``Box(0, 255, (H, W, C), uint8)`` with C = 1 for
+    grayscale or depth and 3 for RGB; several cameras give a ``Dict`` of those.
+    Without (``render=False``, or no ``observation`` in the spec): the state
+    variables marked ``observe`` in declared order, ``Box(-inf, inf, (n,), float32)``.
+
+    ## Action space
+    ``Discrete(n)`` for ``actions.discrete`` (action i sets its inputs for the
+    step); ``Box(low, high, (n,), float32)`` for ``actions.continuous``.
+
+    ## Rewards
+    The spec's ``reward`` every step, plus the ``reward`` of each outcome that fires.
+
+    ## Episode end
+    Terminated or truncated by the first ending outcome whose ``when`` holds
+    after the update (in spec order); truncated after ``max_steps`` steps.
+    ``info`` has ``state`` (all variables), ``outcome`` (the name of the outcome
+    that ended the episode, ``"max_steps"``, or None), ``milestones`` and
+    ``is_success``.
+
+    ## Runtime faults
+    A non-finite state or reward, a division by zero or a math domain error
+    raises :class:`~visualenv.errors.StepError` naming the expression, its
+    spec line and the values; with ``on_fault: terminate`` the episode ends
+    instead and ``info["error"]`` holds the message.
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+
+    def __init__(
+        self,
+        spec: str | Path | LoadedSpec | Program,
+        *,
+        render: bool | None = None,
+        render_mode: str | None = None,
+        params: dict[str, Any] | None = None,
+        renderer_options: dict[str, Any] | None = None,
+    ) -> None:
+        super().__init__()
+        if isinstance(spec, Program) and not params:
+            program = spec
+        else:
+            loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
+            program = compile_spec(loaded, params)
+        self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options}
+        self.program = program
+        s = program.spec
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        if render and s.observation is None:
+            raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
+        self.render_mode = render_mode
+        self.uses_camera = s.observation is not None and render is not False
+        self._renderer_options = dict(renderer_options or {})
+        self._renderer: Renderer | None = None
+        self._random = RandomSource()
+        self._fns = program.functions(self._random)
+        self._state: tuple[float, ...] = tuple(0.0 for _ in program.state_names)
+        self._steps = 0
+        self._fired = 0
+        self._done = False
+        self._success = False
+        if program.discrete is not None:
+            self.action_space = spaces.Discrete(program.discrete)
+        else:
+            lows, highs = zip(*program.continuous)
+            self.action_space = spaces.Box(np.array(lows, np.float32), np.array(highs, np.float32), dtype=np.float32)
+        if self.uses_camera:
+            self.observation_space = observation_space(s.observation)  # type: ignore[arg-type]
+        else:
+            n = len(program.observed)
+            self.observation_space = spaces.Box(-np.inf, np.inf, (n,), np.float32)
+        self._observed = program.observed
+        self._milestones = [r.name for r in program.outcomes if r.end == "none"]
+        self._milestone_success = [r.success for r in program.outcomes if r.end == "none"]
+
+    # -- Gymnasium API ------------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        super().reset(seed=seed)
+        self._random.generator = self.np_random
+        try:
+            state = self._fns.init()
+        except (ArithmeticError, ValueError) as exc:
+            raise self._fault_error("init", exc, {}) from None
+        given = (options or {}).get("state")
+        if given:
+            names = self.program.state_names
+            state = list(state)
+            for key, value in dict(given).items():
+                if key not in names:
+                    raise KeyError(f"options['state'] has an unknown variable '{key}'" + did_you_mean(key, names))
+                state[names.index(key)] = float(value)
+            state = tuple(state)
+        self._state = tuple(float(v) for v in state)
+        self._steps = 0
+        self._fired = 0
+        self._done = False
+        self._success = False
+        return self._observe(), self._info(None)
+
+    def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
+        program = self.program
+        if program.discrete is not None:
+            a: Any = int(action)
+            if not 0 <= a < program.discrete:
+                raise ValueError(f"action {action!r} is out of range: Discrete({program.discrete})")
+        else:
+            a = tuple(float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
+            if len(a) != len(program.continuous):
+                raise ValueError(f"action has {len(a)} values, expected {len(program.continuous)}")
+        old = self._state
+        try:
+            state, reward, outcome, fired = self._fns.step(old, a, self._steps, self._fired)
+            total = sum(state) + reward
+            if total - total != 0:  # NaN or infinity somewhere
+                self._check_finite(state, reward, old, a)
+        except (ArithmeticError, ValueError, StepError) as exc:
+            err = exc if isinstance(exc, StepError) else self._fault_error("step", exc, self._values(old, a))
+            if program.spec.on_fault == "raise":
+                raise err from None
+            self._steps += 1
+            info = self._info("error")
+            info["error"] = str(err)
+            return self._observe(), 0.0, True, False, info
+        self._state = state
+        self._steps += 1
+        newly = fired & ~self._fired
+        self._fired = fired
+        if newly:
+            for i, ok in enumerate(self._milestone_success):
+                if ok and newly & (1 << i):
+                    self._success = True
+        terminated = truncated = False
+        name = None
+        if outcome >= 0:
+            rule = program.outcomes[outcome]
+            name = rule.name
+            terminated = rule.end == "terminate"
+            truncated = rule.end == "truncate"
+            self._success = self._success or rule.success
+        elif self._steps >= program.spec.max_steps:
+            truncated = True
+            name = "max_steps"
+        return self._observe(), float(reward), terminated, truncated, self._info(name)
+
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
+        """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
+            return None
+        return self.renderer.render_view(self._fns.bind(self._state, self._steps))
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        super().close()
+
+    # -- state access -------------------------------------------------------------------------------
+
+    @property
+    def state(self) -> dict[str, float]:
+        """The current state by variable name."""
+        return dict(zip(self.program.state_names, self._state))
+
+    @property
+    def steps(self) -> int:
+        return self._steps
+
+    @property
+    def renderer(self) -> Renderer:
+        """The renderer, built on first use (in the process that uses it)."""
+        if self._renderer is None:
+            plan = RenderPlan.from_program(self.program)
+            self._renderer = create_renderer(plan, **self._renderer_options)
+        return self._renderer
+
+    def binding_values(self) -> tuple:
+        """The current values of every actor binding, in program.bindings order."""
+        return self._fns.bind(self._state, self._steps)
+
+    # -- internals --------------------------------------------------------------------------------
+
+    def _observe(self) -> Any:
+        if self.uses_camera:
+            return self.renderer.render_observation(self._fns.bind(self._state, self._steps))
+        state = self._state
+        return np.array([state[i] for i in self._observed], dtype=np.float32)
+
+    def _info(self, outcome: str | None) -> dict[str, Any]:
+        fired = [m for i, m in enumerate(self._milestones) if self._fired & (1 << i)]
+        return {"state": self.state, "steps": self._steps, "outcome": outcome, "milestones": fired, "is_success": self._success}
+
+    def _values(self, state: tuple, action: Any) -> dict[str, Any]:
+        values: dict[str, Any] = dict(zip(self.program.state_names, state))
+        values["action"] = action
+        return values
+
+    def _check_finite(self, state: tuple, reward: float, old: tuple, action: Any) -> None:
+        program = self.program
+        for name, value in zip(program.state_names, state):
+            if not math.isfinite(value):
+                site = next((s for s in program.sites["step"] if s.what == f"dynamics.update.{name}"), None)
+                raise self._describe(site, f"state '{name}' became {value}", self._values(old, action))
+        if not math.isfinite(reward):
+            site = next((s for s in program.sites["step"] if s.what == "reward"), None)
+            raise self._describe(site, f"the reward became {reward}", self._values(old, action))
+
+    def _fault_error(self, function: str, exc: BaseException, values: dict[str, Any]) -> StepError:
+        tb = exc.__traceback__
+        line = None
+        while tb is not None:
+            if tb.tb_frame.f_code.co_filename == f"<visualenv:{function}>":
+                line = tb.tb_lineno
+            tb = tb.tb_next
+        site = self.program.site(function, line) if line else None
+        message = {ZeroDivisionError: "division by zero", OverflowError: "numeric overflow"}.get(type(exc), str(exc))
+        return self._describe(site, message, values)
+
+    def _describe(self, site: Any, message: str, values: dict[str, Any]) -> StepError:
+        where = ""
+        if site is not None:
+            path = tuple(int(p) if p.isdigit() else p for p in site.what.split("."))
+            pos = self.program.loaded.source.locate(path)
+            line = f"{self.program.loaded.file}:{pos.line}" if pos else self.program.loaded.file
+            where = f"{line}: {site.what} = {site.text!r}: "
+            relevant = {k: v for k, v in values.items() if k in site.names} or values
+        else:
+            relevant = values
+        shown = ", ".join(f"{k}={v!r}" for k, v in relevant.items())
+        return StepError(f"{where}{message} (step {self._steps}; values: {shown})")
+
+    # -- pickling: rebuild from the spec in the receiving process -------------------------------------
+
+    def __getstate__(self) -> dict[str, Any]:
+        return {"loaded": self.program.loaded, "args": self._init_args}
+
+    def __setstate__(self, data: dict[str, Any]) -> None:
+        self.__init__(data["loaded"], **data["args"])  # type: ignore[misc]

@@ -1,0 +1,422 @@
+"""Compile a validated spec into a :class:`Program`: resolved names, generated functions.
+
+Everything a running env needs is decided here, once: parameter values, the
+order of state variables, the action space, and three generated functions:
+
+* ``init(params...)  -> state``                      (draws at reset)
+* ``step(state, action, steps, fired) -> (state, reward, outcome, fired)``
+* ``bind(state, steps) -> values``                 (actor bindings, before a render)
+
+Every expression is checked against the names in scope where it is used, and
+all problems are reported together with their spec positions. The program
+knows nothing of pixels: it lists binding targets for whatever renderer plugs in.
+"""
+
+from __future__ import annotations
+
+import ast
+import importlib
+import keyword
+from dataclasses import dataclass, field
+from typing import Any, Callable, Mapping
+
+from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean
+from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
+from visualenv.expr.codegen import FunctionBuilder, Site, const, function_globals, local, lower, name, tuple_of
+from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
+from visualenv.spec.loader import LoadedSpec
+from visualenv.spec.models import CameraObject, LightObject, Spec
+
+#: names every expression may read besides the spec's own (not all in every context)
+BUILTIN_NAMES = ("steps", "max_steps", "dt", "action")
+_RESERVED = set(FUNCTIONS) | set(CONSTANTS) | set(BUILTIN_NAMES) | set(keyword.kwlist) | {"True", "False", "None"}
+
+#: properties an actor binding may set: (expected type, values it produces)
+BINDABLE: dict[str, Type] = {
+    "location": vec(3), "rotation": vec(3), "scale": vec(3), "visible": BOOL, "color": vec(0),
+    "strength": NUM, "look_at": vec(3), "lens": NUM,
+}
+
+
+@dataclass(frozen=True)
+class BindingTarget:
+    """One scene property a renderer sets before each render."""
+
+    object: str
+    property: str  # a key of BINDABLE
+    size: int  # how many values the binding function yields for it (1 for scalars)
+
+
+@dataclass(frozen=True)
+class OutcomeRule:
+    name: str
+    end: str  # terminate | truncate | none
+    success: bool
+
+
+@dataclass
+class Program:
+    """A compiled spec: what an env needs at run time."""
+
+    loaded: LoadedSpec
+    params: dict[str, float | bool]
+    state_names: list[str]
+    observed: list[int]
+    input_names: list[str]
+    discrete: int | None  # number of discrete actions, or None for continuous
+    continuous: list[tuple[float, float]]
+    outcomes: list[OutcomeRule]
+    bindings: list[BindingTarget]
+    sites: dict[str, list[Site]] = field(default_factory=dict)
+    _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
+    _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
+
+    @property
+    def spec(self) -> Spec:
+        return self.loaded.spec
+
+    def functions(self, random: RandomSource) -> "CompiledFunctions":
+        """Fresh callables bound to `random` (one set per env)."""
+        env = function_globals(bind_random(random))
+        env["_python_dynamics"] = self._python_dynamics
+        env["_random"] = random
+        built = {key: b.build(env) for key, b in self._builders.items()}
+        return CompiledFunctions(built["init"], built["step"], built["bind"])
+
+    def site(self, function: str, line: int) -> Site | None:
+        sites = self.sites.get(function, [])
+        index = line - 2
+        return sites[index] if 0 <= index < len(sites) else None
+
+
+@dataclass(frozen=True)
+class CompiledFunctions:
+    init: Callable[[], tuple]
+    step: Callable[[tuple, Any, int, int], tuple]
+    bind: Callable[[tuple, int], tuple]
+
+
+def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None) -> Program:
+    """Resolve and check every expression in `loaded`; raise SpecError listing all problems."""
+    return _Compiler(loaded, dict(params or {})).run()
+
+
+class _Compiler:
+    def __init__(self, loaded: LoadedSpec, overrides: dict[str, Any]):
+        self.loaded = loaded
+        self.spec = loaded.spec
+        self.smap = loaded.source
+        self.overrides = overrides
+        self.problems: list[Diagnostic] = []
+
+    # -- reporting ------------------------------------------------------------------------------
+
+    def error(self, path: tuple, message: str, *, key: bool = False, column: int | None = None) -> None:
+        self.problems.append(self.smap.diagnostic(path, message, key=key, column_offset=column))
+
+    def expr(self, path: tuple, text: Any, names: Mapping[str, Type], *, expect: Type | None = None, random: bool = True) -> Checked | None:
+        try:
+            return check(text, names, constants=self.params, allow_random=random, expect=expect)
+        except ExpressionError as exc:
+            self.error(path, exc.message, column=exc.offset)
+            return None
+
+    # -- the passes -----------------------------------------------------------------------------
+
+    def run(self) -> Program:
+        spec = self.spec
+        self.check_names()
+        self.params = self.resolve_params()
+        state_names = list(spec.state)
+        input_names, discrete, continuous = self.resolve_actions()
+        self.input_names = input_names
+        builders = {"init": self.build_init(state_names), "step": self.build_step(state_names, input_names, discrete)}
+        builders["bind"], bindings = self.build_bindings(state_names)
+        outcomes = [OutcomeRule(n, o.end, o.success) for n, o in spec.outcomes.items()]
+        python_dynamics = self.resolve_python_dynamics()
+        if self.problems:
+            raise SpecError(sorted(self.problems, key=lambda d: (d.line or 0, d.column or 0)))
+        observed = [i for i, n in enumerate(state_names) if spec.state[n].observe]
+        return Program(
+            self.loaded, self.params, state_names, observed, input_names, discrete, continuous, outcomes, bindings,
+            sites={k: b.sites for k, b in builders.items()}, _builders=builders, _python_dynamics=python_dynamics,
+        )
+
+    def check_names(self) -> None:
+        """User names must not shadow built-ins or each other."""
+        spec = self.spec
+        seen: dict[str, str] = {}
+        groups: list[tuple[str, list[str]]] = [
+            ("params", list(spec.params)), ("state", list(spec.state)),
+            ("dynamics.let", list(spec.dynamics.let)),
+        ]
+        if spec.actions.discrete:
+            groups.append(("actions.discrete", list(dict.fromkeys(k for a in spec.actions.discrete for k in a))))
+        elif spec.actions.continuous:
+            groups.append(("actions.continuous", list(spec.actions.continuous)))
+        for group, names in groups:
+            for n in names:
+                path = tuple(group.split(".")) + (n,)
+                if group == "actions.discrete":
+                    index = next(i for i, a in enumerate(spec.actions.discrete or []) if n in a)
+                    path = ("actions", "discrete", index, n)
+                if n in _RESERVED:
+                    self.error(path, f"'{n}' is a reserved name (a built-in, function or keyword): choose another", key=True)
+                elif n in seen and not (group == "actions.discrete" and seen[n] == group):
+                    self.error(path, f"'{n}' is already defined in {seen[n]}", key=True)
+                else:
+                    seen[n] = group
+        for n in spec.dynamics.update:
+            if n not in spec.state:
+                self.error(("dynamics", "update", n), f"'{n}' is not a state variable" + did_you_mean(n, spec.state).replace("names:", "state:"), key=True)
+
+    def resolve_params(self) -> dict[str, float | bool]:
+        params: dict[str, float | bool] = {}
+        for key in self.overrides:
+            if key not in self.spec.params:
+                raise SpecError([Diagnostic(self.smap.file, None, None, f"params.{key}", f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))])
+        raw = {**self.spec.params, **self.overrides}
+        self.params = {}
+        for key, value in raw.items():
+            if isinstance(value, bool):
+                params[key] = value
+            else:
+                try:
+                    checked = check(value, {}, constants=params, allow_random=False)
+                except ExpressionError as exc:
+                    self.error(("params", key), exc.message, column=exc.offset)
+                    continue
+                if checked.constant is None or isinstance(checked.constant, tuple):
+                    self.error(("params", key), "a parameter must be a number or a condition")
+                    continue
+                params[key] = checked.constant
+        builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.spec.dt)}
+        return {**builtins, **params}
+
+    def resolve_actions(self) -> tuple[list[str], int | None, list[tuple[float, float]]]:
+        actions = self.spec.actions
+        if actions.discrete is not None:
+            names = list(dict.fromkeys(k for a in actions.discrete for k in a))
+            return names, len(actions.discrete), []
+        assert actions.continuous is not None
+        return list(actions.continuous), None, [(c.low, c.high) for c in actions.continuous.values()]
+
+    def resolve_python_dynamics(self) -> Callable[..., Any] | None:
+        target = self.spec.dynamics.python
+        if not target:
+            return None
+        if self.spec.dynamics.update or self.spec.dynamics.let:
+            self.error(("dynamics", "python"), "'python' dynamics replace 'let' and 'update': give one or the other")
+        module_name, func_name = target.split(":")
+        try:
+            module = importlib.import_module(module_name)
+            func = getattr(module, func_name)
+        except Exception as exc:  # noqa: BLE001 - any import failure is reported, located
+            self.error(("dynamics", "python"), f"cannot import '{target}': {type(exc).__name__}: {exc}")
+            return None
+        if not callable(func):
+            self.error(("dynamics", "python"), f"'{target}' is not callable")
+            return None
+        return func
+
+    # -- generated functions --------------------------------------------------------------------
+
+    def build_init(self, state_names: list[str]) -> FunctionBuilder:
+        """init(): each state variable in order; an init may read earlier ones."""
+        fb = FunctionBuilder("init", [])
+        scope: dict[str, Type] = {}
+        for n in state_names:
+            path = ("state", n, "init")
+            checked = self.expr(path, self.spec.state[n].init, scope, expect=NUM)
+            if checked:
+                fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+            scope[n] = NUM
+        fb.returns(tuple_of([name(local(n)) for n in state_names]))
+        return fb
+
+    def build_step(self, state_names: list[str], input_names: list[str], discrete: int | None) -> FunctionBuilder:
+        spec = self.spec
+        fb = FunctionBuilder("step", ["_state", "_action", "_steps", "_fired"])
+        fb.unpack([local(n) for n in state_names], "_state")
+        fb.assign(local("steps"), name("_steps"))
+        scope: dict[str, Type] = {n: NUM for n in state_names}
+        scope["steps"] = NUM
+        # inputs
+        if discrete is not None:
+            fb.assign(local("action"), name("_action"))
+            for n in input_names:
+                fb.assign(local(n), const(0.0))
+            chain: ast.stmt | None = None
+            for index in reversed(range(discrete)):
+                body: list[ast.stmt] = []
+                sub = FunctionBuilder("_", [])
+                for n, value in (spec.actions.discrete or [])[index].items():
+                    path = ("actions", "discrete", index, n)
+                    checked = self.expr(path, value, {**scope, "action": NUM}, expect=NUM)
+                    if checked:
+                        sub.assign(local(n), lower(checked.tree))
+                body = sub.body or [ast.Pass()]
+                test = ast.Compare(name("_action"), [ast.Eq()], [const(index)])
+                chain = ast.If(test, body, [chain] if chain is not None else [])
+            if chain is not None:
+                fb.add(chain, Site("actions.discrete", "the chosen action's inputs"))
+            scope["action"] = NUM
+        else:
+            fb.unpack([local("_in_" + n) for n in input_names], "_action")
+            for n, (lo, hi) in zip(input_names, [(c.low, c.high) for c in (spec.actions.continuous or {}).values()]):
+                clipped = ast.Call(name("_f_clip"), [name(local("_in_" + n)), const(float(lo)), const(float(hi))], [])
+                fb.assign(local(n), clipped)
+        for n in input_names:
+            scope[n] = NUM
+        # derived quantities, in order
+        for n, value in spec.dynamics.let.items():
+            path = ("dynamics", "let", n)
+            checked = self.expr(path, value, scope, expect=NUM)
+            if checked:
+                fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+            scope[n] = NUM
+        # simultaneous update
+        if spec.dynamics.python:
+            self.python_call(fb, state_names, input_names)
+        else:
+            new_names = []
+            for n, value in spec.dynamics.update.items():
+                if n not in spec.state:
+                    continue
+                path = ("dynamics", "update", n)
+                checked = self.expr(path, value, scope, expect=NUM)
+                if checked:
+                    fb.assign("_new_" + n, lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                    new_names.append(n)
+            for n in new_names:
+                fb.assign(local(n), name("_new_" + n))
+        fb.assign(local("steps"), ast.BinOp(name("_steps"), ast.Add(), const(1)))
+        # reward and outcomes read the new state
+        checked = self.expr(("reward",), spec.reward, scope, expect=NUM)
+        fb.assign("_reward", lower(checked.tree) if checked else const(0.0), Site("reward", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()))
+        fb.assign("_outcome", const(-1))
+        ending: ast.stmt | None = None
+        milestone_bit = 0
+        milestones: list[ast.stmt] = []
+        rules = list(spec.outcomes.items())
+        for index in reversed(range(len(rules))):
+            rule_name, rule = rules[index]
+            when = self.expr(("outcomes", rule_name, "when"), rule.when, scope, expect=BOOL)
+            reward = self.expr(("outcomes", rule_name, "reward"), rule.reward, scope, expect=NUM)
+            if not (when and reward):
+                continue
+            if isinstance(when.tree, ast.Constant) and when.tree.value is False:
+                self.error(("outcomes", rule_name, "when"), "this condition is always false: the outcome can never happen")
+            add_reward = ast.AugAssign(ast.Name("_reward", ast.Store()), ast.Add(), lower(reward.tree))
+            set_outcome = ast.Assign([ast.Name("_outcome", ast.Store())], const(index))
+            if rule.end == "none":
+                bit = 1 << milestone_bit
+                milestone_bit += 1
+                not_fired = ast.Compare(ast.BinOp(name("_fired"), ast.BitAnd(), const(bit)), [ast.Eq()], [const(0)])
+                mark = ast.AugAssign(ast.Name("_fired", ast.Store()), ast.BitOr(), const(bit))
+                milestones.insert(0, ast.If(ast.BoolOp(ast.And(), [not_fired, lower(when.tree)]), [add_reward, mark], []))
+            else:
+                ending = ast.If(lower(when.tree), [add_reward, set_outcome], [ending] if ending is not None else [])
+        if ending is not None:
+            fb.add(ending, Site("outcomes", "the outcome conditions"))
+        for stmt in milestones:
+            fb.add(stmt, Site("outcomes", "the milestone conditions"))
+        fb.returns(tuple_of([tuple_of([name(local(n)) for n in state_names]), name("_reward"), name("_outcome"), name("_fired")]))
+        self.milestone_rules = [n for n, r in rules if r.end == "none"]
+        return fb
+
+    def python_call(self, fb: FunctionBuilder, state_names: list[str], input_names: list[str]) -> None:
+        """Call the trusted 'module:function' escape hatch with plain dicts."""
+        def as_dict(names: list[str]) -> ast.expr:
+            return ast.Dict([const(n) for n in names], [name(local(n)) for n in names])
+
+        params = ast.Dict([const(k) for k in self.params], [const(v) for v in self.params.values()])
+        call = ast.Call(name("_python_dynamics"), [as_dict(state_names), as_dict(input_names), params, ast.Attribute(name("_random"), "generator", ast.Load())], [])
+        fb.assign("_py", call, Site("dynamics.python", self.spec.dynamics.python or ""))
+        for n in state_names:
+            get = ast.Call(ast.Attribute(name("_py"), "get", ast.Load()), [const(n), name(local(n))], [])
+            fb.assign(local(n), get, Site("dynamics.python", f"the value returned for '{n}'"))
+
+    def build_bindings(self, state_names: list[str]) -> tuple[FunctionBuilder, list[BindingTarget]]:
+        """bind(state, steps): the value of every actor property, flattened in order."""
+        spec = self.spec
+        fb = FunctionBuilder("bind", ["_state", "_steps"])
+        fb.unpack([local(n) for n in state_names], "_state")
+        fb.assign(local("steps"), name("_steps"))
+        scope: dict[str, Type] = {n: NUM for n in state_names}
+        scope["steps"] = NUM
+        declared = spec.scene.objects
+        targets: list[BindingTarget] = []
+        values: list[ast.expr] = []
+        for obj_name, actor in spec.actors.items():
+            if spec.scene.file is None and obj_name not in declared:
+                self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, declared).replace("names:", "objects:"), key=True)
+                continue
+            obj = declared.get(obj_name)
+            for prop, value in actor.model_dump(exclude_none=True).items():
+                path = ("actors", obj_name, prop)
+                raw = getattr(actor, prop)
+                if prop == "strength" and obj is not None and not isinstance(obj, LightObject):
+                    self.error(path, f"'strength' binds a light's power, but '{obj_name}' is not a light", key=True)
+                    continue
+                if prop == "lens" and obj is not None and not isinstance(obj, CameraObject):
+                    self.error(path, f"'lens' binds a camera's focal length, but '{obj_name}' is not a camera", key=True)
+                    continue
+                checked_values = self.binding_values(path, prop, raw, scope)
+                if checked_values is None:
+                    continue
+                site = Site(".".join(map(str, path)), str(raw))
+                for item in checked_values:
+                    values.append(item)
+                targets.append(BindingTarget(obj_name, prop, len(checked_values)))
+                del site
+        fb.returns(tuple_of(values))
+        if spec.observation is not None and spec.scene.file is None:
+            for key, view in spec.observation.views().items():
+                path = ("observation", "camera") if spec.observation.camera else ("observation", "cameras", key, "camera")
+                self.check_camera(path, view.camera)
+            if spec.render.view.camera:
+                self.check_camera(("render", "view", "camera"), spec.render.view.camera)
+        return fb, targets
+
+    def check_camera(self, path: tuple, camera: str) -> None:
+        declared = self.spec.scene.objects
+        cameras = [n for n, o in declared.items() if isinstance(o, CameraObject)]
+        if camera not in cameras:
+            self.error(path, f"no camera '{camera}' in the scene" + did_you_mean(camera, cameras).replace("names:", "cameras:"))
+
+    def binding_values(self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]) -> list[ast.expr] | None:
+        """A binding's value as a list of scalar trees (a vector expression is split up)."""
+        wanted = BINDABLE[prop]
+        if wanted.kind == "vec":
+            if isinstance(raw, list):
+                if prop == "color" and len(raw) not in (3, 4):
+                    self.error(path, "a colour needs 3 (RGB) or 4 (RGBA) values")
+                    return None
+                out = []
+                for i, item in enumerate(raw):
+                    checked = self.expr(path + (i,), item, scope, expect=NUM)
+                    if checked is None:
+                        return None
+                    out.append(lower(checked.tree))
+                return out
+            if prop == "scale" and not (isinstance(raw, str) and raw.strip().startswith("[")):
+                checked = self.expr(path, raw, scope, expect=NUM)
+                return [lower(checked.tree)] * 3 if checked else None
+            checked = self.expr(path, raw, scope)
+            if checked is None:
+                return None
+            size = checked.type.size if checked.type.kind == "vec" else 0
+            if checked.type.kind != "vec" or (wanted.size and size != wanted.size) or (prop == "color" and size not in (3, 4)):
+                need = "3 or 4 values" if prop == "color" else f"a vector of {wanted.size}"
+                self.error(path, f"'{prop}' needs {need}, got {checked.type}")
+                return None
+            tree = lower(checked.tree)
+            if isinstance(tree, ast.Tuple):
+                return list(tree.elts)
+            # a conditional between vectors: index each element of the evaluated tuple
+            return [ast.Subscript(tree, const(i), ast.Load()) for i in range(size)]
+        checked = self.expr(path, raw, scope, expect=wanted)
+        if checked is None:
+            return None
+        return [lower(checked.tree)]

@@ -1,0 +1,310 @@
+"""Parse an expression and check it against the allow-list, node by node.
+
+Text is parsed with :func:`ast.parse` in ``eval`` mode and every node is
+checked: only numbers, names, arithmetic, comparisons, ``and``/``or``/``not``,
+conditional expressions, vector literals and calls of the functions in
+:data:`~visualenv.expr.functions.FUNCTIONS` are accepted. Names must be in the
+table the caller passes (params, state, inputs, ``let`` names, built-ins).
+Numbers become floats, so integer power towers cannot run for ever; constant
+subexpressions are folded now, so ``9**9**9`` is an overflow error at build time.
+The result is a new tree made only of allowed nodes, ready for code generation.
+"""
+
+from __future__ import annotations
+
+import ast
+import math
+from dataclasses import dataclass, field
+from typing import Mapping
+
+from visualenv.errors import ExpressionError, did_you_mean
+from visualenv.expr.functions import CONSTANTS, FUNCTIONS
+from visualenv.expr.types import BOOL, NUM, Type, vec
+
+MAX_LENGTH = 4000
+MAX_DEPTH = 40
+MAX_NODES = 2000
+MAX_VECTOR = 64
+MAX_LITERAL = 1e300
+
+_BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.FloorDiv: "//", ast.Mod: "%", ast.Pow: "**"}
+_CMPOPS = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=", ast.Eq: "==", ast.NotEq: "!="}
+_DESCRIBE = {
+    ast.Attribute: "attribute access ('.')", ast.Subscript: "subscripts ('[...]' after a value)", ast.Lambda: "lambda",
+    ast.ListComp: "comprehensions", ast.SetComp: "comprehensions", ast.DictComp: "comprehensions",
+    ast.GeneratorExp: "generator expressions", ast.JoinedStr: "f-strings", ast.FormattedValue: "f-strings",
+    ast.NamedExpr: "assignment expressions (':=')", ast.Starred: "'*' unpacking", ast.Dict: "dicts", ast.Set: "sets",
+    ast.Tuple: "tuples (use [a, b, c] for a vector)", ast.Await: "await", ast.Yield: "yield", ast.YieldFrom: "yield",
+    ast.Slice: "slices",
+}
+
+
+@dataclass
+class Checked:
+    """A checked expression: a tree of allowed nodes, its type and what it reads."""
+
+    text: str
+    tree: ast.expr
+    type: Type
+    names: set[str] = field(default_factory=set)
+    random: bool = False
+    constant: float | bool | tuple | None = None  # set when the whole expression folded
+
+
+def parse(text: str | float | int | bool) -> ast.expr:
+    """Parse expression text (numbers and booleans are accepted as themselves)."""
+    if isinstance(text, bool):
+        return ast.Constant(text)
+    if isinstance(text, (int, float)):
+        return ast.Constant(_number(text, 0))
+    if not isinstance(text, str):
+        raise ExpressionError(f"expected a number or an expression, got {type(text).__name__}")
+    if not text.strip():
+        raise ExpressionError("empty expression")
+    if len(text) > MAX_LENGTH:
+        raise ExpressionError(f"expression is too long ({len(text)} characters, at most {MAX_LENGTH})")
+    if "\n" in text.strip() or "\r" in text:
+        text = " ".join(text.split())
+    try:
+        module = ast.parse(text.strip(), mode="eval")
+    except SyntaxError as exc:
+        offset = (exc.offset or 1) - 1
+        raise ExpressionError(f"syntax error: {exc.msg}", offset) from None
+    except (RecursionError, MemoryError, ValueError):
+        raise ExpressionError("expression is too deeply nested") from None
+    return module.body
+
+
+def check(text: str | float | int | bool, names: Mapping[str, Type], *, constants: Mapping[str, float] | None = None,
+          allow_random: bool = True, expect: Type | None = None) -> Checked:
+    """Parse and check `text`; `names` are the variables in scope with their types.
+
+    `constants` (params) are substituted and folded. `expect` is the type the
+    context needs (NUM for a reward, BOOL for a condition, a vector for a location).
+    """
+    tree = parse(text)
+    checker = _Checker(names, {**CONSTANTS, **(constants or {})}, allow_random)
+    try:
+        new_tree, typ = checker.visit(tree, 0)
+    except RecursionError:
+        raise ExpressionError("expression is too deeply nested") from None
+    if expect is not None and not _fits(typ, expect):
+        raise ExpressionError(f"expected {expect}, got {typ}", getattr(tree, "col_offset", 0))
+    checked = Checked(text if isinstance(text, str) else repr(text), new_tree, typ, checker.used, checker.random)
+    if isinstance(new_tree, ast.Constant):
+        checked.constant = new_tree.value
+    elif isinstance(new_tree, ast.List) and all(isinstance(e, ast.Constant) for e in new_tree.elts):
+        checked.constant = tuple(e.value for e in new_tree.elts)  # type: ignore[attr-defined]
+    return checked
+
+
+def _fits(actual: Type, expected: Type) -> bool:
+    if expected.kind == "vec" and actual.kind == "vec":
+        return expected.size == 0 or expected.size == actual.size
+    return actual == expected
+
+
+def _number(value: float | int, offset: int) -> float:
+    if isinstance(value, bool):
+        return value
+    try:
+        number = float(value)
+    except OverflowError:
+        raise ExpressionError("number is too large", offset) from None
+    if not math.isfinite(number) or abs(number) > MAX_LITERAL:
+        raise ExpressionError("number is too large", offset)
+    return number
+
+
+class _Checker:
+    def __init__(self, names: Mapping[str, Type], constants: Mapping[str, float], allow_random: bool):
+        self.names = names
+        self.constants = constants
+        self.allow_random = allow_random
+        self.used: set[str] = set()
+        self.random = False
+        self.count = 0
+
+    def fail(self, node: ast.AST, message: str) -> ExpressionError:
+        return ExpressionError(message, getattr(node, "col_offset", 0))
+
+    def visit(self, node: ast.AST, depth: int) -> tuple[ast.expr, Type]:
+        self.count += 1
+        if depth > MAX_DEPTH:
+            raise self.fail(node, f"expression is too deeply nested (more than {MAX_DEPTH} levels)")
+        if self.count > MAX_NODES:
+            raise self.fail(node, f"expression is too large (more than {MAX_NODES} parts)")
+        method = getattr(self, "visit_" + type(node).__name__, None)
+        if method is None:
+            what = _DESCRIBE.get(type(node), f"'{type(node).__name__}'")
+            raise self.fail(node, f"{what} not allowed in expressions")
+        result = method(node, depth + 1)
+        return ast.copy_location(result[0], node), result[1]
+
+    # -- leaves ---------------------------------------------------------------------------------
+
+    def visit_Constant(self, node: ast.Constant, depth: int) -> tuple[ast.expr, Type]:
+        value = node.value
+        if isinstance(value, bool):
+            return ast.Constant(value), BOOL
+        if isinstance(value, (int, float)) and not isinstance(value, complex):
+            return ast.Constant(_number(value, getattr(node, "col_offset", 0))), NUM
+        if isinstance(value, str):
+            raise self.fail(node, "text values are not allowed in expressions")
+        raise self.fail(node, f"{type(value).__name__} values are not allowed in expressions")
+
+    def visit_Name(self, node: ast.Name, depth: int) -> tuple[ast.expr, Type]:
+        name = node.id
+        if name in self.names:
+            self.used.add(name)
+            return ast.Name(name, ast.Load()), self.names[name]
+        if name in self.constants:
+            value = self.constants[name]
+            return ast.Constant(value), (BOOL if isinstance(value, bool) else NUM)
+        if name in FUNCTIONS:
+            raise self.fail(node, f"'{name}' is a function: call it, e.g. {name}(...)")
+        if name in ("True", "False", "None"):
+            raise self.fail(node, f"'{name}' is not allowed here")
+        known = list(self.names) + [c for c in self.constants if c not in CONSTANTS] + list(CONSTANTS)
+        raise self.fail(node, f"unknown name '{name}'" + did_you_mean(name, known))
+
+    # -- operators ------------------------------------------------------------------------------
+
+    def visit_UnaryOp(self, node: ast.UnaryOp, depth: int) -> tuple[ast.expr, Type]:
+        operand, typ = self.visit(node.operand, depth)
+        if isinstance(node.op, ast.Not):
+            self.need(node.operand, typ, BOOL, "'not'")
+            return self.fold(ast.UnaryOp(ast.Not(), operand)), BOOL
+        if isinstance(node.op, (ast.USub, ast.UAdd)):
+            self.need(node.operand, typ, NUM, "'-'")
+            return self.fold(ast.UnaryOp(type(node.op)(), operand)), NUM
+        raise self.fail(node, "bitwise operators are not allowed in expressions")
+
+    def visit_BinOp(self, node: ast.BinOp, depth: int) -> tuple[ast.expr, Type]:
+        symbol = _BINOPS.get(type(node.op))
+        if symbol is None:
+            raise self.fail(node, "bitwise and matrix operators are not allowed in expressions")
+        left, lt = self.visit(node.left, depth)
+        right, rt = self.visit(node.right, depth)
+        self.need(node.left, lt, NUM, f"'{symbol}'")
+        self.need(node.right, rt, NUM, f"'{symbol}'")
+        return self.fold(ast.BinOp(left, type(node.op)(), right)), NUM
+
+    def visit_BoolOp(self, node: ast.BoolOp, depth: int) -> tuple[ast.expr, Type]:
+        word = "and" if isinstance(node.op, ast.And) else "or"
+        values = []
+        for value in node.values:
+            new, typ = self.visit(value, depth)
+            self.need(value, typ, BOOL, f"'{word}'")
+            values.append(new)
+        return self.fold(ast.BoolOp(type(node.op)(), values)), BOOL
+
+    def visit_Compare(self, node: ast.Compare, depth: int) -> tuple[ast.expr, Type]:
+        left, lt = self.visit(node.left, depth)
+        comparators = []
+        types = [lt]
+        for op in node.ops:
+            if type(op) not in _CMPOPS:
+                raise self.fail(node, "only <, <=, >, >=, == and != comparisons are allowed")
+        for comp in node.comparators:
+            new, typ = self.visit(comp, depth)
+            comparators.append(new)
+            types.append(typ)
+        for sub, typ in zip([node.left, *node.comparators], types):
+            if typ.kind == "vec":
+                raise self.fail(sub, f"cannot compare {typ}")
+        if any(not isinstance(op, (ast.Eq, ast.NotEq)) for op in node.ops):
+            for sub, typ in zip([node.left, *node.comparators], types):
+                self.need(sub, typ, NUM, "an ordering comparison")
+        return self.fold(ast.Compare(left, [type(op)() for op in node.ops], comparators)), BOOL
+
+    def visit_IfExp(self, node: ast.IfExp, depth: int) -> tuple[ast.expr, Type]:
+        test, tt = self.visit(node.test, depth)
+        self.need(node.test, tt, BOOL, "the condition of 'if'")
+        body, bt = self.visit(node.body, depth)
+        orelse, ot = self.visit(node.orelse, depth)
+        if bt != ot:
+            raise self.fail(node, f"both branches of 'if ... else' must have the same type (got {bt} and {ot})")
+        if isinstance(test, ast.Constant):
+            return (body if test.value else orelse), bt
+        return ast.IfExp(test, body, orelse), bt
+
+    def visit_List(self, node: ast.List, depth: int) -> tuple[ast.expr, Type]:
+        if not node.elts:
+            raise self.fail(node, "empty vector")
+        if len(node.elts) > MAX_VECTOR:
+            raise self.fail(node, f"vector is too long (at most {MAX_VECTOR} elements)")
+        elts = []
+        for elt in node.elts:
+            new, typ = self.visit(elt, depth)
+            self.need(elt, typ, NUM, "a vector element")
+            elts.append(new)
+        return ast.List(elts, ast.Load()), vec(len(elts))
+
+    def visit_Call(self, node: ast.Call, depth: int) -> tuple[ast.expr, Type]:
+        if not isinstance(node.func, ast.Name):
+            raise self.fail(node, "only the built-in functions can be called, by name")
+        name = node.func.id
+        func = FUNCTIONS.get(name)
+        if func is None:
+            kind = "unknown function" if name not in self.names else "not a function:"
+            raise self.fail(node.func, f"{kind} '{name}'" + did_you_mean(name, FUNCTIONS).replace("names:", "functions:"))
+        if node.keywords:
+            raise self.fail(node, f"{name}() takes no keyword arguments")
+        if func.random and not self.allow_random:
+            raise self.fail(node, f"{name}() draws a random number, which is not allowed here")
+        n = len(node.args)
+        if n < func.min_args or (func.max_args is not None and n > func.max_args):
+            if func.max_args is None:
+                wanted = f"at least {func.min_args}"
+            elif func.min_args == func.max_args:
+                wanted = str(func.min_args)
+            else:
+                wanted = f"{func.min_args} to {func.max_args}"
+            raise self.fail(node, f"{name}() takes {wanted} argument{'s' if wanted != '1' else ''}, got {n}")
+        args = []
+        for i, arg in enumerate(node.args):
+            new, typ = self.visit(arg, depth)
+            if name == "choice" and n == 1 and typ.kind == "vec":
+                pass
+            else:
+                self.need(arg, typ, NUM, f"argument {i + 1} of {name}()")
+            args.append(new)
+        if name == "choice" and n == 1 and not (isinstance(args[0], ast.List) or self._is_vec(node.args[0])):
+            raise self.fail(node, "choice() needs several values: choice(a, b, ...) or choice([a, b, ...])")
+        if func.random:
+            self.random = True
+            return ast.Call(ast.Name(name, ast.Load()), args, []), func.returns
+        return self.fold(ast.Call(ast.Name(name, ast.Load()), args, [])), func.returns
+
+    def _is_vec(self, node: ast.AST) -> bool:
+        return isinstance(node, ast.Name) and self.names.get(node.id, NUM).kind == "vec"
+
+    # -- helpers --------------------------------------------------------------------------------
+
+    def need(self, node: ast.AST, actual: Type, expected: Type, where: str) -> None:
+        if actual != expected:
+            raise self.fail(node, f"{where} needs {expected}, got {actual}")
+
+    def fold(self, node: ast.expr) -> ast.expr:
+        """Evaluate a subexpression whose operands are all constants, now."""
+        children = [c for c in ast.iter_child_nodes(node) if isinstance(c, ast.expr)]
+        if isinstance(node, ast.Call):
+            children = list(node.args)
+        if not all(isinstance(c, ast.Constant) for c in children):
+            return node
+        from visualenv.expr.codegen import evaluate_constant
+
+        try:
+            value = evaluate_constant(node)
+        except ZeroDivisionError:
+            raise self.fail(node, "division by zero") from None
+        except OverflowError:
+            raise self.fail(node, "numeric overflow: the result is too large") from None
+        except ValueError as exc:
+            raise self.fail(node, f"math error: {exc}") from None
+        if isinstance(value, float) and not math.isfinite(value) and not any(
+            isinstance(c, ast.Constant) and isinstance(c.value, float) and math.isinf(c.value) for c in children
+        ):
+            raise self.fail(node, "numeric overflow: the result is not finite")
+        return ast.Constant(value)

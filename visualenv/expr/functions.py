@@ -1,0 +1,130 @@
+"""The fixed table of functions an expression may call.
+
+Each entry says how many arguments it takes, of which types, what it returns
+and which Python callable implements it. Random draws take their generator
+from the env (seeded by ``reset(seed=...)``), so they are bound per env by
+:func:`bind_random`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any, Callable
+
+from visualenv.expr.types import BOOL, NUM, VEC, Type
+
+
+def _sign(x: float) -> float:
+    return 1.0 if x > 0 else (-1.0 if x < 0 else 0.0)
+
+
+def _clip(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else (hi if x > hi else x)
+
+
+def _log(x: float, base: float | None = None) -> float:
+    return math.log(x) if base is None else math.log(x, base)
+
+
+def _floor(x: float) -> float:
+    return float(math.floor(x))
+
+
+def _ceil(x: float) -> float:
+    return float(math.ceil(x))
+
+
+def _round(x: float) -> float:
+    return float(round(x))
+
+
+def _min(*args: float) -> float:
+    return float(min(args[0]) if len(args) == 1 else min(args))
+
+
+def _max(*args: float) -> float:
+    return float(max(args[0]) if len(args) == 1 else max(args))
+
+
+@dataclass(frozen=True)
+class Function:
+    name: str
+    impl: Callable[..., Any] | None  # None: bound per env (random draws)
+    min_args: int
+    max_args: int | None  # None: any number
+    arg_type: Type  # every argument has this type (VEC: any vector)
+    returns: Type
+    random: bool = False
+    doc: str = ""
+
+
+def _f(name: str, impl: Callable[..., Any] | None, n: int | tuple[int, int | None], doc: str, *, arg: Type = NUM, returns: Type = NUM, random: bool = False) -> Function:
+    lo, hi = (n, n) if isinstance(n, int) else n
+    return Function(name, impl, lo, hi, arg, returns, random, doc)
+
+
+FUNCTIONS: dict[str, Function] = {
+    f.name: f
+    for f in [
+        _f("sin", math.sin, 1, "sine (radians)"),
+        _f("cos", math.cos, 1, "cosine (radians)"),
+        _f("tan", math.tan, 1, "tangent (radians)"),
+        _f("asin", math.asin, 1, "arc sine"),
+        _f("acos", math.acos, 1, "arc cosine"),
+        _f("atan", math.atan, 1, "arc tangent"),
+        _f("atan2", math.atan2, 2, "atan2(y, x): angle of (x, y)"),
+        _f("sinh", math.sinh, 1, "hyperbolic sine"),
+        _f("cosh", math.cosh, 1, "hyperbolic cosine"),
+        _f("tanh", math.tanh, 1, "hyperbolic tangent"),
+        _f("sqrt", math.sqrt, 1, "square root"),
+        _f("exp", math.exp, 1, "e to the power x"),
+        _f("log", _log, (1, 2), "natural log, or log(x, base)"),
+        _f("abs", abs, 1, "absolute value"),
+        _f("min", _min, (2, None), "smallest argument"),
+        _f("max", _max, (2, None), "largest argument"),
+        _f("clip", _clip, 3, "clip(x, low, high)"),
+        _f("hypot", math.hypot, (2, 3), "Euclidean length of (x, y[, z])"),
+        _f("floor", _floor, 1, "round down"),
+        _f("ceil", _ceil, 1, "round up"),
+        _f("round", _round, 1, "round to nearest (ties to even)"),
+        _f("sign", _sign, 1, "-1, 0 or 1"),
+        _f("radians", math.radians, 1, "degrees to radians"),
+        _f("degrees", math.degrees, 1, "radians to degrees"),
+        _f("uniform", None, 2, "uniform(low, high): a random number in [low, high)", random=True),
+        _f("normal", None, 2, "normal(mean, std): a Gaussian random number", random=True),
+        _f("randint", None, 2, "randint(low, high): a random integer in [low, high], both included", random=True),
+        _f("choice", None, (1, None), "choice(a, b, ...) or choice([a, b, ...]): one of the values at random", random=True),
+    ]
+}
+
+#: named constants every expression can use
+CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e, "tau_const": math.tau, "inf": math.inf}
+del CONSTANTS["tau_const"]  # 'tau' is a common parameter name (a time step), so it is not reserved
+
+
+class RandomSource:
+    """Random draws for expressions, reading the env's current seeded generator."""
+
+    __slots__ = ("generator",)
+
+    def __init__(self, generator: Any = None):
+        self.generator = generator
+
+    def uniform(self, low: float, high: float) -> float:
+        return float(self.generator.uniform(low, high))
+
+    def normal(self, mean: float, std: float) -> float:
+        return float(self.generator.normal(mean, std))
+
+    def randint(self, low: float, high: float) -> float:
+        return float(self.generator.integers(int(low), int(high), endpoint=True))
+
+    def choice(self, *values: Any) -> float:
+        options = values[0] if len(values) == 1 and isinstance(values[0], tuple) else values
+        return float(options[int(self.generator.integers(len(options)))])
+
+
+def bind_random(source: RandomSource) -> dict[str, Callable[..., Any]]:
+    """The implementations of the random functions, drawing from `source`."""
+    return {"uniform": source.uniform, "normal": source.normal, "randint": source.randint, "choice": source.choice}

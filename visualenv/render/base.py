@@ -1,0 +1,98 @@
+"""The renderer interface the env talks to, and what a renderer is given.
+
+The compiled program hands a renderer a :class:`RenderPlan`: the scene
+description, the observation cameras, the render settings and the list of
+binding targets. Before each render the env passes the current binding values
+(a flat tuple in :attr:`RenderPlan.bindings` order). A renderer turns those
+into pixels; it knows nothing of rewards or episodes.
+"""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+
+from visualenv.spec.models import CameraView, Observation, Render, Scene
+from visualenv.spec.source import SourceMap
+
+if TYPE_CHECKING:
+    from visualenv.compiler.program import BindingTarget, Program
+
+CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1}
+
+
+def view_space(view: CameraView) -> spaces.Box:
+    width, height = view.resolution
+    return spaces.Box(0, 255, (height, width, CHANNELS[view.color]), np.uint8)
+
+
+def observation_space(observation: Observation) -> spaces.Space:
+    """Box for one camera, Dict keyed by name for several."""
+    views = observation.views()
+    if observation.cameras is None:
+        return view_space(next(iter(views.values())))
+    return spaces.Dict({key: view_space(view) for key, view in views.items()})
+
+
+@dataclass(frozen=True)
+class RenderPlan:
+    """Everything a renderer needs, derived from a compiled program."""
+
+    scene: Scene
+    views: dict[str, CameraView]  # observation cameras by observation key
+    single: bool  # one camera (Box) rather than several (Dict)
+    settings: Render
+    bindings: tuple["BindingTarget", ...]
+    base_dir: Path
+    source: SourceMap
+
+    @classmethod
+    def from_program(cls, program: "Program") -> "RenderPlan":
+        spec = program.spec
+        views = spec.observation.views() if spec.observation is not None else {}
+        return cls(
+            scene=spec.scene,
+            views=views,
+            single=spec.observation is None or spec.observation.cameras is None,
+            settings=spec.render,
+            bindings=tuple(program.bindings),
+            base_dir=program.loaded.base_dir,
+            source=program.loaded.source,
+        )
+
+    @property
+    def view_camera(self) -> str | None:
+        """The camera of the human view: render.view.camera, else the first observation camera."""
+        if self.settings.view.camera:
+            return self.settings.view.camera
+        return next(iter(self.views.values())).camera if self.views else None
+
+
+class Renderer(ABC):
+    """Turns binding values into observation arrays and a human view."""
+
+    plan: RenderPlan
+
+    @abstractmethod
+    def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
+        """Apply `values` to the bound properties and render every observation camera."""
+
+    @abstractmethod
+    def render_view(self, values: Sequence[Any]) -> np.ndarray:
+        """Apply `values` and render the high-resolution RGB view, (H, W, 3) uint8."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Free everything this renderer created (idempotent)."""
+
+
+def create_renderer(plan: RenderPlan, **options: Any) -> Renderer:
+    """The Blender renderer (imported here so state-only envs never load bpy)."""
+    from visualenv.render.blender.renderer import BlenderRenderer
+
+    return BlenderRenderer(plan, **options)

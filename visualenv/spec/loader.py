@@ -1,0 +1,226 @@
+"""Load a spec file and validate it against the models, keeping every error.
+
+:func:`load_spec` returns a :class:`LoadedSpec` (the validated model, its
+source map for later error messages, and the folder relative paths resolve
+against) or raises :class:`~visualenv.errors.SpecError` listing every problem
+as ``file:line:column: field.path: message``.
+"""
+
+from __future__ import annotations
+
+import types
+import typing
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from pydantic import BaseModel, ValidationError
+
+from visualenv.errors import Diagnostic, SpecError, did_you_mean
+from visualenv.spec.models import Spec
+from visualenv.spec.source import SourceMap, format_path, load_document, load_toml_text, load_yaml_text
+
+_OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
+_TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "text", list: "a list", dict: "a mapping", type(None): "nothing"}
+
+
+@dataclass(frozen=True)
+class LoadedSpec:
+    """A validated spec with where it came from."""
+
+    spec: Spec
+    source: SourceMap
+    base_dir: Path
+    raw: dict[str, Any]
+
+    @property
+    def file(self) -> str:
+        return self.source.file
+
+
+def load_spec(path: str | Path) -> LoadedSpec:
+    """Read and validate a YAML or TOML spec file."""
+    data, smap = load_document(path)
+    return validate_data(data, smap, Path(path).resolve().parent)
+
+
+def load_spec_text(text: str, name: str = "<string>.yaml", base_dir: str | Path = ".") -> LoadedSpec:
+    """Validate spec text (YAML, or TOML when `name` ends in .toml)."""
+    data, smap = load_toml_text(text, name) if name.endswith(".toml") else load_yaml_text(text, name)
+    return validate_data(data, smap, Path(base_dir).resolve())
+
+
+def validate_data(data: Any, smap: SourceMap, base_dir: Path) -> LoadedSpec:
+    if not isinstance(data, dict):
+        raise SpecError([smap.diagnostic((), f"expected a mapping of spec fields at the top level, got {_type_name(data)}")])
+    try:
+        spec = Spec.model_validate(data)
+    except ValidationError as exc:
+        raise SpecError(_diagnostics(exc, data, smap)) from None
+    return LoadedSpec(spec, smap, base_dir, data)
+
+
+# -- turning pydantic errors into located, readable diagnostics ----------------------------------------
+
+
+def _diagnostics(exc: ValidationError, data: Any, smap: SourceMap) -> list[Diagnostic]:
+    grouped: dict[tuple, list[dict]] = {}
+    for err in exc.errors(include_url=False):
+        path = _data_path(err["loc"], data, keep_last=err["type"] in ("missing", "extra_forbidden"))
+        grouped.setdefault(path, []).append(err)
+    out: list[Diagnostic] = []
+    for path, errs in grouped.items():
+        message = _message(path, errs, data)
+        out.append(smap.diagnostic(path, message, key=errs[0]["type"] == "extra_forbidden"))
+    out.sort(key=lambda d: (d.line or 0, d.column or 0))
+    return out
+
+
+def _data_path(loc: tuple, data: Any, keep_last: bool) -> tuple:
+    """Drop the union-branch labels pydantic adds to `loc`, keeping keys that exist in the data."""
+    path: list[Any] = []
+    node = data
+    for i, part in enumerate(loc):
+        last = i == len(loc) - 1
+        nxt = loc[i + 1] if not last else None
+        if isinstance(node, dict) and part in node:
+            value = node[part]
+            # a discriminator tag ('primitive') followed by a sibling key: the tag is a label
+            if nxt is not None and part in _OBJECT_KINDS and nxt in node and not isinstance(value, (dict, list)):
+                continue
+            path.append(part)
+            node = value
+        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+            path.append(part)
+            node = node[part]
+        elif last and keep_last:
+            path.append(part)
+        # otherwise: a label such as 'int', 'list[...]' or a Tag: skip it
+    return tuple(path)
+
+
+def _message(path: tuple, errs: list[dict], data: Any) -> str:
+    err = errs[0]
+    kind = err["type"]
+    if kind == "extra_forbidden":
+        key = str(path[-1])
+        if key.count("(") != key.count(")") or key.count("[") != key.count("]"):
+            return (f"unknown key '{key}': an expression with a comma inside {{...}} was split by YAML; "
+                    "quote it, e.g. {init: \"uniform(-1, 1)\"}")
+        allowed = _fields_at(path[:-1], data)
+        return f"unknown key '{path[-1]}'" + (did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else "")
+    if kind == "missing":
+        return f"missing required field '{path[-1]}'"
+    value = _value_at(path, data)
+    if len(errs) > 1 and all(e["type"].endswith("_type") or e["type"] in ("list_type", "string_type") for e in errs):
+        # a union (number-or-expression, list-or-text...) rejected every branch
+        wanted = {_expected(e) for e in errs}
+        if {"a number", "text"} <= wanted:
+            wanted = {"a number or an expression"} | ({"a list of expressions"} if "a list" in wanted else set())
+        return f"expected {' or '.join(sorted(wanted))}, got {_type_name(value)}"
+    for candidate in errs:  # a validator's own message is the most specific
+        if candidate["type"] in ("value_error", "assertion_error", "object_kind"):
+            err = candidate
+            break
+    msg = err["msg"]
+    if msg.startswith("Value error, "):
+        msg = msg[len("Value error, "):]
+    if err["type"] == "literal_error":
+        expected = err.get("ctx", {}).get("expected", "")
+        options = [o.strip(" '") for o in expected.replace(" or ", ",").split(",") if o.strip()]
+        msg = f"expected one of {expected}, got {value!r}"
+        if isinstance(value, str):
+            hint = did_you_mean(value, options)
+            if "did you mean" in hint:
+                msg += " (" + hint.split("?")[0].strip(" (") + "?)"
+        return msg
+    if err["type"].endswith("_type") or err["type"] in ("int_from_float", "bool_parsing", "float_parsing", "int_parsing"):
+        return f"expected {_expected(err)}, got {_type_name(value)} {value!r}" if not isinstance(value, (dict, list)) else f"expected {_expected(err)}, got {_type_name(value)}"
+    if msg.startswith("Input should be "):
+        msg = "expected a value " + msg[len("Input should be "):] + f", got {value!r}"
+    return msg
+
+
+def _expected(err: dict) -> str:
+    kind = err["type"]
+    return {
+        "bool_type": "a boolean", "bool_parsing": "a boolean", "int_type": "an integer", "int_parsing": "an integer",
+        "int_from_float": "an integer", "float_type": "a number", "float_parsing": "a number", "string_type": "text",
+        "list_type": "a list", "dict_type": "a mapping", "model_type": "a mapping", "model_attributes_type": "a mapping",
+    }.get(kind, kind.replace("_", " "))
+
+
+def _type_name(value: Any) -> str:
+    return _TYPE_NAMES.get(type(value), type(value).__name__)
+
+
+def _value_at(path: tuple, data: Any) -> Any:
+    node = data
+    for part in path:
+        try:
+            node = node[part]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return node
+
+
+def _fields_at(path: tuple, data: Any) -> list[str]:
+    """Names of the fields the model at `path` accepts (for 'did you mean')."""
+    annotation: Any = Spec
+    node = data
+    for part in path:
+        annotation = _unwrap(annotation, node)
+        if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+            field = annotation.model_fields.get(str(part))
+            if field is None:
+                return []
+            annotation = field.annotation
+        else:
+            origin = typing.get_origin(annotation)
+            args = typing.get_args(annotation)
+            if origin is dict and len(args) == 2:
+                annotation = args[1]
+            elif origin is list and args:
+                annotation = args[0]
+            else:
+                return []
+        node = node.get(part) if isinstance(node, dict) else (node[part] if isinstance(node, list) and isinstance(part, int) and part < len(node) else None)
+    annotation = _unwrap(annotation, node)
+    if isinstance(annotation, type) and issubclass(annotation, BaseModel):
+        return list(annotation.model_fields)
+    return []
+
+
+def _unwrap(annotation: Any, node: Any) -> Any:
+    """Strip Annotated/Optional/unions down to the model class that matches `node`."""
+    for _ in range(10):
+        origin = typing.get_origin(annotation)
+        if origin is typing.Annotated:
+            annotation = typing.get_args(annotation)[0]
+            continue
+        if origin in (typing.Union, types.UnionType):
+            models = [a for a in (_strip(x) for x in typing.get_args(annotation)) if isinstance(a, type) and issubclass(a, BaseModel)]
+            containers = [a for a in typing.get_args(annotation) if typing.get_origin(_strip(a)) in (dict, list)]
+            if isinstance(node, dict) and len(models) > 1:
+                for model in models:
+                    kind = next((k for k in _OBJECT_KINDS if k in model.model_fields and k in node), None)
+                    if kind:
+                        return model
+                return models[0]
+            if models:
+                return models[0]
+            if containers:
+                annotation = _strip(containers[0])
+                continue
+            return annotation
+        return annotation
+    return annotation
+
+
+def _strip(annotation: Any) -> Any:
+    while typing.get_origin(annotation) is typing.Annotated:
+        annotation = typing.get_args(annotation)[0]
+    return annotation
+
+
+__all__ = ["LoadedSpec", "load_spec", "load_spec_text", "validate_data", "format_path"]

@@ -1,0 +1,318 @@
+"""The spec file format, as pydantic models.
+
+These models check shape, types and ranges; they know nothing of Blender or
+Gymnasium. Expressions are kept as text (or plain numbers) here and checked by
+:mod:`visualenv.expr` when the compiler resolves names. The JSON Schema in
+``schemas/`` is generated from these classes (``visualenv schema``), so the
+docstrings and ``Field`` descriptions are what editors show.
+"""
+
+from __future__ import annotations
+
+from typing import Annotated, Any, Literal, Union
+
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
+
+#: An expression: a number, a boolean or the text of an expression such as ``"x + tau * x_dot"``.
+Expr = Annotated[Union[bool, int, float, str], Field(description="a number or an expression")]
+#: A 3-vector: a list of three expressions, or one expression text such as ``"[x, 0, 0]"``.
+Vec3Expr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length=3)], str], Field(description="three expressions, or one vector expression")]
+#: A colour: three (RGB) or four (RGBA) expressions in 0..1, or one vector expression.
+ColorExpr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length=4)], str], Field(description="RGB or RGBA in 0..1")]
+
+Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
+Color = Annotated[list[Annotated[float, Field(ge=0.0)]], Field(min_length=3, max_length=4, description="RGB or RGBA, linear, 0..1")]
+Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="an identifier")]
+Resolution = Annotated[list[Annotated[int, Field(ge=1, le=8192)]], Field(min_length=2, max_length=2, description="[width, height] in pixels")]
+
+
+class StrictModel(BaseModel):
+    """Unknown keys are errors: a misspelt key must not be silently ignored."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True)
+
+
+# -- scene ------------------------------------------------------------------------------------
+
+
+class Texture(StrictModel):
+    """A procedural or image texture that drives the base colour of a material."""
+
+    type: Literal["noise", "voronoi", "checker", "wave", "image"] = Field(description="texture kind")
+    scale: float = Field(5.0, gt=0, description="texture coordinate scale (procedural kinds)")
+    detail: float = Field(2.0, ge=0, le=15, description="noise detail")
+    colors: Annotated[list[Color], Field(min_length=2, max_length=2)] | None = Field(None, description="two colours the texture value blends between (procedural kinds)")
+    image: str | None = Field(None, description="image file, relative to the spec (type: image)")
+
+    @model_validator(mode="after")
+    def _image_needs_file(self) -> "Texture":
+        if self.type == "image" and not self.image:
+            raise ValueError("an image texture needs 'image': a file path")
+        return self
+
+
+class Material(StrictModel):
+    """A Principled BSDF material."""
+
+    color: Color = Field([0.8, 0.8, 0.8], description="base colour")
+    roughness: float = Field(0.5, ge=0, le=1)
+    metallic: float = Field(0.0, ge=0, le=1)
+    emission: Color | None = Field(None, description="emission colour")
+    emission_strength: float = Field(1.0, ge=0)
+    texture: Texture | None = None
+
+
+class ObjectBase(StrictModel):
+    location: Vec3 = Field([0.0, 0.0, 0.0], description="initial location (m)")
+    rotation: Vec3 = Field([0.0, 0.0, 0.0], description="initial Euler XYZ rotation (radians)")
+    scale: Union[float, Vec3] = Field(1.0, description="initial scale")
+    visible: bool = True
+    parent: str | None = Field(None, description="name of the parent object")
+
+
+class PrimitiveObject(ObjectBase):
+    """A mesh primitive built by the compiler."""
+
+    primitive: Literal["cube", "plane", "sphere", "cylinder", "cone", "torus", "disk", "ring"]
+    size: Union[Annotated[float, Field(gt=0)], Vec3] = Field(1.0, description="cube/plane edge length, or [x, y, z] dimensions")
+    radius: float = Field(0.5, gt=0, description="sphere/cylinder/cone/disk/torus radius")
+    depth: float = Field(1.0, gt=0, description="cylinder/cone height")
+    thickness: float = Field(0.05, gt=0, description="ring/torus tube thickness")
+    segments: int = Field(32, ge=3, le=512)
+    origin: Literal["center", "bottom"] = Field("center", description="where the object's origin sits")
+    smooth: bool = False
+    material: Material | None = None
+
+
+class MeshObject(ObjectBase):
+    """A mesh imported from a file (.obj, .stl, .ply, .glb/.gltf)."""
+
+    mesh: str = Field(description="mesh file, relative to the spec")
+    material: Material | None = None
+
+
+class LightObject(ObjectBase):
+    light: Literal["sun", "point", "spot", "area"]
+    strength: float = Field(3.0, ge=0, description="sun: irradiance (W/m2); others: power (W)")
+    color: Color = [1.0, 1.0, 1.0]
+    spot_size: float = Field(0.785, gt=0, le=3.1416, description="spot cone angle (radians)")
+    size: float = Field(0.25, ge=0, description="light radius or area size (m)")
+
+
+class CameraObject(ObjectBase):
+    camera: Literal["perspective", "orthographic"]
+    lens: float = Field(35.0, gt=0, description="focal length (mm)")
+    sensor_width: float = Field(36.0, gt=0, description="sensor width (mm)")
+    ortho_scale: float = Field(6.0, gt=0, description="view width for orthographic cameras (m)")
+    clip_start: float = Field(0.05, gt=0)
+    clip_end: float = Field(200.0, gt=0)
+    look_at: Vec3 | None = Field(None, description="point the camera at this location (overrides rotation)")
+
+    @model_validator(mode="after")
+    def _clip_order(self) -> "CameraObject":
+        if self.clip_end <= self.clip_start:
+            raise ValueError("clip_end must be greater than clip_start")
+        return self
+
+
+class EmptyObject(ObjectBase):
+    """An empty: a transform other objects can be parented to."""
+
+    empty: Literal[True] = True
+
+
+def _object_kind(value: Any) -> str | None:
+    if isinstance(value, dict):
+        for kind in ("primitive", "mesh", "light", "camera", "empty"):
+            if kind in value:
+                return kind
+        return None
+    return getattr(value, "kind", None)
+
+
+SceneObject = Annotated[
+    Union[
+        Annotated[PrimitiveObject, Tag("primitive")],
+        Annotated[MeshObject, Tag("mesh")],
+        Annotated[LightObject, Tag("light")],
+        Annotated[CameraObject, Tag("camera")],
+        Annotated[EmptyObject, Tag("empty")],
+    ],
+    Discriminator(
+        _object_kind,
+        custom_error_type="object_kind",
+        custom_error_message="an object needs one of 'primitive', 'mesh', 'light', 'camera' or 'empty'",
+    ),
+]
+
+
+class World(StrictModel):
+    color: Color = Field([0.05, 0.05, 0.05], description="background colour")
+    strength: float = Field(1.0, ge=0)
+
+
+class Scene(StrictModel):
+    """The Blender scene: a .blend file, declared objects, or both."""
+
+    file: str | None = Field(None, description="a .blend file made in Blender, relative to the spec; its objects are bound by name")
+    objects: dict[Name, SceneObject] = Field(default_factory=dict, description="objects to build (added to the file's scene, if any)")
+    world: World | None = Field(None, description="background; default: the file's world, or dark grey")
+
+
+# -- state, actions, dynamics -------------------------------------------------------------------
+
+
+class StateVar(StrictModel):
+    init: Expr = Field(description="initial value at reset; may draw random numbers, e.g. uniform(-0.05, 0.05)")
+    observe: bool = Field(True, description="part of the state-only observation vector")
+
+
+class ContinuousInput(StrictModel):
+    low: float
+    high: float
+
+    @model_validator(mode="after")
+    def _order(self) -> "ContinuousInput":
+        if self.high <= self.low:
+            raise ValueError("high must be greater than low")
+        return self
+
+
+class Actions(StrictModel):
+    """Either discrete actions (each sets per-step inputs) or continuous inputs (a Box)."""
+
+    discrete: Annotated[list[dict[Name, Expr]], Field(min_length=1)] | None = Field(
+        None, description="action i sets these inputs for the step; inputs an action omits are 0"
+    )
+    continuous: Annotated[dict[Name, ContinuousInput], Field(min_length=1)] | None = Field(
+        None, description="one Box dimension per input, in this order, clipped to [low, high]"
+    )
+
+    @model_validator(mode="after")
+    def _exactly_one(self) -> "Actions":
+        if (self.discrete is None) == (self.continuous is None):
+            raise ValueError("give exactly one of 'discrete' or 'continuous'")
+        return self
+
+
+class Dynamics(StrictModel):
+    let: dict[Name, Expr] = Field(default_factory=dict, description="derived quantities, computed in order from the old state")
+    update: dict[Name, Expr] = Field(default_factory=dict, description="new state values; all right-hand sides read the old state")
+    python: str | None = Field(
+        None,
+        pattern=r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$",
+        description="escape hatch, RUNS USER CODE: 'module:function' called as f(state, inputs, params, rng) -> dict of new state values",
+    )
+
+
+class Outcome(StrictModel):
+    when: Expr = Field(description="condition, checked after each update")
+    reward: Expr = Field(0.0, description="added to the step's reward when the outcome fires")
+    end: Literal["terminate", "truncate", "none"] = Field(
+        "terminate", description="terminate or truncate the episode; 'none' marks a milestone that fires once"
+    )
+    success: bool = Field(False, description="the episode counts as a success (info['is_success'])")
+
+
+# -- actors, observation, rendering --------------------------------------------------------------
+
+
+class Actor(StrictModel):
+    """Properties of a scene object recomputed from state before every render."""
+
+    location: Vec3Expr | None = None
+    rotation: Vec3Expr | None = Field(None, description="Euler XYZ, radians")
+    scale: Union[Vec3Expr, Expr, None] = None
+    visible: Expr | None = Field(None, description="a condition")
+    color: ColorExpr | None = Field(None, description="material base colour (objects) or light colour (lights)")
+    strength: Expr | None = Field(None, description="light strength")
+    look_at: Vec3Expr | None = Field(None, description="aim the object (a camera) at this point")
+    lens: Expr | None = Field(None, description="camera focal length (mm)")
+
+
+class CameraView(StrictModel):
+    camera: Name = Field(description="a camera in the scene")
+    resolution: Resolution = Field([100, 100], description="[width, height]")
+    color: Literal["rgb", "grayscale", "depth"] = "grayscale"
+    depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = Field(
+        [0.0, 20.0], description="depth observations: distances mapped to 0..255"
+    )
+
+    @field_validator("resolution")
+    @classmethod
+    def _pixels(cls, value: list[int]) -> list[int]:
+        if value[0] * value[1] > 16_777_216:
+            raise ValueError("resolution is too large (at most 16 megapixels)")
+        return value
+
+
+class Observation(StrictModel):
+    """What the agent sees: one camera (a Box) or several (a Dict)."""
+
+    camera: Name | None = Field(None, description="the single observation camera")
+    resolution: Resolution = Field([100, 100], description="[width, height]")
+    color: Literal["rgb", "grayscale", "depth"] = "grayscale"
+    depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = [0.0, 20.0]
+    cameras: dict[Name, CameraView] | None = Field(None, description="several cameras: a Dict observation keyed by these names")
+
+    @model_validator(mode="after")
+    def _one_or_many(self) -> "Observation":
+        if (self.camera is None) == (self.cameras is None):
+            raise ValueError("give either 'camera' (one camera) or 'cameras' (several)")
+        if self.camera is not None:
+            CameraView._pixels(self.resolution)
+        return self
+
+    def views(self) -> dict[str, CameraView]:
+        """Every observation camera by key (the single camera's key is its name)."""
+        if self.cameras is not None:
+            return dict(self.cameras)
+        assert self.camera is not None
+        return {self.camera: CameraView(camera=self.camera, resolution=self.resolution, color=self.color, depth_range=self.depth_range)}
+
+
+class ViewSettings(StrictModel):
+    """The human view returned by ``env.render()`` (render_mode='rgb_array')."""
+
+    camera: Name | None = Field(None, description="default: the (first) observation camera")
+    resolution: Resolution = [400, 400]
+    preset: Literal["fast", "quality"] = "quality"
+
+
+class Render(StrictModel):
+    engine: Literal["cycles", "workbench", "eevee"] = "cycles"
+    preset: Literal["fast", "quality"] = Field("fast", description="fast: 1 sample, no bounces (training); quality: previews")
+    samples: int | None = Field(None, ge=1, le=4096, description="overrides the preset's samples")
+    bounces: int | None = Field(None, ge=0, le=128, description="overrides the preset's light bounces")
+    device: Literal["cpu", "gpu", "auto"] = Field("cpu", description="Cycles device; gpu falls back to cpu with a message")
+    threads: int = Field(0, ge=0, le=256, description="render threads, 0: all cores")
+    view: ViewSettings = Field(default_factory=ViewSettings)
+
+
+# -- the whole spec ---------------------------------------------------------------------------------
+
+
+class Spec(StrictModel):
+    """A visualenv environment: scene, state, dynamics, actions, rewards and observation."""
+
+    model_config = ConfigDict(extra="forbid", frozen=True, json_schema_extra={"$id": "https://visualenv.dev/schema/spec.json"})
+
+    id: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_.]*-v\d+$", description="environment id, e.g. VisualCartPole-v0")
+    description: str = ""
+    scene: Scene = Field(default_factory=Scene)
+    params: dict[Name, Union[bool, int, float, str]] = Field(
+        default_factory=dict, description="named constants; a value may be an expression over earlier params"
+    )
+    state: Annotated[dict[Name, StateVar], Field(min_length=1)] = Field(description="state variables, in observation order")
+    actions: Actions
+    dynamics: Dynamics = Field(default_factory=Dynamics)
+    actors: dict[Name, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")
+    observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
+    render: Render = Field(default_factory=Render)
+    reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")
+    outcomes: dict[Name, Outcome] = Field(default_factory=dict, description="named rules checked in order; the first ending one ends the episode")
+    max_steps: int = Field(1000, ge=1, le=100_000_000, description="episodes are truncated after this many steps")
+    dt: float = Field(1.0, gt=0, description="seconds per step, available as 'dt' in expressions")
+    on_fault: Literal["raise", "terminate"] = Field(
+        "raise", description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']"
+    )

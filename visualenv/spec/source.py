@@ -1,0 +1,236 @@
+"""Read YAML or TOML into plain data plus a map from field paths to positions.
+
+Pydantic validates plain data, so positions must be kept aside: a
+:class:`SourceMap` maps each path (a tuple of keys and list indexes) to the
+line and column where its value starts, and to where the key itself is
+written. Syntax errors become :class:`~visualenv.errors.SpecError` with the
+parser's own position. Duplicate keys, which YAML parsers silently overwrite,
+are reported.
+"""
+
+from __future__ import annotations
+
+import re
+import tomllib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from visualenv.errors import Diagnostic, SpecError
+
+Path_ = tuple[str | int, ...]
+
+
+@dataclass
+class Position:
+    line: int
+    column: int
+    #: for single-line string scalars: how many characters precede the text
+    #: (1 for a quoted scalar), so an expression column can be added to it.
+    text_offset: int | None = None
+
+
+@dataclass
+class SourceMap:
+    """Where each value (and each mapping key) of a loaded document is written."""
+
+    file: str
+    values: dict[Path_, Position] = field(default_factory=dict)
+    keys: dict[Path_, Position] = field(default_factory=dict)
+
+    def locate(self, path: Path_, *, key: bool = False) -> Position | None:
+        """The position of `path`, or of its closest ancestor that has one."""
+        path = tuple(path)
+        if key and path in self.keys:
+            return self.keys[path]
+        while path:
+            if path in self.values:
+                return self.values[path]
+            path = path[:-1]
+        return self.values.get(())
+
+    def diagnostic(self, path: Path_, message: str, *, key: bool = False, column_offset: int | None = None) -> Diagnostic:
+        pos = self.locate(path, key=key)
+        line = pos.line if pos else None
+        column = pos.column if pos else None
+        if pos and column_offset is not None and pos.text_offset is not None and tuple(path) in self.values:
+            column = pos.column + pos.text_offset + column_offset
+        return Diagnostic(self.file, line, column, format_path(path), message)
+
+
+def format_path(path: Path_) -> str:
+    """`('state', 'theta', 'init')` -> `state.theta.init`; list indexes as `[0]`."""
+    out = ""
+    for part in path:
+        if isinstance(part, int):
+            out += f"[{part}]"
+        else:
+            out += ("." if out else "") + str(part)
+    return out
+
+
+def load_document(path: str | Path) -> tuple[Any, SourceMap]:
+    """Load a spec file (by extension: .yaml/.yml or .toml) with its source map."""
+    p = Path(path)
+    name = str(path)
+    try:
+        text = p.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise SpecError([Diagnostic(name, None, None, "", "file not found")]) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SpecError([Diagnostic(name, None, None, "", f"cannot read the file: {exc}")]) from None
+    suffix = p.suffix.lower()
+    if suffix == ".toml":
+        return load_toml_text(text, name)
+    if suffix in (".yaml", ".yml", ".json"):
+        return load_yaml_text(text, name)
+    raise SpecError([Diagnostic(name, None, None, "", f"unknown spec file type '{suffix}': expected .yaml, .yml or .toml")])
+
+
+# -- YAML -------------------------------------------------------------------------------------
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """SafeLoader (no Python tags, no code) that keeps node positions."""
+
+
+def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
+    smap = SourceMap(name)
+    try:
+        node = yaml.compose(text, Loader=_UniqueKeyLoader)
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        problem = exc.problem or exc.context or "invalid YAML"
+        msg = f"YAML syntax error: {problem}"
+        if exc.context and exc.problem:
+            msg += f" ({exc.context})"
+        raise SpecError([Diagnostic(name, mark.line + 1 if mark else None, mark.column + 1 if mark else None, "", msg)]) from None
+    except yaml.YAMLError as exc:
+        raise SpecError([Diagnostic(name, None, None, "", f"YAML error: {exc}")]) from None
+    if node is None:
+        raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a mapping with at least 'id'")])
+    problems: list[Diagnostic] = []
+    data = _convert(node, (), smap, problems)
+    if problems:
+        raise SpecError(problems)
+    return data, smap
+
+
+def _pos(node: yaml.Node) -> Position:
+    text_offset = None
+    if isinstance(node, yaml.ScalarNode) and node.start_mark.line == node.end_mark.line:
+        text_offset = 1 if node.style in ("'", '"') else 0
+    return Position(node.start_mark.line + 1, node.start_mark.column + 1, text_offset)
+
+
+def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagnostic]) -> Any:
+    smap.values[path] = _pos(node)
+    if isinstance(node, yaml.MappingNode):
+        out: dict[Any, Any] = {}
+        for key_node, value_node in node.value:
+            if not isinstance(key_node, yaml.ScalarNode):
+                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "mapping keys must be plain names"))
+                continue
+            key = _scalar(key_node)
+            if key == "<<":
+                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "YAML merge keys ('<<') are not supported"))
+                continue
+            if not isinstance(key, (str, int, float, bool)):
+                key = str(key)
+            key = str(key) if not isinstance(key, str) else key
+            child = path + (key,)
+            if key in out:
+                first = smap.keys[child]
+                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(child), f"duplicate key '{key}' (first defined on line {first.line})"))
+                continue
+            smap.keys[child] = _pos(key_node)
+            out[key] = _convert(value_node, child, smap, problems)
+        return out
+    if isinstance(node, yaml.SequenceNode):
+        return [_convert(item, path + (i,), smap, problems) for i, item in enumerate(node.value)]
+    return _scalar(node)
+
+
+def _lc(node: yaml.Node) -> tuple[int, int]:
+    return node.start_mark.line + 1, node.start_mark.column + 1
+
+
+def _scalar(node: yaml.ScalarNode) -> Any:
+    return _UniqueKeyLoader.construct_scalar_value(node)
+
+
+def _construct_scalar_value(node: yaml.ScalarNode) -> Any:
+    loader = _UniqueKeyLoader("")
+    try:
+        return loader.construct_object(node, deep=True)
+    except yaml.constructor.ConstructorError:
+        return node.value
+
+
+_UniqueKeyLoader.construct_scalar_value = staticmethod(_construct_scalar_value)  # type: ignore[attr-defined]
+
+
+# -- TOML -------------------------------------------------------------------------------------
+
+_TABLE = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
+_KEY = re.compile(r"""(?:^|[{,])\s*((?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*'))*)\s*=\s*""")
+
+
+def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
+    """Parse TOML with tomllib and recover key positions by scanning the text.
+
+    tomllib keeps no positions, so keys are located line by line: table headers
+    set the current prefix and each `key =` (also inside inline tables) is
+    recorded. It is exact for the usual layouts and falls back to the enclosing
+    table otherwise.
+    """
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:
+        msg = str(exc)
+        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
+        line, col = (int(m.group(1)), int(m.group(2))) if m else (None, None)
+        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg)
+        raise SpecError([Diagnostic(name, line, col, "", f"TOML syntax error: {msg}")]) from None
+    if not data:
+        raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a table with at least 'id'")])
+    smap = SourceMap(name)
+    smap.values[()] = Position(1, 1)
+    prefix: Path_ = ()
+    array_counts: dict[Path_, int] = {}
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        stripped = line.split("#", 1)[0] if '"' not in line and "'" not in line else line
+        m = _TABLE.match(stripped)
+        if m and "=" not in stripped.split("]")[0]:
+            keys = tuple(_split_key(m.group(2)))
+            if m.group(1) == "[[":
+                index = array_counts.get(keys, 0)
+                array_counts[keys] = index + 1
+                prefix = keys + (index,)
+            else:
+                prefix = keys
+            smap.values.setdefault(prefix, Position(lineno, line.index("[") + 1))
+            smap.keys.setdefault(prefix, Position(lineno, line.index("[") + 1))
+            continue
+        # keys in `a = 1` and inside inline tables `{ b = 2, c = 3 }` (one level deep)
+        inline_prefix = prefix
+        for km in _KEY.finditer(line):
+            keys = tuple(_split_key(km.group(1)))
+            before = line[: km.start(1)]
+            full = (inline_prefix if "{" in before else prefix) + keys
+            if "{" not in before:
+                inline_prefix = full
+            col = km.start(1) + 1
+            value_col = km.end() + 1
+            smap.keys.setdefault(full, Position(lineno, col))
+            is_string = km.end() < len(line) and line[km.end()] in "\"'"
+            single = is_string and not line[km.end():].startswith(('"""', "'''"))
+            smap.values.setdefault(full, Position(lineno, value_col, 1 if single else None))
+    return data, smap
+
+
+def _split_key(key: str) -> list[str]:
+    parts = re.findall(r"""[A-Za-z0-9_-]+|"[^"]*"|'[^']*'""", key)
+    return [p[1:-1] if p[:1] in "\"'" else p for p in parts]
