@@ -25,7 +25,7 @@ class VisualEnv(gym.Env):
     spec's camera sees, ``Box(0, 255, (H, W, C), uint8)`` with C = 1 for
     grayscale or depth and 3 for RGB; several cameras give a ``Dict`` of those.
     Without (``render=False``, or no ``observation`` in the spec): the state
-    variables marked ``observe`` in declared order, ``Box(-inf, inf, (n,), float32)``.
+    variables marked ``observe`` in declared order, a float32 ``Box`` of shape (n,).
 
     ## Action space
     ``Discrete(n)`` for ``actions.discrete`` (action i sets its inputs for the
@@ -92,7 +92,8 @@ class VisualEnv(gym.Env):
             self.observation_space = observation_space(s.observation)  # type: ignore[arg-type]
         else:
             n = len(program.observed)
-            self.observation_space = spaces.Box(-np.inf, np.inf, (n,), np.float32)
+            big = np.finfo(np.float32).max  # finite bounds: check_env warns about infinite ones
+            self.observation_space = spaces.Box(-big, big, (n,), np.float32)
         self._observed = program.observed
         self._milestones = [r.name for r in program.outcomes if r.end == "none"]
         self._milestone_success = [r.success for r in program.outcomes if r.end == "none"]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import ast
 import importlib
+import re
 import keyword
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
@@ -118,8 +119,22 @@ class _Compiler:
         try:
             return check(text, names, constants=self.params, allow_random=random, expect=expect)
         except ExpressionError as exc:
-            self.error(path, exc.message, column=exc.offset)
+            self.error(path, self.explain_order(path, exc.message), column=exc.offset)
             return None
+
+    def explain_order(self, path: tuple, message: str) -> str:
+        """An unknown name defined further down the same section is an ordering problem."""
+        match = re.match(r"unknown name '(\w+)'", message)
+        if not match or len(path) < 2:
+            return message
+        wanted = match.group(1)
+        sections = {("params",): list(self.spec.params), ("dynamics", "let"): list(self.spec.dynamics.let), ("state",): list(self.spec.state)}
+        for prefix, names in sections.items():
+            if tuple(path[: len(prefix)]) == prefix and wanted in names:
+                where = ".".join(prefix)
+                return (f"'{wanted}' is defined later in {where}: an entry can only use the ones above it "
+                        "(reorder them; cyclic definitions are not allowed)")
+        return message
 
     # -- the passes -----------------------------------------------------------------------------
 
@@ -184,7 +199,7 @@ class _Compiler:
                 try:
                     checked = check(value, {}, constants=params, allow_random=False)
                 except ExpressionError as exc:
-                    self.error(("params", key), exc.message, column=exc.offset)
+                    self.error(("params", key), self.explain_order(("params", key), exc.message), column=exc.offset)
                     continue
                 if checked.constant is None or isinstance(checked.constant, tuple):
                     self.error(("params", key), "a parameter must be a number or a condition")

@@ -1,0 +1,32 @@
+# Two commands on a fresh machine: `make demo` and `make test` (each sets up first).
+PYTHON ?= python3
+VENV   ?= .venv
+PY     := $(VENV)/bin/python
+STAMP  := $(VENV)/.installed
+
+.PHONY: setup demo test bench schema clean
+
+setup: $(STAMP)
+
+$(STAMP): pyproject.toml
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install -q --upgrade pip
+	# torch first: 2.13.0 is a CPU build; any other version pulls gigabytes of CUDA packages
+	$(PY) -m pip install -q torch==2.13.0
+	$(PY) -m pip install -q -e ".[train,dev]"
+	touch $(STAMP)
+
+demo: setup  ## build a bundled spec and show its result
+	$(VENV)/bin/visualenv build specs/visual_cartpole.yaml
+
+test: setup  ## run the test suite
+	$(PY) -m pytest
+
+bench: setup
+	$(VENV)/bin/visualenv bench specs/visual_cartpole.yaml
+
+schema: setup
+	$(VENV)/bin/visualenv schema > schemas/visualenv.schema.json
+
+clean:
+	rm -rf build runs frames .pytest_cache
