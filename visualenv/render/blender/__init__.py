@@ -1,0 +1,16 @@
+"""The Blender backend: builds the scene with ``bpy`` and renders cameras to numpy arrays.
+
+Modules, one job each:
+
+* :mod:`.scene`: load a .blend / build primitives, meshes, lights, cameras; track created data
+* :mod:`.materials`: Principled BSDF materials, textures, the world, the depth material
+* :mod:`.settings`: engine, preset, device and thread configuration
+* :mod:`.readback`: rendered pixels to numpy
+* :mod:`.renderer`: :class:`BlenderRenderer`, the :class:`~visualenv.render.base.Renderer` the env uses
+
+Importing this package imports ``bpy``.
+"""
+
+from visualenv.render.blender.renderer import BlenderRenderer
+
+__all__ = ["BlenderRenderer"]

@@ -1,0 +1,176 @@
+"""Principled BSDF materials, procedural and image textures, the world background.
+
+Every material is a Principled BSDF node tree. Its base colour is also written
+to ``Material.diffuse_color`` so the Workbench engine (which shows that colour)
+agrees with Cycles and EEVEE. Procedural textures (noise, voronoi, checker,
+wave) read object coordinates times ``scale`` and blend between two colours
+(default: the material colour and a darker shade of it); image textures read
+the mesh's UV map (generated coordinates when it has none).
+
+Depth observations use :func:`depth_material`, a view-layer material override
+that emits the camera's Z depth mapped linearly from ``depth_range`` to 0..1,
+and :func:`depth_world` (white: the background is "far").
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Callable, Sequence
+
+import bpy
+
+from visualenv.errors import SpecError
+from visualenv.spec.models import Material, Texture, World
+from visualenv.spec.source import SourceMap
+
+DEFAULT_WORLD = World()
+
+
+def rgba(color: Sequence[float]) -> tuple[float, float, float, float]:
+    c = [float(v) for v in color]
+    return (c[0], c[1], c[2], c[3] if len(c) > 3 else 1.0)
+
+
+def _principled(material: Any) -> Any:
+    return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None) if material.node_tree else None
+
+
+def make_material(
+    name: str, spec: Material, *, base_dir: Path, source: SourceMap, path: tuple, track: Callable[[Any], Any],
+) -> Any:
+    """A new material for `spec`; `path` locates the material in the spec (for errors)."""
+    mat = track(bpy.data.materials.new(name))
+    mat.use_nodes = True if not mat.node_tree else mat.use_nodes
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = _principled(mat)
+    if bsdf is None:
+        nodes.clear()
+        out = nodes.new("ShaderNodeOutputMaterial")
+        bsdf = nodes.new("ShaderNodeBsdfPrincipled")
+        links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
+    color = rgba(spec.color)
+    bsdf.inputs["Base Color"].default_value = color
+    bsdf.inputs["Roughness"].default_value = spec.roughness
+    bsdf.inputs["Metallic"].default_value = spec.metallic
+    if spec.emission is not None:
+        bsdf.inputs["Emission Color"].default_value = rgba(spec.emission)
+        bsdf.inputs["Emission Strength"].default_value = spec.emission_strength
+    mat.diffuse_color = color
+    mat.roughness = spec.roughness
+    mat.metallic = spec.metallic
+    if spec.texture is not None:
+        _texture(mat, bsdf, spec, spec.texture, base_dir=base_dir, source=source, path=path + ("texture",), track=track)
+    return mat
+
+
+def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir: Path, source: SourceMap, path: tuple, track: Callable[[Any], Any]) -> None:
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    coords = nodes.new("ShaderNodeTexCoord")
+    if tex.type == "image":
+        file = (base_dir / str(tex.image)).resolve()
+        if not file.is_file():
+            raise SpecError([source.diagnostic(path + ("image",), f"image file not found: {file}")])
+        try:
+            image = track(bpy.data.images.load(str(file), check_existing=False))
+        except RuntimeError as exc:
+            raise SpecError([source.diagnostic(path + ("image",), f"cannot read image {file}: {exc}")]) from None
+        node = nodes.new("ShaderNodeTexImage")
+        node.image = image
+        links.new(coords.outputs["UV"], node.inputs["Vector"])
+        node["visualenv_needs_uv"] = True
+        links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
+        return
+    kinds = {"noise": "ShaderNodeTexNoise", "voronoi": "ShaderNodeTexVoronoi", "checker": "ShaderNodeTexChecker", "wave": "ShaderNodeTexWave"}
+    node = nodes.new(kinds[tex.type])
+    links.new(coords.outputs["Object"], node.inputs["Vector"])
+    node.inputs["Scale"].default_value = tex.scale
+    if "Detail" in node.inputs:
+        node.inputs["Detail"].default_value = tex.detail
+    first, second = (rgba(tex.colors[0]), rgba(tex.colors[1])) if tex.colors else (rgba(material.color), rgba([0.35 * v for v in material.color[:3]]))
+    if tex.type == "checker":
+        node.inputs["Color1"].default_value = first
+        node.inputs["Color2"].default_value = second
+        links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
+        return
+    factor = node.outputs["Distance"] if tex.type == "voronoi" else node.outputs["Fac"]
+    mix = nodes.new("ShaderNodeMix")
+    mix.data_type = "RGBA"
+    # ShaderNodeMix has A/B sockets per data type: the colour pair is the RGBA one
+    sockets = [s for s in mix.inputs if s.type == "RGBA"]
+    sockets[0].default_value = first
+    sockets[1].default_value = second
+    links.new(factor, mix.inputs["Factor"])
+    result = next(s for s in mix.outputs if s.type == "RGBA")
+    links.new(result, bsdf.inputs["Base Color"])
+
+
+def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
+    """Image textures on a mesh without a UV map read generated coordinates instead."""
+    if mat is None or mat.node_tree is None or mesh is None or len(getattr(mesh, "uv_layers", ())):
+        return
+    for node in mat.node_tree.nodes:
+        if node.type == "TEX_IMAGE" and node.get("visualenv_needs_uv") and node.inputs["Vector"].is_linked:
+            link = node.inputs["Vector"].links[0]
+            coords = link.from_node
+            mat.node_tree.links.new(coords.outputs["Generated"], node.inputs["Vector"])
+
+
+def set_base_color(mat: Any, color: Sequence[float]) -> None:
+    """Bound colour: the Principled base colour (when not driven by a texture) and the viewport colour."""
+    value = rgba(color)
+    bsdf = _principled(mat)
+    if bsdf is not None and not bsdf.inputs["Base Color"].is_linked:
+        bsdf.inputs["Base Color"].default_value = value
+    mat.diffuse_color = value
+
+
+def make_world(name: str, spec: World, track: Callable[[Any], Any]) -> Any:
+    """A world with a uniform background (the Background node and the Workbench colour)."""
+    world = track(bpy.data.worlds.new(name))
+    _background(world, rgba(spec.color), spec.strength)
+    return world
+
+
+def _background(world: Any, color: tuple, strength: float) -> None:
+    nodes = world.node_tree.nodes
+    bg = next((n for n in nodes if n.type == "BACKGROUND"), None)
+    if bg is None:
+        nodes.clear()
+        out = nodes.new("ShaderNodeOutputWorld")
+        bg = nodes.new("ShaderNodeBackground")
+        world.node_tree.links.new(bg.outputs["Background"], out.inputs["Surface"])
+    bg.inputs["Color"].default_value = color
+    bg.inputs["Strength"].default_value = strength
+    world.color = color[:3]
+
+
+def depth_world(name: str, track: Callable[[Any], Any]) -> Any:
+    """White background: a ray that hits nothing is as far as it gets (255)."""
+    world = track(bpy.data.worlds.new(name))
+    _background(world, (1.0, 1.0, 1.0, 1.0), 1.0)
+    return world
+
+
+def depth_material(name: str, track: Callable[[Any], Any]) -> tuple[Any, Callable[[float, float], None]]:
+    """An emission material of clamp((z - near) / (far - near)), and a setter for near/far."""
+    mat = track(bpy.data.materials.new(name))
+    mat.use_nodes = True if not mat.node_tree else mat.use_nodes
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    out = nodes.new("ShaderNodeOutputMaterial")
+    cam = nodes.new("ShaderNodeCameraData")
+    remap = nodes.new("ShaderNodeMapRange")
+    remap.clamp = True
+    remap.inputs["To Min"].default_value = 0.0
+    remap.inputs["To Max"].default_value = 1.0
+    emit = nodes.new("ShaderNodeEmission")
+    emit.inputs["Strength"].default_value = 1.0
+    links.new(cam.outputs["View Z Depth"], remap.inputs["Value"])
+    links.new(remap.outputs["Result"], emit.inputs["Color"])
+    links.new(emit.outputs["Emission"], out.inputs["Surface"])
+
+    def set_range(near: float, far: float) -> None:
+        remap.inputs["From Min"].default_value = near
+        remap.inputs["From Max"].default_value = max(far, near + 1e-6)
+
+    return mat, set_range

@@ -1,0 +1,313 @@
+"""Build the Blender scene a spec describes: load a .blend, add primitives, meshes, lights, cameras.
+
+Everything is created through ``bpy.data`` and ``bmesh`` (no operators, which
+need a window context), except mesh import, which uses Blender's importers
+under a context override. :class:`DataTracker` records every datablock that
+appears while a scene is built, so the renderer can remove exactly those.
+
+Objects are known by their spec names: Blender renames an object whose name is
+taken (``Cart.001`` when another renderer in the process has a ``Cart``), so
+:attr:`BuiltScene.objects` maps the spec's (or the .blend file's) names to the
+objects themselves.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import bmesh
+import bpy
+from mathutils import Vector
+
+from visualenv.errors import Diagnostic, SpecError, did_you_mean
+from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
+from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
+from visualenv.spec.source import SourceMap
+
+_scene_counter = itertools.count()
+
+#: bpy.data collections whose new datablocks a renderer owns
+ID_COLLECTIONS = (
+    "scenes", "objects", "meshes", "materials", "worlds", "cameras", "lights", "images", "collections",
+    "node_groups", "textures", "actions", "curves", "armatures", "lattices", "grease_pencils", "fonts",
+    "libraries", "lightprobes", "particles", "pointclouds", "volumes", "hair_curves", "speakers", "sounds",
+    "texts", "cache_files", "metaballs", "movieclips", "masks", "linestyles", "palettes", "paint_curves", "brushes",
+)
+MESH_IMPORTERS = {".obj": "obj", ".stl": "stl", ".ply": "ply", ".glb": "gltf", ".gltf": "gltf"}
+
+
+class DataTracker:
+    """Remembers which datablocks existed at construction; :meth:`new` lists the ones added since."""
+
+    def __init__(self) -> None:
+        self._before = {name: {i.as_pointer() for i in coll} for name, coll in self._collections()}
+
+    @staticmethod
+    def _collections() -> list[tuple[str, Any]]:
+        return [(n, getattr(bpy.data, n)) for n in ID_COLLECTIONS if hasattr(bpy.data, n)]
+
+    def new(self) -> list[Any]:
+        out = []
+        for name, coll in self._collections():
+            before = self._before.get(name, set())
+            out.extend(i for i in coll if i.as_pointer() not in before)
+        return out
+
+
+def remove_ids(ids: list[Any]) -> None:
+    """Remove datablocks that still exist (scenes one by one, the rest in one batch)."""
+    alive = []
+    for datablock in ids:
+        try:
+            datablock.name  # noqa: B018 - raises ReferenceError once removed
+        except ReferenceError:
+            continue
+        alive.append(datablock)
+    scenes = [d for d in alive if isinstance(d, bpy.types.Scene)]
+    others = [d for d in alive if not isinstance(d, bpy.types.Scene)]
+    for scene in scenes:
+        if len(bpy.data.scenes) > 1:
+            bpy.data.scenes.remove(scene)
+    if others:
+        bpy.data.batch_remove(others)
+
+
+@dataclass
+class BuiltScene:
+    scene: Any
+    collection: Any
+    objects: dict[str, Any] = field(default_factory=dict)  # spec/file name -> object
+
+    def names(self) -> list[str]:
+        return list(self.objects)
+
+
+def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
+    """The scene: the .blend's first scene (appended) or a new one, plus every declared object."""
+    if spec.file:
+        scene, objects = load_blend(spec.file, base_dir=base_dir, source=source)
+    else:
+        scene, objects = bpy.data.scenes.new(f"{prefix}-{next(_scene_counter)}"), {}
+    collection = bpy.data.collections.new(f"{prefix}-objects")
+    scene.collection.children.link(collection)
+    built = BuiltScene(scene, collection, objects)
+    problems: list[Diagnostic] = []
+    for name, obj_spec in spec.objects.items():
+        try:
+            built.objects[name] = _build_object(name, obj_spec, built, base_dir=base_dir, source=source)
+        except SpecError as exc:
+            problems.extend(exc.diagnostics)
+    for name, obj_spec in spec.objects.items():
+        if obj_spec.parent is None or name not in built.objects:
+            continue
+        parent = built.objects.get(obj_spec.parent)
+        if parent is None:
+            problems.append(source.diagnostic(("scene", "objects", name, "parent"), f"no object '{obj_spec.parent}' in the scene" + did_you_mean(obj_spec.parent, built.objects).replace("names:", "objects:")))
+            continue
+        built.objects[name].parent = parent
+    if problems:
+        raise SpecError(problems)
+    if spec.world is not None or scene.world is None:
+        scene.world = make_world(f"{prefix}-world", spec.world or DEFAULT_WORLD, _keep)
+    return built
+
+
+def _keep(datablock: Any) -> Any:
+    return datablock
+
+
+# -- .blend files ------------------------------------------------------------------------------------
+
+
+def load_blend(file: str, *, base_dir: Path, source: SourceMap) -> tuple[Any, dict[str, Any]]:
+    """Append the first scene of a .blend (the current file stays as it is); name -> object by the file's names."""
+    path = (base_dir / file).resolve()
+    where = ("scene", "file")
+    if not path.is_file():
+        raise SpecError([source.diagnostic(where, f"scene file not found: {path}")])
+    with open(path, "rb") as f:
+        magic = f.read(7)
+    if not (magic.startswith(b"BLENDER") or magic[:4] == b"\x28\xb5\x2f\xfd" or magic[:2] == b"\x1f\x8b"):
+        raise SpecError([source.diagnostic(where, f"not a Blender file: {path} (a .blend saved by Blender is needed)")])
+    try:
+        with bpy.data.libraries.load(str(path), link=False) as (data_from, data_to):
+            scene_names = list(data_from.scenes)
+            object_names = list(data_from.objects)
+            data_to.scenes = scene_names[:1]
+            data_to.objects = object_names
+    except (OSError, RuntimeError, ValueError) as exc:
+        raise SpecError([source.diagnostic(where, f"cannot read {path} as a .blend file: {exc}")]) from None
+    if not scene_names or not data_to.scenes or data_to.scenes[0] is None:
+        raise SpecError([source.diagnostic(where, f"{path} has no scene")])
+    scene = data_to.scenes[0]
+    in_scene = {o.as_pointer() for o in scene.objects}
+    by_name = {name: obj for name, obj in zip(object_names, data_to.objects) if obj is not None and obj.as_pointer() in in_scene}
+    return scene, by_name
+
+
+# -- objects -----------------------------------------------------------------------------------------
+
+
+def _build_object(name: str, spec: Any, built: BuiltScene, *, base_dir: Path, source: SourceMap) -> Any:
+    path = ("scene", "objects", name)
+    if isinstance(spec, PrimitiveObject):
+        mesh = bpy.data.meshes.new(name)
+        _primitive_mesh(mesh, spec)
+        obj = bpy.data.objects.new(name, mesh)
+        mat = make_material(name, spec.material or Material(), base_dir=base_dir, source=source, path=path + ("material",), track=_keep)
+        mesh.materials.append(mat)
+        fix_uv_coordinates(mat, mesh)
+    elif isinstance(spec, MeshObject):
+        obj = _import_mesh(name, spec, built, base_dir=base_dir, source=source)
+    elif isinstance(spec, LightObject):
+        light = bpy.data.lights.new(name, spec.light.upper())
+        light.energy = spec.strength
+        light.color = spec.color[:3]
+        if spec.light == "spot":
+            light.spot_size = spec.spot_size
+        if spec.light == "area":
+            light.size = spec.size
+        elif spec.light in ("point", "spot"):
+            light.shadow_soft_size = spec.size
+        obj = bpy.data.objects.new(name, light)
+    elif isinstance(spec, CameraObject):
+        cam = bpy.data.cameras.new(name)
+        cam.type = "PERSP" if spec.camera == "perspective" else "ORTHO"
+        cam.lens = spec.lens
+        cam.sensor_fit = "HORIZONTAL"
+        cam.sensor_width = spec.sensor_width
+        cam.ortho_scale = spec.ortho_scale
+        cam.clip_start = spec.clip_start
+        cam.clip_end = spec.clip_end
+        obj = bpy.data.objects.new(name, cam)
+    elif isinstance(spec, EmptyObject):
+        obj = bpy.data.objects.new(name, None)
+    else:  # pragma: no cover - the models allow nothing else
+        raise TypeError(f"unknown object kind: {spec!r}")
+    if obj.name not in built.collection.objects:
+        built.collection.objects.link(obj)
+    obj.location = spec.location
+    obj.rotation_mode = "XYZ"
+    obj.rotation_euler = spec.rotation
+    obj.scale = (spec.scale,) * 3 if isinstance(spec.scale, (int, float)) else spec.scale
+    obj.hide_render = not spec.visible
+    if isinstance(spec, CameraObject) and spec.look_at is not None:
+        aim(obj, spec.look_at)
+    return obj
+
+
+def aim(obj: Any, target: Any, location: Any = None) -> None:
+    """Point the object's -Z axis at `target` (Y up), as Blender's Track To constraint does."""
+    loc = Vector(location if location is not None else obj.location)
+    direction = Vector(target) - loc
+    if direction.length_squared < 1e-18:
+        return
+    obj.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler("XYZ")
+
+
+def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:
+    bm = bmesh.new()
+    bm.loops.layers.uv.new("UVMap")
+    kind, n = spec.primitive, spec.segments
+    size = spec.size if isinstance(spec.size, list) else [spec.size] * 3
+    if kind == "cube":
+        bmesh.ops.create_cube(bm, size=1.0, calc_uvs=True)
+        bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)
+    elif kind == "plane":
+        bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=0.5, calc_uvs=True)
+        bmesh.ops.scale(bm, vec=Vector((size[0], size[1], 1.0)), verts=bm.verts)
+    elif kind == "sphere":
+        bmesh.ops.create_uvsphere(bm, u_segments=n, v_segments=max(3, n // 2), radius=spec.radius, calc_uvs=True)
+    elif kind in ("cylinder", "cone"):
+        top = spec.radius if kind == "cylinder" else 0.0
+        bmesh.ops.create_cone(bm, cap_ends=True, cap_tris=False, segments=n, radius1=spec.radius, radius2=top, depth=spec.depth, calc_uvs=True)
+    elif kind == "disk":
+        bmesh.ops.create_circle(bm, cap_ends=True, segments=n, radius=spec.radius, calc_uvs=True)
+    elif kind == "torus":
+        _torus(bm, spec.radius, spec.thickness, n, max(6, n // 3))
+    elif kind == "ring":
+        _ring(bm, spec.radius, max(spec.radius - spec.thickness, spec.radius * 0.01), n)
+    if spec.origin == "bottom" and bm.verts:
+        low = min(v.co.z for v in bm.verts)
+        bmesh.ops.translate(bm, vec=Vector((0.0, 0.0, -low)), verts=bm.verts)
+    for face in bm.faces:
+        face.smooth = spec.smooth
+    bm.to_mesh(mesh)
+    bm.free()
+
+
+def _torus(bm: Any, major: float, minor: float, major_segments: int, minor_segments: int) -> None:
+    rings = []
+    for i in range(major_segments):
+        a = 2 * math.pi * i / major_segments
+        ring = []
+        for j in range(minor_segments):
+            b = 2 * math.pi * j / minor_segments
+            r = major + minor * math.cos(b)
+            ring.append(bm.verts.new((r * math.cos(a), r * math.sin(a), minor * math.sin(b))))
+        rings.append(ring)
+    for i in range(major_segments):
+        for j in range(minor_segments):
+            i2, j2 = (i + 1) % major_segments, (j + 1) % minor_segments
+            bm.faces.new((rings[i][j], rings[i2][j], rings[i2][j2], rings[i][j2]))
+
+
+def _ring(bm: Any, outer: float, inner: float, segments: int) -> None:
+    outs, ins = [], []
+    for i in range(segments):
+        a = 2 * math.pi * i / segments
+        outs.append(bm.verts.new((outer * math.cos(a), outer * math.sin(a), 0.0)))
+        ins.append(bm.verts.new((inner * math.cos(a), inner * math.sin(a), 0.0)))
+    for i in range(segments):
+        k = (i + 1) % segments
+        bm.faces.new((ins[i], outs[i], outs[k], ins[k]))
+
+
+def _import_mesh(name: str, spec: MeshObject, built: BuiltScene, *, base_dir: Path, source: SourceMap) -> Any:
+    where = ("scene", "objects", name, "mesh")
+    path = (base_dir / spec.mesh).resolve()
+    kind = MESH_IMPORTERS.get(path.suffix.lower())
+    if kind is None:
+        raise SpecError([source.diagnostic(where, f"unsupported mesh format '{path.suffix}': use one of {', '.join(MESH_IMPORTERS)}")])
+    if not path.is_file():
+        raise SpecError([source.diagnostic(where, f"mesh file not found: {path}")])
+    scene = built.scene
+    before = {o.as_pointer() for o in bpy.data.objects}
+    importer: Callable[..., Any] = {
+        "obj": bpy.ops.wm.obj_import, "stl": bpy.ops.wm.stl_import, "ply": bpy.ops.wm.ply_import, "gltf": bpy.ops.import_scene.gltf,
+    }[kind]
+    layer = scene.view_layers[0]
+    try:
+        with bpy.context.temp_override(scene=scene, view_layer=layer, collection=built.collection):
+            result = importer(filepath=str(path))
+    except (RuntimeError, TypeError) as exc:
+        raise SpecError([source.diagnostic(where, f"cannot import {path}: {exc}")]) from None
+    new = [o for o in bpy.data.objects if o.as_pointer() not in before]
+    if "FINISHED" not in result or not new:
+        raise SpecError([source.diagnostic(where, f"{path} has no mesh to import")])
+    for obj in new:
+        for coll in list(obj.users_collection):
+            coll.objects.unlink(obj)
+        built.collection.objects.link(obj)
+    roots = [o for o in new if o.parent is None]
+    if len(roots) == 1:
+        obj = roots[0]
+        obj.name = name
+    else:
+        obj = bpy.data.objects.new(name, None)
+        built.collection.objects.link(obj)
+        for child in roots:
+            child.parent = obj
+    if spec.material is not None:
+        mat = make_material(name, spec.material, base_dir=base_dir, source=source, path=("scene", "objects", name, "material"), track=_keep)
+        for o in new:
+            if o.type == "MESH":
+                o.data.materials.clear()
+                o.data.materials.append(mat)
+                fix_uv_coordinates(mat, o.data)
+    # the spec's location/rotation/scale replace the imported root's transform
+    return obj

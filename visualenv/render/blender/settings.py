@@ -1,0 +1,219 @@
+"""Engine, preset, device and thread configuration of a Blender scene.
+
+A :class:`RenderConfig` is the complete set of engine knobs one render needs
+(engine, samples, bounces, denoising, pixel filter). :func:`apply_config` writes
+only the fields that differ from the previously applied config, so switching
+between the observation settings and the human-view settings costs a few
+attribute writes.
+
+Presets (Cycles):
+
+* ``fast`` (training): 1 sample, every bounce 0, no denoising, no adaptive
+  sampling, a 1-pixel box filter (crisp, deterministic pixels).
+* ``quality`` (previews): 32 samples, 4 bounces, Blackman-Harris filter,
+  OpenImageDenoise when the build has it (it runs on the CPU).
+
+``samples`` / ``bounces`` in the spec (or the renderer options) override the
+preset. Workbench ignores bounces and maps samples to its anti-aliasing
+levels; EEVEE maps samples to ``taa_render_samples``.
+"""
+
+from __future__ import annotations
+
+import logging
+import warnings
+from dataclasses import dataclass, replace
+from typing import Any
+
+import bpy
+
+from visualenv.spec.models import Render
+
+log = logging.getLogger("visualenv.render")
+
+ENGINE_IDS = {"cycles": "CYCLES", "workbench": "BLENDER_WORKBENCH", "eevee": "BLENDER_EEVEE"}
+GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "METAL", "ONEAPI")
+_BOUNCES = ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces", "transparent_max_bounces")
+_WORKBENCH_AA = ((1, "OFF"), (4, "FXAA"), (5, "5"), (8, "8"), (11, "11"), (16, "16"))
+
+
+@dataclass(frozen=True)
+class RenderConfig:
+    """Engine settings for one kind of render (observation or human view)."""
+
+    engine: str  # cycles | workbench | eevee
+    samples: int
+    bounces: int
+    denoise: bool
+    filter: str  # Cycles pixel_filter_type
+    filter_width: float
+
+
+PRESETS = {
+    "fast": dict(samples=1, bounces=0, denoise=False, filter="BOX", filter_width=1.0),
+    "quality": dict(samples=32, bounces=4, denoise=True, filter="BLACKMAN_HARRIS", filter_width=1.5),
+}
+
+#: a depth observation is always a 1-sample Cycles render of camera depth
+DEPTH_CONFIG = RenderConfig("cycles", 1, 0, False, "BOX", 1.0)
+
+
+def make_config(settings: Render, preset: str, *, engine: str | None = None, samples: int | None = None) -> RenderConfig:
+    """The config of `preset` with the spec's (and the options') overrides."""
+    values = dict(PRESETS[preset])
+    if settings.samples is not None:
+        values["samples"] = settings.samples
+    if settings.bounces is not None:
+        values["bounces"] = settings.bounces
+    if samples is not None:
+        values["samples"] = int(samples)
+    engine = engine or settings.engine
+    if engine not in ENGINE_IDS:
+        raise ValueError(f"unknown engine {engine!r}: use one of {', '.join(ENGINE_IDS)}")
+    return RenderConfig(engine=engine, **values)
+
+
+def view_config(obs: RenderConfig, settings: Render, preset: str) -> RenderConfig:
+    """The human view's config: its preset, but the engine of the observations."""
+    if preset == "fast":
+        return obs
+    return replace(make_config(settings, preset, engine=obs.engine), samples=max(PRESETS["quality"]["samples"], obs.samples))
+
+
+# -- devices -----------------------------------------------------------------------------------------
+
+_gpu_cache: str | None | bool = False  # False: not probed yet
+_warned: set[str] = set()
+
+
+def _warn_once(key: str, message: str) -> None:
+    if key not in _warned:
+        _warned.add(key)
+        warnings.warn(message, RuntimeWarning, stacklevel=3)
+
+
+def detect_gpu() -> str | None:
+    """The first Cycles GPU backend with a usable device (all its devices enabled), or None."""
+    global _gpu_cache
+    if _gpu_cache is not False:
+        return _gpu_cache  # type: ignore[return-value]
+    found = None
+    try:
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        for backend in GPU_BACKENDS:
+            try:
+                prefs.compute_device_type = backend
+            except TypeError:  # backend not compiled into this build
+                continue
+            prefs.refresh_devices()
+            devices = [d for d in prefs.devices if d.type == backend]
+            if devices:
+                for d in prefs.devices:
+                    d.use = d.type == backend
+                found = backend
+                break
+        if found is None:
+            prefs.compute_device_type = "NONE"
+    except Exception as exc:  # noqa: BLE001 - no Cycles preferences: treat as no GPU
+        log.debug("GPU probe failed: %s", exc)
+    _gpu_cache = found
+    return found
+
+
+def resolve_device(device: str) -> str:
+    """'CPU' or 'GPU' for a spec's cpu|gpu|auto, with a one-time message on fallback."""
+    if device == "cpu":
+        return "CPU"
+    backend = detect_gpu()
+    if backend:
+        log.info("Cycles renders on the GPU (%s)", backend)
+        return "GPU"
+    if device == "gpu":
+        _warn_once("gpu", "render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU")
+    else:
+        log.info("render.device 'auto': no GPU found, rendering on the CPU")
+    return "CPU"
+
+
+# -- writing settings to a scene ---------------------------------------------------------------------
+
+
+def configure_scene(scene: Any, *, device: str, threads: int) -> None:
+    """Settings that never change between renders: colour management, output, threads, device."""
+    r = scene.render
+    r.resolution_percentage = 100
+    r.pixel_aspect_x = r.pixel_aspect_y = 1.0
+    r.use_border = False
+    r.film_transparent = False
+    r.dither_intensity = 0.0  # dithering adds noise to 8-bit output
+    r.use_compositing = False
+    r.use_sequencer = False
+    r.use_persistent_data = False
+    r.use_motion_blur = False
+    r.use_simplify = False
+    if threads:
+        r.threads_mode = "FIXED"
+        r.threads = threads
+    else:
+        r.threads_mode = "AUTO"
+    set_color_management(scene, depth=False)
+    c = scene.cycles
+    c.device = device
+    c.use_adaptive_sampling = False
+    c.use_animated_seed = False
+    c.seed = 0
+    c.use_auto_tile = False
+    c.sample_clamp_direct = 0.0
+    c.sample_clamp_indirect = 0.0
+    c.caustics_reflective = False
+    c.caustics_refractive = False
+    d = scene.display.shading  # workbench: material colours, studio light
+    d.light = "STUDIO"
+    d.color_type = "MATERIAL"
+    for layer in list(scene.view_layers)[1:]:
+        layer.use = False
+
+
+def set_color_management(scene: Any, *, depth: bool) -> None:
+    """'Standard' (plain sRGB) for colour, 'Raw' (values written as they are) for depth."""
+    vs = scene.view_settings
+    scene.display_settings.display_device = "sRGB"
+    vs.view_transform = "Raw" if depth else "Standard"
+    vs.look = "None"
+    vs.exposure = 0.0
+    vs.gamma = 1.0
+    vs.use_curve_mapping = False
+
+
+def apply_config(scene: Any, config: RenderConfig, previous: RenderConfig | None) -> None:
+    """Write the fields of `config` that differ from `previous` (all of them when None)."""
+    def changed(field: str) -> bool:
+        return previous is None or getattr(previous, field) != getattr(config, field)
+
+    if changed("engine"):
+        scene.render.engine = ENGINE_IDS[config.engine]
+    c = scene.cycles
+    if changed("samples"):
+        c.samples = config.samples
+        c.preview_samples = config.samples
+        scene.eevee.taa_render_samples = config.samples
+        scene.display.render_aa = next((aa for n, aa in reversed(_WORKBENCH_AA) if config.samples >= n), "OFF")
+    if changed("bounces"):
+        for name in _BOUNCES:
+            setattr(c, name, config.bounces)
+    if changed("denoise"):
+        c.use_denoising = config.denoise and _oidn_available()
+    if changed("filter"):
+        c.pixel_filter_type = config.filter
+    if changed("filter_width"):
+        c.filter_width = config.filter_width
+
+
+def _oidn_available() -> bool:
+    return bool(getattr(bpy.app.build_options, "openimagedenoise", True))
+
+
+def engine_warnings(config: RenderConfig, device: str) -> None:
+    """Say once when a choice will be slow."""
+    if config.engine == "eevee" and detect_gpu() is None:
+        _warn_once("eevee", "EEVEE without a GPU renders in software and takes seconds per frame: use engine 'cycles' (or 'workbench') for training")
