@@ -69,7 +69,9 @@ def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0,
         view = env.render()
         assert view is not None
         Image.fromarray(side_by_side(obs, view)).save(tmp / "preview.png")
-        env.renderer.save_blend(tmp / "scene.blend")  # type: ignore[attr-defined]
+        from visualenv.render.blender.export import save_blend
+
+        save_blend(env.renderer.scene, tmp / "scene.blend")  # type: ignore[attr-defined]
         text = Path(source).read_bytes()
         record = {
             "id": loaded.spec.id,

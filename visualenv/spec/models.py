@@ -127,7 +127,8 @@ def _object_kind(value: Any) -> str | None:
             if kind in value:
                 return kind
         return None
-    return getattr(value, "kind", None)
+    fields = getattr(type(value), "model_fields", {})
+    return next((kind for kind in ("primitive", "mesh", "light", "camera", "empty") if kind in fields), None)
 
 
 SceneObject = Annotated[
