@@ -14,7 +14,7 @@ import re
 import tomllib
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NoReturn
 
 import yaml
 
@@ -76,11 +76,17 @@ def load_document(path: str | Path) -> tuple[Any, SourceMap]:
     p = Path(path)
     name = str(path)
     try:
-        text = p.read_text(encoding="utf-8")
+        raw = p.read_bytes()
     except FileNotFoundError:
         raise SpecError([Diagnostic(name, None, None, "", "file not found")]) from None
-    except (OSError, UnicodeDecodeError) as exc:
+    except OSError as exc:
         raise SpecError([Diagnostic(name, None, None, "", f"cannot read the file: {exc}")]) from None
+    try:
+        text = raw.decode("utf-8")
+    except UnicodeDecodeError as exc:
+        before = raw[: exc.start]
+        line, column = before.count(b"\n") + 1, exc.start - (before.rfind(b"\n") + 1) + 1
+        raise SpecError([Diagnostic(name, line, column, "", f"the file is not UTF-8 text: {exc.reason} (byte 0x{raw[exc.start]:02x})")]) from None
     suffix = p.suffix.lower()
     if suffix == ".toml":
         return load_toml_text(text, name)
@@ -96,9 +102,35 @@ class _UniqueKeyLoader(yaml.SafeLoader):
     """SafeLoader (no Python tags, no code) that keeps node positions."""
 
 
+#: deepest nesting of mappings and lists a spec may have (PyYAML's composer recurses)
+MAX_NESTING = 64
+#: most values a document may hold once YAML aliases are expanded ("billion laughs")
+MAX_VALUES = 100_000
+
+
+def _check_structure(text: str, name: str) -> None:
+    """Reject too-deep nesting and recursive aliases before composing (the event parser does not recurse)."""
+    depth = 0
+    open_anchors: list[str | None] = []
+    for event in yaml.parse(text, Loader=_UniqueKeyLoader):
+        if isinstance(event, yaml.CollectionStartEvent):
+            depth += 1
+            if depth > MAX_NESTING:
+                mark = event.start_mark
+                raise SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", f"nested too deeply (more than {MAX_NESTING} levels of mappings and lists)")])
+            open_anchors.append(event.anchor)
+        elif isinstance(event, yaml.CollectionEndEvent):
+            depth -= 1
+            open_anchors.pop()
+        elif isinstance(event, yaml.AliasEvent) and event.anchor in open_anchors:
+            mark = event.start_mark
+            raise SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor")])
+
+
 def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     smap = SourceMap(name)
     try:
+        _check_structure(text, name)
         node = yaml.compose(text, Loader=_UniqueKeyLoader)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
@@ -109,10 +141,12 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         raise SpecError([Diagnostic(name, mark.line + 1 if mark else None, mark.column + 1 if mark else None, "", msg)]) from None
     except yaml.YAMLError as exc:
         raise SpecError([Diagnostic(name, None, None, "", f"YAML error: {exc}")]) from None
+    except RecursionError:  # pragma: no cover - _check_structure limits the nesting first
+        raise SpecError([Diagnostic(name, None, None, "", "nested too deeply")]) from None
     if node is None:
         raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a mapping with at least 'id'")])
     problems: list[Diagnostic] = []
-    data = _convert(node, (), smap, problems)
+    data = _convert(node, (), smap, problems, [0])
     if problems:
         raise SpecError(problems)
     return data, smap
@@ -125,7 +159,10 @@ def _pos(node: yaml.Node) -> Position:
     return Position(node.start_mark.line + 1, node.start_mark.column + 1, text_offset)
 
 
-def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagnostic]) -> Any:
+def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagnostic], count: list[int]) -> Any:
+    count[0] += 1
+    if count[0] > MAX_VALUES:
+        raise SpecError([Diagnostic(smap.file, *_lc(node), "", f"the document is too large: more than {MAX_VALUES} values (are YAML aliases expanding?)")])
     smap.values[path] = _pos(node)
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
@@ -146,11 +183,20 @@ def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagn
                 problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(child), f"duplicate key '{key}' (first defined on line {first.line})"))
                 continue
             smap.keys[child] = _pos(key_node)
-            out[key] = _convert(value_node, child, smap, problems)
+            out[key] = _convert(value_node, child, smap, problems, count)
         return out
     if isinstance(node, yaml.SequenceNode):
-        return [_convert(item, path + (i,), smap, problems) for i, item in enumerate(node.value)]
-    return _scalar(node)
+        return [_convert(item, path + (i,), smap, problems, count) for i, item in enumerate(node.value)]
+    try:
+        return _scalar(node)
+    except ValueError as exc:  # e.g. an integer with more digits than Python converts
+        problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"cannot read this value: {_short(exc)}"))
+        return None
+
+
+def _short(exc: BaseException) -> str:
+    text = str(exc)
+    return "the number has too many digits" if "digits" in text and "limit" in text else text
 
 
 def _lc(node: yaml.Node) -> tuple[int, int]:
@@ -188,12 +234,14 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     """
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:
-        msg = str(exc)
-        m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
-        line, col = (int(m.group(1)), int(m.group(2))) if m else (None, None)
-        msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg)
-        raise SpecError([Diagnostic(name, line, col, "", f"TOML syntax error: {msg}")]) from None
+    except RecursionError:
+        raise SpecError([Diagnostic(name, *_deepest(text), "", f"nested too deeply (more than {MAX_NESTING} levels of tables and arrays)")]) from None
+    except ValueError as exc:
+        if isinstance(exc, tomllib.TOMLDecodeError):
+            _toml_syntax_error(exc, name)
+        m = re.search(r"\d{1000,}", text)
+        line, col = (text.count("\n", 0, m.start()) + 1, m.start() - text.rfind("\n", 0, m.start())) if m else (None, None)
+        raise SpecError([Diagnostic(name, line, col, "", f"cannot read this value: {_short(exc)}")]) from None
     if not data:
         raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a table with at least 'id'")])
     smap = SourceMap(name)
@@ -229,6 +277,26 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
             single = is_string and not line[km.end():].startswith(('"""', "'''"))
             smap.values.setdefault(full, Position(lineno, value_col, 1 if single else None))
     return data, smap
+
+
+def _toml_syntax_error(exc: Exception, name: str) -> NoReturn:
+    msg = str(exc)
+    m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
+    line, col = (int(m.group(1)), int(m.group(2))) if m else (None, None)
+    msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg)
+    raise SpecError([Diagnostic(name, line, col, "", f"TOML syntax error: {msg}")]) from None
+
+
+def _deepest(text: str) -> tuple[int | None, int | None]:
+    """Roughly where bracket nesting first goes past MAX_NESTING (strings are not skipped)."""
+    depth = 0
+    for lineno, line in enumerate(text.splitlines(), start=1):
+        for col, char in enumerate(line, start=1):
+            depth += char in "[{"
+            depth -= char in "]}"
+            if depth > MAX_NESTING:
+                return lineno, col
+    return None, None
 
 
 def _split_key(key: str) -> list[str]:
