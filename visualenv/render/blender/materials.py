@@ -35,12 +35,18 @@ def _principled(material: Any) -> Any:
     return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None) if material.node_tree else None
 
 
+def _ensure_nodes(mat: Any) -> None:
+    """Blender 5.0 gives every new material a node tree; older versions need use_nodes."""
+    if mat.node_tree is None:  # pragma: no cover - Blender < 5
+        mat.use_nodes = True
+
+
 def make_material(
     name: str, spec: Material, *, base_dir: Path, source: SourceMap, path: tuple, track: Callable[[Any], Any],
 ) -> Any:
     """A new material for `spec`; `path` locates the material in the spec (for errors)."""
     mat = track(bpy.data.materials.new(name))
-    mat.use_nodes = True if not mat.node_tree else mat.use_nodes
+    _ensure_nodes(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     bsdf = _principled(mat)
     if bsdf is None:
@@ -154,7 +160,7 @@ def depth_world(name: str, track: Callable[[Any], Any]) -> Any:
 def depth_material(name: str, track: Callable[[Any], Any]) -> tuple[Any, Callable[[float, float], None]]:
     """An emission material of clamp((z - near) / (far - near)), and a setter for near/far."""
     mat = track(bpy.data.materials.new(name))
-    mat.use_nodes = True if not mat.node_tree else mat.use_nodes
+    _ensure_nodes(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")

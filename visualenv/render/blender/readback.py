@@ -15,7 +15,6 @@ import os
 import sys
 import tempfile
 import weakref
-from typing import Iterator
 
 import numpy as np
 
@@ -78,21 +77,26 @@ def first_channel(rgb: np.ndarray) -> np.ndarray:
     return np.ascontiguousarray(rgb[:, :, :1])
 
 
-@contextlib.contextmanager
-def quiet_stdout() -> Iterator[None]:
-    """Silence Blender's per-render "Saved: ..." line (it writes to file descriptor 1)."""
-    try:
-        fd = sys.stdout.fileno()
-    except (AttributeError, OSError, ValueError):
-        yield
-        return
-    sys.stdout.flush()
-    saved = os.dup(fd)
-    devnull = os.open(os.devnull, os.O_WRONLY)
-    try:
-        os.dup2(devnull, fd)
-        yield
-    finally:
-        os.dup2(saved, fd)
-        os.close(saved)
-        os.close(devnull)
+class QuietStdout:
+    """Silences Blender's per-render "Saved: ..." line, which it writes to file descriptor 1.
+
+    Use as a context manager around the render call; the /dev/null descriptor
+    stays open for the life of the process, so entering costs two dup2 calls.
+    """
+
+    _devnull: int | None = None
+
+    def __enter__(self) -> None:
+        with contextlib.suppress(AttributeError, ValueError, OSError):
+            sys.stdout.flush()
+        if QuietStdout._devnull is None:
+            QuietStdout._devnull = os.open(os.devnull, os.O_WRONLY)
+        self._saved = os.dup(1)
+        os.dup2(QuietStdout._devnull, 1)
+
+    def __exit__(self, *exc: object) -> None:
+        os.dup2(self._saved, 1)
+        os.close(self._saved)
+
+
+quiet_stdout = QuietStdout

@@ -138,7 +138,7 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap) -> tuple[Any, di
             scene_names = list(data_from.scenes)
             object_names = list(data_from.objects)
             data_to.scenes = scene_names[:1]
-            data_to.objects = object_names
+            data_to.objects = list(object_names)  # Blender swaps the names for the objects in place
     except (OSError, RuntimeError, ValueError) as exc:
         raise SpecError([source.diagnostic(where, f"cannot read {path} as a .blend file: {exc}")]) from None
     if not scene_names or not data_to.scenes or data_to.scenes[0] is None:
