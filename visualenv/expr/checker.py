@@ -251,6 +251,9 @@ class _Checker:
             raise self.fail(node.func, f"{kind} '{name}'" + did_you_mean(name, FUNCTIONS).replace("names:", "functions:"))
         if node.keywords:
             raise self.fail(node, f"{name}() takes no keyword arguments")
+        for arg in node.args:
+            if isinstance(arg, ast.Starred):
+                raise self.fail(arg, "'*' unpacking not allowed in expressions")
         if func.random and not self.allow_random:
             raise self.fail(node, f"{name}() draws a random number, which is not allowed here")
         n = len(node.args)
@@ -303,6 +306,8 @@ class _Checker:
             raise self.fail(node, "numeric overflow: the result is too large") from None
         except ValueError as exc:
             raise self.fail(node, f"math error: {exc}") from None
+        if isinstance(value, float) and math.isnan(value):
+            raise self.fail(node, "math error: the result is not a number (NaN)")
         if isinstance(value, float) and not math.isfinite(value) and not any(
             isinstance(c, ast.Constant) and isinstance(c.value, float) and math.isinf(c.value) for c in children
         ):

@@ -22,6 +22,15 @@ from visualenv.expr.functions import FUNCTIONS
 
 VAR_PREFIX = "_v_"
 FUNC_PREFIX = "_f_"
+POW = "_pow"
+
+
+def power(base: float, exponent: float) -> float:
+    """``base ** exponent`` for numbers; a negative base to a fractional power is a domain error, not a complex number."""
+    result = base ** exponent
+    if isinstance(result, complex):
+        raise ValueError("a negative number to a fractional power")
+    return result
 
 
 def local(name: str) -> str:
@@ -38,6 +47,12 @@ class _Rename(ast.NodeTransformer):
     def visit_Name(self, node: ast.Name) -> ast.AST:
         return ast.Name(VAR_PREFIX + node.id, ast.Load())
 
+    def visit_BinOp(self, node: ast.BinOp) -> ast.AST:
+        left, right = self.visit(node.left), self.visit(node.right)
+        if isinstance(node.op, ast.Pow):
+            return ast.Call(ast.Name(POW, ast.Load()), [left, right], [])
+        return ast.BinOp(left, node.op, right)
+
     def visit_List(self, node: ast.List) -> ast.AST:
         return ast.Tuple([self.visit(e) for e in node.elts], ast.Load())
 
@@ -49,7 +64,7 @@ def lower(tree: ast.expr) -> ast.expr:
 
 def function_globals(random_impls: Mapping[str, Callable[..., Any]] | None = None) -> dict[str, Any]:
     """The only globals generated code sees: the function table, and no builtins."""
-    env: dict[str, Any] = {"__builtins__": {}}
+    env: dict[str, Any] = {"__builtins__": {}, POW: power}
     for name, func in FUNCTIONS.items():
         impl = func.impl if func.impl is not None else (random_impls or {}).get(name)
         if impl is not None:
