@@ -116,6 +116,11 @@ class VisualEnv(gym.Env):
                     raise KeyError(f"options['state'] has an unknown variable '{key}'" + did_you_mean(key, names))
                 state[names.index(key)] = float(value)
             state = tuple(state)
+        self._steps = 0
+        for key, value in zip(self.program.state_names, state):
+            if not math.isfinite(value):  # e.g. init: inf, or a draw such as normal(0, inf)
+                site = next((s for s in self.program.sites["init"] if s.what == f"state.{key}.init"), None)
+                raise self._describe(site, f"state '{key}' is {value} at reset", dict(zip(self.program.state_names, state)))
         self._state = tuple(float(v) for v in state)
         self._steps = 0
         self._fired = 0

@@ -132,7 +132,9 @@ class _Compiler:
         for prefix, names in sections.items():
             if tuple(path[: len(prefix)]) == prefix and wanted in names:
                 where = ".".join(prefix)
-                return (f"'{wanted}' is defined later in {where}: an entry can only use the ones above it "
+                if len(path) > len(prefix) and path[len(prefix)] == wanted:
+                    return f"unknown name '{wanted}': '{wanted}' cannot be used in its own definition in {where} (cyclic definitions are not allowed)"
+                return (f"unknown name '{wanted}': '{wanted}' is defined later in {where}: an entry can only use the ones above it "
                         "(reorder them; cyclic definitions are not allowed)")
         return message
 
