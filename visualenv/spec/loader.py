@@ -21,6 +21,12 @@ from visualenv.spec.models import Spec
 from visualenv.spec.source import SourceMap, format_path, load_document, load_toml_text, load_yaml_text
 
 _OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
+#: what the patterns of the models mean, in words
+_PATTERNS = {
+    r"^[A-Za-z][A-Za-z0-9_.]*-v\d+$": "an id such as 'MyEnv-v0' (a letter, then letters, digits, '_' or '.', then '-v' and a version number)",
+    r"^[A-Za-z_][A-Za-z0-9_]*$": "a name made of letters, digits and '_', not starting with a digit",
+    r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$": "'module:function', e.g. 'mypackage.dynamics:step'",
+}
 _TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "text", list: "a list", dict: "a mapping", type(None): "nothing"}
 
 
@@ -125,6 +131,15 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
     msg = err["msg"]
     if msg.startswith("Value error, "):
         msg = msg[len("Value error, "):]
+    if err["type"] == "string_pattern_mismatch":
+        pattern = err.get("ctx", {}).get("pattern", "")
+        what = _PATTERNS.get(pattern, f"text matching {pattern}")
+        return f"expected {what}, got {err.get('input')!r}"
+    if err["type"] in ("too_short", "too_long"):
+        ctx = err.get("ctx", {})
+        bound = ctx.get("min_length") if err["type"] == "too_short" else ctx.get("max_length")
+        items = ("entr" + ("y" if bound == 1 else "ies")) if ctx.get("field_type") == "Dictionary" else ("value" + ("" if bound == 1 else "s"))
+        return f"expected {'at least' if err['type'] == 'too_short' else 'at most'} {bound} {items}, got {ctx.get('actual_length')}"
     if err["type"] == "literal_error":
         expected = err.get("ctx", {}).get("expected", "")
         options = [o.strip(" '") for o in expected.replace(" or ", ",").split(",") if o.strip()]

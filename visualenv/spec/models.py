@@ -256,12 +256,15 @@ class Observation(StrictModel):
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = [0.0, 20.0]
     cameras: dict[Name, CameraView] | None = Field(None, description="several cameras: a Dict observation keyed by these names")
 
+    @field_validator("resolution")
+    @classmethod
+    def _pixels(cls, value: list[int]) -> list[int]:
+        return CameraView._pixels(value)
+
     @model_validator(mode="after")
     def _one_or_many(self) -> "Observation":
         if (self.camera is None) == (self.cameras is None):
             raise ValueError("give either 'camera' (one camera) or 'cameras' (several)")
-        if self.camera is not None:
-            CameraView._pixels(self.resolution)
         return self
 
     def views(self) -> dict[str, CameraView]:
@@ -278,6 +281,11 @@ class ViewSettings(StrictModel):
     camera: Name | None = Field(None, description="default: the (first) observation camera")
     resolution: Resolution = [400, 400]
     preset: Literal["fast", "quality"] = "quality"
+
+    @field_validator("resolution")
+    @classmethod
+    def _pixels(cls, value: list[int]) -> list[int]:
+        return CameraView._pixels(value)
 
 
 class Render(StrictModel):
