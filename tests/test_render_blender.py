@@ -144,7 +144,7 @@ def test_two_cameras_give_a_dict_of_different_images(tmp_path):
   cameras:
     front: {camera: Cam, resolution: [32, 32], color: rgb}
     top:   {camera: Top, resolution: [24, 16], color: grayscale}"""
-    e = make_env(tmp_path, objects=objects, observation=observation)
+    e = make_env(tmp_path, objects=objects, observation=observation, render="{preset: fast, view: {resolution: [64, 48], preset: quality}}")
     try:
         obs = observe(e, x=0.0)
         assert isinstance(obs, dict) and set(obs) == {"front", "top"}
@@ -155,7 +155,10 @@ def test_two_cameras_give_a_dict_of_different_images(tmp_path):
         # the view renders the first camera at the view resolution
         e.render_mode = "rgb_array"
         view = e.render()
-        assert view.shape == (400, 400, 3) and view.dtype == np.uint8
+        assert view.shape == (48, 64, 3) and view.dtype == np.uint8
+        assert view.max() > 60
+        assert obs["front"].shape == (32, 32, 3)  # switching back to the observation settings
+        assert np.array_equal(e.renderer.render_observation(e.binding_values())["front"], obs["front"])
     finally:
         e.close()
 

@@ -11,6 +11,16 @@ Modules, one job each:
 Importing this package imports ``bpy``.
 """
 
-from visualenv.render.blender.renderer import BlenderRenderer
+import os
+import sys
+
+if "bpy" not in sys.modules:
+    # A process spawned by one that already imported bpy inherits Blender's script
+    # folders on sys.path; their `bpy` package would shadow the real module
+    # ("No module named '_bpy'"). bpy adds them again itself on import.
+    _marker = os.sep + "bpy" + os.sep
+    sys.path[:] = [p for p in sys.path if not (_marker in p and os.sep + "scripts" in p)]
+
+from visualenv.render.blender.renderer import BlenderRenderer  # noqa: E402
 
 __all__ = ["BlenderRenderer"]

@@ -64,7 +64,7 @@ class BlenderRenderer(Renderer):
         self._closed = True
         settings = plan.settings
         self.obs_config = cfg.make_config(settings, settings.preset, engine=options.get("engine"), samples=options.get("samples"))
-        self.view_config = cfg.view_config(self.obs_config, settings, settings.view.preset)
+        self.view_config = cfg.view_config(self.obs_config, settings.view.preset)
         self.device = cfg.resolve_device(options.get("device", settings.device))
         threads = int(options.get("threads", settings.threads))
         cfg.engine_warnings(self.obs_config, self.device)
