@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import click
+import numpy as np
 
 from visualenv.errors import SpecError, VisualEnvError
 
@@ -112,6 +113,89 @@ def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
 
     paths = preview_frames(spec, out_dir, steps=steps, seed=seed)
     click.echo(f"wrote {len(paths)} frames to {out_dir}/")
+
+
+def _parse_value(text: str) -> Any:
+    try:
+        return json.loads(text)
+    except json.JSONDecodeError:
+        return text
+
+
+@main.command()
+@click.argument("spec")
+@click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
+@click.option("--steps", default=200_000, show_default=True, help="total env steps")
+@click.option("--envs", default=2, show_default=True, help="parallel envs, one Blender process each")
+@click.option("--frame-stack", default=4, show_default=True)
+@click.option("--eval-every", default=10_000, show_default=True, help="env steps between evaluations")
+@click.option("--eval-episodes", default=10, show_default=True)
+@click.option("--final-episodes", default=50, show_default=True, help="episodes of the best model's final evaluation")
+@click.option("--seed", default=0, show_default=True)
+@click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
+@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4")
+@click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
+@click.option("--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint")
+@click.option("--no-progress", is_flag=True)
+@_friendly
+def train(spec: str, algo: str, steps: int, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
+          final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
+          out_root: str, resume_dir: str | None, no_progress: bool) -> None:
+    """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
+
+    Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
+    """
+    import yaml
+
+    from visualenv.registration import resolve
+    from visualenv.spec.loader import load_spec
+    from visualenv.training import TrainConfig, new_run_dir, train as run_training
+
+    hyper: dict[str, Any] = {}
+    if config_file:
+        hyper.update(yaml.safe_load(Path(config_file).read_text()) or {})
+    for item in overrides:
+        key, sep, value = item.partition("=")
+        if not sep:
+            raise click.BadParameter(f"expected KEY=VALUE, got {item!r}", param_hint="--set")
+        hyper[key] = _parse_value(value)
+    if resume_dir:
+        record = json.loads((Path(resume_dir) / "config.json").read_text())
+        config = TrainConfig(**{**record["config"], "steps": steps if steps != 200_000 else record["config"]["steps"]})
+        run_dir = Path(resume_dir)
+    else:
+        env_id = load_spec(resolve(spec)).spec.id
+        config = TrainConfig(spec=spec, algo=algo, steps=steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
+                             eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
+                             render=not state_only, hyperparams=hyper, progress=not no_progress)
+        run_dir = new_run_dir(out_root, env_id)
+    click.echo(f"run folder: {run_dir}")
+    results = run_training(config, run_dir, resume=bool(resume_dir))
+    click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
+               f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %")
+    click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {run_dir / 'plots'}")
+
+
+@main.command()
+@click.argument("spec")
+@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False), help="a trained model (.zip); default: random actions")
+@click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
+@click.option("--episodes", default=3, show_default=True)
+@click.option("--seed", default=0, show_default=True)
+@click.option("--record", type=click.Path(dir_okay=False), help="save a .gif or .mp4 of the view beside the observation")
+@_friendly
+def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int, record: str | None) -> None:
+    """Run episodes with a random or trained policy; print returns, lengths and success."""
+    from visualenv.play import play as run_play
+
+    results = run_play(spec, model_path=model_path, algo=algo, episodes=episodes, seed=seed, record=record)
+    for i, ep in enumerate(results):
+        click.echo(f"episode {i}: return {ep.ret:.2f}, length {ep.length}, {'success' if ep.success else 'no success'} ({ep.outcome})")
+    rate = sum(ep.success for ep in results) / len(results)
+    click.echo(f"mean return {np.mean([ep.ret for ep in results]):.2f}, mean length {np.mean([ep.length for ep in results]):.1f}, success {100 * rate:.0f} %")
+    if record:
+        click.echo(f"recorded {record}")
 
 
 if __name__ == "__main__":  # pragma: no cover

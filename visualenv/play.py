@@ -1,0 +1,73 @@
+"""`visualenv play`: run episodes with a random or trained policy and record them."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from visualenv.build import side_by_side
+
+
+@dataclass
+class Episode:
+    ret: float
+    length: int
+    success: bool
+    outcome: str | None
+
+
+def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episodes: int = 3, seed: int = 0,
+         record: str | None = None, fps: int = 15, max_frames: int = 2000) -> list[Episode]:
+    """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation."""
+    import visualenv
+    from visualenv.wrappers import FrameStack
+
+    env: Any = visualenv.make(spec, render_mode="rgb_array")
+    model = None
+    if model_path:
+        from visualenv.training import algorithm_class
+
+        model = algorithm_class(algo).load(model_path, device="cpu")
+        have = env.observation_space.shape[-1]
+        want = model.observation_space.shape[-1]
+        if want != have and want % have == 0:
+            env = FrameStack(env, want // have)
+    env.action_space.seed(seed)
+    frames: list[np.ndarray] = []
+    results = []
+    try:
+        for episode in range(episodes):
+            obs, info = env.reset(seed=seed + episode)
+            ret, length = 0.0, 0
+            while True:
+                if record and len(frames) < max_frames:
+                    latest = obs[..., -1:] if model is not None and obs.shape[-1] > 1 and isinstance(env, FrameStack) else obs
+                    frames.append(side_by_side(latest, env.render()))
+                action = model.predict(obs, deterministic=True)[0] if model is not None else env.action_space.sample()
+                obs, reward, terminated, truncated, info = env.step(action)
+                ret += float(reward)
+                length += 1
+                if terminated or truncated:
+                    break
+            results.append(Episode(ret, length, bool(info.get("is_success")), info.get("outcome")))
+    finally:
+        env.close()
+    if record and frames:
+        save_video(frames, record, fps)
+    return results
+
+
+def save_video(frames: list[np.ndarray], path: str | Path, fps: int) -> Path:
+    """GIF or MP4 by the file's extension (imageio)."""
+    import imageio.v3 as iio
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    if path.suffix.lower() == ".gif":
+        iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
+    else:
+        iio.imwrite(path, np.stack(frames), fps=fps, codec="libx264", macro_block_size=1)
+    return path

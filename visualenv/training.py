@@ -1,0 +1,199 @@
+"""`visualenv train`: PPO (or another SB3 algorithm) from pixels, as in the paper.
+
+A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes:
+
+* ``config.json``     the exact command, settings and versions
+* ``logs/``           SB3's ``progress.csv`` and TensorBoard events
+* ``monitor/``        per-episode returns and lengths of the training envs
+* ``evaluations.npz`` periodic evaluation results (SB3's EvalCallback)
+* ``best_model.zip``  the model with the best evaluation reward
+* ``checkpoints/latest.zip`` the newest model, for ``--resume``
+* ``plots/``          the paper's figures: rewards, episode lengths, samples per second
+* ``results.json``    the best model's final evaluation (reward, length, success rate)
+"""
+
+from __future__ import annotations
+
+import json
+import shlex
+import sys
+import time
+from dataclasses import asdict, dataclass, field
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+ALGORITHMS = ("ppo", "a2c", "dqn")
+
+
+@dataclass
+class TrainConfig:
+    spec: str
+    algo: str = "ppo"
+    steps: int = 200_000
+    envs: int = 2
+    frame_stack: int = 4
+    eval_every: int = 10_000  # env steps between evaluations
+    eval_episodes: int = 10
+    final_eval_episodes: int = 50
+    seed: int = 0
+    render: bool = True  # False: state-only env and an MLP policy
+    hyperparams: dict[str, Any] = field(default_factory=dict)
+    progress: bool = True
+
+    @property
+    def policy(self) -> str:
+        return "CnnPolicy" if self.render else "MlpPolicy"
+
+
+def algorithm_class(name: str) -> Any:
+    import stable_baselines3 as sb3
+
+    classes = {"ppo": sb3.PPO, "a2c": sb3.A2C, "dqn": sb3.DQN}
+    if name not in classes:
+        raise ValueError(f"unknown algorithm '{name}': expected one of {', '.join(classes)}")
+    return classes[name]
+
+
+def new_run_dir(root: str | Path, env_id: str) -> Path:
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    run = Path(root) / env_id / stamp
+    run.mkdir(parents=True, exist_ok=False)
+    return run
+
+
+def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
+    return {} if config.render else {"render": False}
+
+
+def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[str, Any]:
+    """Train, evaluate the best model, draw the plots; returns the final results."""
+    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.logger import configure
+    from stable_baselines3.common.preprocessing import is_image_space
+    from stable_baselines3.common.vec_env import VecTransposeImage
+
+    from visualenv.build import versions
+    from visualenv.registration import resolve
+    from visualenv.vector import make_sb3_vec
+
+    spec_path = str(resolve(config.spec))
+    run_dir.mkdir(parents=True, exist_ok=True)
+    if not resume:
+        record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path}
+        (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    frame_stack = config.frame_stack if config.render else 0
+    train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
+                             monitor_dir=str(run_dir / "monitor"), **_vec_kwargs(config))
+    eval_env = make_sb3_vec(spec_path, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **_vec_kwargs(config))
+    if is_image_space(eval_env.observation_space):
+        eval_env = VecTransposeImage(eval_env)  # as SB3 does to the training env
+    algo = algorithm_class(config.algo)
+    latest = run_dir / "checkpoints" / "latest.zip"
+    started = time.perf_counter()
+    try:
+        if resume and latest.exists():
+            model = algo.load(latest, env=train_env)
+            done = model.num_timesteps
+        else:
+            model = algo(config.policy, train_env, seed=config.seed, verbose=0, **config.hyperparams)
+            done = 0
+        model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard"]))
+        per_env = max(1, config.eval_every // config.envs)
+        callbacks = [
+            EvalCallback(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
+                         best_model_save_path=str(run_dir), deterministic=True, verbose=0),
+            _LatestCheckpoint(latest, every=per_env),
+        ]
+        if config.progress:
+            callbacks.append(_ProgressBar(config.steps, done))
+        remaining = max(0, config.steps - done)
+        model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume)
+        model.save(latest)
+        model.save(run_dir / "final_model.zip")
+    finally:
+        train_env.close()
+    wall = time.perf_counter() - started
+    best = run_dir / "best_model.zip"
+    try:
+        results = evaluate(algo.load(best if best.exists() else latest), eval_env, config.final_eval_episodes)
+    finally:
+        eval_env.close()
+    results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": best.name if best.exists() else latest.name})
+    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    from visualenv.plots import training_plots
+
+    training_plots(run_dir)
+    return results
+
+
+def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
+    """Run `episodes` deterministic episodes; mean/std reward, mean length, success rate."""
+    returns, lengths, successes = [], [], []
+    obs = vec_env.reset()
+    ret, length = 0.0, 0
+    while len(returns) < episodes:
+        action, _ = model.predict(obs, deterministic=True)
+        obs, reward, done, infos = vec_env.step(action)
+        ret += float(reward[0])
+        length += 1
+        if done[0]:
+            returns.append(ret)
+            lengths.append(length)
+            successes.append(bool(infos[0].get("is_success", False)))
+            ret, length = 0.0, 0
+    return {
+        "episodes": episodes,
+        "mean_reward": float(np.mean(returns)),
+        "std_reward": float(np.std(returns)),
+        "mean_length": float(np.mean(lengths)),
+        "success_rate": float(np.mean(successes)),
+    }
+
+
+def _base_callback() -> Any:
+    from stable_baselines3.common.callbacks import BaseCallback
+
+    return BaseCallback
+
+
+class _LatestCheckpoint(_base_callback()):  # type: ignore[misc]
+    """Overwrite one checkpoint file, so a killed run resumes from its last save."""
+
+    def __init__(self, path: Path, every: int):
+        super().__init__()
+        self.path, self.every = path, every
+
+    def _on_step(self) -> bool:
+        if self.n_calls % self.every == 0:
+            self.path.parent.mkdir(parents=True, exist_ok=True)
+            self.model.save(self.path)
+        return True
+
+
+class _ProgressBar(_base_callback()):  # type: ignore[misc]
+    """A tqdm bar over env steps showing the recent mean episode reward and length."""
+
+    def __init__(self, total: int, done: int):
+        super().__init__()
+        self.total, self.done = total, done
+        self.bar: Any = None
+
+    def _on_training_start(self) -> None:
+        from tqdm import tqdm
+
+        self.bar = tqdm(total=self.total, initial=self.done, unit="step", dynamic_ncols=True, smoothing=0.05)
+
+    def _on_step(self) -> bool:
+        assert self.bar is not None
+        self.bar.update(self.model.num_timesteps - self.bar.n)
+        buffer = self.model.ep_info_buffer
+        if buffer and self.n_calls % 20 == 0:
+            self.bar.set_postfix(reward=f"{np.mean([e['r'] for e in buffer]):.1f}", length=f"{np.mean([e['l'] for e in buffer]):.0f}")
+        return True
+
+    def _on_training_end(self) -> None:
+        if self.bar is not None:
+            self.bar.close()

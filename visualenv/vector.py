@@ -1,0 +1,67 @@
+"""Parallel envs: one Blender per worker process.
+
+bpy holds one Blender per process, so parallel rendering needs processes:
+:func:`make_vec` gives a Gymnasium ``AsyncVectorEnv`` and :func:`make_sb3_vec`
+an SB3 ``SubprocVecEnv`` (with SB3's own ``VecFrameStack``). Each worker builds
+its env (and its renderer) from the spec, with ``threads`` render threads: on a
+machine with C cores and N workers, C // N threads each keeps the cores busy
+without oversubscribing them.
+"""
+
+from __future__ import annotations
+
+import os
+from functools import partial
+from typing import Any, Callable
+
+import gymnasium as gym
+
+
+def default_threads(n_envs: int) -> int:
+    return max(1, (os.cpu_count() or 1) // max(1, n_envs))
+
+
+def env_factory(target: str, seed: int | None = None, **kwargs: Any) -> Callable[[], gym.Env]:
+    """A picklable function that makes one env (for vector env workers)."""
+    return partial(_make, str(target), kwargs)
+
+
+def _make(target: str, kwargs: dict[str, Any]) -> gym.Env:
+    import visualenv
+
+    return visualenv.make(target, **kwargs)
+
+
+def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, **kwargs: Any) -> gym.vector.VectorEnv:
+    """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
+
+    kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
+    """
+    if kwargs.get("render") is not False:
+        kwargs.setdefault("threads", threads or default_threads(n))
+    fns = [env_factory(target, **kwargs) for _ in range(n)]
+    if asynchronous and n > 1:
+        return gym.vector.AsyncVectorEnv(fns, context="spawn", shared_memory=True)
+    return gym.vector.SyncVectorEnv(fns)
+
+
+def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None,
+                 monitor_dir: str | None = None, **kwargs: Any) -> Any:
+    """`n` envs in SB3's ``SubprocVecEnv`` (``DummyVecEnv`` for one), frames stacked by ``VecFrameStack``."""
+    from stable_baselines3.common.env_util import make_vec_env
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
+
+    if kwargs.get("render") is not False:
+        kwargs.setdefault("threads", threads or default_threads(n))
+    vec = make_vec_env(
+        _make,
+        n_envs=n,
+        seed=seed,
+        env_kwargs={"target": str(target), "kwargs": kwargs},
+        vec_env_cls=SubprocVecEnv if n > 1 else DummyVecEnv,
+        vec_env_kwargs={"start_method": "spawn"} if n > 1 else None,
+        monitor_dir=monitor_dir,
+    )
+    if frame_stack and frame_stack > 1 and kwargs.get("render") is not False:
+        vec = VecFrameStack(vec, n_stack=frame_stack)
+    return vec
