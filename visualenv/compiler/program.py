@@ -399,7 +399,10 @@ class _Compiler:
     def check_camera(self, path: tuple, camera: str) -> None:
         declared = self.spec.scene.objects
         cameras = [n for n, o in declared.items() if isinstance(o, CameraObject)]
-        if camera not in cameras:
+        if camera in declared and camera not in cameras:
+            kind = next(k for k in ("primitive", "mesh", "light", "empty") if hasattr(declared[camera], k))
+            self.error(path, f"'{camera}' is a {kind} object, not a camera" + (f" (cameras: {', '.join(cameras)})" if cameras else " (the scene has no camera)"))
+        elif camera not in cameras:
             self.error(path, f"no camera '{camera}' in the scene" + did_you_mean(camera, cameras).replace("names:", "cameras:"))
 
     def binding_values(self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]) -> list[ast.expr] | None:

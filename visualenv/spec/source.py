@@ -108,6 +108,10 @@ MAX_NESTING = 64
 MAX_VALUES = 100_000
 
 
+#: the tags of plain YAML data: anything else (!!python/..., custom tags) is rejected
+_PLAIN_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("str", "int", "float", "bool", "null", "map", "seq", "timestamp")}
+
+
 def _check_structure(text: str, name: str) -> None:
     """Reject too-deep nesting and recursive aliases before composing (the event parser does not recurse)."""
     depth = 0
@@ -134,6 +138,8 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         node = yaml.compose(text, Loader=_UniqueKeyLoader)
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
+        if exc.context_mark and exc.problem and "end of stream" in exc.problem:
+            mark = exc.context_mark  # an unclosed quote or bracket: point at where it opened
         problem = exc.problem or exc.context or "invalid YAML"
         msg = f"YAML syntax error: {problem}"
         if exc.context and exc.problem:
@@ -164,6 +170,9 @@ def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagn
     if count[0] > MAX_VALUES:
         raise SpecError([Diagnostic(smap.file, *_lc(node), "", f"the document is too large: more than {MAX_VALUES} values (are YAML aliases expanding?)")])
     smap.values[path] = _pos(node)
+    if node.tag not in _PLAIN_TAGS:  # e.g. !!python/object/apply: never constructed, reported
+        problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"YAML tags such as '{node.tag.replace('tag:yaml.org,2002:', '!!')}' are not allowed"))
+        return None
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
@@ -238,7 +247,7 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         raise SpecError([Diagnostic(name, *_deepest(text), "", f"nested too deeply (more than {MAX_NESTING} levels of tables and arrays)")]) from None
     except ValueError as exc:
         if isinstance(exc, tomllib.TOMLDecodeError):
-            _toml_syntax_error(exc, name)
+            _toml_syntax_error(exc, text, name)
         m = re.search(r"\d{1000,}", text)
         line, col = (text.count("\n", 0, m.start()) + 1, m.start() - text.rfind("\n", 0, m.start())) if m else (None, None)
         raise SpecError([Diagnostic(name, line, col, "", f"cannot read this value: {_short(exc)}")]) from None
@@ -279,11 +288,14 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     return data, smap
 
 
-def _toml_syntax_error(exc: Exception, name: str) -> NoReturn:
+def _toml_syntax_error(exc: Exception, text: str, name: str) -> NoReturn:
     msg = str(exc)
     m = re.search(r"\(at line (\d+), column (\d+)\)", msg)
     line, col = (int(m.group(1)), int(m.group(2))) if m else (None, None)
-    msg = re.sub(r"\s*\(at line \d+, column \d+\)", "", msg)
+    if m is None and "(at end of document)" in msg:
+        lines = text.splitlines() or [""]
+        line, col = len(lines), len(lines[-1]) + 1
+    msg = re.sub(r"\s*\(at (line \d+, column \d+|end of document)\)", "", msg)
     raise SpecError([Diagnostic(name, line, col, "", f"TOML syntax error: {msg}")]) from None
 
 
