@@ -184,8 +184,13 @@ class BlenderRenderer(Renderer):
                 obj.scale = v
             return set_scale
         if prop == "visible":
+            # an empty shows nothing itself: its visibility is that of everything under it
+            shown = [obj, *obj.children_recursive] if obj.type == "EMPTY" else [obj]
+
             def set_visible(v: tuple) -> None:
-                obj.hide_render = not v[0]
+                hide = not v[0]
+                for o in shown:
+                    o.hide_render = hide
             return set_visible
         if prop == "look_at":
             def set_look_at(v: tuple) -> None:
