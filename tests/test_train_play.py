@@ -50,7 +50,7 @@ def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     assert result.exit_code == 0, result.output
     assert "episode 0: return" in result.output and "success" in result.output
     frames = iio.imread(gif)
-    assert frames.ndim == 4 and frames.shape[0] >= 15  # one frame per step
+    assert frames.ndim == 4 and frames.shape[0] >= 10  # one frame per step
     # the view beside the observation: the frames change as the ball rolls
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
 

@@ -31,8 +31,11 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
         from visualenv.training import algorithm_class
 
         model = algorithm_class(algo).load(model_path, device="cpu")
+        from stable_baselines3.common.preprocessing import is_image_space_channels_first
+
+        space = model.observation_space
         have = env.observation_space.shape[-1]
-        want = model.observation_space.shape[-1]
+        want = space.shape[0] if is_image_space_channels_first(space) else space.shape[-1]
         if want != have and want % have == 0:
             env = FrameStack(env, want // have)
     env.action_space.seed(seed)
