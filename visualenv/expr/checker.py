@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import ast
 import math
+import warnings
 from dataclasses import dataclass, field
 from typing import Mapping
 
@@ -66,11 +67,17 @@ def parse(text: str | float | int | bool) -> ast.expr:
     if "\n" in text.strip() or "\r" in text:
         text = " ".join(text.split())
     try:
-        module = ast.parse(text.strip(), mode="eval")
+        with warnings.catch_warnings():  # e.g. "invalid escape sequence" in a text the checker rejects anyway
+            warnings.simplefilter("ignore")
+            module = ast.parse(text.strip(), mode="eval")
     except SyntaxError as exc:
         offset = (exc.offset or 1) - 1
         raise ExpressionError(f"syntax error: {exc.msg}", offset) from None
-    except (RecursionError, MemoryError, ValueError):
+    except UnicodeError:  # e.g. a lone surrogate: ast.parse cannot encode the text
+        raise ExpressionError("the expression contains characters that are not valid text") from None
+    except ValueError as exc:  # e.g. null bytes (Python 3.11 raises ValueError, later SyntaxError)
+        raise ExpressionError(f"syntax error: {exc}") from None
+    except (RecursionError, MemoryError):
         raise ExpressionError("expression is too deeply nested") from None
     return module.body
 
