@@ -198,5 +198,33 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
         click.echo(f"recorded {record}")
 
 
+@main.command()
+@click.argument("specs", nargs=-1, required=True)
+@click.option("--steps", default=500, show_default=True, help="measured env steps (after a warm-up)")
+@click.option("--workers", default=2, show_default=True, help="parallel envs for the parallel figure (0: skip)")
+@click.option("--threads", type=int, default=None, help="render threads of the single env (default: all cores)")
+@click.option("--soak", "soak_steps", type=int, default=0, help="also run this many steps and report memory growth (e.g. 50000)")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@_friendly
+def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, soak_steps: int, json_out: str | None) -> None:
+    """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
+    import platform
+
+    import psutil
+
+    from visualenv.bench import as_dict, bench_one
+
+    click.echo(f"machine: {platform.processor() or platform.machine()}, {psutil.cpu_count()} cores, "
+               f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
+    results = []
+    for spec in specs:
+        figures = bench_one(spec, steps, workers=workers, soak_steps=soak_steps, threads=threads)
+        for line in figures.lines():
+            click.echo(line)
+        results.append(as_dict(figures))
+    if json_out:
+        Path(json_out).write_text(json.dumps(results, indent=2) + "\n")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

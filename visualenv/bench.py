@@ -1,0 +1,222 @@
+"""`visualenv bench`: how fast a compiled env delivers observations, and where time goes.
+
+One run measures, on the same built scene:
+
+* the env: steps per second, the render call's time per step (median, p99),
+  and the framework overhead: the step's time minus the raw render floor, as a
+  share of the step (everything that is not Blender rendering);
+* the raw floor: Blender's render call alone (no file written, no readback);
+* a naive implementation: render to a PNG on disk and load it with Pillow;
+* resident memory (peak and final), and optionally a long soak;
+* N parallel envs (one Blender process each) through AsyncVectorEnv.
+
+Timings vary from run to run on shared machines: this prints figures, it
+asserts nothing.
+"""
+
+from __future__ import annotations
+
+import gc
+import os
+import tempfile
+import time
+from dataclasses import asdict, dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+import psutil
+
+
+@dataclass
+class Figures:
+    spec: str
+    steps: int
+    steps_per_s: float = 0.0
+    step_ms_median: float = 0.0
+    render_ms_median: float = 0.0
+    render_ms_p99: float = 0.0
+    floor_ms_median: float = 0.0
+    naive_ms_median: float = 0.0
+    overhead_share: float = 0.0
+    rss_peak_mb: float = 0.0
+    rss_final_mb: float = 0.0
+    parallel: dict[str, float] = field(default_factory=dict)
+    soak: dict[str, Any] = field(default_factory=dict)
+
+    def lines(self) -> list[str]:
+        speed_vs_floor = self.floor_ms_median / self.step_ms_median if self.step_ms_median else 0
+        speed_vs_naive = self.naive_ms_median / self.step_ms_median if self.step_ms_median else 0
+        out = [
+            f"{self.spec}: {self.steps} steps, one env",
+            f"  env steps/s               {self.steps_per_s:8.1f}",
+            f"  step time (median)        {self.step_ms_median:8.2f} ms",
+            f"  render call (median/p99)  {self.render_ms_median:8.2f} / {self.render_ms_p99:.2f} ms",
+            f"  raw render floor (median) {self.floor_ms_median:8.2f} ms   (render call alone, same scene and settings)",
+            f"  naive PNG round trip      {self.naive_ms_median:8.2f} ms   (render, write PNG to disk, load it)",
+            f"  framework overhead        {100 * self.overhead_share:8.1f} %    of a step (step - raw floor)",
+            f"  speed vs floor / naive    {speed_vs_floor:8.2f}x / {speed_vs_naive:.2f}x",
+            f"  resident memory           {self.rss_peak_mb:8.1f} MB peak, {self.rss_final_mb:.1f} MB final",
+        ]
+        if self.parallel:
+            p = self.parallel
+            out.append(f"  {int(p['workers'])} parallel envs           {p['steps_per_s']:8.1f} steps/s  ({p['speedup']:.2f}x one env, {int(p['threads'])} render thread(s) each)")
+        if self.soak:
+            s = self.soak
+            out.append(f"  soak: {s['steps']} steps, {s['resets']} resets: memory {s['rss_start_mb']:.1f} -> {s['rss_end_mb']:.1f} MB "
+                       f"(growth {s['growth_mb']:+.1f} MB), Blender data blocks {s['blocks_start']} -> {s['blocks_end']}")
+        return out
+
+
+def _rss_mb() -> float:
+    return psutil.Process(os.getpid()).memory_info().rss / 2**20
+
+
+def _timed(fn: Callable[[], Any], times: list[float]) -> Callable[[], Any]:
+    def wrapper() -> Any:
+        start = time.perf_counter()
+        result = fn()
+        times.append(time.perf_counter() - start)
+        return result
+
+    return wrapper
+
+
+def _random_actions(env: Any, n: int, seed: int) -> list[Any]:
+    env.action_space.seed(seed)
+    return [env.action_space.sample() for _ in range(n)]
+
+
+def run_env(env: Any, actions: list[Any], seed: int) -> list[float]:
+    """Step through `actions`, resetting at episode ends; per-step wall times."""
+    env.reset(seed=seed)
+    times = []
+    for action in actions:
+        start = time.perf_counter()
+        _, _, terminated, truncated, _ = env.step(action)
+        if terminated or truncated:
+            env.reset()
+        times.append(time.perf_counter() - start)
+    return times
+
+
+def blender_data_blocks() -> int:
+    import bpy
+
+    return sum(len(getattr(bpy.data, kind)) for kind in ("objects", "meshes", "materials", "images", "scenes", "node_groups", "cameras", "lights", "worlds"))
+
+
+def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
+              workers: int = 0, soak_steps: int = 0, threads: int | None = None) -> Figures:
+    import bpy
+
+    import visualenv
+
+    options = {"threads": threads} if threads else {}
+    env = visualenv.make(spec, **options)
+    base = env.unwrapped
+    figures = Figures(spec=str(spec), steps=steps)
+    actions = _random_actions(env, warmup + steps, seed)
+    run_env(env, actions[:warmup], seed)
+    renderer = base.renderer
+    render_times: list[float] = []
+    original = renderer.raw_render
+    renderer.raw_render = _timed(original, render_times)
+    gc.collect()
+    rss_peak = _rss_mb()
+    step_times = run_env(env, actions[warmup:], seed + 1)
+    rss_peak = max(rss_peak, _rss_mb())
+    renderer.raw_render = original
+    # the raw floor: Blender's render call alone, same scene and settings as the last observation
+    base.renderer.render_observation(base.binding_values())
+    scene = renderer.scene
+    floor = []
+    for _ in range(floor_renders):
+        start = time.perf_counter()
+        bpy.ops.render.render(scene=scene.name)
+        floor.append(time.perf_counter() - start)
+    figures.naive_ms_median = 1000 * float(np.median(_naive_png(scene, naive_renders)))
+    total = sum(step_times)
+    figures.steps_per_s = steps / total
+    figures.step_ms_median = 1000 * float(np.median(step_times))
+    figures.render_ms_median = 1000 * float(np.median(render_times))
+    figures.render_ms_p99 = 1000 * float(np.percentile(render_times, 99))
+    figures.floor_ms_median = 1000 * float(np.median(floor))
+    figures.overhead_share = max(0.0, (figures.step_ms_median - figures.floor_ms_median) / figures.step_ms_median)
+    if soak_steps:
+        figures.soak = soak(env, soak_steps, seed + 2)
+    figures.rss_peak_mb = max(rss_peak, _rss_mb())
+    figures.rss_final_mb = _rss_mb()
+    env.close()
+    if workers > 1:
+        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s)
+    return figures
+
+
+def _naive_png(scene: Any, renders: int) -> list[float]:
+    """Render to a PNG file on disk and read it back with Pillow: the obvious way."""
+    import bpy
+    from PIL import Image
+
+    from visualenv.render.blender.readback import quiet_stdout
+
+    settings = scene.render.image_settings
+    saved = (settings.file_format, settings.color_mode, scene.render.filepath)
+    times = []
+    with tempfile.TemporaryDirectory() as folder:
+        path = os.path.join(folder, "frame.png")
+        settings.file_format = "PNG"
+        settings.color_mode = "RGB"
+        scene.render.filepath = path
+        for _ in range(renders):
+            start = time.perf_counter()
+            with quiet_stdout():
+                bpy.ops.render.render(write_still=True, scene=scene.name)
+            np.asarray(Image.open(path).convert("L"))
+            times.append(time.perf_counter() - start)
+    settings.file_format, settings.color_mode, scene.render.filepath = saved
+    return times
+
+
+def soak(env: Any, steps: int, seed: int, report_every: int = 0) -> dict[str, Any]:
+    """Many steps and resets: memory and Blender data blocks must stay flat."""
+    env.action_space.seed(seed)
+    env.reset(seed=seed)
+    gc.collect()
+    rss_start, blocks_start = _rss_mb(), blender_data_blocks()
+    resets = 0
+    for i in range(steps):
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        if terminated or truncated:
+            env.reset()
+            resets += 1
+        if report_every and (i + 1) % report_every == 0:
+            print(f"  soak {i + 1}/{steps}: {_rss_mb():.1f} MB, {blender_data_blocks()} data blocks", flush=True)
+    gc.collect()
+    rss_end = _rss_mb()
+    return {"steps": steps, "resets": resets, "rss_start_mb": rss_start, "rss_end_mb": rss_end, "growth_mb": rss_end - rss_start,
+            "blocks_start": blocks_start, "blocks_end": blender_data_blocks()}
+
+
+def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float) -> dict[str, float]:
+    from visualenv.vector import default_threads, make_vec
+
+    threads = default_threads(workers)
+    vec = make_vec(str(spec), workers, threads=threads)
+    try:
+        vec.reset(seed=seed)
+        vec.action_space.seed(seed)
+        for _ in range(10):
+            vec.step(vec.action_space.sample())
+        rounds = max(1, steps // workers)
+        start = time.perf_counter()
+        for _ in range(rounds):
+            vec.step(vec.action_space.sample())  # autoreset inside
+        elapsed = time.perf_counter() - start
+    finally:
+        vec.close()
+    rate = rounds * workers / elapsed
+    return {"workers": workers, "threads": threads, "steps_per_s": rate, "speedup": rate / single if single else 0.0}
+
+
+def as_dict(figures: Figures) -> dict[str, Any]:
+    return asdict(figures)
