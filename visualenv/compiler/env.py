@@ -17,6 +17,9 @@ from visualenv.render.base import RenderPlan, Renderer, observation_space, creat
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 
+_FLOAT32_MAX = float(np.finfo(np.float32).max)
+
+
 class VisualEnv(gym.Env):
     """A Gymnasium env compiled from a visualenv spec.
 
@@ -121,6 +124,8 @@ class VisualEnv(gym.Env):
             if not math.isfinite(value):  # e.g. init: inf, or a draw such as normal(0, inf)
                 site = next((s for s in self.program.sites["init"] if s.what == f"state.{key}.init"), None)
                 raise self._describe(site, f"state '{key}' is {value} at reset", dict(zip(self.program.state_names, state)))
+        if not self.uses_camera:
+            self._check_observable(state, "state.{}.init", dict(zip(self.program.state_names, state)))
         self._state = tuple(float(v) for v in state)
         self._steps = 0
         self._fired = 0
@@ -144,6 +149,8 @@ class VisualEnv(gym.Env):
             total = sum(state) + reward
             if total - total != 0:  # NaN or infinity somewhere
                 self._check_finite(state, reward, old, a)
+            if not self.uses_camera:
+                self._check_observable(state, "dynamics.update.{}", self._values(old, a))
         except (ArithmeticError, ValueError, StepError) as exc:
             err = exc if isinstance(exc, StepError) else self._fault_error("step", exc, self._values(old, a))
             if program.spec.on_fault == "raise":
@@ -235,6 +242,15 @@ class VisualEnv(gym.Env):
         if not math.isfinite(reward):
             site = next((s for s in program.sites["step"] if s.what == "reward"), None)
             raise self._describe(site, f"the reward became {reward}", self._values(old, action))
+
+    def _check_observable(self, state: tuple, what: str, values: dict[str, Any]) -> None:
+        """A finite state can still overflow the float32 observation (it would read inf)."""
+        for i in self._observed:
+            if not -_FLOAT32_MAX <= state[i] <= _FLOAT32_MAX:
+                name = self.program.state_names[i]
+                function = "init" if what.startswith("state.") else "step"
+                site = next((s for s in self.program.sites[function] if s.what == what.format(name)), None)
+                raise self._describe(site, f"state '{name}' = {state[i]!r} is too large for the float32 observation", values)
 
     def _fault_error(self, function: str, exc: BaseException, values: dict[str, Any]) -> StepError:
         tb = exc.__traceback__
