@@ -168,3 +168,29 @@ def test_step_error_is_a_visualenv_error_and_the_message_is_one_line():
     assert isinstance(err, visualenv.VisualEnvError)
     assert "\n" not in str(err)
     assert err.__cause__ is None and err.__suppress_context__, "raised 'from None': the user sees only the StepError"
+
+
+BOUND = """\
+id: Bound-v0
+scene:
+  objects:
+    Box: {primitive: cube}
+state:
+  x: {init: 0}
+actions: {discrete: [{u: 1}]}
+dynamics: {update: {x: x + u}}
+actors:
+  Box: {location: ["1 / (x - 1)", 0, "x * inf"], visible: x < 5}
+"""
+
+
+def test_fault_in_an_actor_binding_is_a_step_error_naming_the_binding():
+    env = VisualEnv(load_spec_text(BOUND, "bound.yaml"), render=False)
+    env.reset(seed=0)
+    with pytest.raises(StepError, match=r"bound\.yaml:10: actors\.Box\.location = .*a binding became nan .*x=0\.0"):
+        env.binding_values()  # x * inf with x = 0
+    env.step(0)
+    with pytest.raises(StepError, match=r"bound\.yaml:10: actors\.Box\.location = .*division by zero .*x=1\.0"):
+        env.binding_values()
+    env.step(0)
+    assert env.binding_values()[:2] == (1.0, 0.0)

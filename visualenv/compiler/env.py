@@ -185,7 +185,7 @@ class VisualEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
             return None
-        return self.renderer.render_view(self._fns.bind(self._state, self._steps))
+        return self.renderer.render_view(self._bind())
 
     def close(self) -> None:
         if self._renderer is not None:
@@ -214,15 +214,30 @@ class VisualEnv(gym.Env):
 
     def binding_values(self) -> tuple:
         """The current values of every actor binding, in program.bindings order."""
-        return self._fns.bind(self._state, self._steps)
+        return self._bind()
 
     # -- internals --------------------------------------------------------------------------------
 
     def _observe(self) -> Any:
         if self.uses_camera:
-            return self.renderer.render_observation(self._fns.bind(self._state, self._steps))
+            return self.renderer.render_observation(self._bind())
         state = self._state
         return np.array([state[i] for i in self._observed], dtype=np.float32)
+
+    def _bind(self) -> tuple:
+        """The actor binding values for the current state; a fault in them is a StepError, not a bare exception."""
+        try:
+            values = self._fns.bind(self._state, self._steps)
+            total = sum(values)
+        except (ArithmeticError, ValueError) as exc:
+            raise self._fault_error("bind", exc, self.state) from None
+        if total - total != 0:  # NaN or infinity: Blender would silently draw nothing or garbage
+            for i, value in enumerate(values):
+                if not math.isfinite(value):
+                    sites = self.program.sites["bind"]  # one site per value, in order
+                    site = sites[i] if i < len(sites) else None
+                    raise self._describe(site, f"a binding became {value}", self.state)
+        return values
 
     def _info(self, outcome: str | None) -> dict[str, Any]:
         fired = [m for i, m in enumerate(self._milestones) if self._fired & (1 << i)]

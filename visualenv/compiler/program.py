@@ -382,11 +382,13 @@ class _Compiler:
                 checked_values = self.binding_values(path, prop, raw, scope)
                 if checked_values is None:
                     continue
-                site = Site(".".join(map(str, path)), str(raw))
-                for item in checked_values:
-                    values.append(item)
+                text = "[" + ", ".join(map(str, raw)) + "]" if isinstance(raw, list) else str(raw)
+                site = Site(".".join(map(str, path)), text, tuple(sorted(scope)))
+                for item in checked_values:  # one line per value, so a runtime fault names its binding
+                    var = f"_b{len(values)}"
+                    fb.assign(var, item, site)
+                    values.append(name(var))
                 targets.append(BindingTarget(obj_name, prop, len(checked_values)))
-                del site
         fb.returns(tuple_of(values))
         if spec.observation is not None and spec.scene.file is None:
             for key, view in spec.observation.views().items():
