@@ -134,6 +134,10 @@ def test_grayscale_rgb_depth_shapes_and_depth_order(tmp_path):
         luma = (299 * rgb[..., 0] + 587 * rgb[..., 1] + 114 * rgb[..., 2] + 500) // 1000
         assert np.array_equal(gray, luma)
         assert gray[15, 10] > 60 and gray[0, 0] < 10
+        hidden = observe(e, x=2.0)  # the near cube hidden: background behind it
+        assert hidden["depth"][15, 10, 0] == 255
+        again = observe(e, x=0.0)  # switching the depth override on and off leaves every view reproducible
+        assert all(np.array_equal(again[k], obs[k]) for k in obs)
     finally:
         e.close()
 

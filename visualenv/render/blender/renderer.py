@@ -123,6 +123,7 @@ class BlenderRenderer(Renderer):
         self._objects = built.objects
         self._layer = scene.view_layers[0]
         cfg.configure_scene(scene, device=self.device, threads=threads)
+        cfg.quiet_emission(scene)
         r = scene.render
         r.image_settings.file_format = "BMP"
         r.image_settings.color_mode = "RGB"
@@ -130,7 +131,7 @@ class BlenderRenderer(Renderer):
         r.filepath = self._output.path
         self._views = [
             _View(key, built.objects[v.camera], v.resolution[0], v.resolution[1], v.color, (float(v.depth_range[0]), float(v.depth_range[1])),
-                  cfg.DEPTH_CONFIG if v.color == "depth" else self.obs_config)
+                  cfg.depth_config(self.obs_config) if v.color == "depth" else self.obs_config)
             for key, v in plan.views.items()
         ]
         view_camera = plan.view_camera
@@ -279,6 +280,10 @@ class BlenderRenderer(Renderer):
             self._resolution = (view.width, view.height)
         if self._config != view.config:
             cfg.apply_config(scene, view.config, self._config)
+            # Cycles' persistent data remembers a little of other sample counts: the first
+            # observation after a view render would differ from the same one before it. So
+            # only observation renders keep the session; any other config renders afresh.
+            scene.render.use_persistent_data = view.config == self.obs_config
             self._config = view.config
         depth = view.color == "depth"
         if depth != self._depth:
