@@ -205,7 +205,7 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
     try:
         vec.reset(seed=seed)
         vec.action_space.seed(seed)
-        for _ in range(10):
+        for _ in range(50):  # warm-up: workers build their scenes and Blender's persistent data
             vec.step(vec.action_space.sample())
         rounds = max(1, steps // workers)
         start = time.perf_counter()

@@ -11,10 +11,16 @@ without oversubscribing them.
 from __future__ import annotations
 
 import os
+import time
 from functools import partial
 from typing import Any, Callable
 
 import gymnasium as gym
+from gymnasium.vector.async_vector_env import AsyncState, AsyncVectorEnv
+
+from visualenv.errors import WorkerError
+
+_BROKEN = (EOFError, BrokenPipeError, ConnectionResetError)
 
 
 def default_threads(n_envs: int) -> int:
@@ -32,6 +38,49 @@ def _make(target: str, kwargs: dict[str, Any]) -> gym.Env:
     return visualenv.make(target, **kwargs)
 
 
+class WorkerVectorEnv(AsyncVectorEnv):
+    """AsyncVectorEnv that turns a dead worker into a clear :class:`WorkerError`.
+
+    Gymnasium's own class surfaces a killed worker as a bare ``EOFError`` (or
+    hangs in ``close``); here the error names the dead workers and their exit
+    codes, and ``close()`` terminates whatever is left, so no Blender process
+    outlives the vector env.
+    """
+
+    def reset_wait(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().reset_wait(*args, **kwargs)
+        except _BROKEN:
+            raise self._worker_error("reset") from None
+
+    def step_wait(self, *args: Any, **kwargs: Any) -> Any:
+        try:
+            return super().step_wait(*args, **kwargs)
+        except _BROKEN:
+            raise self._worker_error("step") from None
+
+    def _worker_error(self, call: str) -> WorkerError:
+        self._state = AsyncState.DEFAULT
+        deadline = time.monotonic() + 2.0  # the pipe can break a moment before the process is reaped
+        while all(p.is_alive() for p in self.processes) and time.monotonic() < deadline:
+            time.sleep(0.02)
+        dead = [f"#{i} (pid {p.pid}, exit code {p.exitcode})" for i, p in enumerate(self.processes) if not p.is_alive()]
+        what = ", ".join(dead) or "a worker"
+        return WorkerError(f"vector env worker {what} died during {call}(); close the vector env and make a new one")
+
+    def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
+        if any(not p.is_alive() for p in self.processes):
+            terminate = True
+            self._state = AsyncState.DEFAULT
+        try:
+            super().close_extras(timeout=timeout, terminate=terminate)
+        except _BROKEN:
+            for process in self.processes:
+                if process.is_alive():
+                    process.terminate()
+                process.join(timeout=5)
+
+
 def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, **kwargs: Any) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
@@ -41,7 +90,7 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
         kwargs.setdefault("threads", threads or default_threads(n))
     fns = [env_factory(target, **kwargs) for _ in range(n)]
     if asynchronous and n > 1:
-        return gym.vector.AsyncVectorEnv(fns, context="spawn", shared_memory=True)
+        return WorkerVectorEnv(fns, context="spawn", shared_memory=True)
     return gym.vector.SyncVectorEnv(fns)
 
 
