@@ -246,3 +246,18 @@ def test_python_dynamics_escape_hatch():
 def test_spec_without_observation_is_state_only_even_when_render_requested():
     with pytest.raises(SpecError, match="needs an 'observation'"):
         VisualEnv(load_spec_text(WALKER, "t.yaml"), render=True)
+
+
+def test_conditional_vector_binding_gives_each_element():
+    env = env_from("""
+        id: Bind-v0
+        scene: {objects: {B: {primitive: cube}}}
+        state: {x: {init: 0.5}}
+        actions: {discrete: [{dx: -1}]}
+        dynamics: {update: {x: x + dx}}
+        actors: {B: {location: "[x, 0, 1] if x > 0 else [0, x, 2]", scale: 2}}
+    """)
+    env.reset(seed=0)
+    assert env.binding_values() == (0.5, 0.0, 1.0, 2.0, 2.0, 2.0)
+    env.step(0)
+    assert env.binding_values() == (0.0, -0.5, 2.0, 2.0, 2.0, 2.0)

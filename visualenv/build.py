@@ -92,7 +92,7 @@ def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0,
     summary = [
         f"observation: {env.observation_space}",
         f"actions:     {env.action_space}",
-        f"files:       env.json, scene.blend, preview.png",
+        "files:       env.json, scene.blend, preview.png",
     ]
     first = obs if not isinstance(obs, dict) else next(iter(obs.values()))
     return BuildResult(loaded.spec.id, final, time.perf_counter() - start, summary, ascii_art(first))

@@ -125,7 +125,7 @@ def _parse_value(text: str) -> Any:
 @main.command()
 @click.argument("spec")
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
-@click.option("--steps", default=200_000, show_default=True, help="total env steps")
+@click.option("--steps", type=int, default=None, help="total env steps  [default: 200000, or the resumed run's]")
 @click.option("--envs", default=2, show_default=True, help="parallel envs, one Blender process each")
 @click.option("--frame-stack", default=4, show_default=True)
 @click.option("--eval-every", default=10_000, show_default=True, help="env steps between evaluations")
@@ -139,7 +139,7 @@ def _parse_value(text: str) -> Any:
 @click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint")
 @click.option("--no-progress", is_flag=True)
 @_friendly
-def train(spec: str, algo: str, steps: int, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
+def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
           final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
           out_root: str, resume_dir: str | None, no_progress: bool) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
@@ -162,11 +162,11 @@ def train(spec: str, algo: str, steps: int, envs: int, frame_stack: int, eval_ev
         hyper[key] = _parse_value(value)
     if resume_dir:
         record = json.loads((Path(resume_dir) / "config.json").read_text())
-        config = TrainConfig(**{**record["config"], "steps": steps if steps != 200_000 else record["config"]["steps"]})
+        config = TrainConfig(**{**record["config"], "steps": steps or record["config"]["steps"]})
         run_dir = Path(resume_dir)
     else:
         env_id = load_spec(resolve(spec)).spec.id
-        config = TrainConfig(spec=spec, algo=algo, steps=steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
+        config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
                              render=not state_only, hyperparams=hyper, progress=not no_progress)
         run_dir = new_run_dir(out_root, env_id)

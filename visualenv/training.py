@@ -24,6 +24,7 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
+from stable_baselines3.common.callbacks import BaseCallback
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
 
@@ -70,7 +71,7 @@ def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
 
 def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[str, Any]:
     """Train, evaluate the best model, draw the plots; returns the final results."""
-    from stable_baselines3.common.callbacks import CallbackList, CheckpointCallback, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.preprocessing import is_image_space
     from stable_baselines3.common.vec_env import VecTransposeImage
@@ -153,13 +154,7 @@ def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
     }
 
 
-def _base_callback() -> Any:
-    from stable_baselines3.common.callbacks import BaseCallback
-
-    return BaseCallback
-
-
-class _LatestCheckpoint(_base_callback()):  # type: ignore[misc]
+class _LatestCheckpoint(BaseCallback):
     """Overwrite one checkpoint file, so a killed run resumes from its last save."""
 
     def __init__(self, path: Path, every: int):
@@ -173,7 +168,7 @@ class _LatestCheckpoint(_base_callback()):  # type: ignore[misc]
         return True
 
 
-class _ProgressBar(_base_callback()):  # type: ignore[misc]
+class _ProgressBar(BaseCallback):
     """A tqdm bar over env steps showing the recent mean episode reward and length."""
 
     def __init__(self, total: int, done: int):

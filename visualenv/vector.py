@@ -27,7 +27,7 @@ def default_threads(n_envs: int) -> int:
     return max(1, (os.cpu_count() or 1) // max(1, n_envs))
 
 
-def env_factory(target: str, seed: int | None = None, **kwargs: Any) -> Callable[[], gym.Env]:
+def env_factory(target: str, **kwargs: Any) -> Callable[[], gym.Env]:
     """A picklable function that makes one env (for vector env workers)."""
     return partial(_make, str(target), kwargs)
 
@@ -81,13 +81,19 @@ class WorkerVectorEnv(AsyncVectorEnv):
                 process.join(timeout=5)
 
 
+def _with_threads(kwargs: dict[str, Any], n: int, threads: int | None) -> dict[str, Any]:
+    """Give rendering workers a share of the cores unless told otherwise (state-only envs need none)."""
+    if kwargs.get("render") is not False:
+        kwargs.setdefault("threads", threads or default_threads(n))
+    return kwargs
+
+
 def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, **kwargs: Any) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
     kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
     """
-    if kwargs.get("render") is not False:
-        kwargs.setdefault("threads", threads or default_threads(n))
+    kwargs = _with_threads(kwargs, n, threads)
     fns = [env_factory(target, **kwargs) for _ in range(n)]
     if asynchronous and n > 1:
         return WorkerVectorEnv(fns, context="spawn", shared_memory=True)
@@ -100,8 +106,7 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
-    if kwargs.get("render") is not False:
-        kwargs.setdefault("threads", threads or default_threads(n))
+    kwargs = _with_threads(kwargs, n, threads)
     vec = make_vec_env(
         _make,
         n_envs=n,

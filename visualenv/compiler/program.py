@@ -370,9 +370,11 @@ class _Compiler:
                 self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, declared).replace("names:", "objects:"), key=True)
                 continue
             obj = declared.get(obj_name)
-            for prop, value in actor.model_dump(exclude_none=True).items():
-                path = ("actors", obj_name, prop)
+            for prop in type(actor).model_fields:
                 raw = getattr(actor, prop)
+                if raw is None:
+                    continue
+                path = ("actors", obj_name, prop)
                 if prop == "strength" and obj is not None and not isinstance(obj, LightObject):
                     self.error(path, f"'strength' binds a light's power, but '{obj_name}' is not a light", key=True)
                     continue
@@ -384,6 +386,11 @@ class _Compiler:
                     continue
                 text = "[" + ", ".join(map(str, raw)) + "]" if isinstance(raw, list) else str(raw)
                 site = Site(".".join(map(str, path)), text, tuple(sorted(scope)))
+                if isinstance(checked_values, tuple):  # a vector computed as a whole: evaluate it once
+                    whole, size = checked_values
+                    var = f"_b{len(values)}v"
+                    fb.assign(var, whole, site)
+                    checked_values = [ast.Subscript(name(var), const(i), ast.Load()) for i in range(size)]
                 for item in checked_values:  # one line per value, so a runtime fault names its binding
                     var = f"_b{len(values)}"
                     fb.assign(var, item, site)
@@ -407,8 +414,8 @@ class _Compiler:
         elif camera not in cameras:
             self.error(path, f"no camera '{camera}' in the scene" + did_you_mean(camera, cameras).replace("names:", "cameras:"))
 
-    def binding_values(self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]) -> list[ast.expr] | None:
-        """A binding's value as a list of scalar trees (a vector expression is split up)."""
+    def binding_values(self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]) -> list[ast.expr] | tuple[ast.expr, int] | None:
+        """A binding's value as a list of scalar trees, or (vector tree, size) when it is not a literal."""
         wanted = BINDABLE[prop]
         if wanted.kind == "vec":
             if isinstance(raw, list):
@@ -436,8 +443,7 @@ class _Compiler:
             tree = lower(checked.tree)
             if isinstance(tree, ast.Tuple):
                 return list(tree.elts)
-            # a conditional between vectors: index each element of the evaluated tuple
-            return [ast.Subscript(tree, const(i), ast.Load()) for i in range(size)]
+            return tree, size  # e.g. a conditional between vectors: the caller evaluates it once
         checked = self.expr(path, raw, scope, expect=wanted)
         if checked is None:
             return None

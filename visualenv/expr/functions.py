@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from visualenv.expr.types import BOOL, NUM, VEC, Type
+from visualenv.expr.types import NUM, Type
 
 
 def _sign(x: float) -> float:
@@ -99,8 +99,8 @@ FUNCTIONS: dict[str, Function] = {
 }
 
 #: named constants every expression can use
-CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e, "tau_const": math.tau, "inf": math.inf}
-del CONSTANTS["tau_const"]  # 'tau' is a common parameter name (a time step), so it is not reserved
+#: ('tau' is left out on purpose: it is a common parameter name, a time step)
+CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e, "inf": math.inf}
 
 
 class RandomSource:
