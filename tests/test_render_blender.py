@@ -9,6 +9,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -27,7 +28,7 @@ OBJECTS = """\
 
 
 def make_env(tmp_path: Path, *, objects: str = OBJECTS, actors: str = "Box: {location: [x, 0, 0]}", observation: str = "{camera: Cam, resolution: [48, 32], color: rgb}",
-             scene_extra: str = "", state: str = "x: {init: 0.0}", render: str = "{engine: cycles, preset: fast}") -> VisualEnv:
+             scene_extra: str = "", state: str = "x: {init: 0.0}", render: str = "{engine: cycles, preset: fast}", **renderer_options: Any) -> VisualEnv:
     text = f"""\
 id: RenderTest-v0
 scene:
@@ -42,7 +43,7 @@ actors:
 observation: {observation}
 render: {render}
 """
-    return VisualEnv(load_spec_text(text, name="t.yaml", base_dir=tmp_path))
+    return VisualEnv(load_spec_text(text, name="t.yaml", base_dir=tmp_path), renderer_options=renderer_options)
 
 
 def observe(env: VisualEnv, **state: float):
@@ -138,6 +139,49 @@ def test_grayscale_rgb_depth_shapes_and_depth_order(tmp_path):
         assert hidden["depth"][15, 10, 0] == 255
         again = observe(e, x=0.0)  # switching the depth override on and off leaves every view reproducible
         assert all(np.array_equal(again[k], obs[k]) for k in obs)
+    finally:
+        e.close()
+
+
+THREE_VIEWS = """
+  cameras:
+    color: {camera: Cam, resolution: [40, 30], color: rgb}
+    gray:  {camera: Cam, resolution: [40, 30], color: grayscale}
+    depth: {camera: Cam, resolution: [40, 30], color: depth, depth_range: [0, 20]}"""
+
+
+def test_memory_readback_matches_the_file_written_by_blender(tmp_path):
+    """Pixels copied from Cycles' result equal Blender's own 8-bit file, up to one level of rounding."""
+    objects = OBJECTS + "    Ball: {primitive: sphere, radius: 0.6, location: [0, 0, 1.8], material: {color: [0.8, 0.3, 0.05]}}\n"
+    frames = {}
+    for readback in ("memory", "file"):
+        e = make_env(tmp_path, objects=objects, observation=THREE_VIEWS, readback=readback)
+        try:
+            frames[readback] = [observe(e, x=x) for x in (-1.5, 0.0, 1.5)]
+        finally:
+            e.close()
+    for memory, file in zip(frames["memory"], frames["file"]):
+        for key in ("color", "gray", "depth"):
+            difference = np.abs(memory[key].astype(int) - file[key].astype(int))
+            assert difference.max() <= 1, key
+            assert (difference > 0).mean() < 0.02, key  # rounding at a handful of pixels, not a shifted or flipped image
+        assert memory["color"][5:12].max() > 60  # the ball, near the top: an upside-down copy would differ
+
+
+def test_readback_option_is_checked(tmp_path):
+    with pytest.raises(ValueError, match="unknown readback 'gpu'"):
+        make_env(tmp_path, readback="gpu")  # at construction, not at the first render
+    e = make_env(tmp_path, render="{engine: workbench}", readback="memory")
+    with pytest.raises(ValueError, match="needs the Cycles engine"):
+        e.reset(seed=0)
+    e.close()
+
+
+def test_workbench_renders_through_the_file_path(tmp_path):
+    e = make_env(tmp_path, render="{engine: workbench}")
+    try:
+        left, right = observe(e, x=-1.5), observe(e, x=1.5)
+        assert centroid_x(right) - centroid_x(left) > 10
     finally:
         e.close()
 

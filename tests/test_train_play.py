@@ -27,7 +27,7 @@ def run_dir(tmp_path_factory):
 
 def test_train_writes_a_complete_run_folder(run_dir):
     for name in ["config.json", "results.json", "best_model.zip", "final_model.zip", "checkpoints/latest.zip",
-                 "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png", "plots/fps.png"]:
+                 "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png", "plots/success.png", "plots/fps.png"]:
         assert (run_dir / name).is_file(), name
     results = json.loads((run_dir / "results.json").read_text())
     assert results["episodes"] == 2 and results["steps"] >= 256
@@ -38,10 +38,20 @@ def test_train_writes_a_complete_run_folder(run_dir):
     assert list(iio.imread(run_dir / "plots" / "rewards.png").shape[2:]) in ([3], [4])
 
 
-def test_train_resumes_from_the_latest_checkpoint(run_dir):
+def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir):
+    before = np.load(run_dir / "evaluations.npz")["timesteps"].tolist()
+    rows_before = len((run_dir / "logs" / "progress.csv").read_text().splitlines())
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(run_dir), "--steps", "384", "--no-progress"])
     assert result.exit_code == 0, result.output
-    assert json.loads((run_dir / "results.json").read_text())["steps"] >= 384
+    results = json.loads((run_dir / "results.json").read_text())
+    assert results["steps"] >= 384 and results["stopped_early"] is False
+    after = np.load(run_dir / "evaluations.npz")["timesteps"].tolist()
+    assert after[: len(before)] == before and len(after) > len(before)  # earlier evaluations kept, new ones added
+    assert len((run_dir / "logs" / "progress-1.csv").read_text().splitlines()) == rows_before  # the first segment, kept
+    from visualenv.plots import read_progress
+
+    steps = read_progress(run_dir / "logs")["time/total_timesteps"]
+    assert steps[0] < 256 < steps[-1]  # the plots see both segments
 
 
 def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
@@ -59,3 +69,29 @@ def test_play_random_policy():
     result = CliRunner().invoke(main, ["play", "Goalie-v0", "--episodes", "2"])
     assert result.exit_code == 0, result.output
     assert result.output.count("episode ") == 2 and "mean return" in result.output
+
+
+def test_sigterm_stops_training_and_still_evaluates(tmp_path):
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    command = [sys.executable, "-m", "visualenv.cli", "train", "Goalie-v0", "--steps", "100000", "--envs", "2", "--eval-every", "128",
+               "--eval-episodes", "1", "--final-episodes", "2", "--set", "n_steps=64", "--set", "batch_size=64", "--out", str(tmp_path),
+               "--no-progress"]
+    process = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        deadline = time.monotonic() + 240
+        while not list(tmp_path.glob("Goalie-v0/*/evaluations.npz")) and time.monotonic() < deadline:
+            time.sleep(0.5)
+        process.send_signal(signal.SIGTERM)
+        output, _ = process.communicate(timeout=240)
+    finally:
+        process.kill()
+    assert process.returncode == 0, output
+    assert "stopped early" in output
+    (run,) = tmp_path.glob("Goalie-v0/*")
+    results = json.loads((run / "results.json").read_text())
+    assert results["stopped_early"] is True and results["episodes"] == 2 and results["steps"] < 100000
+    assert (run / "plots" / "rewards.png").is_file()

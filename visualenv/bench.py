@@ -106,12 +106,14 @@ def blender_data_blocks() -> int:
 
 
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
-              workers: int = 0, soak_steps: int = 0, threads: int | None = None) -> Figures:
+              workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto") -> Figures:
     import bpy
 
     import visualenv
 
-    options = {"threads": threads} if threads else {}
+    options: dict[str, Any] = {"readback": readback}
+    if threads:
+        options["threads"] = threads
     env = visualenv.make(spec, **options)
     base = env.unwrapped
     figures = Figures(spec=str(spec), steps=steps)
@@ -148,7 +150,7 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     figures.rss_final_mb = _rss_mb()
     env.close()
     if workers > 1:
-        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s)
+        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback)
     return figures
 
 
@@ -197,11 +199,11 @@ def soak(env: Any, steps: int, seed: int, report_every: int = 0) -> dict[str, An
             "blocks_start": blocks_start, "blocks_end": blender_data_blocks()}
 
 
-def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float) -> dict[str, float]:
+def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto") -> dict[str, float]:
     from visualenv.vector import default_threads, make_vec
 
     threads = default_threads(workers)
-    vec = make_vec(str(spec), workers, threads=threads)
+    vec = make_vec(str(spec), workers, threads=threads, readback=readback)
     try:
         vec.reset(seed=seed)
         vec.action_space.seed(seed)

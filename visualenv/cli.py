@@ -203,10 +203,12 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--steps", default=500, show_default=True, help="measured env steps (after a warm-up)")
 @click.option("--workers", default=2, show_default=True, help="parallel envs for the parallel figure (0: skip)")
 @click.option("--threads", type=int, default=None, help="render threads of the single env (default: all cores)")
+@click.option("--readback", type=click.Choice(["auto", "memory", "file"]), default="auto", show_default=True,
+              help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
 @click.option("--soak", "soak_steps", type=int, default=0, help="also run this many steps and report memory growth (e.g. 50000)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
-def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, soak_steps: int, json_out: str | None) -> None:
+def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, readback: str, soak_steps: int, json_out: str | None) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
 
@@ -218,7 +220,7 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
                f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
     results = []
     for spec in specs:
-        figures = bench_one(spec, steps, workers=workers, soak_steps=soak_steps, threads=threads)
+        figures = bench_one(spec, steps, workers=workers, soak_steps=soak_steps, threads=threads, readback=readback)
         for line in figures.lines():
             click.echo(line)
         results.append(as_dict(figures))

@@ -20,8 +20,25 @@ def _read_progress(path: Path) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in columns.items()}
 
 
+def progress_parts(logs: Path) -> list[Path]:
+    """progress-1.csv, progress-2.csv, ... (segments before each resume), then progress.csv."""
+    parts = [p for p in logs.glob("progress-*.csv") if p.stem.rsplit("-", 1)[1].isdigit()]
+    parts.sort(key=lambda p: int(p.stem.rsplit("-", 1)[1]))
+    return parts + [logs / "progress.csv"]
+
+
+def read_progress(logs: Path) -> dict[str, np.ndarray]:
+    """Every segment of a (possibly resumed) run's SB3 progress log, joined in order."""
+    tables = [t for t in (_read_progress(p) for p in progress_parts(logs)) if t]
+    keys = {k for t in tables for k in t}
+    joined: dict[str, np.ndarray] = {}
+    for key in keys:
+        joined[key] = np.concatenate([t.get(key, np.full(len(next(iter(t.values()))), np.nan)) for t in tables])
+    return joined
+
+
 def training_plots(run_dir: str | Path) -> list[Path]:
-    """rewards.png, lengths.png, fps.png in run_dir/plots (roll-outs and evaluation)."""
+    """rewards.png, lengths.png, success.png, fps.png in run_dir/plots (roll-outs and evaluation)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -30,20 +47,21 @@ def training_plots(run_dir: str | Path) -> list[Path]:
     run = Path(run_dir)
     out = run / "plots"
     out.mkdir(exist_ok=True)
-    progress = _read_progress(run / "logs" / "progress.csv")
+    progress = read_progress(run / "logs")
     steps = progress.get("time/total_timesteps", np.array([]))
     evaluations = np.load(run / "evaluations.npz") if (run / "evaluations.npz").exists() else None
     paths = []
     for name, rollout_key, eval_key, label in [
         ("rewards", "rollout/ep_rew_mean", "results", "mean episode reward"),
         ("lengths", "rollout/ep_len_mean", "ep_lengths", "mean episode length"),
+        ("success", "rollout/success_rate", "successes", "success rate"),
     ]:
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
         y = progress.get(rollout_key)
         if y is not None and len(steps):
             axes[0].plot(steps, y)
         axes[0].set(title=f"{label}, roll-outs", xlabel="steps", ylabel=label)
-        if evaluations is not None and len(evaluations["timesteps"]):
+        if evaluations is not None and eval_key in evaluations and len(evaluations["timesteps"]):
             values = evaluations[eval_key].mean(axis=1)
             axes[1].plot(evaluations["timesteps"], values, marker="o", markersize=3)
         axes[1].set(title=f"{label}, evaluation", xlabel="steps", ylabel=label)

@@ -10,21 +10,27 @@ A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes:
 * ``checkpoints/latest.zip`` the newest model, for ``--resume``
 * ``plots/``          the paper's figures: rewards, episode lengths, samples per second
 * ``results.json``    the best model's final evaluation (reward, length, success rate)
+
+Stopping a run early (Ctrl-C, or ``kill`` with SIGTERM) ends training at the next
+step and still saves, evaluates and plots what was learnt so far.
 """
 
 from __future__ import annotations
 
 import json
 import shlex
+import signal
 import sys
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
 from datetime import datetime
 from pathlib import Path
 from typing import Any
 
 import numpy as np
-from stable_baselines3.common.callbacks import BaseCallback
+from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
 
@@ -71,7 +77,7 @@ def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
 
 def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[str, Any]:
     """Train, evaluate the best model, draw the plots; returns the final results."""
-    from stable_baselines3.common.callbacks import CallbackList, EvalCallback
+    from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.preprocessing import is_image_space
     from stable_baselines3.common.vec_env import VecTransposeImage
@@ -86,14 +92,17 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
         record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path}
         (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
     frame_stack = config.frame_stack if config.render else 0
+    if resume:
+        _keep_earlier_logs(run_dir / "logs")
     train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
-                             monitor_dir=str(run_dir / "monitor"), **_vec_kwargs(config))
+                             monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     eval_env = make_sb3_vec(spec_path, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **_vec_kwargs(config))
     if is_image_space(eval_env.observation_space):
         eval_env = VecTransposeImage(eval_env)  # as SB3 does to the training env
     algo = algorithm_class(config.algo)
     latest = run_dir / "checkpoints" / "latest.zip"
     started = time.perf_counter()
+    stopper = _StopOnSignal()
     try:
         if resume and latest.exists():
             model = algo.load(latest, env=train_env)
@@ -104,14 +113,16 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
         model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard"]))
         per_env = max(1, config.eval_every // config.envs)
         callbacks = [
-            EvalCallback(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
-                         best_model_save_path=str(run_dir), deterministic=True, verbose=0),
+            _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
+                           best_model_save_path=str(run_dir), deterministic=True, verbose=0),
             _LatestCheckpoint(latest, every=per_env),
+            stopper,
         ]
         if config.progress:
             callbacks.append(_ProgressBar(config.steps, done))
         remaining = max(0, config.steps - done)
-        model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume)
+        with stopper.listening():
+            model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume)
         model.save(latest)
         model.save(run_dir / "final_model.zip")
     finally:
@@ -122,7 +133,8 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
         results = evaluate(algo.load(best if best.exists() else latest), eval_env, config.final_eval_episodes)
     finally:
         eval_env.close()
-    results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": best.name if best.exists() else latest.name})
+    results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": best.name if best.exists() else latest.name,
+                    "stopped_early": stopper.requested})
     (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     from visualenv.plots import training_plots
 
@@ -154,6 +166,39 @@ def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
     }
 
 
+def _keep_earlier_logs(logs: Path) -> None:
+    """SB3 starts progress.csv afresh: keep the earlier segment as progress-<n>.csv (the plots join them)."""
+    current = logs / "progress.csv"
+    if current.exists():
+        n = 1
+        while (logs / f"progress-{n}.csv").exists():
+            n += 1
+        current.rename(logs / f"progress-{n}.csv")
+
+
+class _ResumableEval(EvalCallback):
+    """SB3's EvalCallback that, in a resumed run, carries on the earlier evaluations.
+
+    Without this a resumed run would forget its history (evaluations.npz is
+    rewritten from scratch) and its best score, so the first evaluation after a
+    resume would overwrite a better best_model.zip.
+    """
+
+    def _init_callback(self) -> None:
+        super()._init_callback()
+        path = Path(self.log_path + ".npz") if self.log_path else None
+        if path is None or not path.exists() or self.evaluations_timesteps:
+            return
+        with np.load(path) as earlier:
+            self.evaluations_timesteps = earlier["timesteps"].tolist()
+            self.evaluations_results = earlier["results"].tolist()
+            self.evaluations_length = earlier["ep_lengths"].tolist()
+            if "successes" in earlier:
+                self.evaluations_successes = earlier["successes"].tolist()
+        if self.evaluations_results:
+            self.best_mean_reward = float(max(np.mean(r) for r in self.evaluations_results))
+
+
 class _LatestCheckpoint(BaseCallback):
     """Overwrite one checkpoint file, so a killed run resumes from its last save."""
 
@@ -166,6 +211,31 @@ class _LatestCheckpoint(BaseCallback):
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.model.save(self.path)
         return True
+
+
+class _StopOnSignal(BaseCallback):
+    """Turn SIGINT/SIGTERM into a clean stop, so an interrupted run still gets its evaluation and plots."""
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.requested = False
+
+    @contextmanager
+    def listening(self) -> Iterator[None]:
+        def request_stop(signum: int, frame: Any) -> None:
+            self.requested = True
+
+        previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+        if self.requested:
+            print(f"stopped early at {self.model.num_timesteps} steps; evaluating the best model", file=sys.stderr)
+
+    def _on_step(self) -> bool:
+        return not self.requested
 
 
 class _ProgressBar(BaseCallback):

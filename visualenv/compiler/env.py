@@ -13,7 +13,7 @@ from gymnasium import spaces
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
-from visualenv.render.base import RenderPlan, Renderer, observation_space, create_renderer
+from visualenv.render.base import RenderPlan, Renderer, check_renderer_options, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 
@@ -78,6 +78,7 @@ class VisualEnv(gym.Env):
         self.render_mode = render_mode
         self.uses_camera = s.observation is not None and render is not False
         self._renderer_options = dict(renderer_options or {})
+        check_renderer_options(self._renderer_options)
         self._renderer: Renderer | None = None
         self._random = RandomSource()
         self._fns = program.functions(self._random)

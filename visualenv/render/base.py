@@ -91,6 +91,21 @@ class Renderer(ABC):
         """Free everything this renderer created (idempotent)."""
 
 
+#: keyword options a renderer accepts (documented on :class:`BlenderRenderer`)
+RENDERER_OPTIONS = ("device", "threads", "engine", "samples", "readback")
+READBACKS = ("auto", "memory", "file")
+
+
+def check_renderer_options(options: dict[str, Any]) -> None:
+    """Fail at ``make()`` time, not at the first render, on an option the renderer would refuse."""
+    unknown = sorted(set(options) - set(RENDERER_OPTIONS))
+    if unknown:
+        raise TypeError(f"unknown renderer option(s) {', '.join(unknown)}: use {', '.join(RENDERER_OPTIONS)}")
+    readback = options.get("readback", "auto")
+    if readback not in READBACKS:
+        raise ValueError(f"unknown readback {readback!r}: use {', '.join(READBACKS)}")
+
+
 def create_renderer(plan: RenderPlan, **options: Any) -> Renderer:
     """The Blender renderer (imported here so state-only envs never load bpy)."""
     from visualenv.render.blender.renderer import BlenderRenderer

@@ -10,14 +10,14 @@ import bpy
 import numpy as np
 
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
-from visualenv.render.base import RenderPlan, Renderer
+from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender.materials import depth_material, depth_world, make_material, set_base_color
+from visualenv.render.blender.capture import Capture, install as install_capture, to_raw_bytes, to_srgb_bytes
 from visualenv.render.blender.readback import OutputFile, first_channel, quiet_stdout, read_bmp, to_grayscale
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
 from visualenv.spec.models import CameraObject, Material
 
-OPTIONS = ("device", "threads", "engine", "samples")
 _instances = itertools.count()
 
 
@@ -53,13 +53,14 @@ class BlenderRenderer(Renderer):
       falls back to the CPU with a one-time warning for ``"gpu"``);
     * ``threads``: render threads, 0 for all cores;
     * ``engine``: ``"cycles"``, ``"workbench"`` or ``"eevee"``;
-    * ``samples``: samples per pixel of observation renders.
+    * ``samples``: samples per pixel of observation renders;
+    * ``readback``: how pixels leave Blender: ``"memory"`` (Cycles only: the
+      render result copied in place, see :mod:`capture`), ``"file"`` (a BMP in
+      shared memory, any engine) or ``"auto"`` (memory where possible; the default).
     """
 
     def __init__(self, plan: RenderPlan, **options: Any) -> None:
-        unknown = sorted(set(options) - set(OPTIONS))
-        if unknown:
-            raise TypeError(f"unknown renderer option(s) {', '.join(unknown)}: use {', '.join(OPTIONS)}")
+        check_renderer_options(options)
         self.plan = plan
         self._closed = True
         settings = plan.settings
@@ -67,6 +68,11 @@ class BlenderRenderer(Renderer):
         self.view_config = cfg.view_config(self.obs_config, settings.view.preset)
         self.device = cfg.resolve_device(options.get("device", settings.device))
         threads = int(options.get("threads", settings.threads))
+        readback = options.get("readback", "auto")
+        if readback == "memory" and "cycles" not in (self.obs_config.engine, self.view_config.engine):
+            raise ValueError("readback 'memory' needs the Cycles engine; use 'file' or 'auto'")
+        self._capture = Capture() if readback != "file" and install_capture() else None
+        self._capturing = False
         cfg.engine_warnings(self.obs_config, self.device)
         self._output = OutputFile()
         tracker = DataTracker()
@@ -291,18 +297,34 @@ class BlenderRenderer(Renderer):
         if depth and self._depth_range != view.depth_range:
             self._set_depth_range(*view.depth_range)
             self._depth_range = view.depth_range
+        self._capturing = self._capture is not None and view.config.engine == "cycles"
+        if self._capture is not None and self._capturing:
+            self._capture.arm(view.width, view.height)
         self.raw_render()
+        return self._read_capture(view) if self._capturing else self._read_file(view)
+
+    def _read_capture(self, view: _View) -> np.ndarray:
+        assert self._capture is not None
+        pixels = self._capture.pixels
+        if view.color == "depth":
+            return to_raw_bytes(pixels[:, :, :1])
+        rgba = to_srgb_bytes(pixels)
+        return np.ascontiguousarray(rgba[:, :, :3]) if view.color == "rgb" else to_grayscale(rgba)
+
+    def _read_file(self, view: _View) -> np.ndarray:
         rgb = read_bmp(self._output.path)
-        if view.color == "rgb":
-            return rgb
-        if view.color == "grayscale":
-            return to_grayscale(rgb)
-        return first_channel(rgb)
+        if view.color == "depth":
+            return first_channel(rgb)
+        return rgb if view.color == "rgb" else to_grayscale(rgb)
 
     def raw_render(self) -> None:
-        """Blender's render call alone, with the scene as it is (the file is written, not read)."""
+        """Blender's render call, with the scene as it is; the pixels wait in the capture buffer or the file."""
         with quiet_stdout():
-            bpy.ops.render.render(write_still=True, scene=self._scene_name)
+            if self._capture is not None and self._capturing:
+                with self._capture:
+                    bpy.ops.render.render(scene=self._scene_name)
+            else:
+                bpy.ops.render.render(write_still=True, scene=self._scene_name)
 
     def _set_depth_mode(self, depth: bool) -> None:
         layer = self._layer
