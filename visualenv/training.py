@@ -99,6 +99,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
     eval_env = make_sb3_vec(spec_path, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **_vec_kwargs(config))
     if is_image_space(eval_env.observation_space):
         eval_env = VecTransposeImage(eval_env)  # as SB3 does to the training env
+    eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
     algo = algorithm_class(config.algo)
     latest = run_dir / "checkpoints" / "latest.zip"
     started = time.perf_counter()
