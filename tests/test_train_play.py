@@ -56,11 +56,13 @@ def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir)
 
 def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     gif = tmp_path / "play.gif"
-    result = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "--episodes", "1", "--record", str(gif)])
+    result = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "--episodes", "1", "--record", str(gif),
+                                       "--view", "fast", "--view-size", "200"])
     assert result.exit_code == 0, result.output
     assert "episode 0: return" in result.output and "success" in result.output
     frames = iio.imread(gif)
     assert frames.ndim == 4 and frames.shape[0] >= 10  # one frame per step
+    assert frames.shape[1] == 200 and frames.shape[2] == 200 + 4 + 200  # the 100 px observation scaled 2x, a gap, the 200 px view
     # the view beside the observation: the frames change as the ball rolls
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
 

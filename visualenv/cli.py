@@ -184,12 +184,17 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 @click.option("--episodes", default=3, show_default=True)
 @click.option("--seed", default=0, show_default=True)
 @click.option("--record", type=click.Path(dir_okay=False), help="save a .gif or .mp4 of the view beside the observation")
+@click.option("--view", "view_preset", type=click.Choice(["fast", "quality"]), default=None,
+              help="render preset of the recorded view (default: the spec's; 'fast' records in seconds)")
+@click.option("--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels")
 @_friendly
-def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int, record: str | None) -> None:
+def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int, record: str | None, view_preset: str | None,
+         view_size: int | None) -> None:
     """Run episodes with a random or trained policy; print returns, lengths and success."""
     from visualenv.play import play as run_play
 
-    results = run_play(spec, model_path=model_path, algo=algo, episodes=episodes, seed=seed, record=record)
+    results = run_play(spec, model_path=model_path, algo=algo, episodes=episodes, seed=seed, record=record,
+                       view_preset=view_preset, view_size=view_size)
     for i, ep in enumerate(results):
         click.echo(f"episode {i}: return {ep.ret:.2f}, length {ep.length}, {'success' if ep.success else 'no success'} ({ep.outcome})")
     rate = sum(ep.success for ep in results) / len(results)

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -19,13 +19,37 @@ class Episode:
     outcome: str | None
 
 
+def with_view(loaded: Any, *, preset: str | None = None, size: int | None = None) -> Any:
+    """The spec with its human view's preset and/or size (longer side, aspect kept) changed.
+
+    The 'quality' view takes seconds per frame on a CPU; 'fast' at 200 px
+    records a 200-step episode in a few seconds.
+    """
+    view = loaded.spec.render.view
+    update: dict[str, Any] = {}
+    if preset:
+        update["preset"] = preset
+    if size:
+        width, height = view.resolution
+        scale = size / max(width, height)
+        update["resolution"] = [max(1, round(width * scale)), max(1, round(height * scale))]
+    if not update:
+        return loaded
+    render = loaded.spec.render.model_copy(update={"view": view.model_copy(update=update)})
+    return replace(loaded, spec=loaded.spec.model_copy(update={"render": render}))
+
+
 def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episodes: int = 3, seed: int = 0,
-         record: str | None = None, fps: int = 15, max_frames: int = 2000) -> list[Episode]:
+         record: str | None = None, fps: int = 15, max_frames: int = 2000, view_preset: str | None = None,
+         view_size: int | None = None) -> list[Episode]:
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation."""
-    import visualenv
+    from visualenv.compiler import VisualEnv
+    from visualenv.registration import resolve
+    from visualenv.spec import load_spec
     from visualenv.wrappers import FrameStack
 
-    env: Any = visualenv.make(spec, render_mode="rgb_array")
+    loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
+    env: Any = VisualEnv(loaded, render_mode="rgb_array")
     model = None
     if model_path:
         from visualenv.training import algorithm_class
