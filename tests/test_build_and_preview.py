@@ -67,3 +67,18 @@ def test_domain_randomization_changes_the_scene_per_episode():
     redder = ca if info_a["state"]["red"] - info_a["state"]["green"] > info_b["state"]["red"] - info_b["state"]["green"] else cb
     other = cb if redder is ca else ca
     assert (redder[0] - redder[1]) > (other[0] - other[1])
+
+
+def test_play_view_override_changes_preset_and_size_keeping_aspect():
+    from visualenv.play import with_view
+    from visualenv.registration import resolve
+
+    loaded = visualenv.load_spec(resolve("Goalie-v0"))
+    view = loaded.spec.render.view.model_copy(update={"resolution": [400, 300]})
+    loaded = with_view(loaded, preset=None, size=None)  # nothing asked: the same spec
+    wide = loaded.spec.model_copy(update={"render": loaded.spec.render.model_copy(update={"view": view})})
+    from dataclasses import replace
+
+    changed = with_view(replace(loaded, spec=wide), preset="fast", size=200)
+    assert changed.spec.render.view.preset == "fast" and changed.spec.render.view.resolution == [200, 150]
+    assert wide.render.view.preset == "quality"  # the original is untouched
