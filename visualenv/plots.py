@@ -59,7 +59,8 @@ def training_plots(run_dir: str | Path) -> list[Path]:
         fig, axes = plt.subplots(1, 2, figsize=(10, 3.8))
         y = progress.get(rollout_key)
         if y is not None and len(steps):
-            axes[0].plot(steps, y)
+            logged = np.isfinite(y)  # evaluation rows leave the roll-out columns empty
+            axes[0].plot(steps[logged], y[logged])
         axes[0].set(title=f"{label}, roll-outs", xlabel="steps", ylabel=label)
         if evaluations is not None and eval_key in evaluations and len(evaluations["timesteps"]):
             values = evaluations[eval_key].mean(axis=1)
@@ -75,7 +76,8 @@ def training_plots(run_dir: str | Path) -> list[Path]:
     fig, ax = plt.subplots(figsize=(5, 3.8))
     fps = progress.get("time/fps")
     if fps is not None and len(steps):
-        ax.plot(steps, fps)
+        logged = np.isfinite(fps)
+        ax.plot(steps[logged], fps[logged])
     ax.set(title="samples per second", xlabel="steps", ylabel="samples / s")
     ax.grid(alpha=0.3)
     fig.tight_layout()
