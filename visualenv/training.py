@@ -21,6 +21,7 @@ import json
 import shlex
 import signal
 import sys
+import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -226,6 +227,9 @@ class _StopOnSignal(BaseCallback):
         def request_stop(signum: int, frame: Any) -> None:
             self.requested = True
 
+        if threading.current_thread() is not threading.main_thread():  # only the main thread may set handlers
+            yield
+            return
         previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
         try:
             yield

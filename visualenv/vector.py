@@ -11,7 +11,7 @@ without oversubscribing them.
 may use). A Blender render keeps more threads busy than its render threads
 (scene evaluation, the render session, idle-spinning pools), and pinning keeps
 one worker's spinning off another's core. On the 2-core development VM it was
-a small, noisy gain (two CartPole workers: 413-478 steps/s pinned, 346-505
+a small, noisy gain (two CartPole workers: 413-591 steps/s pinned, 346-505
 not), and it would crowd two jobs onto the same cores, so it is off by default.
 """
 

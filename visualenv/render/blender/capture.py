@@ -8,7 +8,7 @@ which costs about 1 ms per frame at 100x100, as much as the render itself.
 A render engine, however, can read its own result while it renders. This
 module wraps Cycles' ``RenderEngine.render`` so that, when a renderer has armed
 a :class:`Capture`, the engine's Combined pass (linear, scene-referred RGBA) is
-copied with ``foreach_get`` (about 40 µs) before Blender moves on. The wrapper
+copied with ``foreach_get`` (20-40 µs at 100x100) before Blender moves on. The wrapper
 is installed once per process and does nothing for renders nobody armed.
 
 :func:`to_srgb_bytes` then applies what Blender's 'Standard' view transform and

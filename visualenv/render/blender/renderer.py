@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 from dataclasses import dataclass
 from typing import Any, Callable, Sequence
@@ -71,6 +72,8 @@ class BlenderRenderer(Renderer):
         readback = options.get("readback", "auto")
         if readback == "memory" and "cycles" not in (self.obs_config.engine, self.view_config.engine):
             raise ValueError("readback 'memory' needs the Cycles engine; use 'file' or 'auto'")
+        if readback == "memory" and not install_capture():
+            raise ValueError("readback 'memory' needs Blender's Cycles add-on, which this bpy lacks; use 'file' or 'auto'")
         self._capture = Capture() if readback != "file" and install_capture() else None
         self._capturing = False
         cfg.engine_warnings(self.obs_config, self.device)
@@ -360,6 +363,10 @@ class BlenderRenderer(Renderer):
         self._camera = self._human = self._depth_override = None
         self._views = []
         scene_ids, self._ids = self._ids, []
+        with contextlib.suppress(ReferenceError, AttributeError):
+            # Turning persistent data off frees the render engine Cycles keeps for this scene,
+            # which would otherwise outlive the scene it points to.
+            self._scene.render.use_persistent_data = False
         self._scene = None
         remove_ids(scene_ids)
         self._output.close()
