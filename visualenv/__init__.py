@@ -43,7 +43,7 @@ def make(
         render_mode: ``"rgb_array"`` to make ``env.render()`` return the high-resolution view.
         params: overrides of the spec's ``params``.
         frame_stack, grayscale, resize: image wrappers (see :mod:`visualenv.wrappers`).
-        renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``).
+        renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
     """
     env: gym.Env = VisualEnv(
         load_spec(resolve(target)), render=render, render_mode=render_mode, params=params, renderer_options=renderer_options or None
