@@ -70,15 +70,15 @@ def test_domain_randomization_changes_the_scene_per_episode():
 
 
 def test_play_view_override_changes_preset_and_size_keeping_aspect():
+    from dataclasses import replace
+
     from visualenv.play import with_view
     from visualenv.registration import resolve
 
     loaded = visualenv.load_spec(resolve("Goalie-v0"))
-    view = loaded.spec.render.view.model_copy(update={"resolution": [400, 300]})
-    loaded = with_view(loaded, preset=None, size=None)  # nothing asked: the same spec
-    wide = loaded.spec.model_copy(update={"render": loaded.spec.render.model_copy(update={"view": view})})
-    from dataclasses import replace
-
+    assert with_view(loaded) is loaded  # nothing asked: the same spec
+    render = loaded.spec.render
+    wide = loaded.spec.model_copy(update={"render": render.model_copy(update={"view": render.view.model_copy(update={"resolution": [400, 300]})})})
     changed = with_view(replace(loaded, spec=wide), preset="fast", size=200)
     assert changed.spec.render.view.preset == "fast" and changed.spec.render.view.resolution == [200, 150]
     assert wide.render.view.preset == "quality"  # the original is untouched

@@ -149,7 +149,7 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
     kwargs = _with_threads(kwargs, n, threads)
-    cores = worker_cores(n) if pin and n > 1 else [None] * n
+    cores = worker_cores(n) if pin else [None] * n  # None for a single env: nothing to keep apart
     fns = [partial(_make_monitored, str(target), kwargs, core, seed + i, monitor_dir and os.path.join(monitor_dir, str(i)), monitor_append)
            for i, core in enumerate(cores)]
     if monitor_dir:

@@ -106,22 +106,27 @@ def _srgb_table(size: int = 65536) -> np.ndarray:
 _SRGB = _srgb_table()
 
 
+def _scaled_and_clamped(linear: np.ndarray, top: float) -> np.ndarray:
+    """``linear * top + 0.5`` clamped to [0, top]: ready to truncate to an integer (round half up).
+
+    In place after the first ufunc, and with ufuncs rather than ``np.clip``,
+    which is slow with scalar bounds on numpy 1.x (0.2 ms per 100x100 frame).
+    """
+    scaled = np.multiply(linear, np.float32(top))
+    np.add(scaled, np.float32(0.5), out=scaled)
+    np.maximum(scaled, np.float32(0.0), out=scaled)
+    np.minimum(scaled, np.float32(top), out=scaled)
+    return scaled
+
+
 def to_srgb_bytes(linear: np.ndarray) -> np.ndarray:
     """Linear values to uint8 through the sRGB transfer function, as Blender's 'Standard' view writes them.
 
     Pass whole RGBA rows rather than an RGB slice: contiguous input is twice as fast.
     """
-    index = np.multiply(linear, np.float32(65535.0))  # in place from here on: ufuncs, not np.clip (slow for scalars on numpy 1.x)
-    np.add(index, np.float32(0.5), out=index)
-    np.maximum(index, np.float32(0.0), out=index)
-    np.minimum(index, np.float32(65535.0), out=index)
-    return np.take(_SRGB, index.astype(np.uint16))
+    return np.take(_SRGB, _scaled_and_clamped(linear, 65535.0).astype(np.uint16))
 
 
 def to_raw_bytes(linear: np.ndarray) -> np.ndarray:
     """Linear values to uint8 unchanged (Blender's 'Raw' view: used for depth)."""
-    scaled = np.multiply(linear, np.float32(255.0))
-    np.add(scaled, np.float32(0.5), out=scaled)
-    np.maximum(scaled, np.float32(0.0), out=scaled)
-    np.minimum(scaled, np.float32(255.0), out=scaled)
-    return scaled.astype(np.uint8)
+    return _scaled_and_clamped(linear, 255.0).astype(np.uint8)

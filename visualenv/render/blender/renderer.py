@@ -72,10 +72,11 @@ class BlenderRenderer(Renderer):
         readback = options.get("readback", "auto")
         if readback == "memory" and "cycles" not in (self.obs_config.engine, self.view_config.engine):
             raise ValueError("readback 'memory' needs the Cycles engine; use 'file' or 'auto'")
-        if readback == "memory" and not install_capture():
+        can_capture = readback != "file" and install_capture()
+        if readback == "memory" and not can_capture:
             raise ValueError("readback 'memory' needs Blender's Cycles add-on, which this bpy lacks; use 'file' or 'auto'")
-        self._capture = Capture() if readback != "file" and install_capture() else None
-        self._capturing = False
+        self._capture = Capture() if can_capture else None
+        self._active_capture: Capture | None = None  # the capture armed for the next render (None: read the file)
         cfg.engine_warnings(self.obs_config, self.device)
         self._output = OutputFile()
         tracker = DataTracker()
@@ -300,15 +301,13 @@ class BlenderRenderer(Renderer):
         if depth and self._depth_range != view.depth_range:
             self._set_depth_range(*view.depth_range)
             self._depth_range = view.depth_range
-        self._capturing = self._capture is not None and view.config.engine == "cycles"
-        if self._capture is not None and self._capturing:
-            self._capture.arm(view.width, view.height)
+        capture = self._capture.arm(view.width, view.height) if self._capture is not None and view.config.engine == "cycles" else None
+        self._active_capture = capture
         self.raw_render()
-        return self._read_capture(view) if self._capturing else self._read_file(view)
+        return self._read_capture(view, capture) if capture is not None else self._read_file(view)
 
-    def _read_capture(self, view: _View) -> np.ndarray:
-        assert self._capture is not None
-        pixels = self._capture.pixels
+    def _read_capture(self, view: _View, capture: Capture) -> np.ndarray:
+        pixels = capture.pixels
         if view.color == "depth":
             return to_raw_bytes(pixels[:, :, :1])
         rgba = to_srgb_bytes(pixels)
@@ -323,8 +322,8 @@ class BlenderRenderer(Renderer):
     def raw_render(self) -> None:
         """Blender's render call, with the scene as it is; the pixels wait in the capture buffer or the file."""
         with quiet_stdout():
-            if self._capture is not None and self._capturing:
-                with self._capture:
+            if self._active_capture is not None:
+                with self._active_capture:
                     bpy.ops.render.render(scene=self._scene_name)
             else:
                 bpy.ops.render.render(write_still=True, scene=self._scene_name)
