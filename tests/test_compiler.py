@@ -127,6 +127,13 @@ def test_params_are_expressions_and_can_be_overridden():
         env_from(WALKER, params={"sped": 1})
 
 
+def test_params_can_use_dt_and_max_steps():
+    # a walker that covers `goal` in max_steps steps: speed is derived from the episode length
+    env = env_from(WALKER.replace("{speed: 0.5, goal: 2.0}", "{goal: 2.0, speed: goal / max_steps + 0 * dt}"))
+    env.reset(seed=0)
+    assert env.step(1)[4]["state"]["x"] == pytest.approx(0.2)
+
+
 def test_forward_references_are_explained():
     with pytest.raises(SpecError, match="'goal' is defined later in params"):
         env_from(WALKER.replace("speed: 0.5", "speed: goal / 4"))

@@ -94,6 +94,22 @@ def test_bound_colour_changes_the_rendered_colour(tmp_path):
         e.close()
 
 
+@pytest.mark.parametrize("binding", ["Box: {color: [0.9, 0.9, 0.9, x]}", "Box: {location: [0, 0, 0]}"], ids=["bound", "static"])
+def test_colour_alpha_makes_an_object_see_through(tmp_path, binding):
+    # a white box (alpha x) in front of a red wall: opaque it hides the wall, with alpha 0 the wall shows through
+    objects = OBJECTS.replace("[0.9, 0.9, 0.9]}", "[0.9, 0.9, 0.9, 0.0]}" if "location" in binding else "[0.9, 0.9, 0.9]}")
+    objects += "    Wall: {primitive: cube, size: [6, 0.1, 6], location: [0, 2, 0], material: {color: [0.8, 0.02, 0.02]}}\n"
+    e = make_env(tmp_path, objects=objects, actors=binding)
+    try:
+        centre = observe(e, x=0.0).astype(int)[16, 24]
+        assert centre[0] > centre[1] + 50, f"the red wall should show through: {centre}"
+        if "color" in binding:
+            centre = observe(e, x=1.0).astype(int)[16, 24]
+            assert abs(centre[0] - centre[1]) < 20 and centre[1] > 100, f"an opaque white box: {centre}"
+    finally:
+        e.close()
+
+
 def test_colour_binding_does_not_leak_to_other_objects(tmp_path):
     objects = OBJECTS + "    Other: {primitive: cube, size: 1.0, location: [2, 0, 0], material: {color: [0.9, 0.9, 0.9]}}\n"
     e = make_env(tmp_path, objects=objects, actors="Box: {color: [0.0, 0.0, x]}")
@@ -230,6 +246,11 @@ cam.data.type = "ORTHO"; cam.data.ortho_scale = 6.0
 cam.location = (0, -10, 0); cam.rotation_euler = (1.5707963, 0, 0)
 lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "SUN")); scene.collection.objects.link(lamp)
 scene.camera = cam
+if len(sys.argv) > 2:  # a second scene: the ball again, seen from above
+    top = bpy.data.scenes.new("Top")
+    top.collection.objects.link(ball); top.collection.objects.link(lamp)
+    top_cam = bpy.data.objects.new("TopCam", bpy.data.cameras.new("TopCam")); top.collection.objects.link(top_cam)
+    top_cam.data.type = "ORTHO"; top_cam.data.ortho_scale = 6.0; top_cam.location = (0, 0, 10)
 bpy.ops.wm.save_as_mainfile(filepath=sys.argv[1], copy=True)
 """
 
@@ -241,10 +262,17 @@ def blend_file(tmp_path_factory) -> Path:
     return path
 
 
-def blend_env(blend: Path, actors: str = "Ball: {location: [x, 0, 0]}", camera: str = "Cam") -> VisualEnv:
+@pytest.fixture(scope="module")
+def two_scene_blend(tmp_path_factory) -> Path:
+    path = tmp_path_factory.mktemp("blend") / "two_scenes.blend"
+    subprocess.run([sys.executable, "-c", BLEND_SCRIPT, str(path), "two"], check=True, capture_output=True, timeout=120)
+    return path
+
+
+def blend_env(blend: Path, actors: str = "Ball: {location: [x, 0, 0]}", camera: str = "Cam", file_scene: str = "") -> VisualEnv:
     text = f"""\
 id: BlendTest-v0
-scene: {{file: {blend.name}, world: {{color: [0, 0, 0], strength: 0}}}}
+scene: {{file: {blend.name}, {file_scene}world: {{color: [0, 0, 0], strength: 0}}}}
 state: {{x: {{init: 0.0}}}}
 actions: {{discrete: [{{u: 0}}]}}
 actors:
@@ -280,6 +308,21 @@ def test_wrong_names_list_what_the_scene_has(blend_file):
     assert {d.path for d in info.value.diagnostics} == {"actors.Bal", "actors.Lamp.lens", "observation.camera"}
     with pytest.raises(SpecError, match="'Lamp' is a light, not a camera"):
         blend_env(blend_file, camera="Lamp").renderer
+
+
+def test_file_scene_picks_a_scene_of_the_blend(two_scene_blend):
+    with pytest.raises(SpecError, match=r"blend\.yaml:2:.*scene\.file: .*has 2 scenes \((Scene, Top|Top, Scene)\): choose one with scene\.file_scene"):
+        blend_env(two_scene_blend).renderer
+    top = blend_env(two_scene_blend, camera="TopCam", file_scene="file_scene: Top, ")
+    try:
+        left, right = observe(top, x=-1.5), observe(top, x=1.5)
+        assert centroid_x(right) - centroid_x(left) > 10  # the ball, seen from above, moves along x
+    finally:
+        top.close()
+    with pytest.raises(SpecError, match="no camera 'TopCam'"):
+        blend_env(two_scene_blend, camera="TopCam", file_scene="file_scene: Scene, ").renderer
+    with pytest.raises(SpecError, match=r"blend\.yaml:2:.*scene\.file_scene: .*has no scene 'Tpo' \(did you mean 'Top'\? scenes: "):
+        blend_env(two_scene_blend, camera="TopCam", file_scene="file_scene: Tpo, ").renderer
 
 
 def test_missing_or_bad_blend_file(tmp_path):
@@ -362,3 +405,24 @@ def test_renderers_in_one_process_do_not_interfere(tmp_path):
     finally:
         a.close()
         b.close()
+
+
+@pytest.mark.parametrize("actors", [
+    "Box: {location: [x, 0, 0]}\nRig: {location: [x, 0, 0]}\nCam: {look_at: [x, 0, 0]}",  # the target follows the rig
+    "Rig: {location: [x, 0, 0]}",  # only the rig moves: the camera turns to keep its fixed target
+], ids=["bound-target", "moving-parent"])
+def test_look_at_aims_a_parented_camera_at_a_world_point(tmp_path, actors):
+    # the camera rides on a rig and must keep the box (at its look_at point, in the world) in the middle of the frame
+    objects = """\
+    Box:  {primitive: cube, size: 1.0, material: {color: [0.9, 0.9, 0.9]}}
+    Sun:  {light: sun, strength: 4.0, rotation: [0.8, 0.0, 0.0]}
+    Rig:  {empty: true, location: [0, 0, 0]}
+    Cam:  {camera: perspective, parent: Rig, location: [3, -10, 2], look_at: [0, 0, 0], lens: 50}
+"""
+    e = make_env(tmp_path, objects=objects, actors=actors)
+    try:
+        for x in (0.0, 4.0, -3.0):
+            img = observe(e, x=x)
+            assert abs(centroid_x(img) - 24) < 2, f"box off-centre with the rig at x={x}"
+    finally:
+        e.close()

@@ -194,3 +194,37 @@ def test_fault_in_an_actor_binding_is_a_step_error_naming_the_binding():
         env.binding_values()
     env.step(0)
     assert env.binding_values() == (1.0, 0.0, 0.0, True)
+
+
+SEEN = """\
+id: Seen-v0
+scene:
+  objects:
+    Box: {primitive: cube}
+    Cam: {camera: perspective, location: [0, -8, 0], look_at: [0, 0, 0]}
+state:
+  x: {init: 0}
+actions: {discrete: [{u: 1}]}
+dynamics: {update: {x: x + u}}
+actors:
+  Box: {location: ["1 / (x - 1)", 0, 0]}
+observation: {camera: Cam, resolution: [16, 16], color: grayscale}
+render: {engine: cycles, preset: fast}
+on_fault: ON_FAULT
+"""
+
+
+def test_a_binding_fault_while_rendering_obeys_on_fault():
+    # x becomes 1 at the first step, so the Box's location divides by zero before the observation is rendered
+    env = VisualEnv(load_spec_text(SEEN.replace("ON_FAULT", "terminate"), "seen.yaml"))
+    first, _ = env.reset(seed=0)
+    obs, reward, terminated, truncated, info = env.step(0)
+    assert terminated and not truncated and reward == 0.0
+    assert "seen.yaml:11: actors.Box.location" in info["error"] and "division by zero" in info["error"]
+    assert obs.shape == first.shape and np.array_equal(obs, first), "the last frame that could be rendered"
+    env.close()
+    env = VisualEnv(load_spec_text(SEEN.replace("ON_FAULT", "raise"), "seen.yaml"))
+    env.reset(seed=0)
+    with pytest.raises(StepError, match=r"seen\.yaml:11: actors\.Box\.location = .*division by zero"):
+        env.step(0)
+    env.close()

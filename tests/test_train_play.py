@@ -41,8 +41,16 @@ def test_train_writes_a_complete_run_folder(run_dir):
 def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir):
     before = np.load(run_dir / "evaluations.npz")["timesteps"].tolist()
     rows_before = len((run_dir / "logs" / "progress.csv").read_text().splitlines())
-    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(run_dir), "--steps", "384", "--no-progress"])
+    refused = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(run_dir), "--envs", "3"])
+    assert refused.exit_code == 2 and "--envs: a resumed run keeps its settings" in refused.output
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(run_dir), "--steps", "384", "--no-progress", "--set", "ent_coef=0.02"])
     assert result.exit_code == 0, result.output
+    config = json.loads((run_dir / "config.json").read_text())
+    assert config["config"]["hyperparams"] == {"n_steps": 64, "batch_size": 64, "ent_coef": 0.02}
+    assert config["resumes"][-1]["hyperparams"] == {"ent_coef": 0.02} and config["resumes"][-1]["command"]
+    from stable_baselines3 import PPO
+
+    assert PPO.load(run_dir / "final_model.zip").ent_coef == 0.02  # the change reached the model
     results = json.loads((run_dir / "results.json").read_text())
     assert results["steps"] >= 384 and results["stopped_early"] is False
     after = np.load(run_dir / "evaluations.npz")["timesteps"].tolist()

@@ -13,6 +13,7 @@ from pathlib import Path
 from typing import Any, Callable
 
 import click
+from click.core import ParameterSource
 import numpy as np
 
 from visualenv.errors import SpecError, VisualEnvError
@@ -136,7 +137,7 @@ def _parse_value(text: str) -> Any:
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4")
 @click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
 @click.option("--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
-@click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint")
+@click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)")
 @click.option("--no-progress", is_flag=True)
 @_friendly
 def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
@@ -161,8 +162,16 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
             raise click.BadParameter(f"expected KEY=VALUE, got {item!r}", param_hint="--set")
         hyper[key] = _parse_value(value)
     if resume_dir:
+        ctx = click.get_current_context()
+        fixed = [f"--{name.replace('_', '-')}" for name in ("algo", "envs", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root")
+                 if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
+        if fixed:
+            raise click.UsageError(f"{', '.join(fixed).replace('--out-root', '--out')}: a resumed run keeps its settings; "
+                                   "only --steps, --set and --config change on --resume")
         record = json.loads((Path(resume_dir) / "config.json").read_text())
-        config = TrainConfig(**{**record["config"], "steps": steps or record["config"]["steps"]})
+        saved = record["config"]
+        config = TrainConfig(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyper},
+                                "progress": not no_progress})
         run_dir = Path(resume_dir)
     else:
         env_id = load_spec(resolve(spec)).spec.id
@@ -171,7 +180,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
                              render=not state_only, hyperparams=hyper, progress=not no_progress)
         run_dir = new_run_dir(out_root, env_id)
     click.echo(f"run folder: {run_dir}")
-    results = run_training(config, run_dir, resume=bool(resume_dir))
+    results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
     click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
                f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %")
     click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {run_dir / 'plots'}")

@@ -12,8 +12,8 @@ from visualenv.errors import Diagnostic, SpecError, did_you_mean
 
 NAMESPACE = "visualenv"
 SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
-#: where the bundled specs live (the repository's specs/ folder)
-BUNDLED_DIR = Path(__file__).resolve().parent.parent / "specs"
+#: where the bundled specs live: package data in a wheel; in a checkout, a link to the repository's specs/ folder
+BUNDLED_DIR = (Path(__file__).parent / "specs").resolve()
 
 
 def spec_dirs() -> list[Path]:

@@ -18,6 +18,7 @@ step and still saves, evaluates and plots what was learnt so far.
 from __future__ import annotations
 
 import json
+import os
 import shlex
 import signal
 import sys
@@ -76,8 +77,12 @@ def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
     return {} if config.render else {"render": False}
 
 
-def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[str, Any]:
-    """Train, evaluate the best model, draw the plots; returns the final results."""
+def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None) -> dict[str, Any]:
+    """Train, evaluate the best model, draw the plots; returns the final results.
+
+    A resumed run continues from ``checkpoints/latest.zip``; `changes` are hyperparameters
+    that differ from the saved model's from now on (recorded in config.json under ``resumes``).
+    """
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.preprocessing import is_image_space
@@ -89,9 +94,14 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
 
     spec_path = str(resolve(config.spec))
     run_dir.mkdir(parents=True, exist_ok=True)
+    changes = dict(changes or {})
     if not resume:
         record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path}
-        (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    else:
+        record = json.loads((run_dir / "config.json").read_text())
+        record["config"] = asdict(config)
+        record.setdefault("resumes", []).append({"command": shlex.join(sys.argv), "hyperparams": changes})
+    (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
     frame_stack = config.frame_stack if config.render else 0
     if resume:
         _keep_earlier_logs(run_dir / "logs")
@@ -107,7 +117,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
     stopper = _StopOnSignal()
     try:
         if resume and latest.exists():
-            model = algo.load(latest, env=train_env)
+            model = algo.load(latest, env=train_env, **changes)  # SB3 sets these on the model before building it
             done = model.num_timesteps
         else:
             model = algo(config.policy, train_env, seed=config.seed, verbose=0, **config.hyperparams)
@@ -118,6 +128,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False) -> dict[s
             _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
                            best_model_save_path=str(run_dir), deterministic=True, verbose=0),
             _LatestCheckpoint(latest, every=per_env),
+            _PhaseThreads(),
             stopper,
         ]
         if config.progress:
@@ -212,6 +223,41 @@ class _LatestCheckpoint(BaseCallback):
         if self.n_calls % self.every == 0:
             self.path.parent.mkdir(parents=True, exist_ok=True)
             self.model.save(self.path)
+        return True
+
+
+class _PhaseThreads(BaseCallback):
+    """Torch on one thread while the env workers render, on every core while the policy learns.
+
+    During roll-outs the Blender workers need the cores and the policy only runs
+    small batches; during the update the workers wait. Logs each phase's time
+    (``time/rollout_s``, ``time/update_s``) so the split can be seen.
+    """
+
+    def __init__(self) -> None:
+        super().__init__()
+        self.cores = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+        self.mark: float | None = None
+
+    def _on_rollout_start(self) -> None:
+        import torch
+
+        now = time.perf_counter()
+        if self.mark is not None:
+            self.logger.record("time/update_s", round(now - self.mark, 2))
+        self.mark = now
+        torch.set_num_threads(1)
+
+    def _on_rollout_end(self) -> None:
+        import torch
+
+        now = time.perf_counter()
+        if self.mark is not None:
+            self.logger.record("time/rollout_s", round(now - self.mark, 2))
+        self.mark = now
+        torch.set_num_threads(self.cores)
+
+    def _on_step(self) -> bool:
         return True
 
 

@@ -80,6 +80,7 @@ class VisualEnv(gym.Env):
         self._renderer_options = dict(renderer_options or {})
         check_renderer_options(self._renderer_options)
         self._renderer: Renderer | None = None
+        self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
         self._fns = program.functions(self._random)
         self._state: tuple[float, ...] = tuple(0.0 for _ in program.state_names)
@@ -157,9 +158,7 @@ class VisualEnv(gym.Env):
             if program.spec.on_fault == "raise":
                 raise err from None
             self._steps += 1
-            info = self._info("error")
-            info["error"] = str(err)
-            return self._observe(), 0.0, True, False, info
+            return self._end_on_fault(err, self._last_obs if self.uses_camera else self._observe())
         self._state = state
         self._steps += 1
         newly = fired & ~self._fired
@@ -179,7 +178,13 @@ class VisualEnv(gym.Env):
         elif self._steps >= program.spec.max_steps:
             truncated = True
             name = "max_steps"
-        return self._observe(), float(reward), terminated, truncated, self._info(name)
+        try:
+            obs = self._observe()
+        except StepError as err:  # an actor binding of the new state faulted: nothing to render
+            if program.spec.on_fault == "raise":
+                raise
+            return self._end_on_fault(err, self._last_obs)
+        return obs, float(reward), terminated, truncated, self._info(name)
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode."""
@@ -221,7 +226,8 @@ class VisualEnv(gym.Env):
 
     def _observe(self) -> Any:
         if self.uses_camera:
-            return self.renderer.render_observation(self._bind())
+            self._last_obs = self.renderer.render_observation(self._bind())
+            return self._last_obs
         state = self._state
         return np.array([state[i] for i in self._observed], dtype=np.float32)
 
@@ -239,6 +245,12 @@ class VisualEnv(gym.Env):
                     site = sites[i] if i < len(sites) else None
                     raise self._describe(site, f"a binding became {value}", self.state)
         return values
+
+    def _end_on_fault(self, err: StepError, obs: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """``on_fault: terminate``: the episode ends with no reward; ``obs`` is the last one that could be made."""
+        info = self._info("error")
+        info["error"] = str(err)
+        return obs, 0.0, True, False, info
 
     def _info(self, outcome: str | None) -> dict[str, Any]:
         fired = [m for i, m in enumerate(self._milestones) if self._fired & (1 << i)]

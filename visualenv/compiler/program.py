@@ -193,13 +193,14 @@ class _Compiler:
             if key not in self.spec.params:
                 raise SpecError([Diagnostic(self.smap.file, None, None, f"params.{key}", f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))])
         raw = {**self.spec.params, **self.overrides}
+        builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.spec.dt)}
         self.params = {}
         for key, value in raw.items():
             if isinstance(value, bool):
                 params[key] = value
             else:
                 try:
-                    checked = check(value, {}, constants=params, allow_random=False)
+                    checked = check(value, {}, constants={**builtins, **params}, allow_random=False)
                 except ExpressionError as exc:
                     self.error(("params", key), self.explain_order(("params", key), exc.message), column=exc.offset)
                     continue
@@ -207,7 +208,6 @@ class _Compiler:
                     self.error(("params", key), "a parameter must be a number or a condition")
                     continue
                 params[key] = checked.constant
-        builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.spec.dt)}
         return {**builtins, **params}
 
     def resolve_actions(self) -> tuple[list[str], int | None, list[tuple[float, float]]]:

@@ -18,7 +18,7 @@ Expr = Annotated[Union[bool, int, float, str], Field(description="a number or an
 #: A 3-vector: a list of three expressions, or one expression text such as ``"[x, 0, 0]"``.
 Vec3Expr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length=3)], str], Field(description="three expressions, or one vector expression")]
 #: A colour: three (RGB) or four (RGBA) expressions in 0..1, or one vector expression.
-ColorExpr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length=4)], str], Field(description="RGB or RGBA in 0..1")]
+ColorExpr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length=4)], str], Field(description="RGB or RGBA in 0..1 (on a material, alpha below 1 is see-through)")]
 
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Color = Annotated[list[Annotated[float, Field(ge=0.0)]], Field(min_length=3, max_length=4, description="RGB or RGBA, linear, 0..1")]
@@ -54,7 +54,7 @@ class Texture(StrictModel):
 class Material(StrictModel):
     """A Principled BSDF material."""
 
-    color: Color = Field([0.8, 0.8, 0.8], description="base colour")
+    color: Color = Field([0.8, 0.8, 0.8], description="base colour; an alpha below 1 makes the surface see-through")
     roughness: float = Field(0.5, ge=0, le=1)
     metallic: float = Field(0.0, ge=0, le=1)
     emission: Color | None = Field(None, description="emission colour")
@@ -156,8 +156,15 @@ class Scene(StrictModel):
     """The Blender scene: a .blend file, declared objects, or both."""
 
     file: str | None = Field(None, description="a .blend file made in Blender, relative to the spec; its objects are bound by name")
+    file_scene: str | None = Field(None, description="which scene of the .blend to use; needed when the file has more than one")
     objects: dict[Name, SceneObject] = Field(default_factory=dict, description="objects to build (added to the file's scene, if any)")
     world: World | None = Field(None, description="background; default: the file's world, or dark grey")
+
+    @model_validator(mode="after")
+    def _file_scene_needs_a_file(self) -> "Scene":
+        if self.file_scene is not None and self.file is None:
+            raise ValueError("file_scene names a scene of the .blend in 'file', and there is no file")
+        return self
 
 
 # -- state, actions, dynamics -------------------------------------------------------------------

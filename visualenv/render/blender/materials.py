@@ -56,6 +56,7 @@ def make_material(
         links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
     color = rgba(spec.color)
     bsdf.inputs["Base Color"].default_value = color
+    bsdf.inputs["Alpha"].default_value = color[3]  # below 1: see-through (EEVEE dithers, Cycles passes rays on)
     bsdf.inputs["Roughness"].default_value = spec.roughness
     bsdf.inputs["Metallic"].default_value = spec.metallic
     if spec.emission is not None:
@@ -122,11 +123,13 @@ def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
 
 
 def set_base_color(mat: Any, color: Sequence[float]) -> None:
-    """Bound colour: the Principled base colour (when not driven by a texture) and the viewport colour."""
+    """Bound colour: the Principled base colour (when not driven by a texture) and alpha, and the viewport colour."""
     value = rgba(color)
     bsdf = _principled(mat)
-    if bsdf is not None and not bsdf.inputs["Base Color"].is_linked:
-        bsdf.inputs["Base Color"].default_value = value
+    if bsdf is not None:
+        if not bsdf.inputs["Base Color"].is_linked:
+            bsdf.inputs["Base Color"].default_value = value
+        bsdf.inputs["Alpha"].default_value = value[3]
     mat.diffuse_color = value
 
 

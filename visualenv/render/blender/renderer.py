@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Iterator, Sequence
 
 import bpy
 import numpy as np
@@ -177,14 +177,17 @@ class BlenderRenderer(Renderer):
             setters.append((start, start + target.size, self._setter(target.object, obj, target.property, targets)))
             start += target.size
         self._size = start
+        # aimed objects to re-aim after the setters ran: those that move, or whose parents move, or whose target does
+        aimed = set(targets) | {t.object for t in plan.bindings if t.property == "look_at"}
+        moved = {objects[t.object].as_pointer() for t in plan.bindings if t.property in ("location", "rotation", "scale", "look_at")}
+        self._aimed = [(objects[name], name) for name in sorted(aimed) if any(o.as_pointer() in moved for o in _with_ancestors(objects[name]))]
+        self._targets = targets
         return setters
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Callable[[tuple], None]:
         if prop == "location":
             def set_location(v: tuple) -> None:
                 obj.location = v
-                if name in targets:
-                    aim(obj, targets[name])
             return set_location
         if prop == "rotation":
             def set_rotation(v: tuple) -> None:
@@ -205,8 +208,7 @@ class BlenderRenderer(Renderer):
             return set_visible
         if prop == "look_at":
             def set_look_at(v: tuple) -> None:
-                targets[name] = v
-                aim(obj, v)
+                targets[name] = v  # aimed in apply(), once every location is set
             return set_look_at
         if prop == "strength":
             data = obj.data
@@ -261,6 +263,8 @@ class BlenderRenderer(Renderer):
             part = values[start:end]
             if last is None or part != last[start:end]:
                 setter(part)
+        for obj, name in self._aimed:
+            aim(obj, self._targets[name])
         self._last = values
 
     def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
@@ -369,3 +373,9 @@ class BlenderRenderer(Renderer):
         self._scene = None
         remove_ids(scene_ids)
         self._output.close()
+
+
+def _with_ancestors(obj: Any) -> Iterator[Any]:
+    while obj is not None:
+        yield obj
+        obj = obj.parent

@@ -21,7 +21,7 @@ from typing import Any, Callable
 
 import bmesh
 import bpy
-from mathutils import Vector
+from mathutils import Matrix, Vector
 
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
@@ -87,9 +87,9 @@ class BuiltScene:
 
 
 def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
-    """The scene: the .blend's first scene (appended) or a new one, plus every declared object."""
+    """The scene: a scene of the .blend (appended) or a new one, plus every declared object."""
     if spec.file:
-        scene, objects = load_blend(spec.file, base_dir=base_dir, source=source)
+        scene, objects = load_blend(spec.file, base_dir=base_dir, source=source, scene_name=spec.file_scene)
     else:
         scene, objects = bpy.data.scenes.new(f"{prefix}-{next(_scene_counter)}"), {}
     collection = bpy.data.collections.new(f"{prefix}-objects")
@@ -111,6 +111,9 @@ def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) 
         built.objects[name].parent = parent
     if problems:
         raise SpecError(problems)
+    for name, obj_spec in spec.objects.items():
+        if isinstance(obj_spec, CameraObject) and obj_spec.look_at is not None:
+            aim(built.objects[name], obj_spec.look_at)  # after parenting: the target is a world point
     if spec.world is not None or scene.world is None:
         scene.world = make_world(f"{prefix}-world", spec.world or DEFAULT_WORLD, _keep)
     return built
@@ -123,8 +126,8 @@ def _keep(datablock: Any) -> Any:
 # -- .blend files ------------------------------------------------------------------------------------
 
 
-def load_blend(file: str, *, base_dir: Path, source: SourceMap) -> tuple[Any, dict[str, Any]]:
-    """Append the first scene of a .blend (the current file stays as it is); name -> object by the file's names."""
+def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str | None = None) -> tuple[Any, dict[str, Any]]:
+    """Append one scene of a .blend, `scene_name` or its only one (the current file stays as it is); name -> object by the file's names."""
     path = (base_dir / file).resolve()
     where = ("scene", "file")
     if not path.is_file():
@@ -137,10 +140,18 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap) -> tuple[Any, di
         with bpy.data.libraries.load(str(path), link=False) as (data_from, data_to):
             scene_names = list(data_from.scenes)
             object_names = list(data_from.objects)
-            data_to.scenes = scene_names[:1]
-            data_to.objects = list(object_names)  # Blender swaps the names for the objects in place
+            wanted = scene_name if scene_name is not None else (scene_names[0] if len(scene_names) == 1 else None)
+            if wanted in scene_names:
+                data_to.scenes = [wanted]
+                data_to.objects = list(object_names)  # Blender swaps the names for the objects in place
     except (OSError, RuntimeError, ValueError) as exc:
         raise SpecError([source.diagnostic(where, f"cannot read {path} as a .blend file: {exc}")]) from None
+    if scene_name is not None and scene_name not in scene_names:
+        raise SpecError([source.diagnostic(("scene", "file_scene"), f"{path} has no scene '{scene_name}'"
+                                           + did_you_mean(scene_name, scene_names).replace("names:", "scenes:"))])
+    if scene_name is None and len(scene_names) > 1:  # the file's order says nothing about which one was meant
+        raise SpecError([source.diagnostic(where, f"{path} has {len(scene_names)} scenes ({', '.join(scene_names)}): "
+                                           "choose one with scene.file_scene")])
     if not scene_names or not data_to.scenes or data_to.scenes[0] is None:
         raise SpecError([source.diagnostic(where, f"{path} has no scene")])
     scene = data_to.scenes[0]
@@ -195,18 +206,30 @@ def _build_object(name: str, spec: Any, built: BuiltScene, *, base_dir: Path, so
     obj.rotation_euler = spec.rotation
     obj.scale = (spec.scale,) * 3 if isinstance(spec.scale, (int, float)) else spec.scale
     obj.hide_render = not spec.visible
-    if isinstance(spec, CameraObject) and spec.look_at is not None:
-        aim(obj, spec.look_at)
     return obj
 
 
-def aim(obj: Any, target: Any, location: Any = None) -> None:
-    """Point the object's -Z axis at `target` (Y up), as Blender's Track To constraint does."""
-    loc = Vector(location if location is not None else obj.location)
-    direction = Vector(target) - loc
+def aim(obj: Any, target: Any) -> None:
+    """Point the object's -Z axis at the world point `target` (Y up), as Blender's Track To constraint does."""
+    parent = _parent_frame(obj)
+    direction = Vector(target) - parent @ obj.location
     if direction.length_squared < 1e-18:
         return
-    obj.rotation_euler = direction.to_track_quat("-Z", "Y").to_euler("XYZ")
+    world = direction.to_track_quat("-Z", "Y")
+    obj.rotation_euler = (parent.to_quaternion().inverted() @ world).to_euler("XYZ")
+
+
+def _parent_frame(obj: Any) -> Matrix:
+    """The matrix that takes `obj`'s own location and rotation to world space.
+
+    Built from the parents' current location, rotation and scale rather than from
+    their matrix_world, which is stale until Blender next evaluates the scene (a
+    parent moved by a binding in this same render).
+    """
+    if obj.parent is None:
+        return Matrix.Identity(4)
+    parent = obj.parent
+    return _parent_frame(parent) @ parent.matrix_basis @ obj.matrix_parent_inverse
 
 
 def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:

@@ -34,7 +34,10 @@ log = logging.getLogger("visualenv.render")
 
 ENGINE_IDS = {"cycles": "CYCLES", "workbench": "BLENDER_WORKBENCH", "eevee": "BLENDER_EEVEE"}
 GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "METAL", "ONEAPI")
-_BOUNCES = ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces", "transparent_max_bounces")
+_BOUNCES = ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces")
+#: passes through (partly) transparent surfaces, e.g. a colour with alpha < 1. Not light bounces, so not
+#: limited by `bounces`; they cost nothing where every surface is opaque (Blender's default)
+TRANSPARENT_BOUNCES = 8
 _WORKBENCH_AA = ((1, "OFF"), (4, "FXAA"), (5, "5"), (8, "8"), (11, "11"), (16, "16"))
 
 
@@ -223,6 +226,7 @@ def apply_config(scene: Any, config: RenderConfig, previous: RenderConfig | None
     if changed("bounces"):
         for name in _BOUNCES:
             setattr(c, name, config.bounces)
+        c.transparent_max_bounces = TRANSPARENT_BOUNCES
     if changed("denoise"):
         c.use_denoising = config.denoise and _oidn_available()
     if changed("filter"):

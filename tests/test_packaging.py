@@ -1,0 +1,24 @@
+"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id."""
+
+import subprocess
+import sys
+import zipfile
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+
+
+def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
+    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(tmp_path / "dist"), str(ROOT)],
+                   check=True, capture_output=True)
+    wheel = next((tmp_path / "dist").glob("visualenv-*.whl"))
+    bundled = sorted(p.name for p in (ROOT / "specs").iterdir() if p.suffix in (".yaml", ".toml"))
+    with zipfile.ZipFile(wheel) as archive:
+        shipped = sorted(Path(n).name for n in archive.namelist() if n.startswith("visualenv/specs/"))
+        archive.extractall(tmp_path / "site")
+    assert shipped == bundled
+    # import the unpacked wheel, not the checkout, and look a spec up by id
+    probe = "from visualenv.registration import resolve; print(resolve('Goalie-v0'))"
+    out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env={"PYTHONPATH": str(tmp_path / "site")},
+                         check=True, capture_output=True, text=True).stdout.strip()
+    assert out == str((tmp_path / "site" / "visualenv" / "specs" / "goalie.yaml").resolve())
