@@ -75,6 +75,21 @@ def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
 
 
+def test_state_only_training_runs_without_warnings(tmp_path):
+    import warnings
+
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = CliRunner().invoke(main, ["train", "Goalie-v0", "--state-only", "--steps", "256", "--envs", "2", "--eval-every", "128",
+                                           "--eval-episodes", "2", "--final-episodes", "2", "--set", "n_steps=64", "--set", "batch_size=64",
+                                           "--out", str(tmp_path), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    assert "success" in result.output
+    assert not [w for w in caught if "not of the same type" in str(w.message)]
+    run = next((tmp_path / "Goalie-v0").iterdir())
+    assert json.loads((run / "config.json").read_text())["config"]["render"] is False
+
+
 def test_play_random_policy():
     result = CliRunner().invoke(main, ["play", "Goalie-v0", "--episodes", "2"])
     assert result.exit_code == 0, result.output

@@ -24,6 +24,7 @@ import signal
 import sys
 import threading
 import time
+import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass, field
@@ -134,7 +135,9 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
         if config.progress:
             callbacks.append(_ProgressBar(config.steps, done))
         remaining = max(0, config.steps - done)
-        with stopper.listening():
+        with stopper.listening(), warnings.catch_warnings():
+            # one eval env runs in-process (DummyVecEnv), the training envs in subprocesses: same env, different wrapper
+            warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
             model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume)
         model.save(latest)
         model.save(run_dir / "final_model.zip")
