@@ -103,11 +103,18 @@ def test_colour_alpha_makes_an_object_see_through(tmp_path, binding):
     try:
         centre = observe(e, x=0.0).astype(int)[16, 24]
         assert centre[0] > centre[1] + 50, f"the red wall should show through: {centre}"
+        assert e.renderer._scene.cycles.transparent_max_bounces > 0
         if "color" in binding:
             centre = observe(e, x=1.0).astype(int)[16, 24]
             assert abs(centre[0] - centre[1]) < 20 and centre[1] > 100, f"an opaque white box: {centre}"
     finally:
         e.close()
+
+
+def test_opaque_scenes_skip_transparent_passes(env):
+    # with any see-through pass allowed, Cycles traces shadows through every surface: +0.25 ms per CartPole render
+    observe(env, x=0.0)
+    assert env.renderer._scene.cycles.transparent_max_bounces == 0
 
 
 def test_colour_binding_does_not_leak_to_other_objects(tmp_path):

@@ -133,6 +133,16 @@ def set_base_color(mat: Any, color: Sequence[float]) -> None:
     mat.diffuse_color = value
 
 
+def see_through(scene: Any) -> bool:
+    """Whether any material in `scene` has a Principled alpha below 1."""
+    for obj in scene.objects:
+        for slot in obj.material_slots:
+            bsdf = _principled(slot.material) if slot.material is not None else None
+            if bsdf is not None and (bsdf.inputs["Alpha"].is_linked or bsdf.inputs["Alpha"].default_value < 1.0):
+                return True
+    return False
+
+
 def make_world(name: str, spec: World, track: Callable[[Any], Any]) -> Any:
     """A world with a uniform background (the Background node and the Workbench colour)."""
     world = track(bpy.data.worlds.new(name))

@@ -13,7 +13,7 @@ import numpy as np
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
-from visualenv.render.blender.materials import depth_material, depth_world, make_material, set_base_color
+from visualenv.render.blender.materials import depth_material, depth_world, make_material, see_through, set_base_color
 from visualenv.render.blender.capture import Capture, install as install_capture, to_raw_bytes, to_srgb_bytes
 from visualenv.render.blender.readback import OutputFile, first_channel, quiet_stdout, read_bmp, to_grayscale
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
@@ -134,6 +134,7 @@ class BlenderRenderer(Renderer):
         self._layer = scene.view_layers[0]
         cfg.configure_scene(scene, device=self.device, threads=threads)
         cfg.quiet_emission(scene)
+        self._see_through = see_through(scene) or any(t.property == "color" and t.size == 4 for t in plan.bindings)
         r = scene.render
         r.image_settings.file_format = "BMP"
         r.image_settings.color_mode = "RGB"
@@ -293,7 +294,7 @@ class BlenderRenderer(Renderer):
             scene.render.resolution_y = view.height
             self._resolution = (view.width, view.height)
         if self._config != view.config:
-            cfg.apply_config(scene, view.config, self._config)
+            cfg.apply_config(scene, view.config, self._config, see_through=self._see_through)
             # Cycles' persistent data remembers a little of other sample counts: the first
             # observation after a view render would differ from the same one before it. So
             # only observation renders keep the session; any other config renders afresh.
