@@ -43,7 +43,9 @@ def training_plots(run_dir: str | Path) -> list[Path]:
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+    from matplotlib.ticker import EngFormatter
 
+    steps_axis = EngFormatter(sep="")  # 200k, 1M: full step counts run into each other past 100,000
     run = Path(run_dir)
     out = run / "plots"
     out.mkdir(exist_ok=True)
@@ -68,6 +70,7 @@ def training_plots(run_dir: str | Path) -> list[Path]:
         axes[1].set(title=f"{label}, evaluation", xlabel="steps", ylabel=label)
         for ax in axes:
             ax.grid(alpha=0.3)
+            ax.xaxis.set_major_formatter(steps_axis)
         fig.tight_layout()
         path = out / f"{name}.png"
         fig.savefig(path, dpi=100)
@@ -80,6 +83,7 @@ def training_plots(run_dir: str | Path) -> list[Path]:
         ax.plot(steps[logged], fps[logged])
     ax.set(title="samples per second", xlabel="steps", ylabel="samples / s")
     ax.grid(alpha=0.3)
+    ax.xaxis.set_major_formatter(steps_axis)
     fig.tight_layout()
     path = out / "fps.png"
     fig.savefig(path, dpi=100)
