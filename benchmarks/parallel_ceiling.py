@@ -18,8 +18,6 @@ import subprocess
 import sys
 import time
 
-import numpy as np
-
 CASES = ("single", "single:1", "single:1:pin", "vec", "vec:pin")
 
 
@@ -32,21 +30,13 @@ def run_single(spec: str, steps: int, threads: int | None, pin: bool) -> tuple[f
     if pin:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import visualenv
+    from visualenv.bench import random_actions, run_env
 
     env = visualenv.make(spec, **({"threads": threads} if threads else {}))
-    rng = np.random.default_rng(0)
-    env.reset(seed=0)
-    env.action_space.seed(0)
-
-    def run(n: int) -> None:
-        for _ in range(n):
-            _, _, terminated, truncated, _ = env.step(env.action_space.sample())
-            if terminated or truncated:
-                env.reset(seed=int(rng.integers(1 << 30)))
-
-    run(50)  # warm-up
+    actions = random_actions(env, 50 + steps, seed=0)
+    run_env(env, actions[:50], seed=0)  # warm-up
     cpu, started = _cpu_seconds(), time.perf_counter()
-    run(steps)
+    run_env(env, actions[50:], seed=1)
     seconds = time.perf_counter() - started
     env.close()
     return steps / seconds, (_cpu_seconds() - cpu) / seconds

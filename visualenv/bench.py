@@ -81,7 +81,7 @@ def _timed(fn: Callable[[], Any], times: list[float]) -> Callable[[], Any]:
     return wrapper
 
 
-def _random_actions(env: Any, n: int, seed: int) -> list[Any]:
+def random_actions(env: Any, n: int, seed: int) -> list[Any]:
     env.action_space.seed(seed)
     return [env.action_space.sample() for _ in range(n)]
 
@@ -117,7 +117,7 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     env = visualenv.make(spec, **options)
     base = env.unwrapped
     figures = Figures(spec=str(spec), steps=steps)
-    actions = _random_actions(env, warmup + steps, seed)
+    actions = random_actions(env, warmup + steps, seed)
     run_env(env, actions[:warmup], seed)
     renderer = base.renderer
     render_times: list[float] = []

@@ -17,6 +17,7 @@ from click.core import ParameterSource
 import numpy as np
 
 from visualenv.errors import SpecError, VisualEnvError
+from visualenv.render.base import READBACKS
 
 EXIT_INVALID = 2
 
@@ -217,7 +218,7 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--steps", default=500, show_default=True, help="measured env steps (after a warm-up)")
 @click.option("--workers", default=2, show_default=True, help="parallel envs for the parallel figure (0: skip)")
 @click.option("--threads", type=int, default=None, help="render threads of the single env (default: all cores)")
-@click.option("--readback", type=click.Choice(["auto", "memory", "file"]), default="auto", show_default=True,
+@click.option("--readback", type=click.Choice(READBACKS), default="auto", show_default=True,
               help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
 @click.option("--soak", "soak_steps", type=int, default=0, help="also run this many steps and report memory growth (e.g. 50000)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")

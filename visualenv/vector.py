@@ -10,9 +10,10 @@ without oversubscribing them.
 ``pin=True`` pins worker i to core i (round robin over the cores this process
 may use). A Blender render keeps more threads busy than its render threads
 (scene evaluation, the render session, idle-spinning pools), and pinning keeps
-one worker's spinning off another's core. On the 2-core development VM it was
-a small, noisy gain (two CartPole workers: 413-591 steps/s pinned, 346-505
-not), and it would crowd two jobs onto the same cores, so it is off by default.
+one worker's spinning off another's core. On the 2-core development VM the
+pinned and unpinned figures overlap from run to run (two CartPole workers:
+428-591 steps/s pinned, 346-549 not; ``benchmarks/parallel_ceiling.py``), and
+pinning would crowd two jobs onto the same cores, so it is off by default.
 """
 
 from __future__ import annotations
