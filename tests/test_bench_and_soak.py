@@ -13,11 +13,11 @@ def test_bench_prints_every_figure(tmp_path):
     out = tmp_path / "bench.json"
     result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "2", "--soak", "50", "--json", str(out)])
     assert result.exit_code == 0, result.output
-    for label in ["env steps/s", "render call (median/p99)", "raw render floor", "naive PNG round trip", "framework overhead",
+    for label in ["env steps/s", "render call (median/p99)", "raw render floor", "with objects moved", "naive PNG round trip", "framework overhead",
                   "speed vs floor / naive", "resident memory", "2 parallel envs", "soak: 50 steps"]:
         assert label in result.output, label
     figures = json.loads(out.read_text())[0]
-    assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["parallel"]["workers"] == 2
+    assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["moved_floor_ms_median"] > 0 and figures["parallel"]["workers"] == 2
 
 
 def test_short_soak_keeps_blender_data_blocks_and_memory_flat():

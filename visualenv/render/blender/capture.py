@@ -11,8 +11,9 @@ a :class:`Capture`, the engine's Combined pass (linear, scene-referred RGBA) is
 copied with ``foreach_get`` (20-40 µs at 100x100) before Blender moves on. The wrapper
 is installed once per process and does nothing for renders nobody armed.
 
-:func:`to_srgb_bytes` then applies what Blender's 'Standard' view transform and
-8-bit output would: the sRGB transfer function and round-half-up quantisation.
+The readers (:meth:`Capture.rgb`, :meth:`Capture.grayscale`, :meth:`Capture.raw`)
+then apply what Blender's 'Standard' (or 'Raw') view transform and 8-bit output
+would: the sRGB transfer function and round-half-up quantisation.
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.errors import RenderError
+from visualenv.render.blender.readback import LUMA_601
 
 _armed: Capture | None = None
 _installed: bool | None = None
@@ -54,16 +56,26 @@ def install() -> bool:
 
 
 class Capture:
-    """Armed around one render call: ``with capture: render()``, then :attr:`pixels`."""
+    """Armed around one render call: ``with capture: render()``, then one of the readers.
+
+    The readers convert the copied pass to the observation's uint8 layout
+    (top row first, C-contiguous) in scratch buffers kept between frames, so a
+    step allocates only its small result.
+    """
 
     def __init__(self) -> None:
-        self._buffer = np.empty(0, dtype=np.float32)
+        self._buffer = np.empty(0, dtype=np.float32)  # Combined pass: RGBA rows, bottom row first
+        self._scaled = np.empty(0, dtype=np.float32)  # scratch: the pass scaled and clamped
+        self._levels = np.empty(0, dtype=np.uint16)  # scratch: the same as integer levels
         self._shape = (0, 0)
         self._filled = False
 
     def arm(self, width: int, height: int) -> Capture:
-        if self._buffer.size != width * height * 4:
-            self._buffer = np.empty(width * height * 4, dtype=np.float32)
+        size = width * height * 4
+        if self._buffer.size != size:
+            self._buffer = np.empty(size, dtype=np.float32)
+            self._scaled = np.empty(size, dtype=np.float32)
+            self._levels = np.empty(size, dtype=np.uint16)
         self._shape = (height, width)
         return self
 
@@ -86,13 +98,47 @@ class Capture:
         combined.rect.foreach_get(self._buffer)
         self._filled = True
 
-    @property
-    def pixels(self) -> np.ndarray:
-        """(H, W, 4) float32 linear RGBA of the last armed render, row 0 at the top."""
+    def _check_filled(self) -> None:
         if not self._filled:
             raise RenderError("Cycles finished without a Combined pass to read (was the render cancelled?)")
+
+    def _quantised(self, top: int) -> np.ndarray:
+        """(H, W, 4) levels 0..top of the pass, bottom row first: ``linear * top`` rounded half up and clamped.
+
+        Ufuncs with ``out=`` on the contiguous pass: numpy 1.x's ``np.clip`` with
+        scalar bounds, fresh arrays and a flipped (negative-stride) input each
+        cost more than the arithmetic itself.
+        """
+        self._check_filled()
+        scaled = self._scaled
+        np.multiply(self._buffer, np.float32(top), out=scaled)
+        np.add(scaled, np.float32(0.5), out=scaled)
+        np.minimum(scaled, np.float32(top), out=scaled)
+        np.maximum(scaled, np.float32(0.0), out=scaled)
+        self._levels[...] = scaled  # truncates: with the + 0.5, rounds half up
         height, width = self._shape
-        return self._buffer.reshape(height, width, 4)[::-1]
+        return self._levels.reshape(height, width, 4)
+
+    def rgb(self) -> np.ndarray:
+        """(H, W, 3) sRGB bytes, as Blender's 'Standard' view transform writes them."""
+        return _top_first(np.take(_SRGB, self._quantised(65535)[:, :, :3]))
+
+    def grayscale(self) -> np.ndarray:
+        """(H, W, 1) BT.601 luma of the sRGB bytes: the same bytes as ``to_grayscale(rgb())``, in one pass."""
+        levels = self._quantised(65535)
+        luma = np.take(_LUMA[0], levels[:, :, 0])
+        luma += np.take(_LUMA[1], levels[:, :, 1])
+        luma += np.take(_LUMA[2], levels[:, :, 2])
+        luma *= np.float32(0.001)
+        return _top_first(luma.astype(np.uint8)[:, :, None])
+
+    def raw(self) -> np.ndarray:
+        """(H, W, 1) the red channel's linear values as bytes (Blender's 'Raw' view: used for depth)."""
+        return _top_first(self._quantised(255)[:, :, :1].astype(np.uint8))
+
+
+def _top_first(image: np.ndarray) -> np.ndarray:
+    return np.ascontiguousarray(image[::-1])
 
 
 def _srgb_table(size: int = 65536) -> np.ndarray:
@@ -106,27 +152,16 @@ def _srgb_table(size: int = 65536) -> np.ndarray:
 _SRGB = _srgb_table()
 
 
-def _scaled_and_clamped(linear: np.ndarray, top: float) -> np.ndarray:
-    """``linear * top + 0.5`` clamped to [0, top]: ready to truncate to an integer (round half up).
+def _luma_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per channel, the sRGB byte times its BT.601 weight (float32, exact), the red one plus 500.5.
 
-    In place after the first ufunc, and with ufuncs rather than ``np.clip``,
-    which is slow with scalar bounds on numpy 1.x (0.2 ms per 100x100 frame).
+    Summed and scaled by 0.001, then truncated, they give ``(299 R + 587 G + 114 B + 500) // 1000``
+    exactly: the sum is an integer plus 0.5, at least 0.0005 from the next integer after scaling,
+    far beyond float32's rounding error at these magnitudes.
     """
-    scaled = np.multiply(linear, np.float32(top))
-    np.add(scaled, np.float32(0.5), out=scaled)
-    np.maximum(scaled, np.float32(0.0), out=scaled)
-    np.minimum(scaled, np.float32(top), out=scaled)
-    return scaled
+    tables = [_SRGB.astype(np.float32) * np.float32(weight) for weight in LUMA_601]
+    tables[0] += np.float32(500.5)
+    return tables[0], tables[1], tables[2]
 
 
-def to_srgb_bytes(linear: np.ndarray) -> np.ndarray:
-    """Linear values to uint8 through the sRGB transfer function, as Blender's 'Standard' view writes them.
-
-    Pass whole RGBA rows rather than an RGB slice: contiguous input is twice as fast.
-    """
-    return np.take(_SRGB, _scaled_and_clamped(linear, 65535.0).astype(np.uint16))
-
-
-def to_raw_bytes(linear: np.ndarray) -> np.ndarray:
-    """Linear values to uint8 unchanged (Blender's 'Raw' view: used for depth)."""
-    return _scaled_and_clamped(linear, 255.0).astype(np.uint8)
+_LUMA = _luma_tables()

@@ -14,7 +14,7 @@ from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender.materials import depth_material, depth_world, make_material, see_through, set_base_color
-from visualenv.render.blender.capture import Capture, install as install_capture, to_raw_bytes, to_srgb_bytes
+from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, first_channel, quiet_stdout, read_bmp, to_grayscale
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
 from visualenv.spec.models import CameraObject, Material
@@ -312,11 +312,9 @@ class BlenderRenderer(Renderer):
         return self._read_capture(view, capture) if capture is not None else self._read_file(view)
 
     def _read_capture(self, view: _View, capture: Capture) -> np.ndarray:
-        pixels = capture.pixels
         if view.color == "depth":
-            return to_raw_bytes(pixels[:, :, :1])
-        rgba = to_srgb_bytes(pixels)
-        return np.ascontiguousarray(rgba[:, :, :3]) if view.color == "rgb" else to_grayscale(rgba)
+            return capture.raw()
+        return capture.rgb() if view.color == "rgb" else capture.grayscale()
 
     def _read_file(self, view: _View) -> np.ndarray:
         rgb = read_bmp(self._output.path)
@@ -326,11 +324,11 @@ class BlenderRenderer(Renderer):
 
     def raw_render(self) -> None:
         """Blender's render call, with the scene as it is; the pixels wait in the capture buffer or the file."""
-        with quiet_stdout():
-            if self._active_capture is not None:
-                with self._active_capture:
-                    bpy.ops.render.render(scene=self._scene_name)
-            else:
+        if self._active_capture is not None:
+            with self._active_capture:
+                bpy.ops.render.render(scene=self._scene_name)
+        else:
+            with quiet_stdout():  # Blender prints "Saved: <file>" for every written frame
                 bpy.ops.render.render(write_still=True, scene=self._scene_name)
 
     def _set_depth_mode(self, depth: bool) -> None:
