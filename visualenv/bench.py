@@ -258,4 +258,4 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
 
 
 def as_dict(figures: Figures) -> dict[str, Any]:
-    return asdict(figures)
+    return {**asdict(figures), "own_overhead_share": figures.own_overhead_share}
