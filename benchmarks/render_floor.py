@@ -19,20 +19,14 @@ import sys
 import time
 from typing import Any, Callable
 
-import bpy
 import numpy as np
 
 import visualenv
+from visualenv.bench import render_call_times
 
 
-def median_ms(render: Callable[[], None], before: Callable[[int], None], n: int) -> float:
-    times = []
-    for i in range(n):
-        before(i)
-        start = time.perf_counter()
-        render()
-        times.append(time.perf_counter() - start)
-    return 1000 * float(np.median(times))
+def median_ms(scene_name: str, n: int, before: Callable[[int], None] | None = None) -> float:
+    return 1000 * float(np.median(render_call_times(scene_name, n, before)))
 
 
 def nudge(obj: Any) -> Callable[[int], None]:
@@ -51,28 +45,21 @@ def main(spec: str = "VisualCartPole-v0", n: int = 300) -> None:
     renderer = env.unwrapped.renderer
     scene = renderer.scene
     name = scene.name
-
-    def render() -> None:
-        bpy.ops.render.render(scene=name)
-
-    def still(i: int) -> None:
-        pass
-
     width, height = scene.render.resolution_x, scene.render.resolution_y
-    median_ms(render, still, 30)  # warm up the persistent session
+    median_ms(name, 30)  # warm up the persistent session
     print(f"{spec}: bpy.ops.render.render, median of {n} calls")
     for size in (10, 50, 100, 141, 200):
         scene.render.resolution_x = scene.render.resolution_y = size
-        median_ms(render, still, 10)
-        print(f"  {f'{size}x{size} ({size * size} pixels), nothing moved':44s} {median_ms(render, still, n):6.3f} ms")
+        median_ms(name, 10)
+        print(f"  {f'{size}x{size} ({size * size} pixels), nothing moved':44s} {median_ms(name, n):6.3f} ms")
     scene.render.resolution_x, scene.render.resolution_y = width, height
-    median_ms(render, still, 10)
-    base = median_ms(render, still, n)
+    median_ms(name, 10)
+    base = median_ms(name, n)
     print(f"  {f'{width}x{height}, nothing moved':44s} {base:6.3f} ms")
     movers = [(target.object, renderer.object(target.object)) for target in renderer.plan.bindings if target.property == "location"]
     for label, obj in [*dict(movers).items(), ("camera", scene.camera)]:
-        moved = median_ms(render, nudge(obj), n)
-        print(f"  {f'{width}x{height}, {label} moved before each call':44s} {moved:6.3f} ms  (+{moved - base:.3f})")
+        moved = median_ms(name, n, nudge(obj))
+        print(f"  {f'{width}x{height}, {label} moved before each call':44s} {moved:6.3f} ms  ({moved - base:+.3f})")
     env.close()
 
 

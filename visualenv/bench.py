@@ -120,8 +120,6 @@ def blender_data_blocks() -> int:
 
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
               workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto") -> Figures:
-    import bpy
-
     import visualenv
 
     options: dict[str, Any] = {"readback": readback}
@@ -144,11 +142,7 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     # the raw floor: Blender's render call alone, same scene and settings as the last observation
     base.renderer.render_observation(base.binding_values())
     scene = renderer.scene
-    floor = []
-    for _ in range(floor_renders):
-        start = time.perf_counter()
-        bpy.ops.render.render(scene=scene.name)
-        floor.append(time.perf_counter() - start)
+    floor = render_call_times(scene.name, floor_renders)
     figures.moved_floor_ms_median = 1000 * float(np.median(_moved_floor(env, actions[warmup:warmup + floor_renders], seed + 3)))
     figures.naive_ms_median = 1000 * float(np.median(_naive_png(scene, naive_renders)))
     total = sum(step_times)
@@ -170,8 +164,6 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
 
 def _moved_floor(env: Any, actions: list[Any], seed: int) -> list[float]:
     """Blender's render call alone after the bound objects moved as in an episode (moves and readback not timed)."""
-    import bpy
-
     base = env.unwrapped
     renderer = base.renderer
     env.reset(seed=seed)
@@ -181,12 +173,19 @@ def _moved_floor(env: Any, actions: list[Any], seed: int) -> list[float]:
         values.append(base.binding_values())
         if terminated or truncated:
             env.reset()
-    name = renderer.scene.name
+    return render_call_times(renderer.scene.name, len(values), lambda i: renderer.apply(values[i]))
+
+
+def render_call_times(scene_name: str, n: int, before: Callable[[int], None] | None = None) -> list[float]:
+    """Wall times of `n` bare ``bpy.ops.render.render`` calls; ``before(i)``, untimed, may change the scene first."""
+    import bpy
+
     times = []
-    for value in values:
-        renderer.apply(value)
+    for i in range(n):
+        if before is not None:
+            before(i)
         start = time.perf_counter()
-        bpy.ops.render.render(scene=name)
+        bpy.ops.render.render(scene=scene_name)
         times.append(time.perf_counter() - start)
     return times
 
