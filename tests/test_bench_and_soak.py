@@ -5,7 +5,7 @@ import json
 from click.testing import CliRunner
 
 import visualenv
-from visualenv.bench import soak
+from visualenv.bench import StepTimes, soak
 from visualenv.cli import main
 
 
@@ -14,10 +14,36 @@ def test_bench_prints_every_figure(tmp_path):
     result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "2", "--soak", "50", "--json", str(out)])
     assert result.exit_code == 0, result.output
     for label in ["env steps/s", "render call (median/p99)", "raw render floor", "with objects moved", "naive PNG round trip", "framework overhead",
-                  "speed vs floor / naive", "resident memory", "2 parallel envs", "soak: 50 steps"]:
+                  "outside the render call", "speed vs floor / naive", "resident memory", "2 parallel envs", "step in a worker", "per worker",
+                  "soak: 50 steps"]:
         assert label in result.output, label
+    assert result.output.count("render call (median/p99)") == 2 and result.output.count("outside the render call") == 2  # one env, then the workers
     figures = json.loads(out.read_text())[0]
-    assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["moved_floor_ms_median"] > 0 and 0 <= figures["own_overhead_share"] < 1 and figures["parallel"]["workers"] == 2
+    assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["moved_floor_ms_median"] > 0 and 0 <= figures["own_overhead_share"] < 1
+    assert 0 < figures["outside_ms_median"] < figures["step_ms_median"]
+    parallel = figures["parallel"]
+    assert parallel["workers"] == 2 and parallel["pinned"] is False and parallel["steps_per_s"] > 0
+    assert 0 < parallel["render_ms_median"] <= parallel["render_ms_p99"] and 0 < parallel["outside_share"] < 1
+    assert parallel["rss_final_mb"] > 100 and parallel["rss_total_mb"] >= 2 * parallel["rss_final_mb"] - 1  # each worker holds a Blender
+
+
+def test_step_times_pairs_each_step_with_its_render_calls():
+    env = StepTimes(visualenv.make("VisualCartPole-v0"))
+    try:
+        env.reset(seed=0)
+        renderer = env.unwrapped.renderer
+        env.start_timing()
+        for _ in range(5):
+            env.step(0)
+        timings = env.timings()
+        assert len(timings["step"]) == len(timings["render"]) == len(timings["outside"]) == 5  # one observation render per step
+        for step, render, outside in zip(timings["step"], timings["render"], timings["outside"]):
+            assert 0 < outside < step and abs(step - render - outside) < 1e-9
+        assert "raw_render" not in vars(renderer)  # timing stopped: the renderer's own method again
+        env.step(0)
+        assert len(timings["step"]) == 5
+    finally:
+        env.close()
 
 
 def test_short_soak_keeps_blender_data_blocks_and_memory_flat():

@@ -27,7 +27,7 @@ def children() -> set[int]:
 
 def test_async_vector_env_renders_in_workers_and_closes_them():
     before = children()
-    vec = make_vec("VisualCartPole-v0", 2)
+    vec = visualenv.make_vec("VisualCartPole-v0", 2)  # the public helper
     try:
         obs, _ = vec.reset(seed=[1, 2])
         assert obs.shape == (2, 100, 100, 1) and obs.dtype == np.uint8
@@ -94,8 +94,19 @@ def test_worker_cores_round_robin(monkeypatch):
     monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: {2, 5}, raising=False)
     assert vector.worker_cores(3) == [2, 5, 2]
     assert vector.worker_cores(1) == [None]  # one worker: nothing to keep apart
+    assert vector.worker_cores(3, pin=False) == [None, None, None]
     monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: {0}, raising=False)
     assert vector.worker_cores(2) == [None, None]  # one core: nothing to choose
+
+
+def test_default_threads_share_the_cores_this_process_may_use(monkeypatch):
+    from visualenv import vector
+
+    monkeypatch.setattr(vector.os, "cpu_count", lambda: 64)
+    monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    assert vector.default_threads(2) == 4  # the 8 cores of our affinity mask, not the machine's 64
+    monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: {3}, raising=False)
+    assert vector.default_threads(2) == 1
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs Linux and 2 cores")

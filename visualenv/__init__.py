@@ -18,6 +18,7 @@ from visualenv.compiler import VisualEnv, compile_spec
 from visualenv.errors import ExpressionError, RenderError, SpecError, StepError, VisualEnvError, WorkerError
 from visualenv.registration import register_bundled, resolve
 from visualenv.spec import load_spec, load_spec_text
+from visualenv.vector import make_sb3_vec, make_vec
 from visualenv.wrappers import FrameStack, Grayscale, Resize, wrap_observation
 
 __version__ = "0.1.0"
@@ -55,6 +56,6 @@ register_bundled()
 
 __all__ = [
     "ExpressionError", "FrameStack", "Grayscale", "RenderError", "Resize", "SpecError", "StepError", "VisualEnv",
-    "VisualEnvError", "WorkerError", "compile_spec", "load_spec", "load_spec_text", "make", "register_bundled", "resolve",
-    "wrap_observation",
+    "VisualEnvError", "WorkerError", "compile_spec", "load_spec", "load_spec_text", "make", "make_sb3_vec", "make_vec", "register_bundled",
+    "resolve", "wrap_observation",
 ]

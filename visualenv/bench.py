@@ -11,7 +11,8 @@ One run measures, on the same built scene:
   implementation pays and which the framework overhead therefore includes;
 * a naive implementation: render to a PNG on disk and load it with Pillow;
 * resident memory (peak and final), and optionally a long soak;
-* N parallel envs (one Blender process each) through AsyncVectorEnv.
+* N parallel envs (one Blender process each) through AsyncVectorEnv: the same
+  figures, timed inside the workers (:class:`StepTimes`).
 
 Timings vary from run to run on shared machines: this prints figures, it
 asserts nothing.
@@ -21,11 +22,14 @@ from __future__ import annotations
 
 import gc
 import os
+import resource
+import sys
 import tempfile
 import time
 from dataclasses import asdict, dataclass, field
 from typing import Any, Callable
 
+import gymnasium as gym
 import numpy as np
 import psutil
 
@@ -42,9 +46,11 @@ class Figures:
     moved_floor_ms_median: float = 0.0
     naive_ms_median: float = 0.0
     overhead_share: float = 0.0
+    outside_ms_median: float = 0.0
+    outside_share: float = 0.0
     rss_peak_mb: float = 0.0
     rss_final_mb: float = 0.0
-    parallel: dict[str, float] = field(default_factory=dict)
+    parallel: dict[str, Any] = field(default_factory=dict)
     soak: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -67,12 +73,21 @@ class Figures:
             f"  naive PNG round trip      {self.naive_ms_median:8.2f} ms   (render, write PNG to disk, load it)",
             (f"  framework overhead        {100 * self.overhead_share:8.1f} %    of a step (step - raw floor; "
              f"{100 * self.own_overhead_share:.1f} % without Blender's scene update)"),
+            f"  outside the render call   {self.outside_ms_median:8.2f} ms   ({100 * self.outside_share:.1f} % of a step: actions, dynamics, bindings, readback)",
             f"  speed vs floor / naive    {speed_vs_floor:8.2f}x / {speed_vs_naive:.2f}x",
             f"  resident memory           {self.rss_peak_mb:8.1f} MB peak, {self.rss_final_mb:.1f} MB final",
         ]
         if self.parallel:
             p = self.parallel
-            out.append(f"  {int(p['workers'])} parallel envs           {p['steps_per_s']:8.1f} steps/s  ({p['speedup']:.2f}x one env, {int(p['threads'])} render thread(s) each)")
+            out += [
+                (f"  {p['workers']} parallel envs           {p['steps_per_s']:8.1f} steps/s  ({p['speedup']:.2f}x one env; "
+                 f"{p['threads']} render thread(s) each, {'pinned' if p['pinned'] else 'not pinned'})"),
+                f"    step in a worker (median) {p['step_ms_median']:6.2f} ms",
+                f"    render call (median/p99)  {p['render_ms_median']:6.2f} / {p['render_ms_p99']:.2f} ms",
+                f"    outside the render call   {p['outside_ms_median']:6.2f} ms   ({100 * p['outside_share']:.1f} % of a worker's step)",
+                (f"    resident memory           {p['rss_peak_mb']:6.1f} MB peak, {p['rss_final_mb']:.1f} MB final per worker "
+                 f"({p['rss_total_mb']:.0f} MB for all {p['workers']})"),
+            ]
         if self.soak:
             s = self.soak
             out.append(f"  soak: {s['steps']} steps, {s['resets']} resets: memory {s['rss_start_mb']:.1f} -> {s['rss_end_mb']:.1f} MB "
@@ -82,6 +97,12 @@ class Figures:
 
 def _rss_mb() -> float:
     return psutil.Process(os.getpid()).memory_info().rss / 2**20
+
+
+def _peak_rss_mb() -> float:
+    """This process's peak resident memory (Linux reports kilobytes, macOS bytes)."""
+    peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+    return peak / (2**20 if sys.platform == "darwin" else 2**10)
 
 
 def _timed(fn: Callable[[], Any], times: list[float]) -> Callable[[], Any]:
@@ -119,26 +140,25 @@ def blender_data_blocks() -> int:
 
 
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
-              workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto") -> Figures:
+              workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = False) -> Figures:
     import visualenv
 
     options: dict[str, Any] = {"readback": readback}
     if threads:
         options["threads"] = threads
-    env = visualenv.make(spec, **options)
+    env = StepTimes(visualenv.make(spec, **options))
     base = env.unwrapped
     figures = Figures(spec=str(spec), steps=steps)
     actions = random_actions(env, warmup + steps, seed)
     run_env(env, actions[:warmup], seed)
     renderer = base.renderer
-    render_times: list[float] = []
-    original = renderer.raw_render
-    renderer.raw_render = _timed(original, render_times)
+    env.start_timing()
     gc.collect()
     rss_peak = _rss_mb()
     step_times = run_env(env, actions[warmup:], seed + 1)
     rss_peak = max(rss_peak, _rss_mb())
-    renderer.raw_render = original
+    timings = env.timings()
+    render_times, outside = timings["render"], timings["outside"]
     # the raw floor: Blender's render call alone, same scene and settings as the last observation
     base.renderer.render_observation(base.binding_values())
     scene = renderer.scene
@@ -152,13 +172,15 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     figures.render_ms_p99 = 1000 * float(np.percentile(render_times, 99))
     figures.floor_ms_median = 1000 * float(np.median(floor))
     figures.overhead_share = max(0.0, (figures.step_ms_median - figures.floor_ms_median) / figures.step_ms_median)
+    figures.outside_ms_median = 1000 * float(np.median(outside))
+    figures.outside_share = figures.outside_ms_median / figures.step_ms_median
     if soak_steps:
         figures.soak = soak(env, soak_steps, seed + 2)
     figures.rss_peak_mb = max(rss_peak, _rss_mb())
     figures.rss_final_mb = _rss_mb()
     env.close()
     if workers > 1:
-        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback)
+        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin)
     return figures
 
 
@@ -235,25 +257,82 @@ def soak(env: Any, steps: int, seed: int, report_every: int = 0) -> dict[str, An
             "blocks_start": blocks_start, "blocks_end": blender_data_blocks()}
 
 
-def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto") -> dict[str, float]:
-    from visualenv.vector import default_threads, make_vec
+class StepTimes(gym.Wrapper):
+    """Times each step and each Blender render call, in the process the env runs in.
+
+    The parallel figures need what happens in the workers' processes; Gymnasium's
+    vector envs reach this wrapper through ``call``: ``vec.call("start_timing")``
+    after the warm-up, ``vec.call("timings")`` at the end. The single env uses it directly.
+    """
+
+    def __init__(self, env: gym.Env) -> None:
+        super().__init__(env)
+        self._steps: list[float] = []
+        self._renders: list[float] = []
+        self._outside: list[float] = []  # per step: the step's time minus its render calls
+        self._timing = False
+
+    def start_timing(self) -> None:
+        """Record from now on (the renderer exists once the env has been reset)."""
+        self._steps, self._renders, self._outside = [], [], []
+        if not self._timing:
+            renderer = self.env.unwrapped.renderer
+            renderer.raw_render = _timed(renderer.raw_render, self._renders)
+            self._timing = True
+
+    def step(self, action: Any) -> Any:
+        rendered = len(self._renders)
+        start = time.perf_counter()
+        out = self.env.step(action)
+        if self._timing:
+            elapsed = time.perf_counter() - start
+            self._steps.append(elapsed)
+            self._outside.append(elapsed - sum(self._renders[rendered:]))
+        return out
+
+    def timings(self) -> dict[str, Any]:
+        """What was recorded since :meth:`start_timing`, and stop recording (a long soak must not grow lists)."""
+        if self._timing:
+            del self.env.unwrapped.renderer.raw_render  # the instance attribute: back to the class's method
+            self._timing = False
+        return {"step": self._steps, "render": self._renders, "outside": self._outside, "rss_mb": _rss_mb(), "rss_peak_mb": _peak_rss_mb()}
+
+
+def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
+                   pin: bool = False) -> dict[str, Any]:
+    """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each)."""
+    from visualenv.vector import default_threads, make_vec, worker_cores
 
     threads = default_threads(workers)
-    vec = make_vec(str(spec), workers, threads=threads, readback=readback)
+    pinned = any(core is not None for core in worker_cores(workers, pin))  # pinning needs two cores to choose from
+    vec = make_vec(str(spec), workers, threads=threads, readback=readback, pin=pin, wrapper_class=StepTimes)
     try:
         vec.reset(seed=seed)
         vec.action_space.seed(seed)
         for _ in range(50):  # warm-up: workers build their scenes and Blender's persistent data
             vec.step(vec.action_space.sample())
+        vec.call("start_timing")
         rounds = max(1, steps // workers)
         start = time.perf_counter()
         for _ in range(rounds):
             vec.step(vec.action_space.sample())  # autoreset inside
         elapsed = time.perf_counter() - start
+        measured = vec.call("timings")
     finally:
         vec.close()
     rate = rounds * workers / elapsed
-    return {"workers": workers, "threads": threads, "steps_per_s": rate, "speedup": rate / single if single else 0.0}
+    step_times = [t for w in measured for t in w["step"]]
+    render_times = [t for w in measured for t in w["render"]]
+    outside = [t for w in measured for t in w["outside"]]
+    step_median = float(np.median(step_times))
+    return {
+        "workers": workers, "threads": threads, "pinned": pinned, "steps_per_s": rate, "speedup": rate / single if single else 0.0,
+        "step_ms_median": 1000 * step_median,
+        "render_ms_median": 1000 * float(np.median(render_times)), "render_ms_p99": 1000 * float(np.percentile(render_times, 99)),
+        "outside_ms_median": 1000 * float(np.median(outside)), "outside_share": float(np.median(outside)) / step_median,
+        "rss_peak_mb": max(w["rss_peak_mb"] for w in measured), "rss_final_mb": max(w["rss_mb"] for w in measured),
+        "rss_total_mb": sum(w["rss_mb"] for w in measured),
+    }
 
 
 def as_dict(figures: Figures) -> dict[str, Any]:

@@ -220,22 +220,28 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--threads", type=int, default=None, help="render threads of the single env (default: all cores)")
 @click.option("--readback", type=click.Choice(READBACKS), default="auto", show_default=True,
               help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
+@click.option("--pin", is_flag=True, help="pin each parallel worker to its own core (compare with and without on your machine)")
 @click.option("--soak", "soak_steps", type=int, default=0, help="also run this many steps and report memory growth (e.g. 50000)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
-def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, readback: str, soak_steps: int, json_out: str | None) -> None:
+def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, readback: str, pin: bool, soak_steps: int,
+          json_out: str | None) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
 
     import psutil
 
     from visualenv.bench import as_dict, bench_one
+    from visualenv.vector import usable_cores
 
-    click.echo(f"machine: {platform.processor() or platform.machine()}, {psutil.cpu_count()} cores, "
+    cores = len(usable_cores())
+    machine_cores = psutil.cpu_count() or cores
+    click.echo(f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"
+               f"{f' ({cores} usable by this process)' if cores != machine_cores else ''}, "
                f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
     results = []
     for spec in specs:
-        figures = bench_one(spec, steps, workers=workers, soak_steps=soak_steps, threads=threads, readback=readback)
+        figures = bench_one(spec, steps, workers=workers, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin)
         for line in figures.lines():
             click.echo(line)
         results.append(as_dict(figures))

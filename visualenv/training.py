@@ -18,7 +18,6 @@ step and still saves, evaluates and plots what was learnt so far.
 from __future__ import annotations
 
 import json
-import os
 import shlex
 import signal
 import sys
@@ -34,6 +33,8 @@ from typing import Any
 
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
+
+from visualenv.vector import usable_cores
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
 
@@ -239,7 +240,7 @@ class _PhaseThreads(BaseCallback):
 
     def __init__(self) -> None:
         super().__init__()
-        self.cores = max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1))
+        self.cores = len(usable_cores())
         self.mark: float | None = None
 
     def _on_rollout_start(self) -> None:

@@ -3,17 +3,19 @@
 bpy holds one Blender per process, so parallel rendering needs processes:
 :func:`make_vec` gives a Gymnasium ``AsyncVectorEnv`` and :func:`make_sb3_vec`
 an SB3 ``SubprocVecEnv`` (with SB3's own ``VecFrameStack``). Each worker builds
-its env (and its renderer) from the spec, with ``threads`` render threads: on a
-machine with C cores and N workers, C // N threads each keeps the cores busy
-without oversubscribing them.
+its env (and its renderer) from the spec, with ``threads`` render threads: with
+C cores usable by this process (its affinity mask, not the machine's count) and
+N workers, C // N threads each keeps the cores busy without oversubscribing them.
 
 ``pin=True`` pins worker i to core i (round robin over the cores this process
-may use). A Blender render keeps more threads busy than its render threads
-(scene evaluation, the render session, idle-spinning pools), and pinning keeps
-one worker's spinning off another's core. On the 2-core development VM the
-pinned and unpinned figures overlap from run to run (two CartPole workers:
-428-591 steps/s pinned, 346-549 not; ``benchmarks/parallel_ceiling.py``), and
-pinning would crowd two jobs onto the same cores, so it is off by default.
+may use). A Blender render keeps more threads busy than its render threads: with
+one render thread, Cycles' session thread traces while an idle thread of
+Blender's pool spins on the other core. Pinning keeps that spinning off another
+worker's core and halves the workers' p99 render time, but on the 2-core
+development VM steps/s overlap from run to run (ten interleaved runs of two
+CartPole workers: 493-600 steps/s pinned, 467-615 not;
+``benchmarks/parallel_ceiling.py``, ``visualenv bench --pin``), and pinning would
+crowd two jobs onto the same cores, so it is off by default.
 """
 
 from __future__ import annotations
@@ -34,17 +36,26 @@ from visualenv.errors import WorkerError
 _BROKEN = (EOFError, BrokenPipeError, ConnectionResetError)
 
 
-def default_threads(n_envs: int) -> int:
-    return max(1, (os.cpu_count() or 1) // max(1, n_envs))
-
-
-def worker_cores(n: int) -> list[int | None]:
-    """The core each of `n` workers is pinned to: round robin over this process's cores (None: not pinned)."""
+def usable_cores() -> list[int]:
+    """The cores this process may run on: its affinity mask, which a container, a batch
+    scheduler or ``taskset`` may make smaller than the machine (``os.cpu_count()``)."""
     try:
-        cores = sorted(os.sched_getaffinity(0))
+        return sorted(os.sched_getaffinity(0))
     except AttributeError:  # not on Linux
+        return list(range(os.cpu_count() or 1))
+
+
+def default_threads(n_envs: int) -> int:
+    """Render threads per worker that fill this process's cores without oversubscribing them."""
+    return max(1, len(usable_cores()) // max(1, n_envs))
+
+
+def worker_cores(n: int, pin: bool = True) -> list[int | None]:
+    """The core each of `n` workers is pinned to: round robin over this process's cores (None: not pinned)."""
+    if not pin or n < 2 or not hasattr(os, "sched_setaffinity"):
         return [None] * n
-    if n < 2 or len(cores) < 2:
+    cores = usable_cores()
+    if len(cores) < 2:
         return [None] * n
     return [cores[i % len(cores)] for i in range(n)]
 
@@ -60,12 +71,17 @@ def _pin(core: int) -> None:
             os.sched_setaffinity(tid, {core})
 
 
-def env_factory(target: str, *, core: int | None = None, **kwargs: Any) -> Callable[[], gym.Env]:
-    """A picklable function that makes one env (for vector env workers), pinned to `core` if given."""
-    return partial(_make, str(target), kwargs, core)
+def env_factory(target: str, *, core: int | None = None, wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
+                **kwargs: Any) -> Callable[[], gym.Env]:
+    """A picklable function that makes one env (for vector env workers), pinned to `core` if given.
+
+    `wrapper_class` (a class or module-level function, so that it pickles) wraps the env in its worker.
+    """
+    return partial(_make, str(target), kwargs, core, wrapper_class)
 
 
-def _make(target: str, kwargs: dict[str, Any], core: int | None = None) -> gym.Env:
+def _make(target: str, kwargs: dict[str, Any], core: int | None = None,
+          wrapper_class: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
     if multiprocessing.parent_process() is not None:  # in a worker (Gymnasium also calls this in the parent, for the spaces)
         if core is not None:
             _pin(core)
@@ -73,7 +89,8 @@ def _make(target: str, kwargs: dict[str, Any], core: int | None = None) -> gym.E
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     import visualenv
 
-    return visualenv.make(target, **kwargs)
+    env = visualenv.make(target, **kwargs)
+    return wrapper_class(env) if wrapper_class is not None else env
 
 
 class WorkerVectorEnv(AsyncVectorEnv):
@@ -127,16 +144,17 @@ def _with_threads(kwargs: dict[str, Any], n: int, threads: int | None) -> dict[s
 
 
 def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, pin: bool = False,
-             **kwargs: Any) -> gym.vector.VectorEnv:
+             wrapper_class: Callable[[gym.Env], gym.Env] | None = None, **kwargs: Any) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
+    `wrapper_class` wraps each env in its worker (as in SB3's ``make_vec_env``);
     kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
     """
     kwargs = _with_threads(kwargs, n, threads)
     if asynchronous and n > 1:
-        cores = worker_cores(n) if pin else [None] * n
-        return WorkerVectorEnv([env_factory(target, core=core, **kwargs) for core in cores], context="spawn", shared_memory=True)
-    return gym.vector.SyncVectorEnv([env_factory(target, **kwargs) for _ in range(n)])
+        return WorkerVectorEnv([env_factory(target, core=core, wrapper_class=wrapper_class, **kwargs) for core in worker_cores(n, pin)],
+                               context="spawn", shared_memory=True)
+    return gym.vector.SyncVectorEnv([env_factory(target, wrapper_class=wrapper_class, **kwargs) for _ in range(n)])
 
 
 def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None, pin: bool = False,
@@ -150,9 +168,8 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
     kwargs = _with_threads(kwargs, n, threads)
-    cores = worker_cores(n) if pin else [None] * n  # None for a single env: nothing to keep apart
     fns = [partial(_make_monitored, str(target), kwargs, core, seed + i, monitor_dir and os.path.join(monitor_dir, str(i)), monitor_append)
-           for i, core in enumerate(cores)]
+           for i, core in enumerate(worker_cores(n, pin))]
     if monitor_dir:
         os.makedirs(monitor_dir, exist_ok=True)
     vec = SubprocVecEnv(fns, start_method="spawn") if n > 1 else DummyVecEnv(fns)
