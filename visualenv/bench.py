@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import gc
 import os
-import resource
 import sys
 import tempfile
 import time
@@ -100,7 +99,11 @@ def _rss_mb() -> float:
 
 
 def _peak_rss_mb() -> float:
-    """This process's peak resident memory (Linux reports kilobytes, macOS bytes)."""
+    """This process's peak resident memory (Linux reports kilobytes, macOS bytes; Windows: the current figure)."""
+    try:
+        import resource
+    except ImportError:  # Windows
+        return _rss_mb()
     peak = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
     return peak / (2**20 if sys.platform == "darwin" else 2**10)
 
