@@ -11,7 +11,7 @@ N workers, C // N threads each keeps the cores busy without oversubscribing them
 may use). A Blender render keeps more threads busy than its render threads: with
 one render thread, Cycles' session thread traces while an idle thread of
 Blender's pool spins on the other core. Pinning keeps that spinning off another
-worker's core and halves the workers' p99 render time, but on the 2-core
+worker's core and cuts the workers' p99 render time by a third, but on the 2-core
 development VM steps/s overlap from run to run (ten interleaved runs of two
 CartPole workers: 493-600 steps/s pinned, 467-615 not;
 ``benchmarks/parallel_ceiling.py``, ``visualenv bench --pin``), and pinning would
