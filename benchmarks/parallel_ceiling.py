@@ -18,6 +18,8 @@ import subprocess
 import sys
 import time
 
+from visualenv.vector import usable_cores
+
 CASES = ("single", "single:1", "single:1:pin", "vec", "vec:pin")
 
 
@@ -75,12 +77,12 @@ def main() -> None:
             threads = int(rest[0]) if rest and rest[0] != "pin" else None
             rate, cores = run_single(spec, int(steps), threads, pin)
         else:
-            rate, cores = run_vec(spec, int(steps), len(os.sched_getaffinity(0)), pin)
+            rate, cores = run_vec(spec, int(steps), len(usable_cores()), pin)
         print(f"{rate:.1f} {cores:.2f}")
         return
     spec = sys.argv[1] if len(sys.argv) > 1 else "VisualCartPole-v0"
     steps = sys.argv[2] if len(sys.argv) > 2 else "2000"
-    cores = len(os.sched_getaffinity(0))
+    cores = len(usable_cores())
     print(f"{spec}, {steps} steps per case, {cores} cores (vec: {cores} workers, one render thread each)")
     rates = {}
     for case in CASES:

@@ -42,6 +42,11 @@ def test_step_times_pairs_each_step_with_its_render_calls():
         assert "raw_render" not in vars(renderer)  # timing stopped: the renderer's own method again
         env.step(0)
         assert len(timings["step"]) == 5
+        env.start_timing()
+        env.start_timing()  # again while timing: still one timed render per step, in the new lists
+        env.step(0)
+        again = env.timings()
+        assert len(again["step"]) == len(again["render"]) == 1 and 0 < again["outside"][0] < again["step"][0]
     finally:
         env.close()
 

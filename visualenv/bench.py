@@ -276,12 +276,12 @@ class StepTimes(gym.Wrapper):
         self._timing = False
 
     def start_timing(self) -> None:
-        """Record from now on (the renderer exists once the env has been reset)."""
+        """Record from now on, into fresh lists (the renderer exists once the env has been reset)."""
+        self._stop_timing()
         self._steps, self._renders, self._outside = [], [], []
-        if not self._timing:
-            renderer = self.env.unwrapped.renderer
-            renderer.raw_render = _timed(renderer.raw_render, self._renders)
-            self._timing = True
+        renderer = self.env.unwrapped.renderer
+        renderer.raw_render = _timed(renderer.raw_render, self._renders)
+        self._timing = True
 
     def step(self, action: Any) -> Any:
         rendered = len(self._renders)
@@ -295,10 +295,13 @@ class StepTimes(gym.Wrapper):
 
     def timings(self) -> dict[str, Any]:
         """What was recorded since :meth:`start_timing`, and stop recording (a long soak must not grow lists)."""
+        self._stop_timing()
+        return {"step": self._steps, "render": self._renders, "outside": self._outside, "rss_mb": _rss_mb(), "rss_peak_mb": _peak_rss_mb()}
+
+    def _stop_timing(self) -> None:
         if self._timing:
             del self.env.unwrapped.renderer.raw_render  # the instance attribute: back to the class's method
             self._timing = False
-        return {"step": self._steps, "render": self._renders, "outside": self._outside, "rss_mb": _rss_mb(), "rss_peak_mb": _peak_rss_mb()}
 
 
 def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
