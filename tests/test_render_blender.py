@@ -253,7 +253,12 @@ cam.data.type = "ORTHO"; cam.data.ortho_scale = 6.0
 cam.location = (0, -10, 0); cam.rotation_euler = (1.5707963, 0, 0)
 lamp = bpy.data.objects.new("Lamp", bpy.data.lights.new("Lamp", "SUN")); scene.collection.objects.link(lamp)
 scene.camera = cam
-if len(sys.argv) > 2:  # a second scene: the ball again, seen from above
+if sys.argv[2:] == ["emission"]:  # a material without a Principled BSDF, as a .blend may have
+    nodes = mat.node_tree.nodes
+    nodes.remove(bsdf)
+    emission = nodes.new("ShaderNodeEmission")
+    mat.node_tree.links.new(emission.outputs["Emission"], nodes["Material Output"].inputs["Surface"])
+if sys.argv[2:] == ["two"]:  # a second scene: the ball again, seen from above
     top = bpy.data.scenes.new("Top")
     top.collection.objects.link(ball); top.collection.objects.link(lamp)
     top_cam = bpy.data.objects.new("TopCam", bpy.data.cameras.new("TopCam")); top.collection.objects.link(top_cam)
@@ -267,6 +272,19 @@ def blend_file(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("blend") / "fixture.blend"
     subprocess.run([sys.executable, "-c", BLEND_SCRIPT, str(path)], check=True, capture_output=True, timeout=120)
     return path
+
+
+def test_bound_colour_needs_a_principled_material(tmp_path_factory):
+    path = tmp_path_factory.mktemp("blend") / "emission.blend"
+    subprocess.run([sys.executable, "-c", BLEND_SCRIPT, str(path), "emission"], check=True, capture_output=True, timeout=120)
+    with pytest.raises(SpecError, match="material 'Glow' of 'Ball' has none") as info:
+        blend_env(path, actors="Ball: {color: [x, 0, 0]}").renderer
+    assert info.value.diagnostics[0].path == "actors.Ball.color" and info.value.diagnostics[0].line == 6
+    moved = blend_env(path)  # other bindings are fine
+    try:
+        assert centroid_x(observe(moved, x=1.5)) > centroid_x(observe(moved, x=-1.5)) + 10
+    finally:
+        moved.close()
 
 
 @pytest.fixture(scope="module")
@@ -381,6 +399,27 @@ def test_procedural_textures_and_imported_mesh(tmp_path):
         assert img[16, 24 - 16 + 3, 0] > 150  # the torus
     finally:
         e.close()
+
+
+@pytest.mark.parametrize("texture", ["{type: checker, scale: 4, colors: [[1, 1, 1], [0.5, 0.5, 0.5]]}", "{type: noise, scale: 2}"])
+def test_bound_colour_tints_a_textured_material(tmp_path, texture):
+    objects = OBJECTS.replace("material: {color: [0.9, 0.9, 0.9]}", f"material: {{color: [0.9, 0.9, 0.9], texture: {texture}}}")
+    e = make_env(tmp_path, objects=objects, actors="Box: {color: [1 - x, 0.05, x]}")
+    static = make_env(tmp_path, objects=objects, actors="Box: {location: [0, 0, 0]}")
+    try:
+        box = (slice(12, 20), slice(20, 28))
+        red = observe(e, x=0.0).astype(int)[box].reshape(-1, 3)
+        blue = observe(e, x=1.0).astype(int)[box].reshape(-1, 3)
+        assert (red[:, 0] > red[:, 2] + 40).all() and (blue[:, 2] > blue[:, 0] + 40).all()
+        assert len(np.unique(red[:, 0])) > 1  # still textured: the tint multiplies the texture
+        white = make_env(tmp_path, objects=objects, actors="Box: {color: [1, 1, 1]}")
+        try:  # a white tint leaves the texture as it is
+            assert np.array_equal(observe(white), observe(static))
+        finally:
+            white.close()
+    finally:
+        e.close()
+        static.close()
 
 
 def test_create_close_cycles_keep_blender_data_flat(tmp_path):

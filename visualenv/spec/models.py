@@ -232,7 +232,7 @@ class Actor(StrictModel):
     rotation: Vec3Expr | None = Field(None, description="Euler XYZ, radians")
     scale: Union[Vec3Expr, Expr, None] = None
     visible: Expr | None = Field(None, description="a condition")
-    color: ColorExpr | None = Field(None, description="material base colour (objects) or light colour (lights)")
+    color: ColorExpr | None = Field(None, description="material base colour (objects; on a textured material a tint that multiplies the texture) or light colour (lights)")
     strength: Expr | None = Field(None, description="light strength")
     look_at: Vec3Expr | None = Field(None, description="aim the object (a camera) at this point")
     lens: Expr | None = Field(None, description="camera focal length (mm)")

@@ -5,7 +5,8 @@ to ``Material.diffuse_color`` so the Workbench engine (which shows that colour)
 agrees with Cycles and EEVEE. Procedural textures (noise, voronoi, checker,
 wave) read object coordinates times ``scale`` and blend between two colours
 (default: the material colour and a darker shade of it); image textures read
-the mesh's UV map (generated coordinates when it has none).
+the mesh's UV map (generated coordinates when it has none). A bound colour on
+a textured material multiplies the texture (:func:`make_tintable`).
 
 Depth observations use :func:`depth_material`, a view-layer material override
 that emits the camera's Z depth mapped linearly from ``depth_range`` to 0..1,
@@ -122,14 +123,48 @@ def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
             mat.node_tree.links.new(coords.outputs["Generated"], node.inputs["Vector"])
 
 
+TINT = "visualenv tint"  # the node a bound colour writes when a texture drives the base colour
+
+
+def make_tintable(mat: Any) -> bool:
+    """Let a bound colour reach a material whose base colour a texture (or any node) drives.
+
+    The node feeding Base Color is multiplied by a tint (white: the texture
+    unchanged), the tint being what :func:`set_base_color` writes. False when
+    the material has no Principled BSDF: a bound colour could not show in its
+    render, only in the viewport colour.
+    """
+    bsdf = _principled(mat)
+    if bsdf is None:
+        return False
+    base = bsdf.inputs["Base Color"]
+    if base.is_linked and base.links[0].from_node.name != TINT:
+        nodes, links = mat.node_tree.nodes, mat.node_tree.links
+        source = base.links[0].from_socket
+        mix = nodes.new("ShaderNodeMix")
+        mix.name = TINT
+        mix.data_type = "RGBA"
+        mix.blend_type = "MULTIPLY"
+        mix.inputs["Factor"].default_value = 1.0
+        texture, tint = [s for s in mix.inputs if s.type == "RGBA"]
+        tint.default_value = (1.0, 1.0, 1.0, 1.0)
+        links.new(source, texture)
+        links.new(next(s for s in mix.outputs if s.type == "RGBA"), base)
+    return True
+
+
 def set_base_color(mat: Any, color: Sequence[float]) -> None:
-    """Bound colour: the Principled base colour (when not driven by a texture) and alpha, and the viewport colour."""
+    """Bound colour: the Principled base colour (or the tint of its texture), its alpha, and the viewport colour."""
     value = rgba(color)
     bsdf = _principled(mat)
     if bsdf is not None:
-        if not bsdf.inputs["Base Color"].is_linked:
-            bsdf.inputs["Base Color"].default_value = value
-        bsdf.inputs["Alpha"].default_value = value[3]
+        base = bsdf.inputs["Base Color"]
+        if not base.is_linked:
+            base.default_value = value
+        elif base.links[0].from_node.name == TINT:
+            [s for s in base.links[0].from_node.inputs if s.type == "RGBA"][1].default_value = value
+        if not bsdf.inputs["Alpha"].is_linked:
+            bsdf.inputs["Alpha"].default_value = value[3]
     mat.diffuse_color = value
 
 

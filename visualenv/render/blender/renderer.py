@@ -13,7 +13,7 @@ import numpy as np
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
-from visualenv.render.blender.materials import depth_material, depth_world, make_material, see_through, set_base_color
+from visualenv.render.blender.materials import depth_material, depth_world, make_material, make_tintable, see_through, set_base_color
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, first_channel, quiet_stdout, read_bmp, to_grayscale
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
@@ -227,17 +227,22 @@ class BlenderRenderer(Renderer):
                 def set_light_color(v: tuple) -> None:
                     data.color = v[:3]
                 return set_light_color
-            materials = self._own_materials(obj)
+            materials = self._own_materials(name, obj)
             def set_color(v: tuple) -> None:
                 for mat in materials:
                     set_base_color(mat, v)
             return set_color
         raise RenderError(f"cannot bind '{prop}' of '{name}'")  # pragma: no cover - BINDABLE is checked by the compiler
 
-    def _own_materials(self, obj: Any) -> list[Any]:
-        """Per-object copies of the materials of `obj` (and of its mesh children), so a bound colour stays on it."""
+    def _own_materials(self, name: str, obj: Any) -> list[Any]:
+        """Per-object copies of the materials of `obj` (and of its mesh children), so a bound colour stays on it.
+
+        A textured copy gets a tint node for the colour to write; a material
+        the colour cannot reach in a render (no Principled BSDF, as a .blend
+        may have) is a spec error rather than a binding that silently does nothing.
+        """
         meshes = [obj] if obj.type == "MESH" else [c for c in obj.children_recursive if c.type == "MESH"]
-        out = []
+        out, unreachable = [], []
         for mesh_obj in meshes:
             if len(mesh_obj.material_slots) == 0:
                 mesh_obj.data.materials.append(None)
@@ -248,6 +253,12 @@ class BlenderRenderer(Renderer):
                 slot.link = "OBJECT"
                 slot.material = copy
                 out.append(copy)
+                if not make_tintable(copy):
+                    unreachable.append(f"'{original.name}' of '{mesh_obj.name}'")
+        if unreachable:
+            raise SpecError([self.plan.source.diagnostic(("actors", name, "color"),
+                f"a bound colour sets a Principled BSDF's base colour, but material {', '.join(unreachable)} has none: "
+                "give it a Principled BSDF in Blender, or bind another property")])
         return out
 
     # -- rendering ----------------------------------------------------------------------------------
