@@ -17,7 +17,8 @@ def run_dir(tmp_path_factory):
     out = tmp_path_factory.mktemp("runs")
     result = CliRunner().invoke(main, [
         "train", "Goalie-v0", "--steps", "256", "--envs", "2", "--eval-every", "128", "--eval-episodes", "2",
-        "--final-episodes", "2", "--set", "n_steps=64", "--set", "batch_size=64", "--out", str(out), "--no-progress",
+        "--final-episodes", "2", "--set", "n_steps=64", "--set", "batch_size=64", "--set", "learning_rate=lin_3e-4",
+        "--out", str(out), "--no-progress",
     ])
     assert result.exit_code == 0, result.output
     runs = list((out / "Goalie-v0").iterdir())
@@ -34,8 +35,47 @@ def test_train_writes_a_complete_run_folder(run_dir):
     assert -10 <= results["mean_reward"] <= 10 and 0 <= results["success_rate"] <= 1
     assert 15 <= results["mean_length"] <= 60  # Goalie episodes end when the ball crosses (~21 steps)
     config = json.loads((run_dir / "config.json").read_text())
-    assert config["config"]["hyperparams"] == {"n_steps": 64, "batch_size": 64}
+    assert config["config"]["hyperparams"] == {"n_steps": 64, "batch_size": 64, "learning_rate": "lin_3e-4"}
     assert list(iio.imread(run_dir / "plots" / "rewards.png").shape[2:]) in ([3], [4])
+
+
+def test_linear_schedule_lowers_the_learning_rate_over_the_run(run_dir):
+    from visualenv.plots import read_progress
+
+    rates = read_progress(run_dir / "logs")["train/learning_rate"]
+    rates = rates[~np.isnan(rates)]
+    # the first update comes after 128 of the run's 256 steps: lin_3e-4 is half way down (a constant would log 3e-4)
+    assert rates[0] == pytest.approx(1.5e-4)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--set", "lerning_rate=1e-4"], "PPO has no hyperparameter 'lerning_rate' (did you mean 'learning_rate'?"),
+    (["--set", "learning_rate=fast"], "expected a number or a linear schedule such as lin_3e-4"),
+    (["--set", "n_steps=abc"], "n_steps: expected a number (default 2048), got 'abc'"),
+    (["--algo", "dqn", "--set", "clip_range=0.2"], "DQN has no hyperparameter 'clip_range' (names: learning_rate, buffer_size"),
+])
+def test_bad_hyperparameters_fail_before_anything_starts(tmp_path, args, message):
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--steps", "64", "--no-progress", "--out", str(tmp_path / "runs"), *args])
+    assert result.exit_code == 1 and message in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "runs").exists()  # no empty run folder left behind
+
+
+def test_config_file_must_be_a_mapping(tmp_path):
+    bad = tmp_path / "hyper.yaml"
+    bad.write_text("- learning_rate: 1e-4\n")
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--config", str(bad), "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2 and "expected a mapping of hyperparameters" in result.output
+    bad.write_text("learning_rate: [1e-4\n")
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--config", str(bad), "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2 and "is not YAML" in result.output
+
+
+def test_algorithm_kwargs_makes_schedules_callable():
+    from visualenv.training import algorithm_kwargs
+
+    kwargs = algorithm_kwargs("ppo", {"learning_rate": "lin_1e-3", "clip_range": 0.2, "n_steps": 64})
+    assert kwargs["learning_rate"](1.0) == pytest.approx(1e-3) and kwargs["learning_rate"](0.25) == pytest.approx(2.5e-4)
+    assert kwargs["clip_range"] == 0.2 and kwargs["n_steps"] == 64
 
 
 def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir):
@@ -46,7 +86,7 @@ def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir)
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(run_dir), "--steps", "384", "--no-progress", "--set", "ent_coef=0.02"])
     assert result.exit_code == 0, result.output
     config = json.loads((run_dir / "config.json").read_text())
-    assert config["config"]["hyperparams"] == {"n_steps": 64, "batch_size": 64, "ent_coef": 0.02}
+    assert config["config"]["hyperparams"] == {"n_steps": 64, "batch_size": 64, "learning_rate": "lin_3e-4", "ent_coef": 0.02}
     assert config["resumes"][-1]["hyperparams"] == {"ent_coef": 0.02} and config["resumes"][-1]["command"]
     from stable_baselines3 import PPO
 

@@ -135,7 +135,7 @@ def _parse_value(text: str) -> Any:
 @click.option("--final-episodes", default=50, show_default=True, help="episodes of the best model's final evaluation")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
-@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4")
+@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run")
 @click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
 @click.option("--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)")
@@ -152,11 +152,17 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 
     from visualenv.registration import resolve
     from visualenv.spec.loader import load_spec
-    from visualenv.training import TrainConfig, new_run_dir, train as run_training
+    from visualenv.training import TrainConfig, algorithm_kwargs, new_run_dir, train as run_training
 
     hyper: dict[str, Any] = {}
     if config_file:
-        hyper.update(yaml.safe_load(Path(config_file).read_text()) or {})
+        try:
+            loaded = yaml.safe_load(Path(config_file).read_text()) or {}
+        except yaml.YAMLError as exc:
+            raise click.BadParameter(f"{config_file} is not YAML: {exc}", param_hint="--config") from None
+        if not isinstance(loaded, dict):
+            raise click.BadParameter(f"{config_file}: expected a mapping of hyperparameters (name: value), got a {type(loaded).__name__}", param_hint="--config")
+        hyper.update(loaded)
     for item in overrides:
         key, sep, value = item.partition("=")
         if not sep:
@@ -173,13 +179,12 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         saved = record["config"]
         config = TrainConfig(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyper},
                                 "progress": not no_progress})
-        run_dir = Path(resume_dir)
     else:
-        env_id = load_spec(resolve(spec)).spec.id
         config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
                              render=not state_only, hyperparams=hyper, progress=not no_progress)
-        run_dir = new_run_dir(out_root, env_id)
+    algorithm_kwargs(config.algo, config.hyperparams)  # a misspelt hyperparameter fails before a run folder or an env exists
+    run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
     click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "

@@ -63,6 +63,10 @@ class StepError(VisualEnvError):
     """A runtime fault (NaN, division by zero, math domain) while stepping an env."""
 
 
+class ConfigError(VisualEnvError):
+    """A training setting the algorithm cannot take (an unknown hyperparameter, a malformed schedule)."""
+
+
 class WorkerError(VisualEnvError):
     """A parallel env worker died or stopped answering."""
 

@@ -34,9 +34,12 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
+from visualenv.errors import ConfigError, did_you_mean
 from visualenv.vector import usable_cores
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
+SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
+SET_BY_TRAIN = ("policy", "env", "seed", "verbose", "tensorboard_log", "_init_setup_model")  # not hyperparameters
 
 
 @dataclass
@@ -68,6 +71,39 @@ def algorithm_class(name: str) -> Any:
     return classes[name]
 
 
+def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
+    """`hyperparams` as keyword arguments of the SB3 algorithm, checked before any env starts.
+
+    A misspelt name is an error listing the algorithm's names (SB3's ``load``
+    would set it silently). Schedules use rl-zoo's syntax: ``lin_3e-4`` decays
+    linearly from 3e-4 to 0 over the run.
+    """
+    import inspect
+
+    from stable_baselines3.common.utils import LinearSchedule
+
+    parameters = inspect.signature(algorithm_class(algo).__init__).parameters
+    known = [n for n in parameters if n != "self" and n not in SET_BY_TRAIN]
+    kwargs: dict[str, Any] = {}
+    for key, value in hyperparams.items():
+        if key not in known:
+            raise ConfigError(f"{algo.upper()} has no hyperparameter '{key}'" + did_you_mean(key, known))
+        default = parameters[key].default
+        if isinstance(value, str) and isinstance(default, (int, float)) and key not in SCHEDULES:
+            raise ConfigError(f"{key}: expected a {'true/false' if isinstance(default, bool) else 'number'} (default {default}), got {value!r}")
+        if key in SCHEDULES and not isinstance(value, (int, float)) and value is not None:
+            text = str(value)
+            try:
+                start = float(text.removeprefix("lin_")) if text.startswith("lin_") else None
+            except ValueError:
+                start = None
+            if start is None:
+                raise ConfigError(f"{key}: expected a number or a linear schedule such as lin_3e-4 (from 3e-4 down to 0), got {text!r}")
+            value = LinearSchedule(start, 0.0, 1.0)
+        kwargs[key] = value
+    return kwargs
+
+
 def new_run_dir(root: str | Path, env_id: str) -> Path:
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     run = Path(root) / env_id / stamp
@@ -95,8 +131,9 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     from visualenv.vector import make_sb3_vec
 
     spec_path = str(resolve(config.spec))
-    run_dir.mkdir(parents=True, exist_ok=True)
     changes = dict(changes or {})
+    kwargs, changed_kwargs = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes)
+    run_dir.mkdir(parents=True, exist_ok=True)
     if not resume:
         record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path}
     else:
@@ -119,10 +156,13 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     stopper = _StopOnSignal()
     try:
         if resume and latest.exists():
-            model = algo.load(latest, env=train_env, **changes)  # SB3 sets these on the model before building it
+            model = algo.load(latest, env=train_env, **changed_kwargs)  # SB3 sets these on the model before building it
             done = model.num_timesteps
         else:
-            model = algo(config.policy, train_env, seed=config.seed, verbose=0, **config.hyperparams)
+            try:
+                model = algo(config.policy, train_env, seed=config.seed, verbose=0, **kwargs)
+            except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
+                raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
             done = 0
         model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard"]))
         per_env = max(1, config.eval_every // config.envs)
