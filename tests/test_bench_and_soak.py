@@ -27,6 +27,13 @@ def test_bench_prints_every_figure(tmp_path):
     assert parallel["rss_final_mb"] > 100 and parallel["rss_total_mb"] >= 2 * parallel["rss_final_mb"] - 1  # each worker holds a Blender
 
 
+def test_counts_out_of_range_are_refused_before_anything_runs():
+    for args in (["bench", "VisualCartPole-v0", "--steps", "0"], ["bench", "VisualCartPole-v0", "--workers", "-1"],
+                 ["play", "Goalie-v0", "--episodes", "0"], ["train", "Goalie-v0", "--envs", "0"], ["preview", "Goalie-v0", "--steps", "0"]):
+        result = CliRunner().invoke(main, args)
+        assert result.exit_code == 2 and "is not in the range" in result.output, args
+
+
 def test_step_times_pairs_each_step_with_its_render_calls():
     env = StepTimes(visualenv.make("VisualCartPole-v0"))
     try:

@@ -115,6 +115,26 @@ def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
 
 
+def test_play_refuses_what_it_cannot_do_before_playing(run_dir, tmp_path):
+    model = str(run_dir / "best_model.zip")
+    wrong_format = CliRunner().invoke(main, ["play", "Goalie-v0", "--episodes", "1", "--record", str(tmp_path / "play.avi")])
+    assert wrong_format.exit_code == 2 and "expected a file ending in .gif or .mp4" in wrong_format.output
+    other_env = CliRunner().invoke(main, ["play", "Hover2D-v0", "--model", model, "--episodes", "1"])
+    assert other_env.exit_code == 1 and "was trained on observations (4, 100, 100) and actions Discrete(2)" in other_env.output
+    assert "actions Discrete(4)" in other_env.output  # Hover2D's four pulses
+    junk = tmp_path / "junk.zip"
+    junk.write_text("not a model")
+    not_a_model = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(junk), "--episodes", "1"])
+    assert not_a_model.exit_code == 1 and f"cannot load {junk} as a PPO model" in not_a_model.output
+    for result in (other_env, not_a_model):
+        assert isinstance(result.exception, SystemExit)  # an error line and an exit code, not an escaped exception
+
+
+def test_resume_needs_a_run_folder(tmp_path):
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(tmp_path)])
+    assert result.exit_code == 2 and "is not a run folder of `visualenv train`" in result.output
+
+
 def test_state_only_training_runs_without_warnings(tmp_path):
     import warnings
 

@@ -106,7 +106,7 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
 @main.command()
 @click.argument("spec", type=click.Path())
 @click.option("--out", "out_dir", default="frames", show_default=True, type=click.Path(file_okay=False))
-@click.option("--steps", default=20, show_default=True, help="steps of the random episode")
+@click.option("--steps", default=20, show_default=True, type=click.IntRange(min=1), help="steps of the random episode")
 @click.option("--seed", default=0, show_default=True)
 @_friendly
 def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
@@ -115,6 +115,15 @@ def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
 
     paths = preview_frames(spec, out_dir, steps=steps, seed=seed)
     click.echo(f"wrote {len(paths)} frames to {out_dir}/")
+
+
+def _video_path(value: str | None) -> str | None:
+    """Refuse a --record format before the episodes run, not after."""
+    from visualenv.play import VIDEO_FORMATS
+
+    if value is not None and Path(value).suffix.lower() not in VIDEO_FORMATS:
+        raise click.BadParameter(f"{value}: expected a file ending in {' or '.join(VIDEO_FORMATS)}", param_hint="--record")
+    return value
 
 
 def _parse_value(text: str) -> Any:
@@ -127,12 +136,12 @@ def _parse_value(text: str) -> Any:
 @main.command()
 @click.argument("spec")
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
-@click.option("--steps", type=int, default=None, help="total env steps  [default: 200000, or the resumed run's]")
-@click.option("--envs", default=2, show_default=True, help="parallel envs, one Blender process each")
-@click.option("--frame-stack", default=4, show_default=True)
-@click.option("--eval-every", default=10_000, show_default=True, help="env steps between evaluations")
-@click.option("--eval-episodes", default=10, show_default=True)
-@click.option("--final-episodes", default=50, show_default=True, help="episodes of the best model's final evaluation")
+@click.option("--steps", type=click.IntRange(min=1), default=None, help="total env steps  [default: 200000, or the resumed run's]")
+@click.option("--envs", default=2, show_default=True, type=click.IntRange(min=1), help="parallel envs, one Blender process each")
+@click.option("--frame-stack", default=4, show_default=True, type=click.IntRange(min=1), help="frames per observation (1: no stacking)")
+@click.option("--eval-every", default=10_000, show_default=True, type=click.IntRange(min=1), help="env steps between evaluations")
+@click.option("--eval-episodes", default=10, show_default=True, type=click.IntRange(min=1))
+@click.option("--final-episodes", default=50, show_default=True, type=click.IntRange(min=1), help="episodes of the best model's final evaluation")
 @click.option("--seed", default=0, show_default=True)
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run")
@@ -175,8 +184,10 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         if fixed:
             raise click.UsageError(f"{', '.join(fixed).replace('--out-root', '--out')}: a resumed run keeps its settings; "
                                    "only --steps, --set and --config change on --resume")
-        record = json.loads((Path(resume_dir) / "config.json").read_text())
-        saved = record["config"]
+        try:
+            saved = json.loads((Path(resume_dir) / "config.json").read_text())["config"]
+        except (OSError, ValueError, KeyError) as exc:
+            raise click.BadParameter(f"{resume_dir} is not a run folder of `visualenv train` (config.json: {exc})", param_hint="--resume") from None
         config = TrainConfig(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyper},
                                 "progress": not no_progress})
     else:
@@ -196,9 +207,10 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 @click.argument("spec")
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False), help="a trained model (.zip); default: random actions")
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
-@click.option("--episodes", default=3, show_default=True)
+@click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
 @click.option("--seed", default=0, show_default=True)
-@click.option("--record", type=click.Path(dir_okay=False), help="save a .gif or .mp4 of the view beside the observation")
+@click.option("--record", type=click.Path(dir_okay=False), callback=lambda ctx, param, value: _video_path(value),
+              help="save a .gif or .mp4 of the view beside the observation")
 @click.option("--view", "view_preset", type=click.Choice(["fast", "quality"]), default=None,
               help="render preset of the recorded view (default: the spec's; 'fast' records in seconds)")
 @click.option("--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels")
@@ -220,13 +232,13 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 
 @main.command()
 @click.argument("specs", nargs=-1, required=True)
-@click.option("--steps", default=500, show_default=True, help="measured env steps (after a warm-up)")
-@click.option("--workers", default=2, show_default=True, help="parallel envs for the parallel figure (0: skip)")
-@click.option("--threads", type=int, default=None, help="render threads of the single env (default: all cores)")
+@click.option("--steps", default=500, show_default=True, type=click.IntRange(min=1), help="measured env steps (after a warm-up)")
+@click.option("--workers", default=2, show_default=True, type=click.IntRange(min=0), help="parallel envs for the parallel figure (0: skip)")
+@click.option("--threads", type=click.IntRange(min=1), default=None, help="render threads of the single env (default: all cores)")
 @click.option("--readback", type=click.Choice(READBACKS), default="auto", show_default=True,
               help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
 @click.option("--pin", is_flag=True, help="pin each parallel worker to its own core (compare with and without on your machine)")
-@click.option("--soak", "soak_steps", type=int, default=0, help="also run this many steps and report memory growth (e.g. 50000)")
+@click.option("--soak", "soak_steps", type=click.IntRange(min=0), default=0, help="also run this many steps and report memory growth (e.g. 50000)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, readback: str, pin: bool, soak_steps: int,

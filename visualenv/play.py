@@ -9,6 +9,9 @@ from typing import Any
 import numpy as np
 
 from visualenv.build import side_by_side
+from visualenv.errors import VisualEnvError
+
+VIDEO_FORMATS = (".gif", ".mp4")
 
 
 @dataclass
@@ -48,20 +51,24 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     from visualenv.spec import load_spec
     from visualenv.wrappers import FrameStack
 
-    loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
-    env: Any = VisualEnv(loaded, render_mode="rgb_array")
+    if record and Path(record).suffix.lower() not in VIDEO_FORMATS:
+        raise VisualEnvError(f"cannot record {record}: expected a file ending in {' or '.join(VIDEO_FORMATS)}")
     model = None
     if model_path:
         from visualenv.training import algorithm_class
 
-        model = algorithm_class(algo).load(model_path, device="cpu")
-        from stable_baselines3.common.preprocessing import is_image_space_channels_first
-
-        space = model.observation_space
-        have = env.observation_space.shape[-1]
-        want = space.shape[0] if is_image_space_channels_first(space) else space.shape[-1]
-        if want != have and want % have == 0:
-            env = FrameStack(env, want // have)
+        try:
+            model = algorithm_class(algo).load(model_path, device="cpu")
+        except Exception as exc:  # SB3 raises whatever its unpickling met: report it, whatever it is
+            raise VisualEnvError(f"cannot load {model_path} as a {algo.upper()} model: {exc}") from None
+    loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
+    env: Any = VisualEnv(loaded, render_mode="rgb_array")
+    if model is not None:
+        try:
+            env = _stacked_like(env, model, model_path)
+        except BaseException:
+            env.close()
+            raise
     env.action_space.seed(seed)
     frames: list[np.ndarray] = []
     results = []
@@ -85,6 +92,26 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     if record and frames:
         save_video(frames, record, fps)
     return results
+
+
+def _stacked_like(env: Any, model: Any, model_path: str) -> Any:
+    """`env` with the frame stack the model was trained on; a model of another env is an error, not a crash mid-episode."""
+    from stable_baselines3.common.preprocessing import is_image_space_channels_first
+
+    from visualenv.wrappers import FrameStack
+
+    space = model.observation_space
+    have = env.observation_space.shape
+    want = space.shape[0] if is_image_space_channels_first(space) else space.shape[-1]
+    if len(have) == len(space.shape) and want != have[-1] and want % have[-1] == 0:
+        env = FrameStack(env, want // have[-1])
+    shape = env.observation_space.shape
+    fits = space.shape in (shape, shape[-1:] + shape[:-1])  # SB3 also takes channel-last images for a channel-first model
+    actions, ours = model.action_space, env.action_space
+    if not fits or type(actions) is not type(ours) or actions.shape != ours.shape or getattr(actions, "n", None) != getattr(ours, "n", None):
+        raise VisualEnvError(f"{model_path} was trained on observations {space.shape} and actions {actions}; "
+                             f"this env has observations {env.observation_space.shape} and actions {ours}")
+    return env
 
 
 def save_video(frames: list[np.ndarray], path: str | Path, fps: int) -> Path:
