@@ -27,7 +27,10 @@ def test_bench_prints_every_figure(tmp_path):
     assert parallel["rss_final_mb"] > 100 and parallel["rss_total_mb"] >= 2 * parallel["rss_final_mb"] - 1  # each worker holds a Blender
 
 
-def test_counts_out_of_range_are_refused_before_anything_runs():
+def test_bad_arguments_are_refused_before_anything_runs(tmp_path):
+    (tmp_path / "afile").write_text("")
+    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--json", str(tmp_path / "afile" / "figures.json")])
+    assert result.exit_code == 2 and "cannot write" in result.output and "env steps/s" not in result.output
     for args in (["bench", "VisualCartPole-v0", "--steps", "0"], ["bench", "VisualCartPole-v0", "--workers", "-1"],
                  ["play", "Goalie-v0", "--episodes", "0"], ["train", "Goalie-v0", "--envs", "0"], ["preview", "Goalie-v0", "--steps", "0"]):
         result = CliRunner().invoke(main, args)

@@ -251,6 +251,12 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
     from visualenv.bench import as_dict, bench_one
     from visualenv.vector import usable_cores
 
+    if json_out:  # a figure file that cannot be written is refused now, not after minutes of measuring
+        try:
+            Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+            Path(json_out).touch()
+        except OSError as exc:
+            raise click.BadParameter(f"cannot write {json_out}: {exc.strerror}", param_hint="--json") from None
     cores = len(usable_cores())
     machine_cores = psutil.cpu_count() or cores
     click.echo(f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"
