@@ -135,6 +135,49 @@ def test_resume_needs_a_run_folder(tmp_path):
     assert result.exit_code == 2 and "is not a run folder of `visualenv train`" in result.output
 
 
+def multi_camera_cartpole(tmp_path, side: str) -> str:
+    """VisualCartPole with a Dict observation: the usual grayscale camera and a small RGB one."""
+    from visualenv.registration import resolve
+
+    text = resolve("VisualCartPole-v0").read_text().replace("id: VisualCartPole-v0", "id: MultiCart-v0").replace(
+        "  camera: Camera\n  resolution: [100, 100]\n  color: grayscale\n",
+        f"  cameras:\n    front: {{camera: Camera, resolution: [64, 64]}}\n    side: {{camera: Camera, resolution: {side}, color: rgb}}\n")
+    assert "cameras:" in text
+    path = tmp_path / "multi.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+def test_multi_camera_specs_train_and_play(tmp_path):
+    spec = multi_camera_cartpole(tmp_path, "[40, 40]")
+    out = tmp_path / "runs"
+    result = CliRunner().invoke(main, ["train", spec, "--steps", "64", "--envs", "2", "--eval-every", "64", "--eval-episodes", "1",
+                                       "--final-episodes", "1", "--set", "n_steps=32", "--set", "batch_size=32", "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    (run,) = (out / "MultiCart-v0").iterdir()
+    from stable_baselines3 import PPO
+
+    model = PPO.load(run / "best_model.zip")
+    assert type(model.policy).__name__ == "MultiInputActorCriticPolicy"
+    assert {k: s.shape for k, s in model.observation_space.spaces.items()} == {"front": (4, 64, 64), "side": (12, 40, 40)}
+    gif = tmp_path / "play.gif"
+    played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model.zip"), "--episodes", "1", "--record", str(gif),
+                                       "--view", "fast", "--view-size", "64"])
+    assert played.exit_code == 0, played.output
+    frame = iio.imread(gif)[0]
+    assert frame.shape[1] == 64 + 4 + 40 + 4 + 64  # both cameras' newest frames and the 64 px view, with gaps
+    side = frame[:40, 64 + 4: 64 + 4 + 40].astype(int)
+    assert (side[..., 0] - side[..., 2] > 40).any()  # the red cart in colour: the newest RGB frame, not one channel of the stack
+
+
+def test_images_too_small_for_the_cnn_are_located_before_anything_starts(tmp_path):
+    spec = multi_camera_cartpole(tmp_path, "[32, 24]")
+    result = CliRunner().invoke(main, ["train", spec, "--steps", "64", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2, result.output
+    assert "multi.yaml:" in result.output and "observation.cameras.side.resolution: 32x24 is too small for the CNN policy" in result.output
+    assert not (tmp_path / "runs").exists()
+
+
 def test_state_only_training_runs_without_warnings(tmp_path):
     import warnings
 

@@ -161,7 +161,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 
     from visualenv.registration import resolve
     from visualenv.spec.loader import load_spec
-    from visualenv.training import TrainConfig, algorithm_kwargs, new_run_dir, train as run_training
+    from visualenv.training import TrainConfig, check_config, new_run_dir, train as run_training
 
     hyper: dict[str, Any] = {}
     if config_file:
@@ -194,7 +194,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
                              render=not state_only, hyperparams=hyper, progress=not no_progress)
-    algorithm_kwargs(config.algo, config.hyperparams)  # a misspelt hyperparameter fails before a run folder or an env exists
+    check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)

@@ -10,6 +10,7 @@ import numpy as np
 
 from visualenv.build import side_by_side
 from visualenv.errors import VisualEnvError
+from visualenv.wrappers import subspaces
 
 VIDEO_FORMATS = (".gif", ".mp4")
 
@@ -78,7 +79,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
             ret, length = 0.0, 0
             while True:
                 if record and len(frames) < max_frames:
-                    latest = obs[..., -1:] if model is not None and obs.shape[-1] > 1 and isinstance(env, FrameStack) else obs
+                    latest = env.latest if isinstance(env, FrameStack) else obs
                     frames.append(side_by_side(latest, env.render()))
                 action = model.predict(obs, deterministic=True)[0] if model is not None else env.action_space.sample()
                 obs, reward, terminated, truncated, info = env.step(action)
@@ -96,22 +97,43 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
 
 def _stacked_like(env: Any, model: Any, model_path: str) -> Any:
     """`env` with the frame stack the model was trained on; a model of another env is an error, not a crash mid-episode."""
-    from stable_baselines3.common.preprocessing import is_image_space_channels_first
-
     from visualenv.wrappers import FrameStack
 
-    space = model.observation_space
-    have = env.observation_space.shape
-    want = space.shape[0] if is_image_space_channels_first(space) else space.shape[-1]
-    if len(have) == len(space.shape) and want != have[-1] and want % have[-1] == 0:
-        env = FrameStack(env, want // have[-1])
-    shape = env.observation_space.shape
-    fits = space.shape in (shape, shape[-1:] + shape[:-1])  # SB3 also takes channel-last images for a channel-first model
+    want, have = model.observation_space, env.observation_space
+    depth = next((w // h for w, h in _channel_pairs(want, have) if w != h and w % h == 0), 1)
+    if depth > 1:
+        env = FrameStack(env, depth)
     actions, ours = model.action_space, env.action_space
-    if not fits or type(actions) is not type(ours) or actions.shape != ours.shape or getattr(actions, "n", None) != getattr(ours, "n", None):
-        raise VisualEnvError(f"{model_path} was trained on observations {space.shape} and actions {actions}; "
-                             f"this env has observations {env.observation_space.shape} and actions {ours}")
+    if not _fits(want, env.observation_space) or type(actions) is not type(ours) or actions.shape != ours.shape \
+            or getattr(actions, "n", None) != getattr(ours, "n", None):
+        raise VisualEnvError(f"{model_path} was trained on observations {_shapes(want)} and actions {actions}; "
+                             f"this env has observations {_shapes(env.observation_space)} and actions {ours}")
     return env
+
+
+def _channel_pairs(want: Any, have: Any) -> list[tuple[int, int]]:
+    """(model's channels, env's channels) of each image both have: their ratio is the frame stack."""
+    from stable_baselines3.common.preprocessing import is_image_space_channels_first
+
+    ours = subspaces(have)
+    pairs = []
+    for key, w in subspaces(want).items():
+        h = ours.get(key)
+        if h is not None and len(w.shape or ()) == 3 and len(h.shape or ()) == 3:
+            pairs.append((w.shape[0] if is_image_space_channels_first(w) else w.shape[-1], h.shape[-1]))
+    return pairs
+
+
+def _fits(want: Any, have: Any) -> bool:
+    """Same keys and shapes; SB3 also takes channel-last images for a channel-first model."""
+    w, h = subspaces(want), subspaces(have)
+    return w.keys() == h.keys() and all(
+        w[k].shape is not None and h[k].shape is not None and w[k].shape in (h[k].shape, h[k].shape[-1:] + h[k].shape[:-1]) for k in w)
+
+
+def _shapes(space: Any) -> Any:
+    by_key = subspaces(space)
+    return by_key[""].shape if list(by_key) == [""] else {k: s.shape for k, s in by_key.items()}
 
 
 def save_video(frames: list[np.ndarray], path: str | Path, fps: int) -> Path:

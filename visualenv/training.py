@@ -34,8 +34,9 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
-from visualenv.errors import ConfigError, did_you_mean
+from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.vector import usable_cores
+from visualenv.wrappers import subspaces
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
@@ -57,8 +58,12 @@ class TrainConfig:
     hyperparams: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
 
-    @property
-    def policy(self) -> str:
+    def policy(self, observation_space: Any) -> str:
+        """SB3's policy for the env: images through a CNN, several cameras through one CNN each, a state vector through an MLP."""
+        from gymnasium import spaces
+
+        if isinstance(observation_space, spaces.Dict):
+            return "MultiInputPolicy"
         return "CnnPolicy" if self.render else "MlpPolicy"
 
 
@@ -123,7 +128,6 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     """
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.preprocessing import is_image_space
     from stable_baselines3.common.vec_env import VecTransposeImage
 
     from visualenv.build import versions
@@ -132,7 +136,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
 
     spec_path = str(resolve(config.spec))
     changes = dict(changes or {})
-    kwargs, changed_kwargs = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes)
+    kwargs, changed_kwargs = check_config(config, changes)
     run_dir.mkdir(parents=True, exist_ok=True)
     if not resume:
         record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path}
@@ -146,10 +150,14 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
         _keep_earlier_logs(run_dir / "logs")
     train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
                              monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
-    eval_env = make_sb3_vec(spec_path, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **_vec_kwargs(config))
-    if is_image_space(eval_env.observation_space):
-        eval_env = VecTransposeImage(eval_env)  # as SB3 does to the training env
-    eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
+    try:
+        eval_env = make_sb3_vec(spec_path, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **_vec_kwargs(config))
+        if _channels_last_images(eval_env.observation_space):
+            eval_env = VecTransposeImage(eval_env)  # as SB3 does to the training env
+        eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
+    except BaseException:
+        train_env.close()
+        raise
     algo = algorithm_class(config.algo)
     latest = run_dir / "checkpoints" / "latest.zip"
     started = time.perf_counter()
@@ -160,7 +168,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
             done = model.num_timesteps
         else:
             try:
-                model = algo(config.policy, train_env, seed=config.seed, verbose=0, **kwargs)
+                model = algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
             except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
                 raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
             done = 0
@@ -182,6 +190,9 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
             model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume)
         model.save(latest)
         model.save(run_dir / "final_model.zip")
+    except BaseException:
+        eval_env.close()
+        raise
     finally:
         train_env.close()
     wall = time.perf_counter() - started
@@ -197,6 +208,43 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
 
     training_plots(run_dir)
     return results
+
+
+NATURE_CNN_MIN_SIZE = 36  # SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
+
+
+def check_cnn_input(loaded: Any, hyperparams: dict[str, Any]) -> None:
+    """Observations too small for SB3's default CNN are a located error, not a torch RuntimeError at the first update."""
+    observation = loaded.spec.observation
+    if observation is None or "features_extractor_class" in (hyperparams.get("policy_kwargs") or {}):
+        return
+    problems = []
+    for key, view in observation.views().items():
+        width, height = view.resolution
+        if min(width, height) < NATURE_CNN_MIN_SIZE:
+            path = ("observation", "resolution") if observation.cameras is None else ("observation", "cameras", key, "resolution")
+            problems.append(loaded.source.diagnostic(path, f"{width}x{height} is too small for the CNN policy of `visualenv train` "
+                                                           f"(SB3's NatureCNN): it needs at least {NATURE_CNN_MIN_SIZE}x{NATURE_CNN_MIN_SIZE}"))
+    if problems:
+        raise SpecError(problems)
+
+
+def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
+    """What can be wrong with a run before any env starts; the algorithm's keyword arguments (all, and the changed ones)."""
+    from visualenv.registration import resolve
+    from visualenv.spec import load_spec
+
+    kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})
+    if config.render:
+        check_cnn_input(load_spec(resolve(config.spec)), config.hyperparams)
+    return kwargs, changed
+
+
+def _channels_last_images(space: Any) -> bool:
+    """Whether SB3 wraps an env of this space in VecTransposeImage (its rule in ``BaseAlgorithm._wrap_env``)."""
+    from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
+
+    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())
 
 
 def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:

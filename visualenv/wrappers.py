@@ -26,6 +26,11 @@ def _image_box(space: spaces.Space) -> spaces.Box:
     return space
 
 
+def subspaces(space: spaces.Space) -> dict[str, spaces.Space]:
+    """The spaces of a Dict observation by key; a single observation under the key ''."""
+    return dict(space.spaces) if isinstance(space, spaces.Dict) else {"": space}
+
+
 def _map_space(space: spaces.Space, fn: Any) -> spaces.Space:
     if isinstance(space, spaces.Dict):
         return spaces.Dict({k: fn(_image_box(s)) for k, s in space.spaces.items()})
@@ -97,6 +102,11 @@ class FrameStack(gym.Wrapper):
             env.observation_space, lambda s: spaces.Box(0, 255, s.shape[:2] + (s.shape[2] * depth,), np.uint8)
         )
         self._frames: deque[Any] = deque(maxlen=depth)
+
+    @property
+    def latest(self) -> Any:
+        """The newest frame as the env gave it (what a recording shows)."""
+        return self._frames[-1]
 
     def _stacked(self) -> Any:
         first = self._frames[0]
