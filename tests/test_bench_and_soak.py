@@ -31,8 +31,14 @@ def test_bad_arguments_are_refused_before_anything_runs(tmp_path):
     (tmp_path / "afile").write_text("")
     result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--json", str(tmp_path / "afile" / "figures.json")])
     assert result.exit_code == 2 and "cannot write" in result.output and "env steps/s" not in result.output
+    for args in (["build", "Goalie-v0", "--out"], ["preview", "Goalie-v0", "--out"], ["train", "Goalie-v0", "--out"]):
+        result = CliRunner().invoke(main, [*args, str(tmp_path / "afile" / "out")])
+        assert result.exit_code == 1 and "cannot create the folder" in result.output and "Not a directory" in result.output, args
+    result = CliRunner().invoke(main, ["play", "Goalie-v0", "--record", str(tmp_path / "afile" / "play.gif")])
+    assert result.exit_code == 2 and "cannot create the folder" in result.output
     for args in (["bench", "VisualCartPole-v0", "--steps", "0"], ["bench", "VisualCartPole-v0", "--workers", "-1"],
-                 ["play", "Goalie-v0", "--episodes", "0"], ["train", "Goalie-v0", "--envs", "0"], ["preview", "Goalie-v0", "--steps", "0"]):
+                 ["play", "Goalie-v0", "--episodes", "0"], ["train", "Goalie-v0", "--envs", "0"], ["preview", "Goalie-v0", "--steps", "0"],
+                 ["build", "Goalie-v0", "--seed", "-1"], ["play", "Goalie-v0", "--seed", "-1"]):
         result = CliRunner().invoke(main, args)
         assert result.exit_code == 2 and "is not in the range" in result.output, args
 

@@ -4,11 +4,13 @@ import json
 from pathlib import Path
 
 import numpy as np
+import pytest
 from click.testing import CliRunner
 from PIL import Image
 
 import visualenv
 from visualenv.cli import main
+from visualenv.errors import SpecError
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -29,6 +31,17 @@ def test_build_writes_env_json_blend_and_preview_then_loads(tmp_path):
     obs, _ = env.reset(seed=1)
     assert obs.shape == (100, 100, 1) and obs.dtype == np.uint8
     env.close()
+
+
+def test_a_broken_build_record_is_named(tmp_path):
+    for i, (text, message) in enumerate([("{bad", "not a build record of `visualenv build` (JSONDecodeError"), ('{"id": "X"}', "(KeyError: 'source')"),
+                          ('{"source": "/nowhere/gone.yaml"}', "source: the spec it was built from is gone: /nowhere/gone.yaml")]):
+        folder = tmp_path / str(i)
+        folder.mkdir()
+        (folder / "env.json").write_text(text)
+        with pytest.raises(SpecError, match="env.json") as info:
+            visualenv.make(folder)
+        assert message in str(info.value)
 
 
 def test_preview_writes_frames_of_a_random_episode(tmp_path):

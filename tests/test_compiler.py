@@ -10,6 +10,7 @@ from gymnasium.utils.env_checker import check_env
 
 import visualenv
 from visualenv import SpecError, VisualEnv, load_spec_text
+from visualenv.errors import StepError
 
 
 def env_from(text: str, name: str = "t.yaml", **kwargs) -> VisualEnv:
@@ -248,6 +249,38 @@ def test_python_dynamics_escape_hatch():
     """)
     env.reset(seed=0)
     assert env.step(0)[4]["state"]["x"] == 3.0
+
+
+@pytest.mark.parametrize("function, message", [
+    ("returns_none", "the function returned NoneType, expected a dict of new state values (state: x)"),
+    ("returns_text", "the function returned x='abc', expected a number"),
+    ("returns_a_typo", "the function returned 'xx', which is not state (did you mean 'x'?"),
+    ("one_argument", "the function raised TypeError: one_argument() takes 1 positional argument but 4 were given"),
+])
+def test_python_dynamics_mistakes_are_located_faults(function, message):
+    env = env_from(f"""
+        id: Hook-v0
+        state: {{x: {{init: 0}}}}
+        actions: {{discrete: [{{push: 1}}]}}
+        dynamics: {{python: "tests.fixtures.dynamics_hook:{function}"}}
+    """)
+    env.reset(seed=0)
+    with pytest.raises(StepError) as info:
+        env.step(0)
+    assert f"dynamics.python = 'tests.fixtures.dynamics_hook:{function}': {message}" in str(info.value)
+    assert "(step 0; values: x=0" in str(info.value)
+
+
+def test_python_dynamics_values_become_floats():
+    env = env_from("""
+        id: Hook-v0
+        state: {x: {init: 0}}
+        actions: {discrete: [{push: 1}]}
+        dynamics: {python: "tests.fixtures.dynamics_hook:keeps_ints"}
+    """)
+    env.reset(seed=0)
+    x = env.step(0)[4]["state"]["x"]
+    assert x == 2.0 and type(x) is float
 
 
 def test_spec_without_observation_is_state_only_even_when_render_requested():

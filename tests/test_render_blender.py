@@ -367,6 +367,13 @@ def test_missing_texture_image_is_located(tmp_path):
     assert info.value.diagnostics[0].path == "scene.objects.Box.material.texture.image"
 
 
+def test_an_object_parented_to_itself_is_located(tmp_path):
+    # a longer loop is in tests/bad_specs/build_parent_loop.yaml; Blender itself raises a TypeError for this one
+    with pytest.raises(SpecError, match=r"parents form a loop \(E1 -> E1\)") as info:
+        make_env(tmp_path, objects=OBJECTS + "    E1: {empty: true, parent: E1}\n").renderer
+    assert info.value.diagnostics[0].path == "scene.objects.E1.parent" and info.value.diagnostics[0].line
+
+
 def test_same_values_give_identical_frames(env):
     a = observe(env, x=0.3)
     b = observe(env, x=0.3)

@@ -22,6 +22,7 @@ from typing import Any
 import numpy as np
 from PIL import Image
 
+from visualenv.errors import VisualEnvError
 from visualenv.registration import resolve
 
 ASCII_RAMP = " .:-=+*#%@"
@@ -59,9 +60,8 @@ def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0,
     source = resolve(spec)
     loaded = load_spec(source)
     options: dict[str, Any] = {"device": device} if device else {}
+    out_root = make_dir(Path(out_dir))
     env = VisualEnv(loaded, render_mode="rgb_array", renderer_options=options or None)
-    out_root = Path(out_dir)
-    out_root.mkdir(parents=True, exist_ok=True)
     final = out_root / loaded.spec.id
     tmp = Path(tempfile.mkdtemp(prefix=f".{loaded.spec.id}.", dir=out_root))
     try:
@@ -143,14 +143,23 @@ def ascii_art(image: np.ndarray, width: int = 50) -> str:
     return "\n".join("".join(ASCII_RAMP[i] for i in row) for row in idx)
 
 
+def make_dir(path: Path) -> Path:
+    """``mkdir -p`` that reports a folder it cannot make as a user error, before any work is done."""
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise VisualEnvError(f"cannot create the folder {path}: {exc.strerror or exc}") from None
+    return path
+
+
 def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0) -> list[Path]:
     """Frames of a random-action episode (observation beside the view), as PNGs."""
     from visualenv.compiler.env import VisualEnv
     from visualenv.spec.loader import load_spec
 
-    env = VisualEnv(load_spec(resolve(spec)), render_mode="rgb_array")
-    out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    loaded = load_spec(resolve(spec))
+    out = make_dir(Path(out_dir))
+    env = VisualEnv(loaded, render_mode="rgb_array")
     paths = []
     try:
         obs, _ = env.reset(seed=seed)

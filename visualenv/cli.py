@@ -81,7 +81,7 @@ def schema() -> None:
 @main.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
 @click.option("--out", "out_dir", default="build", show_default=True, type=click.Path(file_okay=False), help="parent folder of the build")
-@click.option("--seed", default=0, show_default=True, help="seed of the previewed reset")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="seed of the previewed reset")
 @click.option("--device", type=click.Choice(["cpu", "gpu", "auto"]), default=None, help="override render.device")
 @click.option("--quiet", is_flag=True, help="do not print the observation preview")
 @_friendly
@@ -107,7 +107,7 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
 @click.argument("spec", type=click.Path())
 @click.option("--out", "out_dir", default="frames", show_default=True, type=click.Path(file_okay=False))
 @click.option("--steps", default=20, show_default=True, type=click.IntRange(min=1), help="steps of the random episode")
-@click.option("--seed", default=0, show_default=True)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @_friendly
 def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
     """Save a few frames (observation beside the high-res view) of a random episode."""
@@ -118,11 +118,18 @@ def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
 
 
 def _video_path(value: str | None) -> str | None:
-    """Refuse a --record format before the episodes run, not after."""
+    """Refuse a --record file before the episodes run, not after."""
+    from visualenv.build import make_dir
     from visualenv.play import VIDEO_FORMATS
 
-    if value is not None and Path(value).suffix.lower() not in VIDEO_FORMATS:
+    if value is None:
+        return None
+    if Path(value).suffix.lower() not in VIDEO_FORMATS:
         raise click.BadParameter(f"{value}: expected a file ending in {' or '.join(VIDEO_FORMATS)}", param_hint="--record")
+    try:
+        make_dir(Path(value).parent)
+    except VisualEnvError as exc:
+        raise click.BadParameter(str(exc), param_hint="--record") from None
     return value
 
 
@@ -142,7 +149,7 @@ def _parse_value(text: str) -> Any:
 @click.option("--eval-every", default=10_000, show_default=True, type=click.IntRange(min=1), help="env steps between evaluations")
 @click.option("--eval-episodes", default=10, show_default=True, type=click.IntRange(min=1))
 @click.option("--final-episodes", default=50, show_default=True, type=click.IntRange(min=1), help="episodes of the best model's final evaluation")
-@click.option("--seed", default=0, show_default=True)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run")
 @click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
@@ -208,7 +215,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 @click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False), help="a trained model (.zip); default: random actions")
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
-@click.option("--seed", default=0, show_default=True)
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--record", type=click.Path(dir_okay=False), callback=lambda ctx, param, value: _video_path(value),
               help="save a .gif or .mp4 of the view beside the observation")
 @click.option("--view", "view_preset", type=click.Choice(["fast", "quality"]), default=None,
@@ -252,11 +259,13 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
     from visualenv.vector import usable_cores
 
     if json_out:  # a figure file that cannot be written is refused now, not after minutes of measuring
+        from visualenv.build import make_dir
+
         try:
-            Path(json_out).parent.mkdir(parents=True, exist_ok=True)
+            make_dir(Path(json_out).parent)
             Path(json_out).touch()
-        except OSError as exc:
-            raise click.BadParameter(f"cannot write {json_out}: {exc.strerror}", param_hint="--json") from None
+        except (OSError, VisualEnvError) as exc:
+            raise click.BadParameter(f"cannot write {json_out}: {getattr(exc, 'strerror', None) or exc}", param_hint="--json") from None
     cores = len(usable_cores())
     machine_cores = psutil.cpu_count() or cores
     click.echo(f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"

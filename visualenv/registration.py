@@ -49,8 +49,14 @@ def resolve(target: str | os.PathLike[str]) -> Path:
     """A spec file for `target`: a spec path, a build folder (its env.json), or an id."""
     path = Path(target)
     if path.is_dir() and (path / "env.json").is_file():
-        record = json.loads((path / "env.json").read_text())
-        return Path(record["source"])
+        record_file = path / "env.json"
+        try:
+            source = Path(json.loads(record_file.read_text())["source"])
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise SpecError([Diagnostic(str(record_file), None, None, "", f"not a build record of `visualenv build` ({type(exc).__name__}: {exc}): build the spec again")]) from None
+        if not source.is_file():
+            raise SpecError([Diagnostic(str(record_file), None, None, "source", f"the spec it was built from is gone: {source}")])
+        return source
     if path.suffix in SPEC_SUFFIXES or path.exists():
         return path
     name = str(target)

@@ -111,8 +111,10 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
 
 def new_run_dir(root: str | Path, env_id: str) -> Path:
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    run = Path(root) / env_id / stamp
-    run.mkdir(parents=True, exist_ok=False)
+    from visualenv.build import make_dir
+
+    run = make_dir(Path(root) / env_id) / stamp
+    run.mkdir(exist_ok=False)
     return run
 
 

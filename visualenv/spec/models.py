@@ -23,7 +23,7 @@ ColorExpr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Color = Annotated[list[Annotated[float, Field(ge=0.0)]], Field(min_length=3, max_length=4, description="RGB or RGBA, linear, 0..1")]
 Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="an identifier")]
-Resolution = Annotated[list[Annotated[int, Field(ge=1, le=8192)]], Field(min_length=2, max_length=2, description="[width, height] in pixels")]
+Resolution = Annotated[list[Annotated[int, Field(ge=4, le=8192)]], Field(min_length=2, max_length=2, description="[width, height] in pixels (Blender renders at least 4)")]
 
 
 class StrictModel(BaseModel):
@@ -261,7 +261,7 @@ class Observation(StrictModel):
     resolution: Resolution = Field([100, 100], description="[width, height]")
     color: Literal["rgb", "grayscale", "depth"] = "grayscale"
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = [0.0, 20.0]
-    cameras: dict[Name, CameraView] | None = Field(None, description="several cameras: a Dict observation keyed by these names")
+    cameras: Annotated[dict[Name, CameraView], Field(min_length=1)] | None = Field(None, description="several cameras: a Dict observation keyed by these names")
 
     @field_validator("resolution")
     @classmethod

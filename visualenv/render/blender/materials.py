@@ -77,11 +77,13 @@ def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir:
     if tex.type == "image":
         file = (base_dir / str(tex.image)).resolve()
         if not file.is_file():
-            raise SpecError([source.diagnostic(path + ("image",), f"image file not found: {file}")])
+            raise SpecError([source.diagnostic(path + ("image",), "image file " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
         try:
             image = track(bpy.data.images.load(str(file), check_existing=False))
         except RuntimeError as exc:
             raise SpecError([source.diagnostic(path + ("image",), f"cannot read image {file}: {exc}")]) from None
+        if image.size[0] == 0:  # Blender loads lazily and keeps an empty image for a file it cannot decode
+            raise SpecError([source.diagnostic(path + ("image",), f"cannot read image {file}: not an image format Blender reads (PNG, JPEG, EXR, ...)")])
         node = nodes.new("ShaderNodeTexImage")
         node.image = image
         links.new(coords.outputs["UV"], node.inputs["Vector"])

@@ -108,7 +108,14 @@ def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) 
         if parent is None:
             problems.append(source.diagnostic(("scene", "objects", name, "parent"), f"no object '{obj_spec.parent}' in the scene" + did_you_mean(obj_spec.parent, built.objects).replace("names:", "objects:")))
             continue
-        built.objects[name].parent = parent
+        obj, chain = built.objects[name], [parent]
+        while chain[-1] is not None and chain[-1] is not obj:
+            chain.append(chain[-1].parent)
+        if chain[-1] is obj:  # Blender would take the loop (or refuse only the object itself, with a TypeError)
+            loop = " -> ".join([name, *(o.name for o in chain[:-1]), name]) if parent is not obj else f"{name} -> {name}"
+            problems.append(source.diagnostic(("scene", "objects", name, "parent"), f"parents form a loop ({loop}): an object cannot be its own ancestor"))
+            continue
+        obj.parent = parent
     if problems:
         raise SpecError(problems)
     for name, obj_spec in spec.objects.items():
@@ -131,7 +138,7 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str 
     path = (base_dir / file).resolve()
     where = ("scene", "file")
     if not path.is_file():
-        raise SpecError([source.diagnostic(where, f"scene file not found: {path}")])
+        raise SpecError([source.diagnostic(where, "scene file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")])
     with open(path, "rb") as f:
         magic = f.read(7)
     if not (magic.startswith(b"BLENDER") or magic[:4] == b"\x28\xb5\x2f\xfd" or magic[:2] == b"\x1f\x8b"):
@@ -297,7 +304,7 @@ def _import_mesh(name: str, spec: MeshObject, built: BuiltScene, *, base_dir: Pa
     if kind is None:
         raise SpecError([source.diagnostic(where, f"unsupported mesh format '{path.suffix}': use one of {', '.join(MESH_IMPORTERS)}")])
     if not path.is_file():
-        raise SpecError([source.diagnostic(where, f"mesh file not found: {path}")])
+        raise SpecError([source.diagnostic(where, "mesh file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")])
     scene = built.scene
     before = {o.as_pointer() for o in bpy.data.objects}
     importer: Callable[..., Any] = {
