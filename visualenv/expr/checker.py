@@ -118,6 +118,8 @@ def _number(value: float | int, offset: int) -> float:
         number = float(value)
     except OverflowError:
         raise ExpressionError("number is too large", offset) from None
+    if math.isnan(number):
+        raise ExpressionError("not a number (NaN): expected a finite number", offset)
     if not math.isfinite(number) or abs(number) > MAX_LITERAL:
         raise ExpressionError("number is too large", offset)
     return number
