@@ -110,9 +110,9 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
 
 
 def new_run_dir(root: str | Path, env_id: str) -> Path:
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     from visualenv.build import make_dir
 
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     run = make_dir(Path(root) / env_id) / stamp
     run.mkdir(exist_ok=False)
     return run
