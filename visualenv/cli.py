@@ -118,18 +118,14 @@ def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
 
 
 def _video_path(value: str | None) -> str | None:
-    """Refuse a --record file before the episodes run, not after."""
-    from visualenv.build import make_dir
-    from visualenv.play import VIDEO_FORMATS
+    """--record checked as play() checks it, reported as a bad option."""
+    from visualenv.play import check_recording
 
-    if value is None:
-        return None
-    if Path(value).suffix.lower() not in VIDEO_FORMATS:
-        raise click.BadParameter(f"{value}: expected a file ending in {' or '.join(VIDEO_FORMATS)}", param_hint="--record")
-    try:
-        make_dir(Path(value).parent)
-    except VisualEnvError as exc:
-        raise click.BadParameter(str(exc), param_hint="--record") from None
+    if value is not None:
+        try:
+            check_recording(value)
+        except VisualEnvError as exc:
+            raise click.BadParameter(str(exc), param_hint="--record") from None
     return value
 
 

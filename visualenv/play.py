@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.build import side_by_side
+from visualenv.build import make_dir, side_by_side
 from visualenv.errors import VisualEnvError
 from visualenv.wrappers import subspaces
 
@@ -43,6 +43,13 @@ def with_view(loaded: Any, *, preset: str | None = None, size: int | None = None
     return replace(loaded, spec=loaded.spec.model_copy(update={"render": render}))
 
 
+def check_recording(path: str | Path) -> None:
+    """A recording that cannot be written is refused before the episodes run, not after them."""
+    if Path(path).suffix.lower() not in VIDEO_FORMATS:
+        raise VisualEnvError(f"cannot record {path}: expected a file ending in {' or '.join(VIDEO_FORMATS)}")
+    make_dir(Path(path).parent)
+
+
 def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episodes: int = 3, seed: int = 0,
          record: str | None = None, fps: int = 15, max_frames: int = 2000, view_preset: str | None = None,
          view_size: int | None = None) -> list[Episode]:
@@ -52,8 +59,8 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     from visualenv.spec import load_spec
     from visualenv.wrappers import FrameStack
 
-    if record and Path(record).suffix.lower() not in VIDEO_FORMATS:
-        raise VisualEnvError(f"cannot record {record}: expected a file ending in {' or '.join(VIDEO_FORMATS)}")
+    if record:
+        check_recording(record)
     model = None
     if model_path:
         from visualenv.training import algorithm_class

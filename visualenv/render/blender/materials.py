@@ -6,7 +6,7 @@ agrees with Cycles and EEVEE. Procedural textures (noise, voronoi, checker,
 wave) read object coordinates times ``scale`` and blend between two colours
 (default: the material colour and a darker shade of it); image textures read
 the mesh's UV map (generated coordinates when it has none). A bound colour on
-a textured material multiplies the texture (:func:`make_tintable`).
+a textured material multiplies the texture (:func:`color_writer`).
 
 Depth observations use :func:`depth_material`, a view-layer material override
 that emits the camera's Z depth mapped linearly from ``depth_range`` to 0..1,
@@ -128,17 +128,18 @@ def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
 TINT = "visualenv tint"  # the node a bound colour writes when a texture drives the base colour
 
 
-def make_tintable(mat: Any) -> bool:
-    """Let a bound colour reach a material whose base colour a texture (or any node) drives.
+def color_writer(mat: Any) -> Callable[[Sequence[float]], None] | None:
+    """What writes a bound colour into `mat`, its sockets found once rather than at every step.
 
-    The node feeding Base Color is multiplied by a tint (white: the texture
-    unchanged), the tint being what :func:`set_base_color` writes. False when
-    the material has no Principled BSDF: a bound colour could not show in its
-    render, only in the viewport colour.
+    The colour goes to the Principled base colour, its alpha to Alpha (unless
+    a node drives it), and both to the viewport colour. When a texture (or any
+    node) drives the base colour, it is multiplied by a tint node (white: the
+    texture unchanged) and the colour goes to the tint. None when the material
+    has no Principled BSDF: a bound colour could not show in its render.
     """
     bsdf = _principled(mat)
     if bsdf is None:
-        return False
+        return None
     base = bsdf.inputs["Base Color"]
     if base.is_linked and base.links[0].from_node.name != TINT:
         nodes, links = mat.node_tree.nodes, mat.node_tree.links
@@ -152,22 +153,17 @@ def make_tintable(mat: Any) -> bool:
         tint.default_value = (1.0, 1.0, 1.0, 1.0)
         links.new(source, texture)
         links.new(next(s for s in mix.outputs if s.type == "RGBA"), base)
-    return True
+    target = [s for s in base.links[0].from_node.inputs if s.type == "RGBA"][1] if base.is_linked else base
+    alpha = None if bsdf.inputs["Alpha"].is_linked else bsdf.inputs["Alpha"]
 
+    def write(color: Sequence[float]) -> None:
+        value = rgba(color)
+        target.default_value = value
+        if alpha is not None:
+            alpha.default_value = value[3]
+        mat.diffuse_color = value
 
-def set_base_color(mat: Any, color: Sequence[float]) -> None:
-    """Bound colour: the Principled base colour (or the tint of its texture), its alpha, and the viewport colour."""
-    value = rgba(color)
-    bsdf = _principled(mat)
-    if bsdf is not None:
-        base = bsdf.inputs["Base Color"]
-        if not base.is_linked:
-            base.default_value = value
-        elif base.links[0].from_node.name == TINT:
-            [s for s in base.links[0].from_node.inputs if s.type == "RGBA"][1].default_value = value
-        if not bsdf.inputs["Alpha"].is_linked:
-            bsdf.inputs["Alpha"].default_value = value[3]
-    mat.diffuse_color = value
+    return write
 
 
 def see_through(scene: Any) -> bool:

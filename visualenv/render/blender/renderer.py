@@ -13,7 +13,7 @@ import numpy as np
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
-from visualenv.render.blender.materials import depth_material, depth_world, make_material, make_tintable, see_through, set_base_color
+from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, first_channel, quiet_stdout, read_bmp, to_grayscale
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
@@ -227,15 +227,17 @@ class BlenderRenderer(Renderer):
                 def set_light_color(v: tuple) -> None:
                     data.color = v[:3]
                 return set_light_color
-            materials = self._own_materials(name, obj)
+            writers = self._own_color_writers(name, obj)
             def set_color(v: tuple) -> None:
-                for mat in materials:
-                    set_base_color(mat, v)
+                for write in writers:
+                    write(v)
             return set_color
         raise RenderError(f"cannot bind '{prop}' of '{name}'")  # pragma: no cover - BINDABLE is checked by the compiler
 
-    def _own_materials(self, name: str, obj: Any) -> list[Any]:
-        """Per-object copies of the materials of `obj` (and of its mesh children), so a bound colour stays on it.
+    def _own_color_writers(self, name: str, obj: Any) -> list[Callable[[Sequence[float]], None]]:
+        """Writers of a bound colour into per-object copies of the materials of `obj` (and of its mesh children).
+
+        Copies, so that the colour stays on this object.
 
         A textured copy gets a tint node for the colour to write; a material
         the colour cannot reach in a render (no Principled BSDF, as a .blend
@@ -252,9 +254,11 @@ class BlenderRenderer(Renderer):
                     f"{mesh_obj.name}-bound", Material(), base_dir=self.plan.base_dir, source=self.plan.source, path=(), track=lambda d: d)
                 slot.link = "OBJECT"
                 slot.material = copy
-                out.append(copy)
-                if not make_tintable(copy):
+                write = color_writer(copy)
+                if write is None:
                     unreachable.append(f"'{original.name}' of '{mesh_obj.name}'")
+                else:
+                    out.append(write)
         if unreachable:
             raise SpecError([self.plan.source.diagnostic(("actors", name, "color"),
                 f"a bound colour sets a Principled BSDF's base colour, but material {', '.join(unreachable)} has none: "
