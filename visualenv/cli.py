@@ -152,13 +152,20 @@ def _parse_value(text: str) -> Any:
 @click.option("--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)")
 @click.option("--no-progress", is_flag=True)
+@click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
+              help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
+@click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
+@click.option("--envs-per-runner", default=1, show_default=True, type=click.IntRange(min=1), help="rllib: envs each runner steps")
+@click.option("--address", default=None, help="rllib: the Ray cluster to join (HOST:PORT or 'auto'); default: start a local one")
 @_friendly
 def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
           final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
-          out_root: str, resume_dir: str | None, no_progress: bool) -> None:
+          out_root: str, resume_dir: str | None, no_progress: bool, backend: str, env_runners: int, envs_per_runner: int,
+          address: str | None) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
+    With --backend rllib the envs run in Ray RLlib EnvRunners, on this machine or a cluster (--address).
     """
     import yaml
 
@@ -180,8 +187,19 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         if not sep:
             raise click.BadParameter(f"expected KEY=VALUE, got {item!r}", param_hint="--set")
         hyper[key] = _parse_value(value)
+    saved_backend = _run_backend(resume_dir) if resume_dir else backend
+    ctx = click.get_current_context()
+    if saved_backend == "rllib" or backend == "rllib":
+        sb3_only = [f"--{name.replace('_', '-')}" for name in ("algo", "envs") if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
+        if sb3_only:
+            raise click.UsageError(f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)")
+        _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
+        return
+    rllib_only = [f"--{name.replace('_', '-')}" for name in ("env_runners", "envs_per_runner", "address")
+                  if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
+    if rllib_only:
+        raise click.UsageError(f"{', '.join(rllib_only)}: only with --backend rllib")
     if resume_dir:
-        ctx = click.get_current_context()
         fixed = [f"--{name.replace('_', '-')}" for name in ("algo", "envs", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root")
                  if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
         if fixed:
@@ -201,6 +219,53 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
+    _report(results, run_dir)
+
+
+def _run_backend(run_dir: str) -> str:
+    """The backend a run folder was trained with (config.json's 'backend'; SB3 runs predate the key)."""
+    try:
+        return json.loads((Path(run_dir) / "config.json").read_text()).get("backend", "sb3")
+    except (OSError, ValueError, AttributeError):
+        return "sb3"  # the SB3 path reports the broken folder
+
+
+def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[str, Any], resume_dir: str | None, out_root: str,
+                 address: str | None, progress: bool) -> None:
+    """`train --backend rllib`: checked before a run folder exists, then visualenv.rllib_training.train."""
+    try:
+        from visualenv.rllib_training import RLlibTrainConfig, algorithm_config, train as run_training
+    except ImportError as exc:
+        raise click.UsageError(f"--backend rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
+    from visualenv.registration import resolve
+    from visualenv.rllib import check_address
+    from visualenv.spec.loader import load_spec
+    from visualenv.training import new_run_dir
+
+    params = ctx.params
+    if resume_dir:
+        fixed = [f"--{name.replace('_', '-')}" for name in ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
+                                                            "out_root", "env_runners", "envs_per_runner")
+                 if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
+        if fixed:
+            raise click.UsageError(f"{', '.join(fixed).replace('--out-root', '--out')}: a resumed run keeps its settings; "
+                                   "only --steps, --set, --config and --address change on --resume")
+        saved = json.loads((Path(resume_dir) / "config.json").read_text())["config"]
+        config = RLlibTrainConfig(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyper}, "progress": progress})
+    else:
+        config = RLlibTrainConfig(spec=spec, steps=steps or RLlibTrainConfig.steps, env_runners=params["env_runners"],
+                                  envs_per_runner=params["envs_per_runner"], frame_stack=params["frame_stack"], eval_every=params["eval_every"],
+                                  eval_episodes=params["eval_episodes"], final_eval_episodes=params["final_episodes"], seed=params["seed"],
+                                  render=not params["state_only"], hyperparams=hyper, progress=progress)
+    check_address(address)
+    algorithm_config(config)  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
+    run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
+    click.echo(f"run folder: {run_dir}")
+    results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None, address=address)
+    _report(results, run_dir)
+
+
+def _report(results: dict[str, Any], run_dir: Path) -> None:
     click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
                f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %")
     click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {run_dir / 'plots'}")
@@ -208,7 +273,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 
 @main.command()
 @click.argument("spec")
-@click.option("--model", "model_path", type=click.Path(exists=True, dir_okay=False), help="a trained model (.zip); default: random actions")
+@click.option("--model", "model_path", type=click.Path(exists=True), help="a trained model (.zip, or a checkpoint folder of --backend rllib); default: random actions")
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))

@@ -63,12 +63,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
         check_recording(record)
     model = None
     if model_path:
-        from visualenv.training import algorithm_class
-
-        try:
-            model = algorithm_class(algo).load(model_path, device="cpu")
-        except Exception as exc:  # SB3 raises whatever its unpickling met: report it, whatever it is
-            raise VisualEnvError(f"cannot load {model_path} as a {algo.upper()} model: {exc}") from None
+        model = load_model(model_path, algo)
     loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
     env: Any = VisualEnv(loaded, render_mode="rgb_array")
     if model is not None:
@@ -100,6 +95,27 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     if record and frames:
         save_video(frames, record, fps)
     return results
+
+
+def load_model(model_path: str, algo: str = "ppo") -> Any:
+    """An SB3 model (.zip), or the policy of an RLlib checkpoint folder (`train --backend rllib`); both have ``predict``."""
+    if Path(model_path).is_dir():
+        try:
+            from visualenv.rllib import RLlibPolicy, is_checkpoint
+        except ImportError as exc:
+            raise VisualEnvError(f"{model_path} is a folder: an RLlib checkpoint needs Ray RLlib (pip install 'visualenv[ray]'; {exc})") from None
+        if not is_checkpoint(model_path):
+            raise VisualEnvError(f"{model_path} is not a checkpoint of `visualenv train --backend rllib` (no {Path('learner_group', 'learner', 'rl_module')})")
+        try:
+            return RLlibPolicy.load(model_path)
+        except Exception as exc:  # RLlib raises whatever its unpickling met
+            raise VisualEnvError(f"cannot load {model_path} as an RLlib checkpoint: {exc}") from None
+    from visualenv.training import algorithm_class
+
+    try:
+        return algorithm_class(algo).load(model_path, device="cpu")
+    except Exception as exc:  # SB3 raises whatever its unpickling met: report it, whatever it is
+        raise VisualEnvError(f"cannot load {model_path} as a {algo.upper()} model: {exc}") from None
 
 
 def _stacked_like(env: Any, model: Any, model_path: str) -> Any:

@@ -1,0 +1,249 @@
+"""Ray RLlib backend: visualenv specs as RLlib envs, trained with PPO on a Ray cluster.
+
+Install the ``[ray]`` extra. RLlib's new API stack builds the envs inside each
+EnvRunner (a Ray actor, on any node) with ``gym.make_vec``; :func:`make_rllib_env`
+is the creator it calls there, so every runner process builds its own Blender
+renderer, at its envs' first reset. The local EnvRunner of the driver only holds
+a copy of the model when there are remote runners: it makes no env, so it never
+starts Blender (:func:`ppo_config` refuses zero remote runners for that reason).
+
+The model sees what the SB3 backend's CnnPolicy sees: the last ``frame_stack``
+frames stacked on the channel axis (:class:`~visualenv.wrappers.FrameStack`, in the
+runner), scaled to [0, 1] (:class:`ScaledImage`: RLlib's CNN encoder convolves
+its input as it comes). RLlib has default conv filters only for 42x42, 64x64 and
+84x84 images; :func:`conv_filters` sizes them from the spec's observation.
+
+This module imports ray; ``import visualenv`` never imports it.
+"""
+
+from __future__ import annotations
+
+import inspect
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+from ray.rllib.callbacks.callbacks import RLlibCallback
+
+from visualenv.errors import ConfigError, did_you_mean
+
+ENV_PREFIX = "visualenv-rllib:"
+MODULE_DIR = Path("learner_group") / "learner" / "rl_module" / "default_policy"  # the RLModule inside an Algorithm checkpoint
+NATURE_FILTERS = [[32, 8, 4, "valid"], [64, 4, 2, "valid"], [64, 3, 1, "valid"]]  # the paper's (and SB3's NatureCNN) conv stack
+
+
+class ScaledImage(gym.ObservationWrapper):
+    """uint8 images (H, W, C) -> float32 in [0, 1], the input RLlib's CNN encoder expects."""
+
+    def __init__(self, env: gym.Env):
+        super().__init__(env)
+        space = env.observation_space
+        self.observation_space = spaces.Box(0.0, 1.0, space.shape, np.float32)
+
+    def observation(self, observation: np.ndarray) -> np.ndarray:
+        return np.asarray(observation, dtype=np.float32) * np.float32(1 / 255)
+
+
+def make_rllib_env(env_config: dict[str, Any]) -> gym.Env:
+    """One env, made where RLlib calls it (in an EnvRunner process); Blender starts at its first reset.
+
+    `env_config` keys: ``spec`` (a path the runner's node can read), ``frame_stack``,
+    ``render`` (False: the state vector, no Blender), ``threads`` (render threads).
+    """
+    import visualenv
+
+    if not env_config.get("render", True):
+        return visualenv.make(env_config["spec"], render=False)
+    env = visualenv.make(env_config["spec"], frame_stack=env_config.get("frame_stack", 4), threads=env_config.get("threads", 1))
+    return ScaledImage(env)
+
+
+def register(target: str, **env_config: Any) -> tuple[str, dict[str, Any]]:
+    """Register a spec path or bundled id with RLlib (Ray's env registry); its name and env_config.
+
+    The name is ``visualenv-rllib:<spec path>``: pass both to ``config.environment(name, env_config=...)``.
+    """
+    from ray.tune.registry import register_env
+
+    from visualenv.registration import resolve
+
+    spec = str(Path(resolve(target)).resolve())
+    name = ENV_PREFIX + spec
+    register_env(name, make_rllib_env)
+    return name, {"spec": spec, **env_config}
+
+
+def conv_filters(height: int, width: int) -> list[list[Any]]:
+    """Conv filters for an image of this size: the Nature CNN where it fits (36 px and up), a small stack below."""
+    size = min(height, width)
+    if size >= 36:
+        return NATURE_FILTERS
+    if size >= 8:
+        return [[16, 3, 2, "valid"], [32, 3, 1, "valid"]]
+    return [[16, 2, 1, "valid"]]
+
+
+def model_config(observation_space: spaces.Space) -> Any:
+    """RLlib's DefaultModelConfig for this observation: a CNN sized for images, an MLP for a state vector."""
+    from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
+
+    if len(observation_space.shape) == 3:
+        height, width = observation_space.shape[:2]
+        return DefaultModelConfig(conv_filters=conv_filters(height, width), conv_activation="relu", head_fcnet_hiddens=[512],
+                                  vf_share_layers=True)
+    return DefaultModelConfig(fcnet_hiddens=[64, 64], vf_share_layers=False)
+
+
+def check_observation(target: str, render: bool = True) -> spaces.Space:
+    """The observation space the model will see (no Blender started); a Dict observation is refused."""
+    import visualenv
+
+    env = visualenv.make(target, render=render)
+    space = env.observation_space
+    env.close()
+    if isinstance(space, spaces.Dict):
+        raise ConfigError(f"{target}: --backend rllib trains on one camera; this spec's observation has several "
+                          f"({', '.join(space.spaces)}): RLlib's default encoder has no Dict support (use the SB3 backend)")
+    return space
+
+
+PPO_NAMES_SET_HERE = ("model_config", "learner_class", "learner_connector", "add_default_connectors_to_learner_pipeline")
+
+
+def ppo_hyperparameters() -> list[str]:
+    """The names `--set` accepts: keyword arguments of ``PPOConfig.training`` (lr, gamma, minibatch_size, ...)."""
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    names = {n for cls in PPOConfig.__mro__ if "training" in vars(cls) for n in inspect.signature(vars(cls)["training"]).parameters}
+    return sorted(names - {"self", "kwargs", *PPO_NAMES_SET_HERE})
+
+
+def check_hyperparameters(hyperparams: dict[str, Any]) -> None:
+    known = ppo_hyperparameters()
+    for key in hyperparams:
+        if key not in known:
+            raise ConfigError(f"RLlib's PPO has no hyperparameter '{key}'" + did_you_mean(key, known))
+
+
+def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, frame_stack: int = 4, seed: int = 0,
+               render: bool = True, hyperparams: dict[str, Any] | None = None, cpus_per_runner: int = 1) -> Any:
+    """A PPOConfig for `target`: `env_runners` remote EnvRunners of `envs_per_runner` envs each, restarted when they die.
+
+    Every env renders with ``cpus_per_runner // envs_per_runner`` threads (at least one),
+    so a runner uses the CPUs Ray reserves for it. Hyperparameters are ``PPOConfig.training``'s.
+    """
+    from ray.rllib.algorithms.ppo import PPOConfig
+
+    if env_runners < 1:
+        raise ConfigError("--env-runners must be at least 1: the driver's own EnvRunner does not render")
+    hyperparams = dict(hyperparams or {})
+    check_hyperparameters(hyperparams)
+    space = check_observation(target, render)
+    if render:
+        space = spaces.Box(0.0, 1.0, space.shape[:2] + (space.shape[2] * max(1, frame_stack),), np.float32)
+    threads = max(1, cpus_per_runner // envs_per_runner)
+    name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads)
+    defaults = {"train_batch_size_per_learner": 512 * env_runners * envs_per_runner // 2 or 512, "minibatch_size": 128, "num_epochs": 4,
+                "lr": 2.5e-4, "gamma": 0.99, "lambda_": 0.95, "clip_param": 0.1, "entropy_coeff": 0.01, "vf_loss_coeff": 0.5}
+    return (
+        PPOConfig()
+        .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
+        .environment(name, env_config=env_config)
+        .env_runners(num_env_runners=env_runners, num_envs_per_env_runner=envs_per_runner, num_cpus_per_env_runner=cpus_per_runner,
+                     rollout_fragment_length="auto", sample_timeout_s=600.0)
+        .fault_tolerance(restart_failed_env_runners=True, max_num_env_runner_restarts=100)
+        .rl_module(model_config=model_config(space))
+        .training(**{**defaults, **hyperparams})
+        .callbacks(VisualEnvCallbacks)
+        .debugging(seed=seed, log_level="ERROR")
+    )
+
+
+class VisualEnvCallbacks(RLlibCallback):
+    """Logs each episode's success (``success_rate``) and the env steps sampled on each node (``env_steps_by_node``)."""
+
+    def on_episode_end(self, *, episode: Any, metrics_logger: Any = None, **kwargs: Any) -> None:
+        infos = episode.get_infos(-1) if hasattr(episode, "get_infos") else {}
+        if metrics_logger is not None:
+            metrics_logger.log_value("success_rate", float(bool((infos or {}).get("is_success", False))), reduce="mean", window=100)
+
+    def on_sample_end(self, *, env_runner: Any = None, metrics_logger: Any = None, samples: Any = None, **kwargs: Any) -> None:
+        import ray
+
+        if metrics_logger is None or not samples:
+            return
+        steps = sum(len(episode) for episode in samples)
+        metrics_logger.log_value(("env_steps_by_node", ray.get_runtime_context().get_node_id()), steps, reduce="sum")
+
+
+class RLlibPolicy:
+    """An RLlib RLModule behind SB3's ``predict``: what ``visualenv play`` and the final evaluation call.
+
+    Takes the uint8 observations the env gives (stacked frames, channels last) and
+    scales them as :class:`ScaledImage` does in the runners.
+    """
+
+    def __init__(self, module: Any):
+        self.module = module
+        space = module.observation_space
+        self.scaled = len(space.shape) == 3
+        self.observation_space = spaces.Box(0, 255, space.shape, np.uint8) if self.scaled else space
+        self.action_space = module.action_space
+
+    @classmethod
+    def load(cls, checkpoint: str | Path) -> "RLlibPolicy":
+        """The policy of an Algorithm checkpoint folder (``best_model``, ``checkpoints/latest``, ...)."""
+        from ray.rllib.core.rl_module.rl_module import RLModule
+
+        return cls(RLModule.from_checkpoint(str(Path(checkpoint).resolve() / MODULE_DIR)))
+
+    def predict(self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        """Actions for a batch of observations (or one), as SB3's ``predict``; `state` and `episode_start` are unused."""
+        import torch
+
+        obs = np.asarray(observation, dtype=np.float32)
+        single = obs.ndim == len(self.observation_space.shape)
+        if single:
+            obs = obs[None]
+        if self.scaled:
+            obs = obs * np.float32(1 / 255)
+        with torch.no_grad():
+            out = self.module.forward_inference({"obs": torch.from_numpy(obs)})
+        inputs = out["action_dist_inputs"]
+        dist = self.module.get_inference_action_dist_cls().from_logits(inputs)
+        actions = (dist.to_deterministic().sample() if deterministic else dist.sample()).numpy()
+        return (actions[0] if single else actions), None
+
+
+def is_checkpoint(path: str | Path) -> bool:
+    """Whether `path` is an RLlib Algorithm checkpoint folder (what `visualenv train --backend rllib` saves)."""
+    return (Path(path) / MODULE_DIR).is_dir()
+
+
+def check_address(address: str | None) -> None:
+    """An address that cannot be reached is refused before anything starts ('auto' needs a running local cluster)."""
+    import socket
+
+    if address is None or address.startswith("ray://"):
+        return
+    if address == "auto":
+        import os
+
+        from ray._private.services import find_gcs_addresses  # what ray.init("auto") reads
+
+        if not os.environ.get("RAY_ADDRESS") and not find_gcs_addresses():
+            raise ConfigError("--address auto: no Ray cluster runs on this machine (start one with `ray start --head`)")
+        return
+    host, _, port = address.rpartition(":")
+    if not host or not port.isdigit():
+        raise ConfigError(f"--address {address}: expected HOST:PORT of a Ray head (e.g. 10.0.0.1:6379), or 'auto'")
+    try:
+        socket.create_connection((host, int(port)), timeout=5).close()
+    except OSError as exc:
+        raise ConfigError(f"--address {address}: cannot reach a Ray head there ({exc.strerror or exc})") from None
+
+
+__all__ = ["RLlibPolicy", "ScaledImage", "VisualEnvCallbacks", "check_address", "check_observation", "conv_filters", "is_checkpoint",
+           "make_rllib_env", "model_config", "ppo_config", "register"]

@@ -1,0 +1,281 @@
+"""`visualenv train --backend rllib`: PPO on a Ray cluster, writing the SB3 backend's run folder.
+
+The run folder has the layout :mod:`visualenv.training` describes, with RLlib
+checkpoint folders in place of SB3's zip files: ``best_model/``,
+``final_model/`` and ``checkpoints/latest/`` (each a full Algorithm checkpoint;
+``visualenv play --model`` takes any of them). ``logs/progress.csv`` uses SB3's
+column names, ``evaluations.npz`` EvalCallback's arrays, and the plots and
+``results.json`` are drawn and computed by the same code as the SB3 backend's
+(:func:`visualenv.plots.training_plots`, :func:`visualenv.training.evaluate`).
+The evaluation env runs in the driver, as SB3's does, so the driver renders only
+while it evaluates; the runners sample on the cluster.
+
+Not written: ``monitor/`` (RLlib's runners may be on other machines; their
+episode returns are in progress.csv) and TensorBoard events.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import shlex
+import shutil
+import signal
+import sys
+import threading
+import time
+from collections.abc import Iterator
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+BACKEND = "rllib"
+PROGRESS_COLUMNS = ("time/total_timesteps", "time/iterations", "time/fps", "time/time_elapsed", "rollout/ep_rew_mean",
+                    "rollout/ep_len_mean", "rollout/success_rate", "train/learning_rate", "train/policy_loss", "train/value_loss",
+                    "train/entropy")
+
+
+@dataclass
+class RLlibTrainConfig:
+    spec: str
+    steps: int = 200_000
+    env_runners: int = 2
+    envs_per_runner: int = 1
+    frame_stack: int = 4
+    eval_every: int = 10_000  # env steps between evaluations (and checkpoints)
+    eval_episodes: int = 10
+    final_eval_episodes: int = 50
+    seed: int = 0
+    render: bool = True
+    hyperparams: dict[str, Any] = field(default_factory=dict)
+    progress: bool = True
+    algo: str = "ppo"
+    backend: str = BACKEND
+
+
+def algorithm_config(config: RLlibTrainConfig) -> Any:
+    """The PPOConfig of this run; checks the spec and the hyperparameters before anything starts."""
+    from visualenv.rllib import ppo_config
+
+    return ppo_config(config.spec, env_runners=config.env_runners, envs_per_runner=config.envs_per_runner,
+                      frame_stack=config.frame_stack if config.render else 0, seed=config.seed, render=config.render,
+                      hyperparams=config.hyperparams)
+
+
+@contextmanager
+def ray_cluster(address: str | None, cpus: int) -> Iterator[None]:
+    """Connect to the cluster at `address`, or start a local one of `cpus` CPUs; shut down what this started."""
+    import ray
+
+    if ray.is_initialized():
+        yield
+        return
+    kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": True, "logging_level": "ERROR"}
+    if address:
+        ray.init(address=address, **kwargs)
+    else:
+        ray.init(num_cpus=cpus, **kwargs)
+    try:
+        yield
+    finally:
+        ray.shutdown()
+
+
+class _StopRequest:
+    """SIGINT/SIGTERM set a flag the training loop reads between iterations, so the run still saves."""
+
+    def __init__(self) -> None:
+        self.requested = False
+
+    @contextmanager
+    def listening(self) -> Iterator["_StopRequest"]:
+        def request(signum: int, frame: Any) -> None:
+            if self.requested:  # a second Ctrl-C: the user means it
+                raise KeyboardInterrupt
+            self.requested = True
+            print("stopping after this iteration; saving and evaluating (Ctrl-C again to abort)", file=sys.stderr)
+
+        if threading.current_thread() is not threading.main_thread():
+            yield self
+            return
+        previous = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
+        try:
+            yield self
+        finally:
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
+
+
+def save_checkpoint(algo: Any, path: Path, steps: int) -> None:
+    """Save to a sibling folder, then swap it in: a run killed while saving keeps its previous checkpoint."""
+    fresh, old = path.with_name(path.name + ".saving"), path.with_name(path.name + ".old")
+    shutil.rmtree(fresh, ignore_errors=True)
+    algo.save_to_path(str(fresh.resolve()))
+    (fresh / "visualenv.json").write_text(json.dumps({"steps": int(steps)}) + "\n")
+    if path.exists():
+        shutil.rmtree(old, ignore_errors=True)
+        path.rename(old)
+    fresh.rename(path)
+    shutil.rmtree(old, ignore_errors=True)
+
+
+def latest_checkpoint(run_dir: Path) -> Path | None:
+    """checkpoints/latest, or the one it was replacing when a save was interrupted."""
+    for name in ("latest", "latest.old"):
+        path = run_dir / "checkpoints" / name
+        if (path / "visualenv.json").is_file():
+            return path
+    return None
+
+
+class _Evaluations:
+    """evaluations.npz as SB3's EvalCallback writes it (timesteps, results, ep_lengths, successes), carried over a resume."""
+
+    def __init__(self, path: Path):
+        self.path = path
+        self.timesteps: list[int] = []
+        self.results: list[list[float]] = []
+        self.ep_lengths: list[list[int]] = []
+        self.successes: list[list[bool]] = []
+        if path.exists():
+            with np.load(path) as earlier:
+                self.timesteps = earlier["timesteps"].tolist()
+                self.results = earlier["results"].tolist()
+                self.ep_lengths = earlier["ep_lengths"].tolist()
+                self.successes = earlier["successes"].tolist() if "successes" in earlier else []
+
+    @property
+    def best(self) -> float:
+        return max((float(np.mean(r)) for r in self.results), default=-np.inf)
+
+    def add(self, steps: int, returns: list[float], lengths: list[int], successes: list[bool]) -> None:
+        self.timesteps.append(steps)
+        self.results.append(returns)
+        self.ep_lengths.append(lengths)
+        self.successes.append(successes)
+        np.savez(self.path, timesteps=self.timesteps, results=self.results, ep_lengths=self.ep_lengths, successes=self.successes)
+
+
+def _episodes(policy: Any, vec_env: Any, episodes: int) -> tuple[list[float], list[int], list[bool]]:
+    """Per-episode returns, lengths and successes of deterministic episodes (SB3's evaluate_policy, through our policy)."""
+    from stable_baselines3.common.evaluation import evaluate_policy
+
+    successes: list[bool] = []
+
+    def record(local: dict[str, Any], _: Any) -> None:
+        if local["done"]:
+            successes.append(bool(local["info"].get("is_success", False)))
+
+    returns, lengths = evaluate_policy(policy, vec_env, n_eval_episodes=episodes, deterministic=True, return_episode_rewards=True,
+                                       callback=record, warn=False)
+    return [float(r) for r in returns], [int(n) for n in lengths], successes[:episodes]
+
+
+def _progress_row(result: dict[str, Any], steps: int, elapsed: float, iteration_steps: int) -> dict[str, Any]:
+    runners, learner = result.get("env_runners", {}), result.get("learners", {}).get("default_policy", {})
+    seconds = result.get("time_this_iter_s") or 0.0
+    return {
+        "time/total_timesteps": steps, "time/iterations": result.get("training_iteration"), "time/time_elapsed": round(elapsed, 1),
+        "time/fps": round(iteration_steps / seconds) if seconds else "",
+        "rollout/ep_rew_mean": runners.get("episode_return_mean", ""), "rollout/ep_len_mean": runners.get("episode_len_mean", ""),
+        "rollout/success_rate": runners.get("success_rate", ""), "train/learning_rate": learner.get("default_optimizer_learning_rate", ""),
+        "train/policy_loss": learner.get("policy_loss", ""), "train/value_loss": learner.get("vf_loss", ""), "train/entropy": learner.get("entropy", ""),
+    }
+
+
+def _append_progress(path: Path, row: dict[str, Any]) -> None:
+    new = not path.exists()
+    with path.open("a", newline="") as f:
+        writer = csv.DictWriter(f, fieldnames=PROGRESS_COLUMNS)
+        if new:
+            writer.writeheader()
+        writer.writerow({k: ("" if v is None or (isinstance(v, float) and np.isnan(v)) else v) for k, v in row.items()})
+
+
+def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None,
+          address: str | None = None) -> dict[str, Any]:
+    """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
+    from visualenv.build import versions
+    from visualenv.plots import training_plots
+    from visualenv.rllib import RLlibPolicy, check_address
+    from visualenv.training import evaluate
+    from visualenv.vector import make_sb3_vec, usable_cores
+
+    check_address(address)
+    algo_config = algorithm_config(config)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    (run_dir / "logs").mkdir(exist_ok=True)
+    if not resume:
+        record = {"command": shlex.join(sys.argv), "backend": BACKEND, "config": asdict(config), "versions": versions(), "spec_path": str(config.spec)}
+    else:
+        record = json.loads((run_dir / "config.json").read_text())
+        record["config"] = asdict(config)
+        record.setdefault("resumes", []).append({"command": shlex.join(sys.argv), "hyperparams": dict(changes or {})})
+    (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    frame_stack = config.frame_stack if config.render else 0
+    render = {} if config.render else {"render": False}
+    eval_env = make_sb3_vec(config.spec, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **render)
+    stop = _StopRequest()
+    cpus = max(len(usable_cores()), config.env_runners)  # a local cluster: one CPU per runner even on a small machine
+    try:
+        with ray_cluster(address, cpus):
+            algo = algo_config.build_algo()
+            try:
+                results = _train_loop(config, run_dir, algo, eval_env, stop, resume)
+            finally:
+                algo.stop()
+        best = run_dir / "best_model"
+        model = best if best.exists() else run_dir / "final_model"
+        results.update(evaluate(RLlibPolicy.load(model), eval_env, config.final_eval_episodes))
+    finally:
+        eval_env.close()
+    results["model"] = model.name
+    results = {k: results[k] for k in ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "steps", "wall_time_s",
+                                       "model", "stopped_early")}
+    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    training_plots(run_dir)
+    return results
+
+
+def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: Any, stop: _StopRequest, resume: bool) -> dict[str, Any]:
+    from tqdm import tqdm
+
+    from visualenv.rllib import RLlibPolicy
+
+    steps = 0
+    earlier = latest_checkpoint(run_dir) if resume else None
+    if earlier is not None:
+        algo.restore_from_path(str(earlier.resolve()))
+        steps = json.loads((earlier / "visualenv.json").read_text())["steps"]
+    evaluations = _Evaluations(run_dir / "evaluations.npz")
+    last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps
+    latest = run_dir / "checkpoints" / "latest"
+    latest.parent.mkdir(exist_ok=True)
+    started = time.perf_counter()
+    bar = tqdm(total=config.steps, initial=steps, unit="step", dynamic_ncols=True, disable=not config.progress)
+    with stop.listening(), bar:
+        while steps < config.steps and not stop.requested:
+            result = algo.train()
+            sampled = int(result.get("env_runners", {}).get("num_env_steps_sampled", 0))
+            steps += sampled
+            row = _progress_row(result, steps, time.perf_counter() - started, sampled)
+            _append_progress(run_dir / "logs" / "progress.csv", row)
+            bar.update(steps - bar.n)
+            reward = row["rollout/ep_rew_mean"]
+            bar.set_postfix(reward=f"{reward:.1f}" if reward != "" else "-", runners=result.get("fault_tolerance", {}).get("num_healthy_workers", "?"))
+            if steps - last_eval >= config.eval_every:
+                last_eval = steps
+                returns, lengths, successes = _episodes(RLlibPolicy(algo.get_module()), eval_env, config.eval_episodes)
+                improved = float(np.mean(returns)) > evaluations.best
+                evaluations.add(steps, returns, lengths, successes)
+                if improved:
+                    save_checkpoint(algo, run_dir / "best_model", steps)
+                save_checkpoint(algo, latest, steps)
+    if stop.requested:
+        print(f"stopped early at {steps} steps", file=sys.stderr)
+    save_checkpoint(algo, latest, steps)
+    save_checkpoint(algo, run_dir / "final_model", steps)
+    return {"steps": steps, "wall_time_s": round(time.perf_counter() - started, 1), "stopped_early": stop.requested}
