@@ -1,0 +1,149 @@
+"""The Ray RLlib backend: env registration, frame stacking in the runners, train --backend rllib, play, stop and resume.
+
+Runs where the [ray] extra is installed (``make setup`` installs it); the import test runs everywhere.
+"""
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from visualenv.cli import main
+
+REPO = Path(__file__).resolve().parents[1]
+
+
+def test_import_visualenv_never_imports_ray():
+    code = "import sys, visualenv, visualenv.cli, visualenv.training, visualenv.play; assert 'ray' not in sys.modules, 'ray imported'"
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
+    assert result.returncode == 0, result.stderr
+
+
+ray = pytest.importorskip("ray.rllib", reason="the [ray] extra is not installed")
+
+
+def tiny_goalie(tmp_path: Path, size: int = 24) -> str:
+    """Goalie-v0 at a few pixels: renders in a millisecond or two (the runner tests sample many steps)."""
+    from visualenv.registration import resolve
+
+    text = resolve("Goalie-v0").read_text().replace("resolution: [100, 100]", f"resolution: [{size}, {size}]").replace("id: Goalie-v0", "id: TinyGoalie-v0")
+    assert f"[{size}, {size}]" in text
+    path = tmp_path / "tiny_goalie.yaml"
+    path.write_text(text)
+    return str(path)
+
+
+@pytest.mark.parametrize("size", [100, 24, 6])
+def test_conv_filters_are_sized_from_the_observation(size):
+    from ray.rllib.core.models.configs import CNNEncoderConfig
+
+    from visualenv.rllib import conv_filters
+
+    encoder = CNNEncoderConfig(input_dims=(size, size, 4), cnn_filter_specifiers=conv_filters(size, size))
+    assert encoder.output_dims[0] > 0
+    if size == 100:  # RLlib's own defaults stop at 84x84: sizing the filters is what lets the paper's 100x100 through
+        from ray.rllib.models.utils import get_filter_config
+
+        with pytest.raises(ValueError, match="No default CNN configuration"):
+            get_filter_config((100, 100, 4))
+
+
+def test_runner_env_stacks_four_scaled_frames():
+    from visualenv.rllib import make_rllib_env
+
+    env = make_rllib_env({"spec": "Goalie-v0", "frame_stack": 4})
+    try:
+        assert env.observation_space.shape == (100, 100, 4) and env.observation_space.dtype == np.float32
+        obs, _ = env.reset(seed=0)
+        assert obs.dtype == np.float32 and 0.0 <= obs.min() and obs.max() <= 1.0
+        assert obs[..., 0].std() > 0.02  # a rendered field, not a blank frame
+        assert all(np.array_equal(obs[..., 0], obs[..., i]) for i in range(4))  # reset fills every slot with the first frame
+        for _ in range(3):
+            obs, *_ = env.step(1)
+        assert not np.array_equal(obs[..., 0], obs[..., 3])  # the goalie moved: the newest frame differs from the oldest
+    finally:
+        env.close()
+
+
+def test_observations_the_encoder_cannot_take_are_refused_before_anything_starts(tmp_path):
+    from visualenv.registration import resolve
+
+    spec = tmp_path / "two_cameras.yaml"
+    spec.write_text(resolve("Goalie-v0").read_text().replace(
+        "  camera: Camera\n  resolution: [100, 100]\n  color: grayscale\n",
+        "  cameras:\n    front: {camera: Camera, resolution: [64, 64]}\n    back: {camera: Camera, resolution: [64, 64]}\n"))
+    result = CliRunner().invoke(main, ["train", str(spec), "--backend", "rllib", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 1 and "RLlib's default encoder has no Dict support" in result.output and "Traceback" not in result.output
+    assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--address", "127.0.0.1:1"], "--address 127.0.0.1:1: cannot reach a Ray head there"),
+    (["--address", "nohost"], "expected HOST:PORT of a Ray head"),
+    (["--set", "learning_rate=1e-4"], "RLlib's PPO has no hyperparameter 'learning_rate'"),
+    (["--envs", "4"], "--envs: not for --backend rllib"),
+])
+def test_bad_rllib_runs_are_refused_with_one_line(tmp_path, args, message):
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--out", str(tmp_path / "runs"), *args])
+    assert result.exit_code in (1, 2) and message in result.output and "Traceback" not in result.output, result.output
+    assert not (tmp_path / "runs").exists()
+
+
+def test_runner_options_need_the_rllib_backend(tmp_path):
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--env-runners", "3", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 2 and "--env-runners: only with --backend rllib" in result.output
+
+
+TRAIN = ["--backend", "rllib", "--env-runners", "2", "--eval-every", "64", "--eval-episodes", "1", "--final-episodes", "2",
+         "--set", "train_batch_size_per_learner=64", "--set", "minibatch_size=32", "--set", "num_epochs=1", "--no-progress"]
+
+
+@pytest.mark.slow
+def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
+    """A run stopped with SIGTERM still saves, evaluates and plots; --resume continues its steps and evaluations."""
+    spec, out = tiny_goalie(tmp_path), tmp_path / "runs"
+    env = {**os.environ, "PYTHONPATH": str(REPO)}
+    process = subprocess.Popen([sys.executable, "-m", "visualenv.cli", "train", spec, "--steps", "100000", "--out", str(out), *TRAIN],
+                               cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    deadline = time.monotonic() + 240
+    progress = None
+    while time.monotonic() < deadline and process.poll() is None:
+        runs = list((out / "TinyGoalie-v0").glob("*/logs/progress.csv")) if out.exists() else []
+        if runs and len(runs[0].read_text().splitlines()) >= 3:  # two iterations: one evaluation and checkpoint done
+            progress = runs[0]
+            break
+        time.sleep(1)
+    assert progress is not None, process.communicate(timeout=60)[0] if process.poll() is not None else "no progress in 240 s"
+    process.send_signal(signal.SIGTERM)
+    output = process.communicate(timeout=240)[0]
+    assert process.returncode == 0, output
+    run = progress.parents[1]
+    for name in ["config.json", "results.json", "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png",
+                 "plots/success.png", "plots/fps.png", "best_model", "final_model", "checkpoints/latest"]:
+        assert (run / name).exists(), name
+    results = json.loads((run / "results.json").read_text())
+    assert results["stopped_early"] is True and results["episodes"] == 2 and 64 <= results["steps"] < 100000
+    assert json.loads((run / "config.json").read_text())["backend"] == "rllib"
+    with np.load(run / "evaluations.npz") as first:
+        evaluated = first["timesteps"].tolist()
+    assert evaluated
+
+    played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"])
+    assert played.exit_code == 0 and "episode 0: return" in played.output, played.output
+
+    stopped_at = results["steps"]
+    resumed = CliRunner().invoke(main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress"])
+    assert resumed.exit_code == 0, resumed.output
+    results = json.loads((run / "results.json").read_text())
+    assert results["steps"] >= stopped_at + 128 and results["stopped_early"] is False
+    with np.load(run / "evaluations.npz") as later:
+        assert later["timesteps"].tolist()[:len(evaluated)] == evaluated and len(later["timesteps"]) > len(evaluated)  # history kept
+    steps = [int(line.split(",")[0]) for line in (run / "logs" / "progress.csv").read_text().splitlines()[1:]]
+    assert steps == sorted(steps) and steps[-1] == results["steps"]  # the resumed run carried on the step count
