@@ -147,3 +147,75 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
         assert later["timesteps"].tolist()[:len(evaluated)] == evaluated and len(later["timesteps"]) > len(evaluated)  # history kept
     steps = [int(line.split(",")[0]) for line in (run / "logs" / "progress.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] == results["steps"]  # the resumed run carried on the step count
+
+
+def _descendants() -> list:
+    import psutil
+
+    return psutil.Process().children(recursive=True)
+
+
+def _runner_processes() -> list:
+    return [p for p in _descendants() if _cmdline(p).startswith("ray::SingleAgentEnvRunner")]
+
+
+def _cmdline(process) -> str:
+    import psutil
+
+    try:
+        return " ".join(process.cmdline())
+    except psutil.Error:
+        return ""
+
+
+@pytest.mark.slow
+def test_two_node_cluster_samples_on_both_and_survives_a_killed_runner(tmp_path):
+    """Two Ray nodes on this machine, one runner on each (one CPU per node); one runner is killed mid-run.
+
+    RLlib restarts it and the run reaches its steps with every evaluation checkpointed;
+    afterwards no runner (each held a Blender) or Ray process is left.
+    """
+    import psutil
+    from ray.cluster_utils import Cluster
+
+    spec, out = tiny_goalie(tmp_path), tmp_path / "runs"
+    cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
+    try:
+        worker = cluster.add_node(num_cpus=1)
+        cluster.wait_for_nodes()
+        env = {**os.environ, "PYTHONPATH": str(REPO)}
+        process = subprocess.Popen([sys.executable, "-m", "visualenv.cli", "train", spec, "--steps", "512", "--address", cluster.address,
+                                    "--out", str(out), "--backend", "rllib", "--env-runners", "2",
+                                    "--eval-every", "128", "--eval-episodes", "1", "--final-episodes", "1", "--set", "train_batch_size_per_learner=64",
+                                    "--set", "minibatch_size=32", "--set", "num_epochs=1", "--no-progress"],
+                                   cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        deadline, killed, replaced = time.monotonic() + 300, None, False
+        while not replaced and time.monotonic() < deadline and process.poll() is None:
+            progress = list(out.glob("*/*/logs/progress.csv")) if out.exists() else []
+            if killed is None and progress and len(progress[0].read_text().splitlines()) >= 3:
+                runners = _runner_processes()
+                assert len(runners) == 2, [_cmdline(p) for p in runners]
+                first_pids = {p.pid for p in runners}
+                killed = runners[0].pid
+                runners[0].kill()
+            elif killed is not None:
+                replaced = any(p.pid not in first_pids for p in _runner_processes())  # RLlib started a new runner
+            time.sleep(0.5)
+        output = process.communicate(timeout=400)[0]
+        assert killed is not None and replaced and process.returncode == 0, output
+        (run,) = out.glob("*/*")
+        results = json.loads((run / "results.json").read_text())
+        assert results["steps"] >= 512 and not results["stopped_early"]
+        by_node = json.loads((run / "logs" / "env_steps_by_node.json").read_text())
+        assert set(by_node) == {cluster.head_node.node_id, worker.node_id} and min(by_node.values()) > 0, by_node
+        with np.load(run / "evaluations.npz") as evaluations:
+            assert len(evaluations["timesteps"]) == 512 // 128  # an evaluation (and checkpoint) every 128 steps, none lost to the kill
+        assert json.loads((run / "checkpoints" / "latest" / "visualenv.json").read_text())["steps"] == results["steps"]
+        assert not (run / "checkpoints" / "latest.old").exists() and not (run / "checkpoints" / "latest.saving").exists()
+    finally:
+        cluster.shutdown()
+    deadline = time.monotonic() + 30
+    while time.monotonic() < deadline and any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in _descendants()):
+        time.sleep(0.5)
+    left = [_cmdline(p) for p in _descendants() if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    assert not left, left

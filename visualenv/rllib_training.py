@@ -10,6 +10,7 @@ column names, ``evaluations.npz`` EvalCallback's arrays, and the plots and
 The evaluation env runs in the driver, as SB3's does, so the driver renders only
 while it evaluates; the runners sample on the cluster.
 
+``logs/env_steps_by_node.json`` counts the env steps sampled on each Ray node.
 Not written: ``monitor/`` (RLlib's runners may be on other machines; their
 episode returns are in progress.csv) and TensorBoard events.
 """
@@ -186,6 +187,15 @@ def _progress_row(result: dict[str, Any], steps: int, elapsed: float, iteration_
     }
 
 
+def _count_nodes(path: Path, result: dict[str, Any]) -> None:
+    """Env steps sampled on each Ray node over the run (node id -> steps): where the rendering happened."""
+    by_node = json.loads(path.read_text()) if path.exists() else {}
+    for node, steps in (result.get("env_runners", {}).get("env_steps_by_node") or {}).items():
+        if np.isfinite(steps):  # NaN: the node's runner sent nothing this iteration (it died, or is starting)
+            by_node[node] = by_node.get(node, 0) + int(steps)
+    path.write_text(json.dumps(by_node, indent=2) + "\n")
+
+
 def _append_progress(path: Path, row: dict[str, Any]) -> None:
     new = not path.exists()
     with path.open("a", newline="") as f:
@@ -261,6 +271,7 @@ def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: An
             result = algo.train()
             sampled = int(result.get("env_runners", {}).get("num_env_steps_sampled", 0))
             steps += sampled
+            _count_nodes(run_dir / "logs" / "env_steps_by_node.json", result)
             row = _progress_row(result, steps, time.perf_counter() - started, sampled)
             _append_progress(run_dir / "logs" / "progress.csv", row)
             bar.update(steps - bar.n)
