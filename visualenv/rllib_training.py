@@ -78,7 +78,7 @@ def ray_cluster(address: str | None, cpus: int) -> Iterator[None]:
     if address:
         ray.init(address=address, **kwargs)
     else:
-        ray.init(num_cpus=cpus, **kwargs)
+        ray.init(address="local", num_cpus=cpus, **kwargs)  # "local": a new cluster, even where `ray start` runs one
     try:
         yield
     finally:
