@@ -342,5 +342,24 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
         Path(json_out).write_text(json.dumps(results, indent=2) + "\n")
 
 
+@main.command("bench-rllib")
+@click.argument("spec")
+@click.option("--envs", default=2, show_default=True, type=click.IntRange(min=1), help="envs on each side (RLlib: one runner each)")
+@click.option("--steps", default=200, show_default=True, type=click.IntRange(min=1), help="measured steps per env (after a warm-up)")
+@click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@_friendly
+def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:
+    """Env steps/s through RLlib's EnvRunners vs SB3's SubprocVecEnv (same spec, same envs); memory per runner; time to first sample."""
+    try:
+        from visualenv.rllib_bench import as_dict, bench_rllib as run_bench
+    except ImportError as exc:
+        raise click.UsageError(f"bench-rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
+    figures = run_bench(spec, envs=envs, steps=steps)
+    for line in figures.lines():
+        click.echo(line)
+    if json_out:
+        Path(json_out).write_text(json.dumps(as_dict(figures), indent=2) + "\n")
+
+
 if __name__ == "__main__":  # pragma: no cover
     main()

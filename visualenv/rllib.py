@@ -63,13 +63,14 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env:
 def register(target: str, **env_config: Any) -> tuple[str, dict[str, Any]]:
     """Register a spec path or bundled id with RLlib (Ray's env registry); its name and env_config.
 
-    The name is ``visualenv-rllib:<spec path>``: pass both to ``config.environment(name, env_config=...)``.
+    The name is ``visualenv-rllib:<spec path or id>``: pass both to ``config.environment(name, env_config=...)``.
     """
     from ray.tune.registry import register_env
 
     from visualenv.registration import resolve
 
-    spec = str(Path(resolve(target)).resolve())
+    resolve(target)  # a bad target fails here, in the driver
+    spec = str(Path(target).resolve()) if Path(target).exists() else str(target)  # a bundled id resolves on every node
     name = ENV_PREFIX + spec
     register_env(name, make_rllib_env)
     return name, {"spec": spec, **env_config}
@@ -132,7 +133,8 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
     """A PPOConfig for `target`: `env_runners` remote EnvRunners of `envs_per_runner` envs each, restarted when they die.
 
     Every env renders with ``cpus_per_runner // envs_per_runner`` threads (at least one),
-    so a runner uses the CPUs Ray reserves for it. Hyperparameters are ``PPOConfig.training``'s.
+    so a runner uses the CPUs Ray reserves for it. Hyperparameters are ``PPOConfig.training``'s; the defaults
+    are the SB3 backend's Goalie settings (examples/hyperparams/goalie.yaml) in RLlib's names.
     """
     from ray.rllib.algorithms.ppo import PPOConfig
 
@@ -145,7 +147,7 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
         space = spaces.Box(0.0, 1.0, space.shape[:2] + (space.shape[2] * max(1, frame_stack),), np.float32)
     threads = max(1, cpus_per_runner // envs_per_runner)
     name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads)
-    defaults = {"train_batch_size_per_learner": 512 * env_runners * envs_per_runner // 2 or 512, "minibatch_size": 128, "num_epochs": 4,
+    defaults = {"train_batch_size_per_learner": 512, "minibatch_size": 128, "num_epochs": 4,
                 "lr": 2.5e-4, "gamma": 0.99, "lambda_": 0.95, "clip_param": 0.1, "entropy_coeff": 0.01, "vf_loss_coeff": 0.5}
     return (
         PPOConfig()
