@@ -96,6 +96,12 @@ def test_bad_rllib_runs_are_refused_with_one_line(tmp_path, args, message):
     assert not (tmp_path / "runs").exists()
 
 
+def test_a_resumed_run_keeps_its_backend(tmp_path):
+    (tmp_path / "config.json").write_text(json.dumps({"config": {"spec": "Goalie-v0"}}))  # an SB3 run: no 'backend' key
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--resume", str(tmp_path)])
+    assert result.exit_code == 2 and "was trained with --backend sb3; a resumed run keeps its backend" in result.output
+
+
 def test_runner_options_need_the_rllib_backend(tmp_path):
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--env-runners", "3", "--out", str(tmp_path / "runs")])
     assert result.exit_code == 2 and "--env-runners: only with --backend rllib" in result.output

@@ -189,6 +189,8 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         hyper[key] = _parse_value(value)
     saved_backend = _run_backend(resume_dir) if resume_dir else backend
     ctx = click.get_current_context()
+    if resume_dir and ctx.get_parameter_source("backend") is ParameterSource.COMMANDLINE and backend != saved_backend:
+        raise click.UsageError(f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend")
     if saved_backend == "rllib" or backend == "rllib":
         sb3_only = [f"--{name.replace('_', '-')}" for name in ("algo", "envs") if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
         if sb3_only:
@@ -242,6 +244,9 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
     from visualenv.spec.loader import load_spec
     from visualenv.training import new_run_dir
 
+    import logging
+
+    logging.getLogger("ray.rllib").setLevel(logging.ERROR)  # RLlib's notes on its own API changes are not the user's business
     params = ctx.params
     if resume_dir:
         fixed = [f"--{name.replace('_', '-')}" for name in ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
@@ -354,6 +359,9 @@ def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:
         from visualenv.rllib_bench import as_dict, bench_rllib as run_bench
     except ImportError as exc:
         raise click.UsageError(f"bench-rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
+    import logging
+
+    logging.getLogger("ray.rllib").setLevel(logging.ERROR)
     figures = run_bench(spec, envs=envs, steps=steps)
     for line in figures.lines():
         click.echo(line)
