@@ -197,9 +197,17 @@ class RLlibPolicy:
     @classmethod
     def load(cls, checkpoint: str | Path) -> "RLlibPolicy":
         """The policy of an Algorithm checkpoint folder (``best_model``, ``checkpoints/latest``, ...)."""
+        import logging
+
         from ray.rllib.core.rl_module.rl_module import RLModule
 
-        return cls(RLModule.from_checkpoint(str(Path(checkpoint).resolve() / MODULE_DIR)))
+        rllib_log = logging.getLogger("ray._common.deprecation")
+        level = rllib_log.level
+        rllib_log.setLevel(logging.ERROR)  # RLlib warns about its own deprecated constructor while loading its own checkpoint
+        try:
+            return cls(RLModule.from_checkpoint(str(Path(checkpoint).resolve() / MODULE_DIR)))
+        finally:
+            rllib_log.setLevel(level)
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True) -> tuple[np.ndarray, None]:
         """Actions for a batch of observations (or one), as SB3's ``predict``; `state` and `episode_start` are unused."""
