@@ -112,6 +112,7 @@ TRAIN = ["--backend", "rllib", "--env-runners", "2", "--eval-every", "64", "--ev
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)  # two Ray starts and a dozen iterations: about 100 s on an idle 2-core machine, 200 s under load
 def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     """A run stopped with SIGTERM still saves, evaluates and plots; --resume continues its steps and evaluations."""
     spec, out = tiny_goalie(tmp_path), tmp_path / "runs"
@@ -175,6 +176,7 @@ def _cmdline(process) -> str:
 
 
 @pytest.mark.slow
+@pytest.mark.timeout(600)
 def test_two_node_cluster_samples_on_both_and_survives_a_killed_runner(tmp_path):
     """Two Ray nodes on this machine, one runner on each (one CPU per node); one runner is killed mid-run.
 
