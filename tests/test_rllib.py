@@ -107,6 +107,28 @@ def test_runner_options_need_the_rllib_backend(tmp_path):
     assert result.exit_code == 2 and "--env-runners: only with --backend rllib" in result.output
 
 
+@pytest.mark.slow
+def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
+    import ray
+
+    from visualenv.rllib import ppo_config
+
+    ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        algo = ppo_config(tiny_goalie(tmp_path), env_runners=1, envs_per_runner=2).build_algo()
+        try:
+            assert algo.env_runner.env is None  # the driver's own EnvRunner: a model copy, no env, so no Blender
+            (sampled,) = algo.env_runner_group.foreach_env_runner(
+                lambda r: (sum(len(e) for e in r.sample(num_timesteps=8, random_actions=True)), "bpy" in sys.modules,
+                           r.env.observation_space.shape), local_env_runner=False)
+            steps, blender, shape = sampled
+            assert steps >= 8 and blender and shape == (2, 24, 24, 4)  # two envs of four stacked frames, rendered in the runner
+        finally:
+            algo.stop()
+    finally:
+        ray.shutdown()
+
+
 TRAIN = ["--backend", "rllib", "--env-runners", "2", "--eval-every", "64", "--eval-episodes", "1", "--final-episodes", "2",
          "--set", "train_batch_size_per_learner=64", "--set", "minibatch_size=32", "--set", "num_epochs=1", "--no-progress"]
 
