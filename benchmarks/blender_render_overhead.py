@@ -14,7 +14,7 @@ import time
 
 import numpy as np
 
-from visualenv.compiler.env import VisualEnv
+from visualenv.env import VisualEnv
 from visualenv.render.blender.readback import read_bmp, to_grayscale
 
 

@@ -16,7 +16,7 @@ import pytest
 
 bpy = pytest.importorskip("bpy")
 
-from visualenv.compiler.env import VisualEnv  # noqa: E402
+from visualenv.env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError  # noqa: E402
 from visualenv.spec import load_spec_text  # noqa: E402
 

@@ -14,7 +14,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from visualenv.compiler import VisualEnv, compile_spec
+from visualenv.compiler import compile_spec
+from visualenv.env import VisualEnv
 from visualenv.errors import ExpressionError, RenderError, SpecError, StepError, VisualEnvError, WorkerError
 from visualenv.registration import register_bundled, resolve
 from visualenv.spec import load_spec, load_spec_text

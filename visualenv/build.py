@@ -53,7 +53,7 @@ def versions() -> dict[str, str]:
 
 
 def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0, device: str | None = None) -> BuildResult:
-    from visualenv.compiler.env import VisualEnv
+    from visualenv.env import VisualEnv
     from visualenv.spec.loader import load_spec
 
     start = time.perf_counter()
@@ -154,7 +154,7 @@ def make_dir(path: Path) -> Path:
 
 def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0) -> list[Path]:
     """Frames of a random-action episode (observation beside the view), as PNGs."""
-    from visualenv.compiler.env import VisualEnv
+    from visualenv.env import VisualEnv
     from visualenv.spec.loader import load_spec
 
     loaded = load_spec(resolve(spec))

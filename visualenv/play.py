@@ -54,7 +54,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
          record: str | None = None, fps: int = 15, max_frames: int = 2000, view_preset: str | None = None,
          view_size: int | None = None) -> list[Episode]:
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation."""
-    from visualenv.compiler import VisualEnv
+    from visualenv.env import VisualEnv
     from visualenv.registration import resolve
     from visualenv.spec import load_spec
     from visualenv.wrappers import FrameStack

@@ -74,6 +74,6 @@ def register_bundled() -> list[str]:
     for env_id, path in spec_index().items():
         full = f"{NAMESPACE}/{env_id}"
         if full not in gym.registry:
-            gym.register(id=full, entry_point="visualenv.compiler.env:VisualEnv", kwargs={"spec": str(path)})
+            gym.register(id=full, entry_point="visualenv.env:VisualEnv", kwargs={"spec": str(path)})
         ids.append(full)
     return ids

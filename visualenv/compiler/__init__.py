@@ -1,6 +1,5 @@
-"""Spec -> resolved program -> Gymnasium env."""
+"""Spec -> resolved program (generated init/step/bind functions and the renderer's plan)."""
 
-from visualenv.compiler.env import VisualEnv
 from visualenv.compiler.program import BindingTarget, Program, compile_spec
 
-__all__ = ["BindingTarget", "Program", "VisualEnv", "compile_spec"]
+__all__ = ["BindingTarget", "Program", "compile_spec"]
