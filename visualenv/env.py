@@ -13,7 +13,7 @@ from gymnasium import spaces
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
-from visualenv.render.base import RenderPlan, Renderer, check_renderer_options, create_renderer, observation_space
+from visualenv.render.base import Renderer, check_renderer_options, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 
@@ -214,8 +214,7 @@ class VisualEnv(gym.Env):
     def renderer(self) -> Renderer:
         """The renderer, built on first use (in the process that uses it)."""
         if self._renderer is None:
-            plan = RenderPlan.from_program(self.program)
-            self._renderer = create_renderer(plan, **self._renderer_options)
+            self._renderer = create_renderer(self.program.render_plan(), **self._renderer_options)
         return self._renderer
 
     def binding_values(self) -> tuple:

@@ -25,6 +25,7 @@ from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mea
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
+from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.models import CameraObject, LightObject, Spec
 
@@ -69,15 +70,6 @@ BINDABLE: dict[str, Type] = {
 
 
 @dataclass(frozen=True)
-class BindingTarget:
-    """One scene property a renderer sets before each render."""
-
-    object: str
-    property: str  # a key of BINDABLE
-    size: int  # how many values the binding function yields for it (1 for scalars)
-
-
-@dataclass(frozen=True)
 class OutcomeRule:
     name: str
     end: str  # terminate | truncate | none
@@ -112,6 +104,20 @@ class Program:
         env["_random"] = random
         built = {key: b.build(env) for key, b in self._builders.items()}
         return CompiledFunctions(built["init"], built["step"], built["bind"])
+
+    def render_plan(self) -> RenderPlan:
+        """What a renderer needs: the scene, the observation cameras, the settings and the binding targets."""
+        spec = self.spec
+        views = spec.observation.views() if spec.observation is not None else {}
+        return RenderPlan(
+            scene=spec.scene,
+            views=views,
+            single=spec.observation is None or spec.observation.cameras is None,
+            settings=spec.render,
+            bindings=tuple(self.bindings),
+            base_dir=self.loaded.base_dir,
+            source=self.loaded.source,
+        )
 
     def site(self, function: str, line: int) -> Site | None:
         sites = self.sites.get(function, [])

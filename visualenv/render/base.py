@@ -1,8 +1,8 @@
 """The renderer interface the env talks to, and what a renderer is given.
 
-The compiled program hands a renderer a :class:`RenderPlan`: the scene
-description, the observation cameras, the render settings and the list of
-binding targets. Before each render the env passes the current binding values
+The compiler produces a :class:`RenderPlan` (``Program.render_plan()``): the
+scene description, the observation cameras, the render settings and the list
+of binding targets. Before each render the env passes the current binding values
 (a flat tuple in :attr:`RenderPlan.bindings` order). A renderer turns those
 into pixels; it knows nothing of rewards or episodes.
 """
@@ -12,16 +12,13 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING, Any, Sequence
+from typing import Any, Sequence
 
 import numpy as np
 from gymnasium import spaces
 
 from visualenv.spec.models import CameraView, Observation, Render, Scene
 from visualenv.spec.source import SourceMap
-
-if TYPE_CHECKING:
-    from visualenv.compiler.program import BindingTarget, Program
 
 CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1}
 
@@ -40,30 +37,25 @@ def observation_space(observation: Observation) -> spaces.Space:
 
 
 @dataclass(frozen=True)
+class BindingTarget:
+    """One scene property a renderer sets before each render."""
+
+    object: str
+    property: str  # a key of BINDABLE
+    size: int  # how many values the binding function yields for it (1 for scalars)
+
+
+@dataclass(frozen=True)
 class RenderPlan:
-    """Everything a renderer needs, derived from a compiled program."""
+    """Everything a renderer needs, produced by the compiler (``Program.render_plan()``)."""
 
     scene: Scene
     views: dict[str, CameraView]  # observation cameras by observation key
     single: bool  # one camera (Box) rather than several (Dict)
     settings: Render
-    bindings: tuple["BindingTarget", ...]
+    bindings: tuple[BindingTarget, ...]
     base_dir: Path
     source: SourceMap
-
-    @classmethod
-    def from_program(cls, program: "Program") -> "RenderPlan":
-        spec = program.spec
-        views = spec.observation.views() if spec.observation is not None else {}
-        return cls(
-            scene=spec.scene,
-            views=views,
-            single=spec.observation is None or spec.observation.cameras is None,
-            settings=spec.render,
-            bindings=tuple(program.bindings),
-            base_dir=program.loaded.base_dir,
-            source=program.loaded.source,
-        )
 
     @property
     def view_camera(self) -> str | None:
