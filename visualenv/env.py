@@ -13,7 +13,7 @@ from gymnasium import spaces
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
-from visualenv.render.base import Renderer, check_renderer_options, create_renderer, observation_space
+from visualenv.render.base import BLENDER_BACKEND, Renderer, check_renderer_options, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 
@@ -49,6 +49,11 @@ class VisualEnv(gym.Env):
     raises :class:`~visualenv.errors.StepError` naming the expression, its
     spec line and the values; with ``on_fault: terminate`` the episode ends
     instead and ``info["error"]`` holds the message.
+
+    ## Renderer backend
+    ``backend`` names the renderer class as ``module:attribute`` (default:
+    Blender), loaded on first render; a test can plug in a fake renderer to
+    check logic that does not depend on pixels.
     """
 
     metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
@@ -61,6 +66,7 @@ class VisualEnv(gym.Env):
         render_mode: str | None = None,
         params: dict[str, Any] | None = None,
         renderer_options: dict[str, Any] | None = None,
+        backend: str = BLENDER_BACKEND,
     ) -> None:
         super().__init__()
         if isinstance(spec, Program) and not params:
@@ -68,7 +74,7 @@ class VisualEnv(gym.Env):
         else:
             loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
             program = compile_spec(loaded, params)
-        self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options}
+        self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options, "backend": backend}
         self.program = program
         s = program.spec
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
@@ -77,6 +83,7 @@ class VisualEnv(gym.Env):
             raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
         self.render_mode = render_mode
         self.uses_camera = s.observation is not None and render is not False
+        self._backend = backend
         self._renderer_options = dict(renderer_options or {})
         check_renderer_options(self._renderer_options)
         self._renderer: Renderer | None = None
@@ -214,7 +221,7 @@ class VisualEnv(gym.Env):
     def renderer(self) -> Renderer:
         """The renderer, built on first use (in the process that uses it)."""
         if self._renderer is None:
-            self._renderer = create_renderer(self.program.render_plan(), **self._renderer_options)
+            self._renderer = create_renderer(self.program.render_plan(), self._backend, **self._renderer_options)
         return self._renderer
 
     def binding_values(self) -> tuple:

@@ -9,10 +9,11 @@ into pixels; it knows nothing of rewards or episodes.
 
 from __future__ import annotations
 
+import importlib
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import numpy as np
 from gymnasium import spaces
@@ -98,8 +99,18 @@ def check_renderer_options(options: dict[str, Any]) -> None:
         raise ValueError(f"unknown readback {readback!r}: use {', '.join(READBACKS)}")
 
 
-def create_renderer(plan: RenderPlan, **options: Any) -> Renderer:
-    """The Blender renderer (imported here so state-only envs never load bpy)."""
-    from visualenv.render.blender.renderer import BlenderRenderer
+#: the default backend, as a ``module:attribute`` entry point (imported on first render, so state-only envs never load bpy)
+BLENDER_BACKEND = "visualenv.render.blender:BlenderRenderer"
 
-    return BlenderRenderer(plan, **options)
+
+def load_backend(entry_point: str) -> Callable[..., Renderer]:
+    """The renderer class (or factory) named by ``module:attribute``, as Gymnasium's registry loads env creators."""
+    module_name, _, attribute = entry_point.partition(":")
+    if not module_name or not attribute:
+        raise ValueError(f"renderer backend {entry_point!r} is not of the form 'module:attribute'")
+    return getattr(importlib.import_module(module_name), attribute)
+
+
+def create_renderer(plan: RenderPlan, backend: str = BLENDER_BACKEND, **options: Any) -> Renderer:
+    """The renderer of `backend` for `plan`, given the renderer `options`."""
+    return load_backend(backend)(plan, **options)
