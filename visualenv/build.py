@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import platform
 import shutil
 import tempfile
 import time
@@ -19,13 +18,12 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
 from PIL import Image
 
-from visualenv.errors import VisualEnvError
+from visualenv.files import make_dir
+from visualenv.images import ascii_art, side_by_side
 from visualenv.registration import resolve
-
-ASCII_RAMP = " .:-=+*#%@"
+from visualenv.versions import versions
 
 
 @dataclass
@@ -35,21 +33,6 @@ class BuildResult:
     seconds: float
     summary: list[str] = field(default_factory=list)
     ascii_preview: str = ""
-
-
-def versions() -> dict[str, str]:
-    import gymnasium
-
-    import visualenv
-
-    out = {"visualenv": visualenv.__version__, "gymnasium": gymnasium.__version__, "numpy": np.__version__, "python": platform.python_version()}
-    try:
-        import bpy
-
-        out["blender"] = bpy.app.version_string
-    except ImportError:  # pragma: no cover - bpy is a dependency
-        pass
-    return out
 
 
 def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0, device: str | None = None) -> BuildResult:
@@ -107,49 +90,6 @@ def _swap_in(tmp: Path, final: Path) -> None:
     tmp.rename(final)
     if old is not None:
         shutil.rmtree(old, ignore_errors=True)
-
-
-def to_rgb(image: np.ndarray) -> np.ndarray:
-    return np.repeat(image, 3, axis=2) if image.shape[2] == 1 else image[..., :3]
-
-
-def side_by_side(observation: Any, view: np.ndarray) -> np.ndarray:
-    """Observation(s), scaled up (nearest) to the view's height, left of the view."""
-    images = list(observation.values()) if isinstance(observation, dict) else [observation]
-    height = view.shape[0]
-    panels = []
-    for image in images:
-        scale = max(1, height // image.shape[0])
-        big = np.kron(to_rgb(image), np.ones((scale, scale, 1), dtype=np.uint8))
-        pad = np.zeros((height, big.shape[1], 3), np.uint8)
-        pad[: min(height, big.shape[0])] = big[:height]
-        panels.append(pad)
-    gap = np.full((height, 4, 3), 255, np.uint8)
-    parts = []
-    for panel in panels + [view[..., :3]]:
-        parts += [panel, gap]
-    return np.concatenate(parts[:-1], axis=1)
-
-
-def ascii_art(image: np.ndarray, width: int = 50) -> str:
-    """A terminal sketch of an image (characters are about twice as tall as wide)."""
-    gray = image.astype(np.float32).mean(axis=2)
-    h, w = gray.shape
-    rows = max(1, int(h * width / w / 2))
-    ys = (np.arange(rows) * h / rows).astype(int)
-    xs = (np.arange(width) * w / width).astype(int)
-    small = gray[np.ix_(ys, xs)]
-    idx = (small / 256 * len(ASCII_RAMP)).astype(int).clip(0, len(ASCII_RAMP) - 1)
-    return "\n".join("".join(ASCII_RAMP[i] for i in row) for row in idx)
-
-
-def make_dir(path: Path) -> Path:
-    """``mkdir -p`` that reports a folder it cannot make as a user error, before any work is done."""
-    try:
-        path.mkdir(parents=True, exist_ok=True)
-    except OSError as exc:
-        raise VisualEnvError(f"cannot create the folder {path}: {exc.strerror or exc}") from None
-    return path
 
 
 def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0) -> list[Path]:

@@ -325,7 +325,7 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
     from visualenv.vector import usable_cores
 
     if json_out:  # a figure file that cannot be written is refused now, not after minutes of measuring
-        from visualenv.build import make_dir
+        from visualenv.files import make_dir
 
         try:
             make_dir(Path(json_out).parent)

@@ -8,7 +8,8 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.build import make_dir, side_by_side
+from visualenv.files import make_dir
+from visualenv.images import side_by_side
 from visualenv.errors import VisualEnvError
 from visualenv.wrappers import subspaces
 

@@ -208,7 +208,7 @@ def _append_progress(path: Path, row: dict[str, Any]) -> None:
 def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None,
           address: str | None = None) -> dict[str, Any]:
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
-    from visualenv.build import versions
+    from visualenv.versions import versions
     from visualenv.plots import training_plots
     from visualenv.rllib import RLlibPolicy, check_address
     from visualenv.training import evaluate

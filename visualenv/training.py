@@ -110,7 +110,7 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
 
 
 def new_run_dir(root: str | Path, env_id: str) -> Path:
-    from visualenv.build import make_dir
+    from visualenv.files import make_dir
 
     stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
     run = make_dir(Path(root) / env_id) / stamp
@@ -132,7 +132,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     from stable_baselines3.common.logger import configure
     from stable_baselines3.common.vec_env import VecTransposeImage
 
-    from visualenv.build import versions
+    from visualenv.versions import versions
     from visualenv.registration import resolve
     from visualenv.vector import make_sb3_vec
 
