@@ -18,7 +18,7 @@ import subprocess
 import sys
 import time
 
-from visualenv.vector import usable_cores
+from visualenv.cores import usable_cores
 
 CASES = ("single", "single:1", "single:1:pin", "vec", "vec:pin")
 

@@ -10,7 +10,8 @@ import pytest
 
 import visualenv
 from visualenv.errors import WorkerError
-from visualenv.vector import make_sb3_vec, make_vec
+from visualenv.sb3_vec import make_sb3_vec
+from visualenv.vector import make_vec
 
 
 def children() -> set[int]:
@@ -89,24 +90,24 @@ def test_a_killed_worker_raises_promptly_instead_of_hanging():
 
 
 def test_worker_cores_round_robin(monkeypatch):
-    from visualenv import vector
+    from visualenv import cores
 
-    monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: {2, 5}, raising=False)
-    assert vector.worker_cores(3) == [2, 5, 2]
-    assert vector.worker_cores(1) == [None]  # one worker: nothing to keep apart
-    assert vector.worker_cores(3, pin=False) == [None, None, None]
-    monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: {0}, raising=False)
-    assert vector.worker_cores(2) == [None, None]  # one core: nothing to choose
+    monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {2, 5}, raising=False)
+    assert cores.worker_cores(3) == [2, 5, 2]
+    assert cores.worker_cores(1) == [None]  # one worker: nothing to keep apart
+    assert cores.worker_cores(3, pin=False) == [None, None, None]
+    monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {0}, raising=False)
+    assert cores.worker_cores(2) == [None, None]  # one core: nothing to choose
 
 
 def test_default_threads_share_the_cores_this_process_may_use(monkeypatch):
-    from visualenv import vector
+    from visualenv import cores
 
-    monkeypatch.setattr(vector.os, "cpu_count", lambda: 64)
-    monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
-    assert vector.default_threads(2) == 4  # the 8 cores of our affinity mask, not the machine's 64
-    monkeypatch.setattr(vector.os, "sched_getaffinity", lambda pid: {3}, raising=False)
-    assert vector.default_threads(2) == 1
+    monkeypatch.setattr(cores.os, "cpu_count", lambda: 64)
+    monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)
+    assert cores.default_threads(2) == 4  # the 8 cores of our affinity mask, not the machine's 64
+    monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {3}, raising=False)
+    assert cores.default_threads(2) == 1
 
 
 @pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs Linux and 2 cores")

@@ -19,7 +19,8 @@ from visualenv.env import VisualEnv
 from visualenv.errors import ExpressionError, RenderError, SpecError, StepError, VisualEnvError, WorkerError
 from visualenv.registration import register_bundled, resolve
 from visualenv.spec import load_spec, load_spec_text
-from visualenv.vector import make_sb3_vec, make_vec
+from visualenv.sb3_vec import make_sb3_vec
+from visualenv.vector import make_vec
 from visualenv.wrappers import FrameStack, Grayscale, Resize, wrap_observation
 
 __version__ = "0.1.0"

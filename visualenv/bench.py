@@ -307,7 +307,8 @@ class StepTimes(gym.Wrapper):
 def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
                    pin: bool = False) -> dict[str, Any]:
     """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each)."""
-    from visualenv.vector import default_threads, make_vec, worker_cores
+    from visualenv.cores import default_threads, worker_cores
+    from visualenv.vector import make_vec
 
     threads = default_threads(workers)
     pinned = any(core is not None for core in worker_cores(workers, pin))  # pinning needs two cores to choose from

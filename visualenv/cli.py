@@ -322,7 +322,7 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
     import psutil
 
     from visualenv.bench import as_dict, bench_one
-    from visualenv.vector import usable_cores
+    from visualenv.cores import usable_cores
 
     if json_out:  # a figure file that cannot be written is refused now, not after minutes of measuring
         from visualenv.files import make_dir

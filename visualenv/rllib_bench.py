@@ -50,7 +50,7 @@ class RLlibFigures:
 
 
 def _sb3_steps_per_s(spec: str, envs: int, steps: int, warmup: int) -> tuple[float, list[float]]:
-    from visualenv.vector import make_sb3_vec
+    from visualenv.sb3_vec import make_sb3_vec
 
     vec = make_sb3_vec(spec, envs, frame_stack=4)
     try:

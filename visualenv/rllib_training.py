@@ -212,7 +212,8 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     from visualenv.plots import training_plots
     from visualenv.rllib import RLlibPolicy, check_address
     from visualenv.training import evaluate
-    from visualenv.vector import make_sb3_vec, usable_cores
+    from visualenv.cores import usable_cores
+    from visualenv.sb3_vec import make_sb3_vec
 
     check_address(address)
     algo_config = algorithm_config(config)

@@ -35,7 +35,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from visualenv.errors import ConfigError, SpecError, did_you_mean
-from visualenv.vector import usable_cores
+from visualenv.cores import usable_cores
 from visualenv.wrappers import subspaces
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
@@ -134,7 +134,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
 
     from visualenv.versions import versions
     from visualenv.registration import resolve
-    from visualenv.vector import make_sb3_vec
+    from visualenv.sb3_vec import make_sb3_vec
 
     spec_path = str(resolve(config.spec))
     changes = dict(changes or {})

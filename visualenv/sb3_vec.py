@@ -1,0 +1,43 @@
+"""Parallel envs for Stable-Baselines3: ``SubprocVecEnv`` workers, seeded and monitored like SB3's ``make_vec_env``."""
+
+from __future__ import annotations
+
+import os
+from functools import partial
+from typing import Any
+
+import gymnasium as gym
+
+from visualenv.cores import worker_cores
+from visualenv.vector import make_in_worker, with_render_threads
+
+
+def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None, pin: bool = False,
+                 monitor_dir: str | None = None, monitor_append: bool = False, **kwargs: Any) -> Any:
+    """`n` envs in SB3's ``SubprocVecEnv`` (``DummyVecEnv`` for one), frames stacked by ``VecFrameStack``.
+
+    Like SB3's ``make_vec_env``: env ``i`` is seeded ``seed + i`` and wrapped in a
+    ``Monitor`` writing ``monitor_dir/i.monitor.csv`` when a folder is given
+    (appended to with ``monitor_append``, for a resumed run).
+    """
+    from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
+
+    kwargs = with_render_threads(kwargs, n, threads)
+    fns = [partial(_make_monitored, str(target), kwargs, core, seed + i, monitor_dir and os.path.join(monitor_dir, str(i)), monitor_append)
+           for i, core in enumerate(worker_cores(n, pin))]
+    if monitor_dir:
+        os.makedirs(monitor_dir, exist_ok=True)
+    vec = SubprocVecEnv(fns, start_method="spawn") if n > 1 else DummyVecEnv(fns)
+    vec.seed(seed)
+    if frame_stack and frame_stack > 1 and kwargs.get("render") is not False:
+        vec = VecFrameStack(vec, n_stack=frame_stack)
+    return vec
+
+
+def _make_monitored(target: str, kwargs: dict[str, Any], core: int | None, seed: int, monitor_file: str | None,
+                    append: bool = False) -> gym.Env:
+    from stable_baselines3.common.monitor import Monitor
+
+    env = make_in_worker(target, kwargs, core)
+    env.action_space.seed(seed)
+    return Monitor(env, filename=monitor_file, override_existing=not append)
