@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 from PIL import Image
 
-LUMA = np.array([0.299, 0.587, 0.114], dtype=np.float32)  # ITU-R BT.601, as PIL's "L" mode
+from visualenv.pixels import to_grayscale
 
 
 def _image_box(space: spaces.Space) -> spaces.Box:
@@ -44,7 +44,7 @@ def _map_obs(obs: Any, fn: Any) -> Any:
 
 
 class Grayscale(gym.ObservationWrapper):
-    """RGB (H, W, 3) -> grayscale (H, W, 1) with BT.601 luma; 1-channel images pass through."""
+    """RGB (H, W, 3) -> grayscale (H, W, 1) with the renderer's BT.601 luma (:func:`visualenv.pixels.to_grayscale`); 1-channel images pass through."""
 
     def __init__(self, env: gym.Env):
         super().__init__(env)
@@ -54,8 +54,7 @@ class Grayscale(gym.ObservationWrapper):
     def convert(image: np.ndarray) -> np.ndarray:
         if image.shape[-1] == 1:
             return image
-        gray = image[..., :3].astype(np.float32) @ LUMA
-        return np.clip(gray + 0.5, 0, 255).astype(np.uint8)[..., None]
+        return to_grayscale(image)
 
     def observation(self, observation: Any) -> Any:
         return _map_obs(observation, self.convert)

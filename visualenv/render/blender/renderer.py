@@ -11,11 +11,12 @@ import bpy
 import numpy as np
 
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
+from visualenv.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through
 from visualenv.render.blender.capture import Capture, install as install_capture
-from visualenv.render.blender.readback import OutputFile, first_channel, quiet_stdout, read_bmp, to_grayscale
+from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
 from visualenv.spec.models import CameraObject, Material
 
