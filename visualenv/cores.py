@@ -7,11 +7,10 @@ which a container, a batch scheduler or ``taskset`` may make smaller than the ma
 may use). A Blender render keeps more threads busy than its render threads: with
 one render thread, Cycles' session thread traces while an idle thread of
 Blender's pool spins on the other core. Pinning keeps that spinning off another
-worker's core and cuts the workers' p99 render time by a third, but on the 2-core
-development VM steps/s overlap from run to run (ten interleaved runs of two
-CartPole workers: 493-600 steps/s pinned, 467-615 not;
-``benchmarks/parallel_ceiling.py``, ``visualenv bench --pin``), and pinning would
-crowd two jobs onto the same cores, so it is off by default.
+worker's core, which steadies the workers' render times more than it raises
+steps/s (``visualenv bench --workers N --pin`` and ``benchmarks/parallel_ceiling.py``
+measure it; docs/performance.md has the figures), and pinning would crowd two
+jobs onto the same cores, so it is off by default.
 """
 
 from __future__ import annotations

@@ -3,12 +3,13 @@
 Blender's background mode gives Python no access to a finished render: the
 'Render Result' image has no pixels and the compositor's Viewer node is never
 run. The portable route (see :mod:`readback`) writes a file and reads it back,
-which costs about 1 ms per frame at 100x100, as much as the render itself.
+which costs about as much as the render itself at 100x100 (``visualenv bench --readback file``
+against the default; docs/performance.md).
 
 A render engine, however, can read its own result while it renders. This
 module wraps Cycles' ``RenderEngine.render`` so that, when a renderer has armed
 a :class:`Capture`, the engine's Combined pass (linear, scene-referred RGBA) is
-copied with ``foreach_get`` (20-40 µs at 100x100) before Blender moves on. The wrapper
+copied with ``foreach_get`` (a small share of a step: ``benchmarks/readback_probe.py``) before Blender moves on. The wrapper
 is installed once per process and does nothing for renders nobody armed.
 
 The readers (:meth:`Capture.rgb`, :meth:`Capture.grayscale`, :meth:`Capture.raw`)
@@ -147,8 +148,9 @@ def _srgb_table(size: int = 65536) -> np.ndarray:
     return np.floor(encoded * 255.0 + 0.5).astype(np.uint8)
 
 
-#: sRGB bytes for linear values quantised to 16 bits: a table lookup is 5x faster than
-#: evaluating the power function per pixel, and agrees with it except at exact rounding ties
+#: sRGB bytes for linear values quantised to 16 bits: a table lookup is faster than evaluating
+#: the power function per pixel (``visualenv bench``'s time outside the render call shows the
+#: conversion), and agrees with it except at exact rounding ties
 _SRGB = _srgb_table()
 
 

@@ -12,7 +12,7 @@ Presets (Cycles):
   sampling, a 1-pixel box filter (crisp, deterministic pixels).
 * ``quality`` (previews): 16 samples, 4 bounces, Blackman-Harris filter, no
   denoising (OpenImageDenoise runs on the CPU but adds seconds per frame).
-  About 1.1 s for a 400x400 view on 2 CPU cores.
+  About a second per 400x400 view on a CPU (``visualenv preview`` renders it).
 
 ``samples`` / ``bounces`` in the spec (or the renderer options) override the
 preset. Workbench ignores bounces and maps samples to its anti-aliasing
@@ -36,7 +36,8 @@ ENGINE_IDS = {"cycles": "CYCLES", "workbench": "BLENDER_WORKBENCH", "eevee": "BL
 GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "METAL", "ONEAPI")
 _BOUNCES = ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces")
 #: passes through see-through surfaces (a colour with alpha < 1), only in scenes that have one: with
-#: any, Cycles traces shadows through every surface, +0.25 ms on CartPole's 1.4 ms render
+#: any, Cycles traces shadows through every surface, which raises the raw render floor
+#: (``visualenv bench``; docs/performance.md)
 TRANSPARENT_BOUNCES = 8
 _WORKBENCH_AA = ((1, "OFF"), (4, "FXAA"), (5, "5"), (8, "8"), (11, "11"), (16, "16"))
 
@@ -55,7 +56,7 @@ class RenderConfig:
 
 PRESETS = {
     "fast": dict(samples=1, bounces=0, denoise=False, filter="BOX", filter_width=1.0),
-    # OpenImageDenoise works on the CPU but costs ~3.5 s at 400x400 on 2 cores: off
+    # OpenImageDenoise works on the CPU but adds seconds per 400x400 frame: off
     "quality": dict(samples=16, bounces=4, denoise=False, filter="BLACKMAN_HARRIS", filter_width=1.5),
 }
 
@@ -160,7 +161,7 @@ def configure_scene(scene: Any, *, device: str, threads: int) -> None:
     r.dither_intensity = 0.0  # dithering adds noise to 8-bit output
     r.use_compositing = False
     r.use_sequencer = False
-    r.use_persistent_data = True  # keeps Cycles' scene between renders: about 2x faster per frame
+    r.use_persistent_data = True  # keeps Cycles' scene between renders (benchmarks/readback_probe.py measures the gain)
     r.use_motion_blur = False
     r.use_simplify = False
     if threads:
