@@ -287,70 +287,89 @@ class _Compiler:
         return fb
 
     def build_step(self, state_names: list[str], input_names: list[str], discrete: int | None) -> FunctionBuilder:
-        spec = self.spec
+        """The step function: inputs from the action, derived values, the simultaneous update, then reward and outcomes."""
         fb = FunctionBuilder("step", ["_state", "_action", "_steps", "_fired"])
         fb.unpack([local(n) for n in state_names], "_state")
         fb.assign(local("steps"), name("_steps"))
         scope: dict[str, Type] = {n: NUM for n in state_names}
         scope["steps"] = NUM
-        # inputs
         if discrete is not None:
-            fb.assign(local("action"), name("_action"))
-            for n in input_names:
-                fb.assign(local(n), const(0.0))
-            chain: ast.stmt | None = None
-            for index in reversed(range(discrete)):
-                body: list[ast.stmt] = []
-                sub = FunctionBuilder("_", [])
-                for n, value in (spec.actions.discrete or [])[index].items():
-                    path = ("actions", "discrete", index, n)
-                    checked = self.expr(path, value, {**scope, "action": NUM}, expect=NUM)
-                    if checked:
-                        sub.assign(local(n), lower(checked.tree))
-                body = sub.body or [ast.Pass()]
-                test = ast.Compare(name("_action"), [ast.Eq()], [const(index)])
-                chain = ast.If(test, body, [chain] if chain is not None else [])
-            if chain is not None:
-                fb.add(chain, Site("actions.discrete", "the chosen action's inputs"))
-            scope["action"] = NUM
+            self.step_discrete_inputs(fb, scope, input_names, discrete)
         else:
-            fb.unpack([local("_in_" + n) for n in input_names], "_action")
-            for n, (lo, hi) in zip(input_names, [(c.low, c.high) for c in (spec.actions.continuous or {}).values()]):
-                clipped = ast.Call(name("_f_clip"), [name(local("_in_" + n)), const(float(lo)), const(float(hi))], [])
-                fb.assign(local(n), clipped)
+            self.step_continuous_inputs(fb, input_names)
         for n in input_names:
             scope[n] = NUM
-        # derived quantities, in order
-        for n, value in spec.dynamics.let.items():
+        self.step_let(fb, scope)
+        if self.spec.dynamics.python:
+            self.python_call(fb, state_names, input_names)
+        else:
+            self.step_update(fb, scope)
+        fb.assign(local("steps"), ast.BinOp(name("_steps"), ast.Add(), const(1)))
+        # reward and outcomes read the new state
+        checked = self.expr(("reward",), self.spec.reward, scope, expect=NUM)
+        fb.assign("_reward", lower(checked.tree) if checked else const(0.0), Site("reward", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()))
+        self.step_outcomes(fb, scope)
+        fb.returns(tuple_of([tuple_of([name(local(n)) for n in state_names]), name("_reward"), name("_outcome"), name("_fired")]))
+        return fb
+
+    def step_discrete_inputs(self, fb: FunctionBuilder, scope: dict[str, Type], input_names: list[str], discrete: int) -> None:
+        """Every input 0, then the chosen action's inputs (an if-chain on the action index)."""
+        fb.assign(local("action"), name("_action"))
+        for n in input_names:
+            fb.assign(local(n), const(0.0))
+        chain: ast.stmt | None = None
+        for index in reversed(range(discrete)):
+            sub = FunctionBuilder("_", [])
+            for n, value in (self.spec.actions.discrete or [])[index].items():
+                path = ("actions", "discrete", index, n)
+                checked = self.expr(path, value, {**scope, "action": NUM}, expect=NUM)
+                if checked:
+                    sub.assign(local(n), lower(checked.tree))
+            body: list[ast.stmt] = sub.body or [ast.Pass()]
+            test = ast.Compare(name("_action"), [ast.Eq()], [const(index)])
+            chain = ast.If(test, body, [chain] if chain is not None else [])
+        if chain is not None:
+            fb.add(chain, Site("actions.discrete", "the chosen action's inputs"))
+        scope["action"] = NUM
+
+    def step_continuous_inputs(self, fb: FunctionBuilder, input_names: list[str]) -> None:
+        """The action's values, clipped to each input's bounds."""
+        fb.unpack([local("_in_" + n) for n in input_names], "_action")
+        for n, (lo, hi) in zip(input_names, [(c.low, c.high) for c in (self.spec.actions.continuous or {}).values()]):
+            clipped = ast.Call(name("_f_clip"), [name(local("_in_" + n)), const(float(lo)), const(float(hi))], [])
+            fb.assign(local(n), clipped)
+
+    def step_let(self, fb: FunctionBuilder, scope: dict[str, Type]) -> None:
+        """Derived quantities, in order: each may use the ones before it."""
+        for n, value in self.spec.dynamics.let.items():
             path = ("dynamics", "let", n)
             checked = self.expr(path, value, scope, expect=NUM)
             if checked:
                 fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
             scope[n] = NUM
-        # simultaneous update
-        if spec.dynamics.python:
-            self.python_call(fb, state_names, input_names)
-        else:
-            new_names = []
-            for n, value in spec.dynamics.update.items():
-                if n not in spec.state:
-                    continue
-                path = ("dynamics", "update", n)
-                checked = self.expr(path, value, scope, expect=NUM)
-                if checked:
-                    fb.assign("_new_" + n, lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
-                    new_names.append(n)
-            for n in new_names:
-                fb.assign(local(n), name("_new_" + n))
-        fb.assign(local("steps"), ast.BinOp(name("_steps"), ast.Add(), const(1)))
-        # reward and outcomes read the new state
-        checked = self.expr(("reward",), spec.reward, scope, expect=NUM)
-        fb.assign("_reward", lower(checked.tree) if checked else const(0.0), Site("reward", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()))
+
+    def step_update(self, fb: FunctionBuilder, scope: dict[str, Type]) -> None:
+        """The simultaneous update: every right-hand side reads the old state, then all are assigned."""
+        spec = self.spec
+        new_names = []
+        for n, value in spec.dynamics.update.items():
+            if n not in spec.state:
+                continue
+            path = ("dynamics", "update", n)
+            checked = self.expr(path, value, scope, expect=NUM)
+            if checked:
+                fb.assign("_new_" + n, lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                new_names.append(n)
+        for n in new_names:
+            fb.assign(local(n), name("_new_" + n))
+
+    def step_outcomes(self, fb: FunctionBuilder, scope: dict[str, Type]) -> None:
+        """Ending outcomes as an if-chain in spec order (the first that holds wins); milestones fire once each (a bit in _fired)."""
         fb.assign("_outcome", const(-1))
         ending: ast.stmt | None = None
         milestone_bit = 0
         milestones: list[ast.stmt] = []
-        rules = list(spec.outcomes.items())
+        rules = list(self.spec.outcomes.items())
         for index in reversed(range(len(rules))):
             rule_name, rule = rules[index]
             when = self.expr(("outcomes", rule_name, "when"), rule.when, scope, expect=BOOL)
@@ -373,9 +392,7 @@ class _Compiler:
             fb.add(ending, Site("outcomes", "the outcome conditions"))
         for stmt in milestones:
             fb.add(stmt, Site("outcomes", "the milestone conditions"))
-        fb.returns(tuple_of([tuple_of([name(local(n)) for n in state_names]), name("_reward"), name("_outcome"), name("_fired")]))
         self.milestone_rules = [n for n, r in rules if r.end == "none"]
-        return fb
 
     def python_call(self, fb: FunctionBuilder, state_names: list[str], input_names: list[str]) -> None:
         """Call the trusted 'module:function' escape hatch with plain dicts."""
