@@ -187,53 +187,31 @@ class BlenderRenderer(Renderer):
         return setters
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Callable[[tuple], None]:
-        if prop == "location":
-            def set_location(v: tuple) -> None:
-                obj.location = v
-            return set_location
-        if prop == "rotation":
-            def set_rotation(v: tuple) -> None:
-                obj.rotation_euler = v
-            return set_rotation
-        if prop == "scale":
-            def set_scale(v: tuple) -> None:
-                obj.scale = v
-            return set_scale
-        if prop == "visible":
-            # an empty shows nothing itself: its visibility is that of everything under it
-            shown = [obj, *obj.children_recursive] if obj.type == "EMPTY" else [obj]
-
-            def set_visible(v: tuple) -> None:
-                hide = not v[0]
-                for o in shown:
-                    o.hide_render = hide
-            return set_visible
+        """The function that writes a binding's values into the scene (a closure: no lookups per render)."""
+        if prop in _SETTERS:
+            return _SETTERS[prop](obj)
         if prop == "look_at":
             def set_look_at(v: tuple) -> None:
                 targets[name] = v  # aimed in apply(), once every location is set
             return set_look_at
-        if prop == "strength":
-            data = obj.data
-            def set_strength(v: tuple) -> None:
-                data.energy = v[0]
-            return set_strength
-        if prop == "lens":
-            data = obj.data
-            def set_lens(v: tuple) -> None:
-                data.lens = v[0]
-            return set_lens
         if prop == "color":
-            if obj.type == "LIGHT":
-                data = obj.data
-                def set_light_color(v: tuple) -> None:
-                    data.color = v[:3]
-                return set_light_color
-            writers = self._own_color_writers(name, obj)
-            def set_color(v: tuple) -> None:
-                for write in writers:
-                    write(v)
-            return set_color
+            return self._color_setter(name, obj)
         raise RenderError(f"cannot bind '{prop}' of '{name}'")  # pragma: no cover - BINDABLE is checked by the compiler
+
+    def _color_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
+        """A light's colour, or the colour of the object's own copies of its materials."""
+        if obj.type == "LIGHT":
+            data = obj.data
+
+            def set_light_color(v: tuple) -> None:
+                data.color = v[:3]
+            return set_light_color
+        writers = self._own_color_writers(name, obj)
+
+        def set_color(v: tuple) -> None:
+            for write in writers:
+                write(v)
+        return set_color
 
     def _own_color_writers(self, name: str, obj: Any) -> list[Callable[[Sequence[float]], None]]:
         """Writers of a bound colour into per-object copies of the materials of `obj` (and of its mesh children).
@@ -394,3 +372,55 @@ def _with_ancestors(obj: Any) -> Iterator[Any]:
     while obj is not None:
         yield obj
         obj = obj.parent
+
+
+def _set_location(obj: Any) -> Callable[[tuple], None]:
+    def set_location(v: tuple) -> None:
+        obj.location = v
+    return set_location
+
+
+def _set_rotation(obj: Any) -> Callable[[tuple], None]:
+    def set_rotation(v: tuple) -> None:
+        obj.rotation_euler = v
+    return set_rotation
+
+
+def _set_scale(obj: Any) -> Callable[[tuple], None]:
+    def set_scale(v: tuple) -> None:
+        obj.scale = v
+    return set_scale
+
+
+def _set_visible(obj: Any) -> Callable[[tuple], None]:
+    # an empty shows nothing itself: its visibility is that of everything under it
+    shown = [obj, *obj.children_recursive] if obj.type == "EMPTY" else [obj]
+
+    def set_visible(v: tuple) -> None:
+        hide = not v[0]
+        for o in shown:
+            o.hide_render = hide
+    return set_visible
+
+
+def _set_strength(obj: Any) -> Callable[[tuple], None]:
+    data = obj.data
+
+    def set_strength(v: tuple) -> None:
+        data.energy = v[0]
+    return set_strength
+
+
+def _set_lens(obj: Any) -> Callable[[tuple], None]:
+    data = obj.data
+
+    def set_lens(v: tuple) -> None:
+        data.lens = v[0]
+    return set_lens
+
+
+#: setters of the properties that need only the object (look_at and color need the renderer's state)
+_SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
+    "location": _set_location, "rotation": _set_rotation, "scale": _set_scale,
+    "visible": _set_visible, "strength": _set_strength, "lens": _set_lens,
+}
