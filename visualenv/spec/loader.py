@@ -109,12 +109,7 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
     err = errs[0]
     kind = err["type"]
     if kind == "extra_forbidden":
-        key = str(path[-1])
-        if key.count("(") != key.count(")") or key.count("[") != key.count("]"):
-            return (f"unknown key '{key}': an expression with a comma inside {{...}} was split by YAML; "
-                    "quote it, e.g. {init: \"uniform(-1, 1)\"}")
-        allowed = _fields_at(path[:-1], data)
-        return f"unknown key '{path[-1]}'" + (did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else "")
+        return _unknown_key_message(path, data)
     if kind == "missing":
         return f"missing required field '{path[-1]}'"
     value = _value_at(path, data)
@@ -141,18 +136,33 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
         items = ("entr" + ("y" if bound == 1 else "ies")) if ctx.get("field_type") == "Dictionary" else ("value" + ("" if bound == 1 else "s"))
         return f"expected {'at least' if err['type'] == 'too_short' else 'at most'} {bound} {items}, got {ctx.get('actual_length')}"
     if err["type"] == "literal_error":
-        expected = err.get("ctx", {}).get("expected", "")
-        options = [o.strip(" '") for o in expected.replace(" or ", ",").split(",") if o.strip()]
-        msg = f"expected one of {expected}, got {value!r}"
-        if isinstance(value, str):
-            hint = did_you_mean(value, options)
-            if "did you mean" in hint:
-                msg += " (" + hint.split("?")[0].strip(" (") + "?)"
-        return msg
+        return _literal_message(err, value)
     if err["type"].endswith("_type") or err["type"] in ("int_from_float", "bool_parsing", "float_parsing", "int_parsing"):
         return f"expected {_expected(err)}, got {_type_name(value)} {value!r}" if not isinstance(value, (dict, list)) else f"expected {_expected(err)}, got {_type_name(value)}"
     if msg.startswith("Input should be "):
         msg = "expected a value " + msg[len("Input should be "):] + f", got {value!r}"
+    return msg
+
+
+def _unknown_key_message(path: tuple, data: Any) -> str:
+    """An unknown key, with the keys allowed there; a key that is half an expression means YAML split it at a comma."""
+    key = str(path[-1])
+    if key.count("(") != key.count(")") or key.count("[") != key.count("]"):
+        return (f"unknown key '{key}': an expression with a comma inside {{...}} was split by YAML; "
+                "quote it, e.g. {init: \"uniform(-1, 1)\"}")
+    allowed = _fields_at(path[:-1], data)
+    return f"unknown key '{path[-1]}'" + (did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else "")
+
+
+def _literal_message(err: dict, value: Any) -> str:
+    """A value outside a fixed set of words, with the closest word when there is one."""
+    expected = err.get("ctx", {}).get("expected", "")
+    options = [o.strip(" '") for o in expected.replace(" or ", ",").split(",") if o.strip()]
+    msg = f"expected one of {expected}, got {value!r}"
+    if isinstance(value, str):
+        hint = did_you_mean(value, options)
+        if "did you mean" in hint:
+            msg += " (" + hint.split("?")[0].strip(" (") + "?)"
     return msg
 
 
