@@ -20,7 +20,9 @@ $(STAMP): pyproject.toml
 demo: setup  ## build a bundled spec and show its result
 	$(VENV)/bin/visualenv build specs/visual_cartpole.yaml
 
-test: setup  ## run the test suite
+test: setup  ## lint (ruff), type-check (mypy), then run the test suite
+	$(VENV)/bin/ruff check .
+	$(VENV)/bin/mypy
 	$(PY) -m pytest
 
 bench: setup

@@ -75,7 +75,7 @@ def build_scene(engine: str = "CYCLES", res: int = RES) -> bpy.types.Scene:
     bmesh.ops.create_cube(bm, size=1.0)
     bm.to_mesh(me)
     bm.free()
-    cube = link("cube", me)
+    link("cube", me)
     me.materials.append(_emission_material("red", (1.0, 0.0, 0.0)))
     # grey diffuse ground plane
     pm = bpy.data.meshes.new("plane")

@@ -16,7 +16,6 @@ Timings vary from run to run on shared machines; compare within one run.
 from __future__ import annotations
 
 import sys
-import time
 from typing import Any, Callable
 
 import numpy as np

@@ -103,7 +103,7 @@ def test_goalie_missing_the_ball_costs_10():
 def test_goalie_leaving_the_goal_costs_10():
     env = visualenv.make("Goalie-v0", render=False, params={"length": 40.0})
     env.reset(seed=0)
-    for t in range(13):
+    for _ in range(13):
         _, r, terminated, _, info = env.step(1)
     assert terminated and info["outcome"] == "left_goal" and r == -10.0
 

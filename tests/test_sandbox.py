@@ -171,7 +171,7 @@ def test_compile_spec_rejects_attempt_in_every_place(attempt: str, fragment: str
     lines = str(err.value).splitlines()
     places = ("state.v.init", "dynamics.let.a", "dynamics.update.x", "actors.Box.location[0]", "reward", "outcomes.done.when")
     for place in places:
-        line = next((l for l in lines if f" {place}: " in l), None)
+        line = next((row for row in lines if f" {place}: " in row), None)
         assert line is not None, f"no problem reported at {place}:\n{err.value}"
         assert line.startswith("sandbox.yaml:"), line
         assert fragment in line, line

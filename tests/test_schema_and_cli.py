@@ -25,7 +25,7 @@ def test_validate_reports_unknown_name_with_position_and_names(tmp_path):
     text = (ROOT / "specs" / "visual_cartpole.yaml").read_text().replace("theta: theta + tau * theta_dot", "theta: thta + tau * theta_dot")
     broken = tmp_path / "broken.yaml"
     broken.write_text(text)
-    line = next(i for i, l in enumerate(text.splitlines(), 1) if "thta +" in l)
+    line = next(i for i, row in enumerate(text.splitlines(), 1) if "thta +" in row)
     column = text.splitlines()[line - 1].index("thta") + 1
     result = CliRunner().invoke(main, ["validate", str(broken)])
     assert result.exit_code == 2

@@ -150,7 +150,7 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     if threads:
         options["threads"] = threads
     env = StepTimes(visualenv.make(spec, **options))
-    base = env.unwrapped
+    base: Any = env.unwrapped  # the VisualEnv under the wrappers
     figures = Figures(spec=str(spec), steps=steps)
     actions = random_actions(env, warmup + steps, seed)
     run_env(env, actions[:warmup], seed)
@@ -189,7 +189,7 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
 
 def _moved_floor(env: Any, actions: list[Any], seed: int) -> list[float]:
     """Blender's render call alone after the bound objects moved as in an episode (moves and readback not timed)."""
-    base = env.unwrapped
+    base: Any = env.unwrapped  # the VisualEnv under the wrappers
     renderer = base.renderer
     env.reset(seed=seed)
     values = []
@@ -279,7 +279,7 @@ class StepTimes(gym.Wrapper):
         """Record from now on, into fresh lists (the renderer exists once the env has been reset)."""
         self._stop_timing()
         self._steps, self._renders, self._outside = [], [], []
-        renderer = self.env.unwrapped.renderer
+        renderer = self.env.unwrapped.renderer  # type: ignore[attr-defined]  # a VisualEnv
         renderer.raw_render = _timed(renderer.raw_render, self._renders)
         self._timing = True
 
@@ -300,7 +300,7 @@ class StepTimes(gym.Wrapper):
 
     def _stop_timing(self) -> None:
         if self._timing:
-            del self.env.unwrapped.renderer.raw_render  # the instance attribute: back to the class's method
+            del self.env.unwrapped.renderer.raw_render  # type: ignore[attr-defined]  # the instance attribute: back to the class's method
             self._timing = False
 
 
@@ -312,7 +312,7 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
 
     threads = default_threads(workers)
     pinned = any(core is not None for core in worker_cores(workers, pin))  # pinning needs two cores to choose from
-    vec = make_vec(str(spec), workers, threads=threads, readback=readback, pin=pin, wrapper_class=StepTimes)
+    vec: Any = make_vec(str(spec), workers, threads=threads, readback=readback, pin=pin, wrapper_class=StepTimes)
     try:
         vec.reset(seed=seed)
         vec.action_space.seed(seed)

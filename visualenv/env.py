@@ -122,12 +122,12 @@ class VisualEnv(gym.Env):
         given = (options or {}).get("state")
         if given:
             names = self.program.state_names
-            state = list(state)
+            values = list(state)
             for key, value in dict(given).items():
                 if key not in names:
                     raise KeyError(f"options['state'] has an unknown variable '{key}'" + did_you_mean(key, names))
-                state[names.index(key)] = float(value)
-            state = tuple(state)
+                values[names.index(key)] = float(value)
+            state = tuple(values)
         self._steps = 0
         for key, value in zip(self.program.state_names, state):
             if not math.isfinite(value):  # e.g. init: inf, or a draw such as normal(0, inf)
@@ -294,7 +294,8 @@ class VisualEnv(gym.Env):
                 line = tb.tb_lineno
             tb = tb.tb_next
         site = self.program.site(function, line) if line else None
-        message = {ZeroDivisionError: "division by zero", OverflowError: "numeric overflow"}.get(type(exc), str(exc))
+        messages: dict[type, str] = {ZeroDivisionError: "division by zero", OverflowError: "numeric overflow"}
+        message = messages.get(type(exc), str(exc))
         return self._describe(site, message, values)
 
     def _describe(self, site: Any, message: str, values: dict[str, Any]) -> StepError:

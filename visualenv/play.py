@@ -69,7 +69,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     env: Any = VisualEnv(loaded, render_mode="rgb_array")
     if model is not None:
         try:
-            env = _stacked_like(env, model, model_path)
+            env = _stacked_like(env, model, str(model_path))
         except BaseException:
             env.close()
             raise
@@ -144,7 +144,7 @@ def _channel_pairs(want: Any, have: Any) -> list[tuple[int, int]]:
     for key, w in subspaces(want).items():
         h = ours.get(key)
         if h is not None and len(w.shape or ()) == 3 and len(h.shape or ()) == 3:
-            pairs.append((w.shape[0] if is_image_space_channels_first(w) else w.shape[-1], h.shape[-1]))
+            pairs.append((w.shape[0] if is_image_space_channels_first(w) else w.shape[-1], h.shape[-1]))  # type: ignore[arg-type,index]
     return pairs
 
 
@@ -152,7 +152,7 @@ def _fits(want: Any, have: Any) -> bool:
     """Same keys and shapes; SB3 also takes channel-last images for a channel-first model."""
     w, h = subspaces(want), subspaces(have)
     return w.keys() == h.keys() and all(
-        w[k].shape is not None and h[k].shape is not None and w[k].shape in (h[k].shape, h[k].shape[-1:] + h[k].shape[:-1]) for k in w)
+        w[k].shape is not None and h[k].shape is not None and w[k].shape in (h[k].shape, h[k].shape[-1:] + h[k].shape[:-1]) for k in w)  # type: ignore[index]
 
 
 def _shapes(space: Any) -> Any:

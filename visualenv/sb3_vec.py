@@ -27,7 +27,7 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
            for i, core in enumerate(worker_cores(n, pin))]
     if monitor_dir:
         os.makedirs(monitor_dir, exist_ok=True)
-    vec = SubprocVecEnv(fns, start_method="spawn") if n > 1 else DummyVecEnv(fns)
+    vec: Any = SubprocVecEnv(fns, start_method="spawn") if n > 1 else DummyVecEnv(fns)  # type: ignore[arg-type]  # partials are env makers
     vec.seed(seed)
     if frame_stack and frame_stack > 1 and kwargs.get("render") is not False:
         vec = VecFrameStack(vec, n_stack=frame_stack)

@@ -246,12 +246,14 @@ def _channels_last_images(space: Any) -> bool:
     """Whether SB3 wraps an env of this space in VecTransposeImage (its rule in ``BaseAlgorithm._wrap_env``)."""
     from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
 
-    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())
+    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())  # type: ignore[arg-type]
 
 
 def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
     """Run `episodes` deterministic episodes; mean/std reward, mean length, success rate."""
-    returns, lengths, successes = [], [], []
+    returns: list[float] = []
+    lengths: list[int] = []
+    successes: list[bool] = []
     obs = vec_env.reset()
     ret, length = 0.0, 0
     while len(returns) < episodes:

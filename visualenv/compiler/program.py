@@ -208,7 +208,7 @@ class _Compiler:
             groups.append(("actions.continuous", list(spec.actions.continuous)))
         for group, names in groups:
             for n in names:
-                path = tuple(group.split(".")) + (n,)
+                path: tuple = tuple(group.split(".")) + (n,)
                 if group == "actions.discrete":
                     index = next(i for i, a in enumerate(spec.actions.discrete or []) if n in a)
                     path = ("actions", "discrete", index, n)
@@ -426,7 +426,7 @@ class _Compiler:
                 raw = getattr(actor, prop)
                 if raw is None:
                     continue
-                path = ("actors", obj_name, prop)
+                path: tuple = ("actors", obj_name, prop)
                 if prop == "strength" and obj is not None and not isinstance(obj, LightObject):
                     self.error(path, f"'strength' binds a light's power, but '{obj_name}' is not a light", key=True)
                     continue

@@ -99,7 +99,7 @@ def check(text: str | float | int | bool, names: Mapping[str, Type], *, constant
         raise ExpressionError(f"expected {expect}, got {typ}", getattr(tree, "col_offset", 0))
     checked = Checked(text if isinstance(text, str) else repr(text), new_tree, typ, checker.used, checker.random)
     if isinstance(new_tree, ast.Constant):
-        checked.constant = new_tree.value
+        checked.constant = new_tree.value  # type: ignore[assignment]  # the checker only lets numbers and booleans through
     elif isinstance(new_tree, ast.List) and all(isinstance(e, ast.Constant) for e in new_tree.elts):
         checked.constant = tuple(e.value for e in new_tree.elts)  # type: ignore[attr-defined]
     return checked

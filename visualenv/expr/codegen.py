@@ -134,7 +134,7 @@ class FunctionBuilder:
 
     def build(self, env: dict[str, Any]) -> Callable[..., Any]:
         args = ast.arguments(posonlyargs=[], args=[ast.arg(a) for a in self.args], kwonlyargs=[], kw_defaults=[], defaults=[])
-        fn = ast.FunctionDef(self.name, args, self.body or [ast.Pass()], [], None, type_params=[])
+        fn = ast.FunctionDef(self.name, args, self.body or [ast.Pass()], [], None, type_params=[])  # type: ignore[call-arg]  # 3.12 field, harmless on 3.11
         module = ast.Module([fn], type_ignores=[])
         ast.fix_missing_locations(module)
         fn.lineno = 1

@@ -39,11 +39,11 @@ def _round(x: float) -> float:
     return float(round(x))
 
 
-def _min(*args: float) -> float:
+def _min(*args: Any) -> float:
     return float(min(args[0]) if len(args) == 1 else min(args))
 
 
-def _max(*args: float) -> float:
+def _max(*args: Any) -> float:
     return float(max(args[0]) if len(args) == 1 else max(args))
 
 

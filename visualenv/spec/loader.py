@@ -70,7 +70,7 @@ def validate_data(data: Any, smap: SourceMap, base_dir: Path) -> LoadedSpec:
 
 
 def _diagnostics(exc: ValidationError, data: Any, smap: SourceMap) -> list[Diagnostic]:
-    grouped: dict[tuple, list[dict]] = {}
+    grouped: dict[tuple, list[Any]] = {}
     for err in exc.errors(include_url=False):
         path = _data_path(err["loc"], data, keep_last=err["type"] in ("missing", "extra_forbidden"))
         grouped.setdefault(path, []).append(err)

@@ -249,8 +249,8 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         if isinstance(exc, tomllib.TOMLDecodeError):
             _toml_syntax_error(exc, text, name)
         m = re.search(r"\d{1000,}", text)
-        line, col = (text.count("\n", 0, m.start()) + 1, m.start() - text.rfind("\n", 0, m.start())) if m else (None, None)
-        raise SpecError([Diagnostic(name, line, col, "", f"cannot read this value: {_short(exc)}")]) from None
+        at_line, at_col = (text.count("\n", 0, m.start()) + 1, m.start() - text.rfind("\n", 0, m.start())) if m else (None, None)
+        raise SpecError([Diagnostic(name, at_line, at_col, "", f"cannot read this value: {_short(exc)}")]) from None
     if not data:
         raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a table with at least 'id'")])
     smap = SourceMap(name)

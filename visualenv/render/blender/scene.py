@@ -51,7 +51,7 @@ class DataTracker:
         return [(n, getattr(bpy.data, n)) for n in ID_COLLECTIONS if hasattr(bpy.data, n)]
 
     def new(self) -> list[Any]:
-        out = []
+        out: list[Any] = []
         for name, coll in self._collections():
             before = self._before.get(name, set())
             out.extend(i for i in coll if i.as_pointer() not in before)

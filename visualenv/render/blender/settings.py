@@ -54,7 +54,7 @@ class RenderConfig:
     filter_width: float
 
 
-PRESETS = {
+PRESETS: dict[str, dict[str, Any]] = {
     "fast": dict(samples=1, bounces=0, denoise=False, filter="BOX", filter_width=1.0),
     # OpenImageDenoise works on the CPU but adds seconds per 400x400 frame: off
     "quality": dict(samples=16, bounces=4, denoise=False, filter="BLACKMAN_HARRIS", filter_width=1.5),
