@@ -14,6 +14,7 @@ from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
 from visualenv.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
+from visualenv.render.blender import user_file
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
@@ -132,7 +133,8 @@ class BlenderRenderer(Renderer):
         scene = self._scene = built.scene
         self._scene_name = scene.name
         self._objects = built.objects
-        self._layer = scene.view_layers[0]
+        self._layer = user_file.render_layer(scene)
+        self._free_bound_objects(built)
         cfg.configure_scene(scene, device=self.device, threads=threads)
         cfg.quiet_emission(scene)
         self._see_through = see_through(scene) or any(t.property == "color" and t.size == 4 for t in plan.bindings)
@@ -164,6 +166,20 @@ class BlenderRenderer(Renderer):
         self._set_depth_mode(False)
         self._setters = self._compile_bindings()
         self._last: tuple | None = None
+
+    def _free_bound_objects(self, built: BuiltScene) -> None:
+        """The env's copy of the scene lets the bindings through: what the file animates, constrains
+        or simulates on a bound channel is muted, and the collections of bound objects and cameras
+        are rendered (:mod:`user_file`)."""
+        plan = self.plan
+        bound: dict[str, set[str]] = {}
+        for target in plan.bindings:
+            bound.setdefault(target.object, set()).add(target.property)
+        for name, properties in bound.items():
+            user_file.free_bound_channels(built.objects[name], properties)
+        cameras = [built.objects[v.camera] for v in plan.views.values()]
+        user_file.include_collections_of(self._layer, [*(built.objects[n] for n in bound), *cameras])
+        user_file.stop_simulations(built.scene)
 
     def _compile_bindings(self) -> list[tuple[int, int, Callable[[tuple], None]]]:
         """One setter per binding target, with the slice of the values it reads."""

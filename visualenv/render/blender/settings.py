@@ -154,6 +154,10 @@ def resolve_device(device: str) -> str:
 def configure_scene(scene: Any, *, device: str, threads: int) -> None:
     """Settings that never change between renders: colour management, output, threads, device."""
     r = scene.render
+    r.image_settings.media_type = "IMAGE"  # a file saved for video or multilayer EXR output has no BMP
+    r.use_multiview = False
+    r.use_stamp = False  # metadata burnt into the pixels
+    r.use_freestyle = False
     r.resolution_percentage = 100
     r.pixel_aspect_x = r.pixel_aspect_y = 1.0
     r.use_border = False
@@ -180,11 +184,13 @@ def configure_scene(scene: Any, *, device: str, threads: int) -> None:
     c.sample_clamp_indirect = 0.0
     c.caustics_reflective = False
     c.caustics_refractive = False
+    c.film_exposure = 1.0
+    c.time_limit = 0.0  # a time limit cuts renders short at a load-dependent sample
+    c.use_layer_samples = "IGNORE"
+    c.use_guiding = False
     d = scene.display.shading  # workbench: material colours, studio light
     d.light = "STUDIO"
     d.color_type = "MATERIAL"
-    for layer in list(scene.view_layers)[1:]:
-        layer.use = False
 
 
 def quiet_emission(scene: Any) -> None:
@@ -209,6 +215,7 @@ def set_color_management(scene: Any, *, depth: bool) -> None:
     vs.exposure = 0.0
     vs.gamma = 1.0
     vs.use_curve_mapping = False
+    vs.use_white_balance = False
 
 
 def apply_config(scene: Any, config: RenderConfig, previous: RenderConfig | None, *, see_through: bool = False) -> None:
