@@ -101,3 +101,24 @@ def test_a_file_with_one_setting_changed_renders_as_the_spec_says(corpus, base_i
     else:
         assert not np.array_equal(left, base_images[0])  # the file's change shows (a modifier, a texture)
     assert blend.read_bytes() == before  # the user's file is never modified
+
+
+def test_a_file_that_crashes_blender_is_a_located_error(corpus, monkeypatch):
+    """No .blend that segfaults bpy 5.0.1 could be made with bpy itself: the reader here is a child
+    that dies of a real SIGSEGV when asked to read, as Blender does on such a file."""
+    from visualenv import blendfile
+
+    crashing = blendfile._Reader([sys.executable, "-c", "import os, signal, sys; sys.stdin.readline(); os.kill(os.getpid(), signal.SIGSEGV)"])
+    monkeypatch.setattr(blendfile, "_reader", crashing)
+    monkeypatch.setattr(blendfile, "_answers", {})
+    with pytest.raises(SpecError, match=r"Blender crashed \(signal SIGSEGV\) while reading .*base\.blend: open it in Blender and save it again") as info:
+        corpus_env(corpus, "base", VARIANTS["base"]).renderer
+    assert info.value.diagnostics[0].path == "scene.file" and info.value.diagnostics[0].line == 2
+    assert crashing.proc is None  # the dead reader is forgotten; the next request starts a new one
+
+
+def test_a_truncated_file_is_a_located_error(corpus, tmp_path):
+    (tmp_path / "cut.blend").write_bytes((corpus / "base.blend").read_bytes()[:4000])
+    with pytest.raises(SpecError, match=r"scene\.file: cannot read .*cut\.blend as a \.blend file: .*") as info:
+        corpus_env(tmp_path, "cut", VARIANTS["base"]).renderer
+    assert info.value.diagnostics[0].line == 2

@@ -25,6 +25,7 @@ _OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
 _PATTERNS = {
     r"^[A-Za-z][A-Za-z0-9_.]*-v\d+$": "an id such as 'MyEnv-v0' (a letter, then letters, digits, '_' or '.', then '-v' and a version number)",
     r"^[A-Za-z_][A-Za-z0-9_]*$": "a name made of letters, digits and '_', not starting with a digit",
+    r"^[^\x00-\x1f\x7f]+$": "a Blender name (any text without control characters, e.g. 'Cube.001')",
     r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$": "'module:function', e.g. 'mypackage.dynamics:step'",
 }
 _TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "text", list: "a list", dict: "a mapping", type(None): "nothing"}

@@ -23,6 +23,8 @@ ColorExpr = Annotated[Union[Annotated[list[Expr], Field(min_length=3, max_length
 Vec3 = Annotated[list[float], Field(min_length=3, max_length=3)]
 Color = Annotated[list[Annotated[float, Field(ge=0.0)]], Field(min_length=3, max_length=4, description="RGB or RGBA, linear, 0..1")]
 Name = Annotated[str, Field(pattern=r"^[A-Za-z_][A-Za-z0-9_]*$", description="an identifier")]
+#: A name as Blender writes it (objects, cameras, scenes): dots, spaces and non-ASCII letters included, as in 'Cube.001'
+BlenderName = Annotated[str, Field(pattern=r"^[^\x00-\x1f\x7f]+$", max_length=255, description="a Blender name, e.g. 'Cube.001' (any text without control characters)")]
 Resolution = Annotated[list[Annotated[int, Field(ge=4, le=8192)]], Field(min_length=2, max_length=2, description="[width, height] in pixels (Blender renders at least 4)")]
 
 
@@ -67,7 +69,7 @@ class ObjectBase(StrictModel):
     rotation: Vec3 = Field([0.0, 0.0, 0.0], description="initial Euler XYZ rotation (radians)")
     scale: Union[float, Vec3] = Field(1.0, description="initial scale")
     visible: bool = True
-    parent: str | None = Field(None, description="name of the parent object")
+    parent: BlenderName | None = Field(None, description="name of the parent object")
 
 
 class PrimitiveObject(ObjectBase):
@@ -156,8 +158,8 @@ class Scene(StrictModel):
     """The Blender scene: a .blend file, declared objects, or both."""
 
     file: str | None = Field(None, description="a .blend file made in Blender, relative to the spec; its objects are bound by name")
-    file_scene: str | None = Field(None, description="which scene of the .blend to use; needed when the file has more than one")
-    objects: dict[Name, SceneObject] = Field(default_factory=dict, description="objects to build (added to the file's scene, if any)")
+    file_scene: BlenderName | None = Field(None, description="which scene of the .blend to use; needed when the file has more than one")
+    objects: dict[BlenderName, SceneObject] = Field(default_factory=dict, description="objects to build (added to the file's scene, if any)")
     world: World | None = Field(None, description="background; default: the file's world, or dark grey")
 
     @model_validator(mode="after")
@@ -239,7 +241,7 @@ class Actor(StrictModel):
 
 
 class CameraView(StrictModel):
-    camera: Name = Field(description="a camera in the scene")
+    camera: BlenderName = Field(description="a camera in the scene")
     resolution: Resolution = Field([100, 100], description="[width, height]")
     color: Literal["rgb", "grayscale", "depth"] = "grayscale"
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = Field(
@@ -257,7 +259,7 @@ class CameraView(StrictModel):
 class Observation(StrictModel):
     """What the agent sees: one camera (a Box) or several (a Dict)."""
 
-    camera: Name | None = Field(None, description="the single observation camera")
+    camera: BlenderName | None = Field(None, description="the single observation camera")
     resolution: Resolution = Field([100, 100], description="[width, height]")
     color: Literal["rgb", "grayscale", "depth"] = "grayscale"
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = [0.0, 20.0]
@@ -285,7 +287,7 @@ class Observation(StrictModel):
 class ViewSettings(StrictModel):
     """The human view returned by ``env.render()`` (render_mode='rgb_array')."""
 
-    camera: Name | None = Field(None, description="default: the (first) observation camera")
+    camera: BlenderName | None = Field(None, description="default: the (first) observation camera")
     resolution: Resolution = [400, 400]
     preset: Literal["fast", "quality"] = "quality"
 
@@ -322,7 +324,7 @@ class Spec(StrictModel):
     state: Annotated[dict[Name, StateVar], Field(min_length=1)] = Field(description="state variables, in observation order")
     actions: Actions
     dynamics: Dynamics = Field(default_factory=Dynamics)
-    actors: dict[Name, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")
+    actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")
     observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
     render: Render = Field(default_factory=Render)
     reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")

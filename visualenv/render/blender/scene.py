@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
@@ -23,6 +24,8 @@ import bmesh
 import bpy
 from mathutils import Matrix, Vector
 
+from visualenv.blendfile import BlendReadError
+from visualenv import blendfile
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
@@ -143,6 +146,7 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str 
         magic = f.read(7)
     if not (magic.startswith(b"BLENDER") or magic[:4] == b"\x28\xb5\x2f\xfd" or magic[:2] == b"\x1f\x8b"):
         raise SpecError([source.diagnostic(where, f"not a Blender file: {path} (a .blend saved by Blender is needed)")])
+    _check_readable(path, source)
     try:
         with bpy.data.libraries.load(str(path), link=False) as (data_from, data_to):
             scene_names = list(data_from.scenes)
@@ -165,6 +169,33 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str 
     in_scene = {o.as_pointer() for o in scene.objects}
     by_name = {name: obj for name, obj in zip(object_names, data_to.objects) if obj is not None and obj.as_pointer() in in_scene}
     return scene, by_name
+
+
+def _check_readable(path: Path, source: SourceMap) -> None:
+    """Read the file in a child process first (a file that crashes Blender is an error, not a dead process).
+
+    Policy: a missing linked library is an error (its objects would be absent without a word); a
+    missing image file is a warning (Blender renders it magenta; the env still works).
+    """
+    where = ("scene", "file")
+    try:
+        info = blendfile.describe(path)
+    except BlendReadError as exc:
+        raise SpecError([source.diagnostic(where, str(exc))]) from None
+    missing = [lib for lib in info["libraries"] if not lib["found"]]
+    if missing:
+        raise SpecError([source.diagnostic(where, f"linked library not found: {lib['path']} (resolved: {_resolve_blender_path(lib['path'], path)}), "
+                                           f"which {', '.join(lib['uses']) or 'nothing'} come from: put it back, or make the data local in Blender "
+                                           "(Object > Relations > Make Local) and save") for lib in missing])
+    for image in info["missing_images"]:
+        warnings.warn(str(source.diagnostic(where, f"image file not found: {image['path']} (image '{image['name']}' in {path.name}) "
+                                            "renders magenta: put the file back, or pack it in Blender (File > External Data > Pack Resources)")),
+                      RuntimeWarning, stacklevel=4)
+
+
+def _resolve_blender_path(blender_path: str, blend: Path) -> Path:
+    """A path as Blender stores it ('//' is the .blend's folder)."""
+    return (blend.parent / blender_path[2:]).resolve() if blender_path.startswith("//") else Path(blender_path)
 
 
 # -- objects -----------------------------------------------------------------------------------------
