@@ -10,7 +10,6 @@ located ``scene.file`` error. Never a traceback, never a hang.
 from __future__ import annotations
 
 import json
-import subprocess
 import sys
 import warnings
 from pathlib import Path
@@ -24,15 +23,6 @@ from tests.fixtures.blend_corpus import VARIANTS, Variant  # noqa: E402
 from visualenv.compiler.env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError  # noqa: E402
 from visualenv.spec import load_spec_text  # noqa: E402
-
-CORPUS_SCRIPT = Path(__file__).parent / "fixtures" / "blend_corpus.py"
-
-
-@pytest.fixture(scope="session")
-def corpus(tmp_path_factory) -> Path:
-    folder = tmp_path_factory.mktemp("blend_corpus")
-    subprocess.run([sys.executable, str(CORPUS_SCRIPT), str(folder)], check=True, capture_output=True, timeout=300)
-    return folder
 
 
 def corpus_env(folder: Path, name: str, variant: Variant) -> VisualEnv:

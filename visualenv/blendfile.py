@@ -29,14 +29,16 @@ class BlendReadError(VisualEnvError):
 
 
 class _Reader:
-    """The reader process: one JSON line in, one out."""
+    """The reader process: one JSON line in, one out; it exits by itself when idle (IDLE_EXIT)."""
 
     def __init__(self, command: list[str] | None = None) -> None:
         self.command = command or [sys.executable, "-m", "visualenv.render.blender.describe"]
         self.proc: subprocess.Popen[str] | None = None
+        self.owner = os.getpid()  # a forked process starts its own reader rather than share the pipes
 
     def start(self) -> subprocess.Popen[str]:
-        if self.proc is None or self.proc.poll() is not None:
+        if self.proc is None or self.proc.poll() is not None or self.owner != os.getpid():
+            self.owner = os.getpid()
             env = dict(os.environ)
             root = str(Path(__file__).resolve().parent.parent)
             env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
@@ -45,32 +47,45 @@ class _Reader:
         return self.proc
 
     def ask(self, path: str, timeout: float) -> dict[str, Any]:
-        proc = self.start()
-        assert proc.stdin is not None and proc.stdout is not None
-        try:
-            proc.stdin.write(json.dumps({"path": path}) + "\n")
-            proc.stdin.flush()
-        except BrokenPipeError:
-            pass
-        ready, _, _ = select.select([proc.stdout], [], [], timeout)
-        line = proc.stdout.readline() if ready else ""
-        if line:
-            return json.loads(line)
-        if not ready:
-            proc.kill()
-        code = proc.wait()
-        self.proc = None
-        if not ready:
-            raise BlendReadError(f"Blender did not finish reading {path} in {timeout:.0f} s")
-        how = f"signal {signal.Signals(-code).name}" if code < 0 and -code in signal.Signals._value2member_map_ else f"exit status {code}"
-        raise BlendReadError(f"Blender crashed ({how}) while reading {path}: open it in Blender and save it again "
-                             "(File > Save As), or use a file saved by another Blender version")
+        for attempt in range(2):
+            if self.proc is not None and self.proc.poll() == 0:
+                self.proc = None  # it stopped itself after an idle while
+            proc = self.start()
+            assert proc.stdin is not None and proc.stdout is not None
+            try:
+                proc.stdin.write(json.dumps({"path": path}) + "\n")
+                proc.stdin.flush()
+            except BrokenPipeError:
+                pass
+            ready, _, _ = select.select([proc.stdout], [], [], timeout)
+            line = proc.stdout.readline() if ready else ""
+            if line:
+                return json.loads(line)
+            if not ready:
+                proc.kill()
+            code = proc.wait()
+            self.proc = None
+            if not ready:
+                raise BlendReadError(f"Blender did not finish reading {path} in {timeout:.0f} s")
+            if code == 0 and attempt == 0:
+                continue  # it went idle just as the request came: ask a new one
+            how = f"signal {signal.Signals(-code).name}" if code < 0 and -code in signal.Signals._value2member_map_ else f"exit status {code}"
+            raise BlendReadError(f"Blender crashed ({how}) while reading {path}: open it in Blender and save it again "
+                                 "(File > Save As), or use a file saved by another Blender version")
+        raise AssertionError("unreachable")  # pragma: no cover
 
     def close(self) -> None:
         if self.proc is not None and self.proc.poll() is None:
             self.proc.stdin.close()  # type: ignore[union-attr]
             self.proc.wait(timeout=10)
         self.proc = None
+
+
+def is_blend_file(path: str | Path) -> bool:
+    """Whether the file starts as a .blend does (Blender's header, or zstd/gzip compression)."""
+    with open(path, "rb") as f:
+        magic = f.read(7)
+    return magic.startswith(b"BLENDER") or magic[:4] == b"\x28\xb5\x2f\xfd" or magic[:2] == b"\x1f\x8b"
 
 
 _reader = _Reader()

@@ -1,4 +1,4 @@
-"""The `visualenv` command: validate, build, preview, schema, bench, train, play.
+"""The `visualenv` command: validate, build, inspect, init, preview, schema, bench, train, play.
 
 Bad input never shows a traceback: spec problems print as
 ``file:line:column: field: message`` lines and exit with status 2.
@@ -101,6 +101,54 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
     if not quiet and result.ascii_preview:
         click.echo("observation (reset, seed %d):" % seed)
         click.echo(result.ascii_preview)
+
+
+@main.command()
+@click.argument("blend", type=click.Path(exists=True, dir_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="print the report as JSON (for tools)")
+@_friendly
+def inspect(blend: str, as_json: bool) -> None:
+    """What BLEND holds for a spec: scenes, cameras, lights, meshes, materials, animation, and what the spec overrides.
+
+    The file is read in a child process: a file that crashes Blender is reported, not fatal.
+    """
+    from visualenv import blendfile
+    from visualenv.starter import format_report
+
+    info = blendfile.describe(_blend_path(blend))
+    click.echo(json.dumps(info, indent=1, ensure_ascii=False) if as_json else format_report(info))
+
+
+@main.command()
+@click.argument("blend", type=click.Path(exists=True, dir_okay=False))
+@click.option("-o", "--out", "out_path", default=None, type=click.Path(dir_okay=False), help="spec file to write [default: <blend name>.yaml here]")
+@click.option("--force", is_flag=True, help="replace an existing spec file")
+@_friendly
+def init(blend: str, out_path: str | None, force: bool) -> None:
+    """Write a starter spec over BLEND that builds as it is: the file's scene, its first camera, placeholder state, actions and dynamics."""
+    from visualenv import blendfile
+    from visualenv.starter import starter_spec
+
+    path = _blend_path(blend)
+    out = Path(out_path) if out_path else Path(path.stem + ".yaml")
+    if out.exists() and not force:
+        raise VisualEnvError(f"{out} exists: choose another name with -o, or replace it with --force")
+    text = starter_spec(blendfile.describe(path), path, out)
+    try:
+        out.parent.mkdir(parents=True, exist_ok=True)
+        out.write_text(text, encoding="utf-8")
+    except OSError as exc:
+        raise VisualEnvError(f"cannot write {out}: {exc.strerror}") from None
+    click.echo(f"wrote {out}: edit the placeholders, then `visualenv build {out}`")
+
+
+def _blend_path(blend: str) -> Path:
+    from visualenv.blendfile import is_blend_file
+
+    path = Path(blend)
+    if not is_blend_file(path):
+        raise VisualEnvError(f"not a Blender file: {path} (a .blend saved by Blender is needed)")
+    return path
 
 
 @main.command()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import os
+import select
 import sys
 from typing import Any
 
@@ -17,6 +18,8 @@ import bpy
 from visualenv.render.blender.user_file import animated_fcurves, constraint_sets
 
 _R = 4  # decimals of the numbers reported
+#: seconds without a request after which the reader exits (a process that builds once keeps no idle Blender)
+IDLE_EXIT = 30.0
 
 
 def _vec(v: Any) -> list[float]:
@@ -123,7 +126,10 @@ def serve() -> None:
     """Answer describe requests from stdin until it closes."""
     answers = os.fdopen(os.dup(1), "w", encoding="utf-8")
     os.dup2(2, 1)  # Blender prints to stdout; the answers keep the original one
-    for line in sys.stdin:
+    while select.select([sys.stdin], [], [], IDLE_EXIT)[0]:
+        line = sys.stdin.readline()
+        if not line:
+            return
         path = json.loads(line)["path"]
         try:
             answer: dict[str, Any] = {"ok": describe(path)}

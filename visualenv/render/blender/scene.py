@@ -142,9 +142,7 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str 
     where = ("scene", "file")
     if not path.is_file():
         raise SpecError([source.diagnostic(where, "scene file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")])
-    with open(path, "rb") as f:
-        magic = f.read(7)
-    if not (magic.startswith(b"BLENDER") or magic[:4] == b"\x28\xb5\x2f\xfd" or magic[:2] == b"\x1f\x8b"):
+    if not blendfile.is_blend_file(path):
         raise SpecError([source.diagnostic(where, f"not a Blender file: {path} (a .blend saved by Blender is needed)")])
     _check_readable(path, source)
     try:
