@@ -20,7 +20,7 @@ import pytest
 bpy = pytest.importorskip("bpy")
 
 from tests.fixtures.blend_corpus import VARIANTS, Variant  # noqa: E402
-from visualenv.compiler.env import VisualEnv  # noqa: E402
+from visualenv.env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError  # noqa: E402
 from visualenv.spec import load_spec_text  # noqa: E402
 

@@ -56,7 +56,7 @@ def test_init_writes_a_spec_that_builds_unchanged_and_with_its_examples(corpus, 
     assert '#  "My Cube": {location: [x, 0, 0]}' in text if name == "name_spaces" else "file_scene: Main" in text
     lines = [line[2:] if line.startswith("#  ") and "location" in line else line for line in text.splitlines()]
     spec.write_text("\n".join(line.replace("actors: {}", "actors:") for line in lines) + "\n")
-    from visualenv.compiler.env import VisualEnv
+    from visualenv.env import VisualEnv
     from visualenv.spec.loader import load_spec
 
     env = VisualEnv(load_spec(spec))

@@ -52,7 +52,7 @@ def format_report(info: dict[str, Any]) -> str:
     if several:
         lines.append("  several scenes: name one in the spec with scene.file_scene")
     sections = (("cameras", lambda c: f"{c['type'].lower()}, lens {_num(c['lens'])} mm" + (f", ortho scale {_num(c['ortho_scale'])}" if c["type"] == "ORTHO" else "")),
-                ("lights", lambda l: f"{l['type'].lower()}, {_num(l['energy'])} W"),
+                ("lights", lambda light: f"{light['type'].lower()}, {_num(light['energy'])} W"),
                 ("meshes", lambda m: f"{' x '.join(_num(d) for d in m['dimensions'])} m" + (f", modifiers {', '.join(m['modifiers'])}" if m["modifiers"] else "")),
                 ("empties", lambda e: "empty"),
                 ("other_objects", lambda o: o["type"].lower()))
