@@ -14,6 +14,7 @@ from __future__ import annotations
 import math
 
 import numpy as np
+import pytest
 from hypothesis import HealthCheck, assume, example, given, settings
 from hypothesis import strategies as st
 
@@ -220,3 +221,55 @@ def test_typed_grammar_mostly_checks():
 
     count()
     assert ok >= total // 4, (ok, total)
+
+
+# -- long flat chains and constant arguments (issue 18) ------------------------------------------------------
+
+
+@FAST
+@given(st.lists(st.tuples(st.sampled_from(["+", "-", "*"]), st.sampled_from(["x", "y", "1", "2.5"])), min_size=1, max_size=140),
+       values, values)
+def test_flat_chains_are_not_nesting_and_run_like_python(chain: list, x: float, y: float):
+    """`a + b - c * ...` of up to 140 operations checks (a flat sum is not "deeply nested") and computes what Python computes."""
+    text = "x" + "".join(f" {op} {term}" for op, term in chain)
+    checked = check(text, NAMES)
+    fn = _compile(checked)
+    with np.errstate(all="ignore"):
+        try:
+            expected = float(eval(text, {}, {"x": x, "y": y}))  # noqa: S307 - the test's own text of + - * and numbers
+        except OverflowError:
+            return
+    try:
+        result = fn(x, y, 0.0, False, (0.0, 0.0, 0.0))
+    except OverflowError:
+        return
+    assert result == expected or (math.isnan(result) and math.isnan(expected))
+
+
+def test_a_chain_longer_than_the_limit_says_so_not_nesting():
+    with pytest.raises(ExpressionError) as caught:
+        check(" + ".join(["x"] * 200), NAMES)
+    assert "chained" in caught.value.message and "nested" not in caught.value.message
+
+
+@FAST
+@given(st.integers(-50, 50), st.integers(-50, 50), st.sampled_from(["uniform", "randint", "clip"]))
+def test_bounds_in_the_wrong_order_fail_at_check(low: int, high: int, fname: str):
+    text = f"clip(x, {low}, {high})" if fname == "clip" else f"{fname}({low}, {high})"
+    if low <= high:
+        check(text, NAMES)
+    else:
+        with pytest.raises(ExpressionError) as caught:
+            check(text, NAMES)
+        assert "needs low <= high" in caught.value.message
+
+
+@FAST
+@given(st.floats(-1e6, 1e6, allow_nan=False))
+def test_a_negative_constant_std_fails_at_check(std: float):
+    if std >= 0:
+        check(f"normal(0, {std!r})", NAMES)
+    else:
+        with pytest.raises(ExpressionError) as caught:
+            check(f"normal(0, {std!r})", NAMES)
+        assert "std >= 0" in caught.value.message

@@ -27,7 +27,7 @@ from visualenv.expr.codegen import FunctionBuilder, Site, const, function_global
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
-from visualenv.spec.models import CameraObject, LightObject, Spec
+from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Spec
 
 #: names every expression may read besides the spec's own (not all in every context)
 BUILTIN_NAMES = ("steps", "max_steps", "dt", "action")
@@ -218,6 +218,8 @@ class _Compiler:
                     self.error(path, f"'{n}' is already defined in {seen[n]}", key=True)
                 else:
                     seen[n] = group
+        if "max_steps" in spec.outcomes:
+            self.error(("outcomes", "max_steps"), "'max_steps' is what info['outcome'] says when an episode reaches max_steps: choose another name", key=True)
         for n in spec.dynamics.update:
             if n not in spec.state:
                 self.error(("dynamics", "update", n), f"'{n}' is not a state variable" + did_you_mean(n, spec.state).replace("names:", "state:"), key=True)
@@ -429,6 +431,10 @@ class _Compiler:
                 path: tuple = ("actors", obj_name, prop)
                 if prop == "strength" and obj is not None and not isinstance(obj, LightObject):
                     self.error(path, f"'strength' binds a light's power, but '{obj_name}' is not a light", key=True)
+                    continue
+                if prop == "color" and isinstance(obj, (CameraObject, EmptyObject)):
+                    kind = "a camera" if isinstance(obj, CameraObject) else "an empty"
+                    self.error(path, f"'color' binds a material or light colour, but '{obj_name}' is {kind}, which has none", key=True)
                     continue
                 if prop == "lens" and obj is not None and not isinstance(obj, CameraObject):
                     self.error(path, f"'lens' binds a camera's focal length, but '{obj_name}' is not a camera", key=True)

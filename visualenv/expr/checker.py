@@ -24,6 +24,8 @@ from visualenv.expr.types import BOOL, NUM, Type, vec
 
 MAX_LENGTH = 4000
 MAX_DEPTH = 40
+#: deepest syntax tree (a flat sum of n terms is n deep): code generation recurses on the tree
+MAX_TREE_DEPTH = 150
 MAX_NODES = 2000
 MAX_VECTOR = 64
 MAX_LITERAL = 1e300
@@ -90,6 +92,9 @@ def check(text: str | float | int | bool, names: Mapping[str, Type], *, constant
     context needs (NUM for a reward, BOOL for a condition, a vector for a location).
     """
     tree = parse(text)
+    if _tree_depth(tree) > MAX_TREE_DEPTH:
+        raise ExpressionError(f"expression is too long: more than {MAX_TREE_DEPTH} operations chained one after another; "
+                              "split it into named parts with dynamics.let")
     checker = _Checker(names, {**CONSTANTS, **(constants or {})}, allow_random)
     try:
         new_tree, typ = checker.visit(tree, 0)
@@ -103,6 +108,16 @@ def check(text: str | float | int | bool, names: Mapping[str, Type], *, constant
     elif isinstance(new_tree, ast.List) and all(isinstance(e, ast.Constant) for e in new_tree.elts):
         checked.constant = tuple(e.value for e in new_tree.elts)  # type: ignore[attr-defined]
     return checked
+
+
+def _tree_depth(tree: ast.AST) -> int:
+    """How deep the syntax tree goes, counted without recursion."""
+    deepest, stack = 0, [(tree, 1)]
+    while stack:
+        node, depth = stack.pop()
+        deepest = max(deepest, depth)
+        stack.extend((child, depth + 1) for child in ast.iter_child_nodes(node) if isinstance(child, ast.expr))
+    return deepest
 
 
 def _fits(actual: Type, expected: Type) -> bool:
@@ -190,14 +205,26 @@ class _Checker:
         raise self.fail(node, "bitwise operators are not allowed in expressions")
 
     def visit_BinOp(self, node: ast.BinOp, depth: int) -> tuple[ast.expr, Type]:
-        symbol = _BINOPS.get(type(node.op))
-        if symbol is None:
-            raise self.fail(node, "bitwise and matrix operators are not allowed in expressions")
-        left, lt = self.visit(node.left, depth)
-        right, rt = self.visit(node.right, depth)
-        self.need(node.left, lt, NUM, f"'{symbol}'")
-        self.need(node.right, rt, NUM, f"'{symbol}'")
-        return self.fold(ast.BinOp(left, type(node.op)(), right)), NUM
+        # A flat chain `a + b - c + ...` parses as a tree nested to the left: walk that
+        # spine in a loop, so a long sum is not "too deeply nested" (nor deep recursion).
+        chain = [node]
+        while isinstance(chain[-1].left, ast.BinOp):
+            chain.append(chain[-1].left)
+        first = chain[-1].left
+        result, typ = self.visit(first, depth)
+        left_node: ast.AST = first
+        for link in reversed(chain):
+            symbol = _BINOPS.get(type(link.op))
+            if symbol is None:
+                raise self.fail(link, "bitwise and matrix operators are not allowed in expressions")
+            if link is not node:
+                self.count += 1
+            right, rt = self.visit(link.right, depth)
+            self.need(left_node, typ, NUM, f"'{symbol}'")
+            self.need(link.right, rt, NUM, f"'{symbol}'")
+            result, typ = ast.copy_location(self.fold(ast.BinOp(result, type(link.op)(), right)), link), NUM
+            left_node = link
+        return result, NUM
 
     def visit_BoolOp(self, node: ast.BoolOp, depth: int) -> tuple[ast.expr, Type]:
         word = "and" if isinstance(node.op, ast.And) else "or"
@@ -284,10 +311,23 @@ class _Checker:
             args.append(new)
         if name == "choice" and n == 1 and not (isinstance(args[0], ast.List) or self._is_vec(node.args[0])):
             raise self.fail(node, "choice() needs several values: choice(a, b, ...) or choice([a, b, ...])")
+        self.check_constant_arguments(node, name, args)
         if func.random:
             self.random = True
             return ast.Call(ast.Name(name, ast.Load()), args, []), func.returns
         return self.fold(ast.Call(ast.Name(name, ast.Load()), args, [])), func.returns
+
+    def check_constant_arguments(self, node: ast.Call, name: str, args: list[ast.expr]) -> None:
+        """Constant arguments that cannot work (a negative spread, bounds in the wrong order) fail now, not at run time."""
+        values = [a.value if isinstance(a, ast.Constant) else None for a in args]
+        if name == "normal" and isinstance(values[1], float) and values[1] < 0:
+            raise self.fail(node.args[1], f"normal(mean, std) needs std >= 0, got {values[1]:g}")
+        bounds = {"uniform": (0, 1), "randint": (0, 1), "clip": (1, 2)}.get(name)
+        if bounds is not None:
+            low, high = (values[i] for i in bounds)
+            if isinstance(low, float) and isinstance(high, float) and low > high:
+                words = "clip(x, low, high)" if name == "clip" else f"{name}(low, high)"
+                raise self.fail(node, f"{words} needs low <= high, got {low:g} and {high:g}")
 
     def _is_vec(self, node: ast.AST) -> bool:
         return isinstance(node, ast.Name) and self.names.get(node.id, NUM).kind == "vec"

@@ -18,7 +18,8 @@ from pydantic import BaseModel, ValidationError
 
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.spec.models import Spec
-from visualenv.spec.source import SourceMap, format_path, load_document, load_toml_text, load_yaml_text
+from visualenv.spec.source import BASE60, SourceMap, format_path, load_document, load_toml_text, load_yaml_text
+from visualenv.spec.unused import unused_fields
 
 _OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
 #: what the patterns of the models mean, in words
@@ -64,6 +65,9 @@ def validate_data(data: Any, smap: SourceMap, base_dir: Path) -> LoadedSpec:
         spec = Spec.model_validate(data)
     except ValidationError as exc:
         raise SpecError(_diagnostics(exc, data, smap)) from None
+    unused = unused_fields(spec)
+    if unused:
+        raise SpecError([smap.diagnostic(path, message, key=True) for path, message in unused])
     return LoadedSpec(spec, smap, base_dir, data)
 
 
@@ -139,7 +143,9 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
     if err["type"] == "literal_error":
         return _literal_message(err, value)
     if err["type"].endswith("_type") or err["type"] in ("int_from_float", "bool_parsing", "float_parsing", "int_parsing"):
-        return f"expected {_expected(err)}, got {_type_name(value)} {value!r}" if not isinstance(value, (dict, list)) else f"expected {_expected(err)}, got {_type_name(value)}"
+        if isinstance(value, (dict, list)):
+            return f"expected {_expected(err)}, got {_type_name(value)}"
+        return f"expected {_expected(err)}, got {_type_name(value)} {value!r}" + _strict_hint(_expected(err), value)
     if msg.startswith("Input should be "):
         msg = "expected a value " + msg[len("Input should be "):] + f", got {value!r}"
     return msg
@@ -165,6 +171,23 @@ def _literal_message(err: dict, value: Any) -> str:
         if "did you mean" in hint:
             msg += " (" + hint.split("?")[0].strip(" (") + "?)"
     return msg
+
+
+def _strict_hint(expected: str, value: Any) -> str:
+    """Why a value that looks right is refused (types are strict: no quoted numbers, no 1 for true)."""
+    if isinstance(value, str) and BASE60.match(value.strip()):
+        return " (YAML 1.1 would read it as a base-60 number; write the number itself)"
+    if isinstance(value, str) and expected in ("an integer", "a number"):
+        try:
+            float(value)
+        except ValueError:
+            return ""
+        return " (write the number without quotes)"
+    if isinstance(value, str) and expected == "a boolean" and value.strip().lower() in ("true", "false", "yes", "no", "on", "off"):
+        return " (write true or false without quotes)"
+    if isinstance(value, bool) and expected in ("an integer", "a number"):
+        return " (a boolean is not a number)"
+    return ""
 
 
 def _expected(err: dict) -> str:

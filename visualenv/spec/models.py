@@ -29,9 +29,13 @@ Resolution = Annotated[list[Annotated[int, Field(ge=4, le=8192)]], Field(min_len
 
 
 class StrictModel(BaseModel):
-    """Unknown keys are errors: a misspelt key must not be silently ignored."""
+    """Unknown keys are errors and types are strict: a misspelt key or a quoted number must not be silently accepted.
 
-    model_config = ConfigDict(extra="forbid", frozen=True)
+    Strict mode refuses ``"10"`` for an integer, ``true`` for a number and ``"yes"``
+    for a boolean (an integer is still accepted where a number is expected).
+    """
+
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True)
 
 
 # -- scene ------------------------------------------------------------------------------------
@@ -313,7 +317,7 @@ class Render(StrictModel):
 class Spec(StrictModel):
     """A visualenv environment: scene, state, dynamics, actions, rewards and observation."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, json_schema_extra={"$id": "https://visualenv.dev/schema/spec.json"})
+    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, json_schema_extra={"$id": "https://visualenv.dev/schema/spec.json"})
 
     id: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_.]*-v\d+$", description="environment id, e.g. VisualCartPole-v0")
     description: str = ""

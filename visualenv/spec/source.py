@@ -98,8 +98,17 @@ def load_document(path: str | Path) -> tuple[Any, SourceMap]:
 # -- YAML -------------------------------------------------------------------------------------
 
 
+#: YAML 1.1 base-60 numbers (``1:30`` is 90): read as text, so a typed field refuses them
+BASE60 = re.compile(r"^[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?$")
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
     """SafeLoader (no Python tags, no code) that keeps node positions."""
+
+    def resolve(self, kind: type, value: Any, implicit: Any) -> str:
+        if kind is yaml.ScalarNode and implicit[0] and BASE60.match(value):
+            return "tag:yaml.org,2002:str"
+        return super().resolve(kind, value, implicit)
 
 
 #: deepest nesting of mappings and lists a spec may have (PyYAML's composer recurses)
@@ -112,9 +121,20 @@ MAX_VALUES = 100_000
 _PLAIN_TAGS = {f"tag:yaml.org,2002:{t}" for t in ("str", "int", "float", "bool", "null", "map", "seq", "timestamp")}
 
 
-def _check_structure(text: str, name: str) -> None:
-    """Reject too-deep nesting and recursive aliases before composing (the event parser does not recurse)."""
+class _TooLarge(Exception):
+    """More than MAX_VALUES values: raised at the node where the count ran over."""
+
+    def __init__(self, node: yaml.Node):
+        self.node = node
+
+
+def _check_structure(text: str, name: str) -> bool:
+    """Reject too-deep nesting and recursive aliases before composing (the event parser does not recurse).
+
+    Returns whether the document uses aliases, so a too-large document can be blamed on the right thing.
+    """
     depth = 0
+    aliases = False
     open_anchors: list[str | None] = []
     for event in yaml.parse(text, Loader=_UniqueKeyLoader):
         if isinstance(event, yaml.CollectionStartEvent):
@@ -126,16 +146,24 @@ def _check_structure(text: str, name: str) -> None:
         elif isinstance(event, yaml.CollectionEndEvent):
             depth -= 1
             open_anchors.pop()
-        elif isinstance(event, yaml.AliasEvent) and event.anchor in open_anchors:
-            mark = event.start_mark
-            raise SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor")])
+        elif isinstance(event, yaml.AliasEvent):
+            aliases = True
+            if event.anchor in open_anchors:
+                mark = event.start_mark
+                raise SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor")])
+    return aliases
 
 
 def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     smap = SourceMap(name)
     try:
-        _check_structure(text, name)
+        aliases = _check_structure(text, name)
         node = yaml.compose(text, Loader=_UniqueKeyLoader)
+    except yaml.reader.ReaderError as exc:  # a character YAML does not allow, such as a NUL byte
+        before = text[: exc.position]
+        line, column = before.count("\n") + 1, exc.position - (before.rfind("\n") + 1) + 1
+        char = f"U+{exc.character:04X}" if isinstance(exc.character, int) else repr(exc.character)
+        raise SpecError([Diagnostic(name, line, column, "", f"YAML does not allow the control character {char} in a file")]) from None
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
         if exc.context_mark and exc.problem and "end of stream" in exc.problem:
@@ -152,7 +180,11 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     if node is None:
         raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a mapping with at least 'id'")])
     problems: list[Diagnostic] = []
-    data = _convert(node, (), smap, problems, [0])
+    try:
+        data = _convert(node, (), smap, problems, [0])
+    except _TooLarge as exc:
+        why = " (YAML aliases expand to copies of what they name)" if aliases else ""
+        raise SpecError([Diagnostic(name, *_lc(exc.node), "", f"the document is too large: more than {MAX_VALUES} values{why}")]) from None
     if problems:
         raise SpecError(problems)
     return data, smap
@@ -168,7 +200,7 @@ def _pos(node: yaml.Node) -> Position:
 def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagnostic], count: list[int]) -> Any:
     count[0] += 1
     if count[0] > MAX_VALUES:
-        raise SpecError([Diagnostic(smap.file, *_lc(node), "", f"the document is too large: more than {MAX_VALUES} values (are YAML aliases expanding?)")])
+        raise _TooLarge(node)
     smap.values[path] = _pos(node)
     if node.tag not in _PLAIN_TAGS:  # e.g. !!python/object/apply: never constructed, reported
         problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"YAML tags such as '{node.tag.replace('tag:yaml.org,2002:', '!!')}' are not allowed"))
@@ -180,6 +212,10 @@ def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagn
                 problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "mapping keys must be plain names"))
                 continue
             key = _scalar(key_node)
+            if (isinstance(key, bool) or key is None) and key_node.style is None:
+                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path),
+                                           f"YAML 1.1 reads the key '{key_node.value}' as {_yaml_word(key)}: quote it ('{key_node.value}':)"))
+                continue
             if key == "<<":
                 problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "YAML merge keys ('<<') are not supported"))
                 continue
@@ -201,6 +237,10 @@ def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagn
     except ValueError as exc:  # e.g. an integer with more digits than Python converts
         problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"cannot read this value: {_short(exc)}"))
         return None
+
+
+def _yaml_word(value: Any) -> str:
+    return "nothing (null)" if value is None else f"the boolean {str(value).lower()}"
 
 
 def _short(exc: BaseException) -> str:
@@ -241,6 +281,7 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     recorded. It is exact for the usual layouts and falls back to the enclosing
     table otherwise.
     """
+    text = text.removeprefix("\ufeff")  # a byte order mark: tomllib does not skip it
     try:
         data = tomllib.loads(text)
     except RecursionError:
