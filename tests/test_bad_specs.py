@@ -11,7 +11,8 @@ the rest is a substring of the message. Files that cannot hold a comment
 (an empty file, bytes that are not UTF-8) are listed in ``expected.yaml``.
 
 For each spec the CLI must exit with status 2, print exactly one line per
-problem, each starting ``<file>:<line>:<col>:``, and never a traceback.
+problem, each starting ``<file>:<line>:<col>:``, and never a traceback; what
+Blender itself printed may follow, each line marked ``blender:``.
 Specs marked ``build`` need Blender (``.blend`` files, textures, meshes and
 object names in a scene file are checked when the scene is built); they are
 skipped when the Blender renderer cannot be imported.
@@ -151,7 +152,9 @@ def test_bad_spec_is_reported(case: Case, tmp_path: Path, request: pytest.Fixtur
     output = result.output
     assert "Traceback" not in output, output
     assert result.exit_code == 2, f"exit code {result.exit_code}, output:\n{output}\nexception: {result.exception!r}"
-    lines = output.splitlines()
+    all_lines = output.splitlines()
+    lines = [line for line in all_lines if not line.startswith("blender: ")]
+    assert all_lines[: len(lines)] == lines, f"Blender's own lines must follow the errors:\n{output}"
     assert len(lines) == len(case.expected), f"expected {len(case.expected)} line(s), got:\n{output}"
     for line, (at, message) in zip(lines, case.expected):
         assert line.startswith(f"{spec}{at} "), f"expected location {at!r} in:\n{line}"
@@ -207,3 +210,16 @@ def test_failed_build_keeps_the_earlier_build(tmp_path: Path):
     assert "image file not found" in second.output
     assert _tree_digest(folder) == before
     assert sorted(p.name for p in out.iterdir()) == ["KeepMe-v0"], "no temporary or .old folder may be left"
+
+
+@needs_blender
+def test_blender_prints_nothing_when_a_mesh_imports(tmp_path: Path, capfd: pytest.CaptureFixture[str]):
+    """The OBJ importer's timing lines are dropped when the build succeeds; only the CLI's own output is shown."""
+    (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    spec = tmp_path / "env.yaml"
+    spec.write_text(VALID_SCENE_SPEC.format(id="MeshQuiet-v0").replace("Box: {primitive: cube}", "Box: {mesh: tri.obj}"))
+    capfd.readouterr()
+    result = CliRunner().invoke(main, ["build", str(spec), "-o", str(tmp_path / "build"), "--quiet"])
+    assert result.exit_code == 0, result.output
+    printed = capfd.readouterr()
+    assert "obj" not in (printed.out + printed.err).lower(), printed

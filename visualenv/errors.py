@@ -41,9 +41,11 @@ class VisualEnvError(Exception):
 class SpecError(VisualEnvError):
     """A spec that cannot be loaded, validated or compiled (one or more problems)."""
 
-    def __init__(self, diagnostics: Sequence[Diagnostic]):
+    def __init__(self, diagnostics: Sequence[Diagnostic], notes: Sequence[str] = ()):
         self.diagnostics = list(diagnostics)
-        super().__init__("\n".join(str(d) for d in self.diagnostics))
+        #: lines shown after the diagnostics, such as Blender's own output when it failed to read a file
+        self.notes = list(notes)
+        super().__init__("\n".join([*(str(d) for d in self.diagnostics), *self.notes]))
 
 
 class ExpressionError(VisualEnvError):

@@ -27,6 +27,7 @@ from mathutils import Matrix, Vector
 from visualenv.blendfile import BlendReadError
 from visualenv import blendfile
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
+from visualenv.render.blender.log import blender_output, marked
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
 from visualenv.spec.source import SourceMap
@@ -90,7 +91,21 @@ class BuiltScene:
 
 
 def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
-    """The scene: a scene of the .blend (appended) or a new one, plus every declared object."""
+    """The scene: a scene of the .blend (appended) or a new one, plus every declared object.
+
+    What Blender prints meanwhile (importer timings, its own read errors) is
+    dropped when the build succeeds and follows the error, marked, when it fails.
+    """
+    with blender_output() as output:
+        try:
+            return _build_scene(spec, base_dir=base_dir, source=source, prefix=prefix)
+        except SpecError as exc:
+            error = exc
+    said = "\n".join(d.message for d in error.diagnostics)
+    raise SpecError(error.diagnostics, [*error.notes, *marked(output.lines, said)]) from None
+
+
+def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
     if spec.file:
         scene, objects = load_blend(spec.file, base_dir=base_dir, source=source, scene_name=spec.file_scene)
     else:
@@ -344,7 +359,7 @@ def _import_mesh(name: str, spec: MeshObject, built: BuiltScene, *, base_dir: Pa
         with bpy.context.temp_override(scene=scene, view_layer=layer, collection=built.collection):
             result = importer(filepath=str(path))
     except (RuntimeError, TypeError) as exc:
-        raise SpecError([source.diagnostic(where, f"cannot import {path}: {exc}")]) from None
+        raise SpecError([source.diagnostic(where, f"cannot import {path}: {' '.join(str(exc).split())}")]) from None
     new = [o for o in bpy.data.objects if o.as_pointer() not in before]
     if "FINISHED" not in result or not new:
         raise SpecError([source.diagnostic(where, f"{path} has no mesh to import")])
