@@ -36,3 +36,17 @@ def test_validate_reports_unknown_name_with_position_and_names(tmp_path):
 def test_schema_command_prints_the_schema():
     result = CliRunner().invoke(main, ["schema"])
     assert result.exit_code == 0 and json.loads(result.output)["title"] == "visualenv spec"
+
+
+def test_every_command_that_writes_a_folder_takes_o_for_out():
+    writers = {name: cmd for name, cmd in main.commands.items() if any("--out" in p.opts for p in cmd.params)}
+    assert {"build", "preview", "train"} <= set(writers)
+    for name, cmd in writers.items():
+        out = next(p for p in cmd.params if "--out" in p.opts)
+        assert "-o" in out.opts, f"visualenv {name}: -o is not the short form of --out"
+
+
+def test_o_without_a_folder_is_a_one_line_error():
+    result = CliRunner().invoke(main, ["build", str(ROOT / "specs" / "visual_cartpole.yaml"), "-o"])
+    assert result.exit_code == 2 and "Traceback" not in result.output
+    assert "Option '-o' requires an argument" in result.output

@@ -32,6 +32,8 @@ def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
         except SpecError as exc:
             for diagnostic in exc.diagnostics:
                 click.echo(str(diagnostic), err=True)
+            for note in exc.notes:
+                click.echo(note, err=True)
             sys.exit(EXIT_INVALID)
         except VisualEnvError as exc:
             click.echo(f"error: {exc}", err=True)
@@ -80,7 +82,7 @@ def schema() -> None:
 
 @main.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
-@click.option("--out", "out_dir", default="build", show_default=True, type=click.Path(file_okay=False), help="parent folder of the build")
+@click.option("-o", "--out", "out_dir", default="build", show_default=True, type=click.Path(file_okay=False), help="parent folder of the build")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="seed of the previewed reset")
 @click.option("--device", type=click.Choice(["cpu", "gpu", "auto"]), default=None, help="override render.device")
 @click.option("--quiet", is_flag=True, help="do not print the observation preview")
@@ -153,7 +155,7 @@ def _blend_path(blend: str) -> Path:
 
 @main.command()
 @click.argument("spec", type=click.Path())
-@click.option("--out", "out_dir", default="frames", show_default=True, type=click.Path(file_okay=False))
+@click.option("-o", "--out", "out_dir", default="frames", show_default=True, type=click.Path(file_okay=False))
 @click.option("--steps", default=20, show_default=True, type=click.IntRange(min=1), help="steps of the random episode")
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @_friendly
@@ -197,7 +199,7 @@ def _parse_value(text: str) -> Any:
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run")
 @click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
-@click.option("--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)")
 @click.option("--no-progress", is_flag=True)
 @click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
