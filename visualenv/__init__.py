@@ -17,6 +17,7 @@ import gymnasium as gym
 from visualenv.compiler import compile_spec
 from visualenv.env import VisualEnv
 from visualenv.errors import ExpressionError, RenderError, SpecError, StepError, VisualEnvError, WorkerError
+from visualenv.options import check_make_options
 from visualenv.registration import register_bundled, resolve
 from visualenv.spec import load_spec, load_spec_text
 from visualenv.sb3_vec import make_sb3_vec
@@ -47,7 +48,12 @@ def make(
         params: overrides of the spec's ``params``.
         frame_stack, grayscale, resize: image wrappers (see :mod:`visualenv.wrappers`).
         renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
+
+    Every option is checked as the same value in a spec would be (``device="tpu"``,
+    ``samples=0`` or ``resize="64"`` raise :class:`SpecError` naming the option).
     """
+    check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale,
+                       resize=resize, **renderer_options)
     env: gym.Env = VisualEnv(
         load_spec(resolve(target)), render=render, render_mode=render_mode, params=params, renderer_options=renderer_options or None
     )

@@ -25,6 +25,7 @@ from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mea
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
+from visualenv.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Spec
@@ -228,7 +229,7 @@ class _Compiler:
         params: dict[str, float | bool] = {}
         for key in self.overrides:
             if key not in self.spec.params:
-                raise SpecError([Diagnostic(self.smap.file, None, None, f"params.{key}", f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))])
+                raise SpecError([Diagnostic(OPTIONS_WHERE, None, None, f"params.{key}", f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))])
         raw = {**self.spec.params, **self.overrides}
         builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.spec.dt)}
         self.params = {}
@@ -239,13 +240,22 @@ class _Compiler:
                 try:
                     checked = check(value, {}, constants={**builtins, **params}, allow_random=False)
                 except ExpressionError as exc:
-                    self.error(("params", key), self.explain_order(("params", key), exc.message), column=exc.offset)
+                    self.param_error(key, self.explain_order(("params", key), exc.message), column=exc.offset)
                     continue
                 if checked.constant is None or isinstance(checked.constant, tuple):
-                    self.error(("params", key), "a parameter must be a number or a condition")
+                    self.param_error(key, "a parameter must be a number or a condition")
                     continue
                 params[key] = checked.constant
         return {**builtins, **params}
+
+    def param_error(self, key: str, message: str, *, column: int | None = None) -> None:
+        """A bad param: blamed on the override when the value came from make(params=...), else on the spec's line.
+
+        A bad override stops compiling at once: the params that use it would only repeat the problem.
+        """
+        if key in self.overrides:
+            raise SpecError([Diagnostic(OPTIONS_WHERE, None, None, f"params.{key}", f"{message} (in the override {self.overrides[key]!r})")])
+        self.error(("params", key), message, column=column)
 
     def resolve_actions(self) -> tuple[list[str], int | None, list[tuple[float, float]]]:
         actions = self.spec.actions

@@ -74,6 +74,11 @@ def validate_data(data: Any, smap: SourceMap, base_dir: Path) -> LoadedSpec:
 # -- turning pydantic errors into located, readable diagnostics ----------------------------------------
 
 
+def diagnostics_of(exc: ValidationError, data: Any, smap: SourceMap) -> list[Diagnostic]:
+    """Readable diagnostics for a model's validation error, located by `smap` (also used for API options)."""
+    return _diagnostics(exc, data, smap)
+
+
 def _diagnostics(exc: ValidationError, data: Any, smap: SourceMap) -> list[Diagnostic]:
     grouped: dict[tuple, list[Any]] = {}
     for err in exc.errors(include_url=False):
@@ -101,7 +106,7 @@ def _data_path(loc: tuple, data: Any, keep_last: bool) -> tuple:
                 continue
             path.append(part)
             node = value
-        elif isinstance(node, list) and isinstance(part, int) and 0 <= part < len(node):
+        elif isinstance(node, (list, tuple)) and isinstance(part, int) and 0 <= part < len(node):
             path.append(part)
             node = node[part]
         elif last and keep_last:
@@ -195,7 +200,7 @@ def _expected(err: dict) -> str:
     return {
         "bool_type": "a boolean", "bool_parsing": "a boolean", "int_type": "an integer", "int_parsing": "an integer",
         "int_from_float": "an integer", "float_type": "a number", "float_parsing": "a number", "string_type": "text",
-        "list_type": "a list", "dict_type": "a mapping", "model_type": "a mapping", "model_attributes_type": "a mapping",
+        "list_type": "a list", "tuple_type": "a tuple", "dict_type": "a mapping", "model_type": "a mapping", "model_attributes_type": "a mapping",
     }.get(kind, kind.replace("_", " "))
 
 

@@ -1,0 +1,73 @@
+"""visualenv.make() options are checked with the spec's own models and messages.
+
+An option overrides a spec field (``device``, ``threads``, ``samples``,
+``engine``) or adds a wrapper (``frame_stack``, ``grayscale``, ``resize``);
+a value the spec would refuse is refused at ``make()``, located at
+``visualenv.make()``, never accepted silently. State-only envs: no Blender.
+"""
+
+from __future__ import annotations
+
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+import visualenv
+from visualenv.errors import SpecError
+
+ENV = "VisualCartPole-v0"
+
+
+def _refusal(**options) -> str:
+    with pytest.raises(SpecError) as caught:
+        visualenv.make(ENV, render=False, **options)
+    assert len(caught.value.diagnostics) == 1, caught.value
+    return str(caught.value)
+
+
+@pytest.mark.parametrize("options, message", [
+    ({"device": "tpu"}, "visualenv.make(): device: expected one of 'cpu', 'gpu' or 'auto', got 'tpu'"),
+    ({"threads": -1}, "visualenv.make(): threads: expected a value greater than or equal to 0, got -1"),
+    ({"samples": 0}, "visualenv.make(): samples: expected a value greater than or equal to 1, got 0"),
+    ({"frame_stack": -1}, "visualenv.make(): frame_stack: expected a value greater than or equal to 1, got -1"),
+    ({"resize": "64"}, "visualenv.make(): resize: expected a tuple, got text '64'"),
+    ({"resize": (64, "64")}, "visualenv.make(): resize[1]: expected an integer, got text '64'"),
+    ({"engine": "blender"}, "visualenv.make(): engine: expected one of 'cycles', 'workbench' or 'eevee', got 'blender'"),
+    ({"threads": True}, "visualenv.make(): threads: expected an integer, got a boolean True"),
+    ({"frame_stack": 2.0}, "visualenv.make(): frame_stack: expected an integer, got a number 2.0"),
+    ({"render": "yes"}, "visualenv.make(): render: expected a boolean, got text 'yes'"),
+])
+def test_a_bad_option_is_refused_like_the_same_value_in_a_spec(options: dict, message: str):
+    with pytest.raises(SpecError) as caught:
+        visualenv.make(ENV, **options)
+    assert str(caught.value).startswith(message), str(caught.value)
+
+
+@settings(max_examples=30, deadline=None)
+@given(st.integers(-1000, 1000))
+def test_threads_follow_the_spec_range(threads: int):
+    if 0 <= threads <= 256:
+        from visualenv.options import check_make_options
+        check_make_options(threads=threads)
+    else:
+        assert "visualenv.make(): threads: expected a value" in _refusal(threads=threads)
+
+
+def test_good_options_are_accepted():
+    env = visualenv.make(ENV, render=False, device="cpu", threads=1, samples=2, engine="cycles", params={"masscart": 2.0})
+    assert env.unwrapped.program.params["masscart"] == 2.0
+
+
+@pytest.mark.parametrize("value, message", [
+    ("abc", "unknown name 'abc'"),
+    ("1 / 0", "division by zero"),
+])
+def test_a_bad_params_override_is_blamed_on_the_override(value: str, message: str):
+    text = _refusal(params={"masscart": value})
+    assert text.startswith("visualenv.make(): params.masscart: ") and message in text, text
+    assert "visual_cartpole.yaml" not in text
+
+
+def test_an_unknown_params_override_is_blamed_on_the_override():
+    text = _refusal(params={"mascart": 1.0})
+    assert text.startswith("visualenv.make(): params.mascart: unknown parameter override 'mascart' (did you mean 'masscart'?")
