@@ -113,7 +113,8 @@ ATTEMPTS: list[tuple[str, str]] = [
     ("exp(1000)", "numeric overflow"),
     ("(" * 10000 + "x" + ")" * 10000, "expression is too long"),
     ("(" * 1300 + "x" + ")" * 1300, "too many nested parentheses"),
-    ("(" * 100 + "x" + " + 1)" * 100, "too deeply nested"),
+    ("(1 + " * 100 + "x" + ")" * 100, "too deeply nested"),  # nested to the right: (((x + 1) + 1) ...) is a flat sum
+    ("(" * 200 + "x" + " + 1)" * 200, "chained"),
     ("-" * 3000 + "x", "too deeply nested"),
     ("sin(" * 100 + "x" + ")" * 100, "too deeply nested"),
     ("1e999", "number is too large"),
