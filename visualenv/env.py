@@ -4,11 +4,12 @@ from __future__ import annotations
 
 import math
 from pathlib import Path
-from typing import Any, SupportsFloat
+from typing import Any, Mapping, SupportsFloat
 
 import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
+from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
@@ -18,6 +19,8 @@ from visualenv.spec.loader import LoadedSpec, load_spec
 
 
 _FLOAT32_MAX = float(np.finfo(np.float32).max)
+#: the keys reset(options=...) understands
+RESET_OPTIONS = ("state",)
 
 
 class VisualEnv(gym.Env):
@@ -95,6 +98,7 @@ class VisualEnv(gym.Env):
         self._fired = 0
         self._done = False
         self._success = False
+        self._was_reset = False  # step() before the first reset() raises, as Gymnasium's OrderEnforcing does
         if program.discrete is not None:
             self.action_space = spaces.Discrete(program.discrete)
         else:
@@ -119,14 +123,12 @@ class VisualEnv(gym.Env):
             state = self._fns.init()
         except (ArithmeticError, ValueError) as exc:
             raise self._fault_error("init", exc, {}) from None
-        given = (options or {}).get("state")
+        given = self._reset_options(options)
         if given:
             names = self.program.state_names
             values = list(state)
-            for key, value in dict(given).items():
-                if key not in names:
-                    raise KeyError(f"options['state'] has an unknown variable '{key}'" + did_you_mean(key, names))
-                values[names.index(key)] = float(value)
+            for key, value in given.items():
+                values[names.index(key)] = value
             state = tuple(values)
         self._steps = 0
         for key, value in zip(self.program.state_names, state):
@@ -140,18 +142,22 @@ class VisualEnv(gym.Env):
         self._fired = 0
         self._done = False
         self._success = False
+        self._was_reset = True
         return self._observe(), self._info(None)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         program = self.program
+        if not self._was_reset:
+            raise ResetNeeded("call reset() before step(): the state is set by reset (Gymnasium's order)")
         if program.discrete is not None:
-            a: Any = int(action)
-            if not 0 <= a < program.discrete:
-                raise ValueError(f"action {action!r} is out of range: Discrete({program.discrete})")
+            a: Any = self._discrete_action(action)
         else:
-            a = tuple(float(v) for v in np.asarray(action, dtype=np.float64).reshape(-1))
+            values = np.asarray(action)
+            if values.dtype.kind not in "iuf":
+                raise TypeError(f"action {action!r} is not an array of numbers: the action space is {self.action_space}")
+            a = tuple(float(v) for v in values.astype(np.float64).reshape(-1))
             if len(a) != len(program.continuous):
-                raise ValueError(f"action has {len(a)} values, expected {len(program.continuous)}")
+                raise ValueError(f"action has {len(a)} values, expected {len(program.continuous)}: the action space is {self.action_space}")
         old = self._state
         try:
             state, reward, outcome, fired = self._fns.step(old, a, self._steps, self._fired)
@@ -192,6 +198,40 @@ class VisualEnv(gym.Env):
                 raise
             return self._end_on_fault(err, self._last_obs)
         return obs, float(reward), terminated, truncated, self._info(name)
+
+    def _discrete_action(self, action: Any) -> int:
+        """An int, a numpy integer or a 0-d integer array (as SB3 passes them); a bool, float or text is refused."""
+        value = action[()] if isinstance(action, np.ndarray) and action.shape == () else action
+        if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
+            raise TypeError(f"action {action!r} is not an integer: the action space is {self.action_space}, "
+                            f"actions 0 to {self.program.discrete - 1}")
+        if not 0 <= value < self.program.discrete:
+            raise ValueError(f"action {action!r} is out of range: the action space is {self.action_space}")
+        return int(value)
+
+    def _reset_options(self, options: dict[str, Any] | None) -> dict[str, float]:
+        """The state values of ``options["state"]`` as floats; an unknown option or variable, or a value that is not a number, is an error."""
+        if not options:
+            return {}
+        unknown = [key for key in options if key not in RESET_OPTIONS]
+        if unknown:
+            raise ValueError(f"unknown reset option {unknown[0]!r}" + did_you_mean(str(unknown[0]), RESET_OPTIONS).replace("names:", "options:"))
+        given = options.get("state") or {}
+        if not isinstance(given, Mapping):
+            raise ValueError(f"options['state'] must map state variables to numbers, got {given!r}")
+        names = self.program.state_names
+        values: dict[str, float] = {}
+        for key, value in given.items():
+            if key not in names:
+                raise KeyError(f"options['state'] has an unknown variable '{key}'" + did_you_mean(str(key), names))
+            if isinstance(value, np.ndarray) and value.shape == ():
+                value = value[()]
+            if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, float, np.integer, np.floating)):
+                raise ValueError(f"options['state'][{key!r}]: expected a number, got {value!r}")
+            if not math.isfinite(value):
+                raise ValueError(f"options['state'][{key!r}]: expected a finite number, got {value!r}")
+            values[key] = float(value)
+        return values
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
         """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode."""
