@@ -149,15 +149,7 @@ class VisualEnv(gym.Env):
         program = self.program
         if not self._was_reset:
             raise ResetNeeded("call reset() before step(): the state is set by reset (Gymnasium's order)")
-        if program.discrete is not None:
-            a: Any = self._discrete_action(action)
-        else:
-            values = np.asarray(action)
-            if values.dtype.kind not in "iuf":
-                raise TypeError(f"action {action!r} is not an array of numbers: the action space is {self.action_space}")
-            a = tuple(float(v) for v in values.astype(np.float64).reshape(-1))
-            if len(a) != len(program.continuous):
-                raise ValueError(f"action has {len(a)} values, expected {len(program.continuous)}: the action space is {self.action_space}")
+        a: Any = self._discrete_action(action, program.discrete) if program.discrete is not None else self._continuous_action(action)
         old = self._state
         try:
             state, reward, outcome, fired = self._fns.step(old, a, self._steps, self._fired)
@@ -199,15 +191,24 @@ class VisualEnv(gym.Env):
             return self._end_on_fault(err, self._last_obs)
         return obs, float(reward), terminated, truncated, self._info(name)
 
-    def _discrete_action(self, action: Any) -> int:
+    def _discrete_action(self, action: Any, n: int) -> int:
         """An int, a numpy integer or a 0-d integer array (as SB3 passes them); a bool, float or text is refused."""
         value = action[()] if isinstance(action, np.ndarray) and action.shape == () else action
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-            raise TypeError(f"action {action!r} is not an integer: the action space is {self.action_space}, "
-                            f"actions 0 to {self.program.discrete - 1}")
-        if not 0 <= value < self.program.discrete:
+            raise TypeError(f"action {action!r} is not an integer: the action space is {self.action_space}, actions 0 to {n - 1}")
+        if not 0 <= value < n:
             raise ValueError(f"action {action!r} is out of range: the action space is {self.action_space}")
         return int(value)
+
+    def _continuous_action(self, action: Any) -> tuple[float, ...]:
+        """One number per input (any numeric array or list of the right size); text or bools are refused."""
+        values = np.asarray(action)
+        if values.dtype.kind not in "iuf":
+            raise TypeError(f"action {action!r} is not an array of numbers: the action space is {self.action_space}")
+        a = tuple(float(v) for v in values.astype(np.float64).reshape(-1))
+        if len(a) != len(self.program.continuous):
+            raise ValueError(f"action has {len(a)} values, expected {len(self.program.continuous)}: the action space is {self.action_space}")
+        return a
 
     def _reset_options(self, options: dict[str, Any] | None) -> dict[str, float]:
         """The state values of ``options["state"]`` as floats; an unknown option or variable, or a value that is not a number, is an error."""

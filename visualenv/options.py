@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Optional, Union
 
-from pydantic import Field, ValidationError, create_model
+from pydantic import Field, ValidationError
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
@@ -27,33 +27,30 @@ RENDER_OVERRIDES = ("engine", "samples", "device", "threads")
 _Pixels = Annotated[int, Field(ge=1, le=8192)]
 
 
-def _render_field(name: str) -> tuple[Any, Any]:
-    field = Render.model_fields[name]
-    annotation = Annotated[(field.annotation, *field.metadata)] if field.metadata else field.annotation
-    return Optional[annotation], Field(None, description=field.description)
+class MakeOptions(StrictModel):
+    """The options of make() that are not render fields: the env kind, params and the image wrappers."""
 
-
-MakeOptions = create_model(
-    "MakeOptions",
-    __base__=StrictModel,
-    __doc__="The keyword options of visualenv.make(), gymnasium.make('visualenv/...') and make_vec.",
-    render=(Optional[bool], Field(None, description="False: the state-only env (no Blender)")),
-    render_mode=(Optional[Literal["rgb_array"]], None),
-    params=(Optional[dict[Name, Union[bool, int, float, str]]], Field(None, description="overrides of the spec's params")),
-    frame_stack=(Optional[Annotated[int, Field(ge=1, le=64)]], Field(None, description="stack this many frames")),
-    grayscale=(bool, False),
-    resize=(Optional[tuple[_Pixels, _Pixels]],
-            Field(None, description="(width, height) of the observation")),
-    **{name: _render_field(name) for name in RENDER_OVERRIDES},
-)
+    render: Optional[bool] = Field(None, description="False: the state-only env (no Blender)")
+    render_mode: Optional[Literal["rgb_array"]] = None
+    params: Optional[dict[Name, Union[bool, int, float, str]]] = Field(None, description="overrides of the spec's params")
+    frame_stack: Optional[Annotated[int, Field(ge=1, le=64)]] = Field(None, description="stack this many frames")
+    grayscale: bool = False
+    resize: Optional[tuple[_Pixels, _Pixels]] = Field(None, description="(width, height) of the observation")
 
 
 def check_make_options(**options: Any) -> None:
-    """Raise :class:`SpecError` for any option a spec would refuse (unknown renderer options are left to the renderer)."""
-    known = {k: v for k, v in options.items() if k in MakeOptions.model_fields and v is not None}
-    if isinstance(known.get("resize"), list):  # [w, h] reads as well as (w, h)
-        known["resize"] = tuple(known["resize"])
-    try:
-        MakeOptions.model_validate(known)
-    except ValidationError as exc:
-        raise SpecError(diagnostics_of(exc, known, SourceMap(WHERE))) from None
+    """Raise :class:`SpecError` for any option a spec would refuse (unknown renderer options are left to the renderer).
+
+    The render overrides are validated by the spec's own ``Render`` model, the rest by :class:`MakeOptions`.
+    """
+    if isinstance(options.get("resize"), list):  # [w, h] reads as well as (w, h)
+        options["resize"] = tuple(options["resize"])
+    problems = []
+    for model, names in ((Render, RENDER_OVERRIDES), (MakeOptions, tuple(MakeOptions.model_fields))):
+        given = {k: options[k] for k in names if options.get(k) is not None}
+        try:
+            model.model_validate(given)
+        except ValidationError as exc:
+            problems.extend(diagnostics_of(exc, given, SourceMap(WHERE)))
+    if problems:
+        raise SpecError(problems)
