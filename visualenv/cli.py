@@ -1,4 +1,4 @@
-"""The `visualenv` command: validate, build, inspect, init, preview, schema, bench, train, play.
+"""The `visualenv` command: validate, build, inspect, init, preview, schema, bench, train, play, eval.
 
 Bad input never shows a traceback: spec problems print as
 ``file:line:column: field: message`` lines and exit with status 2.
@@ -20,6 +20,7 @@ from visualenv.errors import SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
 EXIT_INVALID = 2
+PRETRAINED = "pretrained"  # --model's name for the shipped agent
 
 
 def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -179,6 +180,19 @@ def _video_path(value: str | None) -> str | None:
     return value
 
 
+def _model_file(spec: str, value: str) -> str:
+    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/best_model.zip)."""
+    if value == PRETRAINED:
+        from visualenv.evaluation import pretrained_model
+        from visualenv.registration import resolve
+        from visualenv.spec.loader import load_spec
+
+        return str(pretrained_model(load_spec(resolve(spec)).spec.id))
+    if not Path(value).exists():  # a file, or an RLlib checkpoint folder: load_model tells which it is not
+        raise click.BadParameter(f"{value}: no such file (or '{PRETRAINED}' for the shipped agent)", param_hint="--model")
+    return value
+
+
 def _parse_value(text: str) -> Any:
     try:
         return json.loads(text)
@@ -328,7 +342,7 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
 
 @main.command()
 @click.argument("spec")
-@click.option("--model", "model_path", type=click.Path(exists=True), help="a trained model (.zip, or a checkpoint folder of --backend rllib); default: random actions")
+@click.option("--model", "model_path", help="a trained model (.zip, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/best_model.zip); default: random actions")
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
@@ -343,6 +357,8 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
     """Run episodes with a random or trained policy; print returns, lengths and success."""
     from visualenv.play import play as run_play
 
+    if model_path is not None:
+        model_path = _model_file(spec, model_path)
     results = run_play(spec, model_path=model_path, algo=algo, episodes=episodes, seed=seed, record=record,
                        view_preset=view_preset, view_size=view_size)
     for i, ep in enumerate(results):
@@ -351,6 +367,59 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
     click.echo(f"mean return {np.mean([ep.ret for ep in results]):.2f}, mean length {np.mean([ep.length for ep in results]):.1f}, success {100 * rate:.0f} %")
     if record:
         click.echo(f"recorded {record}")
+
+
+@main.command("eval")
+@click.argument("spec")
+@click.option("--model", "model_path", required=True,
+              help="a trained model (.zip, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/best_model.zip)")
+@click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
+@click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 50]")
+@click.option("--seed", type=click.IntRange(min=0), default=None,
+              help="seed of the first episode's reset  [default: its run's final evaluation's (results.json's eval_seed), else 10000]")
+@click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@_friendly
+def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None) -> None:
+    """Evaluate a trained model on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
+
+    The intervals are a percentile bootstrap of the mean (return, length) and Wilson's
+    (success rate). With the seed of the model's run (the default when its results.json
+    and config.json lie beside the model, as in runs/<Id>/<time>/ and results/<Id>/),
+    the episodes are those of the run's final evaluation and the figures match its results.json.
+    """
+    from visualenv.evaluation import differences, evaluate_model
+
+    model_path = _model_file(spec, model_path)
+    if json_out:
+        _check_writable(json_out, "--out")
+    results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed)
+    click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}")
+    (r_lo, r_hi), (l_lo, l_hi), (s_lo, s_hi) = results["reward_ci95"], results["length_ci95"], results["success_ci95"]
+    click.echo(f"  mean return   {results['mean_reward']:8.2f}  95 % CI [{r_lo:.2f}, {r_hi:.2f}] (bootstrap), std {results['std_reward']:.2f}")
+    click.echo(f"  mean length   {results['mean_length']:8.2f}  95 % CI [{l_lo:.2f}, {l_hi:.2f}] (bootstrap)")
+    click.echo(f"  success rate  {100 * results['success_rate']:6.0f} %  95 % CI [{100 * s_lo:.0f} %, {100 * s_hi:.0f} %] (Wilson)")
+    matches = None
+    if recorded is not None and recorded.results is not None and recorded.results.get("episodes") == results["episodes"]:
+        wrong = differences(results, recorded.results)
+        matches = not wrong
+        click.echo("reproduces its run's results.json" if matches else "differs from its run's results.json: " + "; ".join(wrong))
+        if recorded.note:
+            click.echo(f"note: {recorded.note}")
+    if json_out:
+        record = {"spec": spec, "model": model_path, **results, "matches_results_json": matches}
+        Path(json_out).write_text(json.dumps(record, indent=2) + "\n")
+        click.echo(f"wrote {json_out}")
+
+
+def _check_writable(path: str, option: str) -> None:
+    """A figure file that cannot be written is refused now, not after minutes of measuring (its folder is made)."""
+    from visualenv.files import make_dir
+
+    try:
+        make_dir(Path(path).parent)
+        Path(path).touch()
+    except (OSError, VisualEnvError) as exc:
+        raise click.BadParameter(f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option) from None
 
 
 @main.command()
@@ -374,14 +443,8 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
     from visualenv.bench import as_dict, bench_one
     from visualenv.cores import usable_cores
 
-    if json_out:  # a figure file that cannot be written is refused now, not after minutes of measuring
-        from visualenv.files import make_dir
-
-        try:
-            make_dir(Path(json_out).parent)
-            Path(json_out).touch()
-        except (OSError, VisualEnvError) as exc:
-            raise click.BadParameter(f"cannot write {json_out}: {getattr(exc, 'strerror', None) or exc}", param_hint="--json") from None
+    if json_out:
+        _check_writable(json_out, "--json")
     cores = len(usable_cores())
     machine_cores = psutil.cpu_count() or cores
     click.echo(f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"

@@ -69,7 +69,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     env: Any = VisualEnv(loaded, render_mode="rgb_array")
     if model is not None:
         try:
-            env = _stacked_like(env, model, str(model_path))
+            env = stacked_like(env, model, str(model_path))
         except BaseException:
             env.close()
             raise
@@ -119,7 +119,7 @@ def load_model(model_path: str, algo: str = "ppo") -> Any:
         raise VisualEnvError(f"cannot load {model_path} as a {algo.upper()} model: {exc}") from None
 
 
-def _stacked_like(env: Any, model: Any, model_path: str) -> Any:
+def stacked_like(env: Any, model: Any, model_path: str) -> Any:
     """`env` with the frame stack the model was trained on; a model of another env is an error, not a crash mid-episode."""
     from visualenv.wrappers import FrameStack
 

@@ -34,9 +34,9 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
-from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.cores import usable_cores
-from visualenv.wrappers import subspaces
+from visualenv.errors import ConfigError, SpecError, did_you_mean
+from visualenv.evaluation import eval_seed, evaluate, final_evaluation, make_eval_env  # evaluate: also the RLlib backend's
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
@@ -130,8 +130,8 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     """
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
-    from stable_baselines3.common.vec_env import VecTransposeImage
 
+    from visualenv.play import load_model
     from visualenv.versions import versions
     from visualenv.registration import resolve
     from visualenv.sb3_vec import make_sb3_vec
@@ -153,9 +153,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
                              monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     try:
-        eval_env = make_sb3_vec(spec_path, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **_vec_kwargs(config))
-        if _channels_last_images(eval_env.observation_space):
-            eval_env = VecTransposeImage(eval_env)  # as SB3 does to the training env
+        eval_env = make_eval_env(spec_path, seed=eval_seed(config.seed), frame_stack=frame_stack, render=config.render)
         eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
     except BaseException:
         train_env.close()
@@ -200,7 +198,8 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     wall = time.perf_counter() - started
     best = run_dir / "best_model.zip"
     try:
-        results = evaluate(algo.load(best if best.exists() else latest), eval_env, config.final_eval_episodes)
+        results = final_evaluation(load_model(str(best if best.exists() else latest), config.algo), eval_env,
+                                   config.final_eval_episodes, eval_seed(config.seed))
     finally:
         eval_env.close()
     results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": best.name if best.exists() else latest.name,
@@ -240,39 +239,6 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     if config.render:
         check_cnn_input(load_spec(resolve(config.spec)), config.hyperparams)
     return kwargs, changed
-
-
-def _channels_last_images(space: Any) -> bool:
-    """Whether SB3 wraps an env of this space in VecTransposeImage (its rule in ``BaseAlgorithm._wrap_env``)."""
-    from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
-
-    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())  # type: ignore[arg-type]
-
-
-def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
-    """Run `episodes` deterministic episodes; mean/std reward, mean length, success rate."""
-    returns: list[float] = []
-    lengths: list[int] = []
-    successes: list[bool] = []
-    obs = vec_env.reset()
-    ret, length = 0.0, 0
-    while len(returns) < episodes:
-        action, _ = model.predict(obs, deterministic=True)
-        obs, reward, done, infos = vec_env.step(action)
-        ret += float(reward[0])
-        length += 1
-        if done[0]:
-            returns.append(ret)
-            lengths.append(length)
-            successes.append(bool(infos[0].get("is_success", False)))
-            ret, length = 0.0, 0
-    return {
-        "episodes": episodes,
-        "mean_reward": float(np.mean(returns)),
-        "std_reward": float(np.std(returns)),
-        "mean_length": float(np.mean(lengths)),
-        "success_rate": float(np.mean(successes)),
-    }
 
 
 def _keep_earlier_logs(logs: Path) -> None:

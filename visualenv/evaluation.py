@@ -1,0 +1,250 @@
+"""Deterministic evaluation of a trained agent: `visualenv train`'s final evaluation and `visualenv eval`.
+
+Both run :func:`final_evaluation` on the env :func:`make_eval_env` makes, so
+``visualenv eval`` with the seed a run recorded (``eval_seed`` in results.json)
+plays the same episodes and prints the same numbers as the run's results.json.
+
+Intervals are 95 %: a percentile bootstrap of the mean (10,000 resamples, a fixed
+resampling seed, so the same episodes give the same interval) for the return and
+the length, and the Wilson score interval for the success rate (sound near 0 and 1,
+where the normal approximation leaves [0, 1]).
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from visualenv.errors import VisualEnvError
+from visualenv.wrappers import subspaces
+
+EVAL_SEED_OFFSET = 10_000  # the eval env's seed is the run's seed + this: its episodes are not the training envs'
+CONFIDENCE = 0.95
+Z_95 = 1.959963984540054  # standard normal quantile of 0.975
+BOOTSTRAP_RESAMPLES = 10_000
+CI_METHOD = "95 %: percentile bootstrap of the mean (10,000 resamples) for return and length, Wilson score for the success rate"
+RESULT_KEYS = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate")  # what results.json has always held
+
+
+def eval_seed(train_seed: int) -> int:
+    """The seed of a run's evaluation env (its periodic evaluations and the final one)."""
+    return train_seed + EVAL_SEED_OFFSET
+
+
+def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True) -> Any:
+    """One in-process env seeded `seed`, frames stacked and images transposed as SB3 does to the training env."""
+    from stable_baselines3.common.vec_env import VecTransposeImage
+
+    from visualenv.sb3_vec import make_sb3_vec
+
+    env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **({} if render else {"render": False}))
+    return VecTransposeImage(env) if channels_last_images(env.observation_space) else env
+
+
+def channels_last_images(space: Any) -> bool:
+    """Whether SB3 wraps an env of this space in VecTransposeImage (its rule in ``BaseAlgorithm._wrap_env``)."""
+    from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
+
+    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())
+
+
+def final_evaluation(model: Any, vec_env: Any, episodes: int, seed: int, *, resets_before: int = 0) -> dict[str, Any]:
+    """`episodes` deterministic episodes, the first from a reset seeded `seed`: the figures of results.json.
+
+    `resets_before` resets the env that many times first (the first of them seeded):
+    the final evaluation of runs made before results.json recorded ``eval_seed`` came
+    after the periodic evaluations on the same env (see :func:`recorded_evaluation`).
+    """
+    vec_env.seed(seed)
+    for _ in range(resets_before):
+        vec_env.reset()
+    results = evaluate(model, vec_env, episodes)
+    results["eval_seed"] = seed
+    if resets_before:
+        results["resets_before"] = resets_before
+    return results
+
+
+def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
+    """Run `episodes` deterministic episodes; mean/std return, mean length, success rate, their intervals."""
+    returns: list[float] = []
+    lengths: list[int] = []
+    successes: list[bool] = []
+    obs = vec_env.reset()
+    ret, length = 0.0, 0
+    while len(returns) < episodes:
+        action, _ = model.predict(obs, deterministic=True)
+        obs, reward, done, infos = vec_env.step(action)
+        ret += float(reward[0])
+        length += 1
+        if done[0]:
+            returns.append(ret)
+            lengths.append(length)
+            successes.append(bool(infos[0].get("is_success", False)))
+            ret, length = 0.0, 0
+    return {
+        "episodes": episodes,
+        "mean_reward": float(np.mean(returns)),
+        "std_reward": float(np.std(returns)),
+        "mean_length": float(np.mean(lengths)),
+        "success_rate": float(np.mean(successes)),
+        "reward_ci95": bootstrap_mean_interval(returns),
+        "length_ci95": bootstrap_mean_interval(lengths),
+        "success_ci95": wilson_interval(sum(successes), len(successes)),
+        "ci_method": CI_METHOD,
+    }
+
+
+def bootstrap_mean_interval(values: Any, resamples: int = BOOTSTRAP_RESAMPLES, confidence: float = CONFIDENCE) -> list[float]:
+    """Percentile bootstrap interval of the mean (resampling seed 0: the same values give the same interval)."""
+    data = np.asarray(values, dtype=np.float64)
+    rng = np.random.default_rng(0)
+    means = np.concatenate([data[rng.integers(0, len(data), (n, len(data)))].mean(axis=1)
+                            for n in np.diff(np.r_[0:resamples:1000, resamples])])
+    tail = 100 * (1 - confidence) / 2
+    low, high = np.percentile(means, [tail, 100 - tail])
+    return [float(low), float(high)]
+
+
+def wilson_interval(successes: int, n: int, z: float = Z_95) -> list[float]:
+    """Wilson score interval of a success rate (95 % with the default z)."""
+    p = successes / n
+    centre = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * math.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return [0.0 if successes == 0 else centre - half, 1.0 if successes == n else centre + half]
+
+
+# -- what a run recorded about its final evaluation ----------------------------------------------------------
+
+
+@dataclass
+class RecordedEvaluation:
+    """How a run evaluated its model at the end: what `visualenv eval` replays to reproduce results.json."""
+
+    seed: int
+    episodes: int
+    algo: str
+    frame_stack: int
+    render: bool
+    resets_before: int = 0
+    results: dict[str, Any] | None = None  # the run's results.json
+    note: str | None = None  # why the replay may not match results.json
+
+
+def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
+    """The final evaluation recorded in `run_dir` (results.json, config.json); None without config.json.
+
+    results.json names its ``eval_seed`` since `eval` exists. Earlier runs evaluated on
+    the env of their periodic evaluations, seeded ``seed + 10000`` at the start of the
+    run's last segment (its start or latest ``--resume``), reset once then and
+    ``eval_episodes + 1`` times by each periodic evaluation since: the replay makes the
+    same resets, counted from evaluations.npz and the segment's progress.csv.
+    """
+    try:
+        config = json.loads((run_dir / "config.json").read_text())["config"]
+    except (OSError, ValueError, KeyError, TypeError):
+        return None
+    try:
+        results = json.loads((run_dir / "results.json").read_text())
+    except (OSError, ValueError):
+        results = None
+    render = bool(config.get("render", True))
+    episodes = int(results.get("episodes", 0) if results else 0) or int(config.get("final_eval_episodes", 50))
+    common = {"episodes": episodes, "algo": str(config.get("algo", "ppo")), "render": render,
+              "frame_stack": int(config.get("frame_stack", 1)) if render else 0, "results": results}
+    if results is not None and "eval_seed" in results:
+        return RecordedEvaluation(seed=int(results["eval_seed"]), **common)
+    seed = eval_seed(int(config.get("seed", 0)))
+    if results is None:
+        return RecordedEvaluation(seed=seed, **common)
+    periodic = _periodic_evaluations_in_last_segment(run_dir)
+    if periodic is None:
+        return RecordedEvaluation(seed=seed, **common, note="results.json predates eval_seed and the run's progress.csv is missing: "
+                                                              "the periodic evaluations before its final one cannot be counted")
+    return RecordedEvaluation(seed=seed, **common, resets_before=1 + periodic * (int(config.get("eval_episodes", 10)) + 1))
+
+
+def _periodic_evaluations_in_last_segment(run_dir: Path) -> int | None:
+    """Evaluations (evaluations.npz) since the last segment of the run started; None if its start is unknown."""
+    try:
+        with np.load(run_dir / "evaluations.npz") as saved:
+            timesteps = saved["timesteps"]
+    except (OSError, KeyError, ValueError):
+        timesteps = np.zeros(0)
+    start = _last_segment_start(run_dir)
+    return None if start is None else int(np.sum(timesteps > start))
+
+
+def _last_segment_start(run_dir: Path) -> int | None:
+    """The step the run's last segment started at, from its progress.csv (SB3's on-policy rows: iterations, total steps)."""
+    progress = next((p for p in (run_dir / "logs" / "progress.csv", run_dir / "progress.csv") if p.is_file()), None)
+    if progress is None:
+        return None
+    try:
+        with progress.open(newline="") as f:
+            rows = [(float(r["time/iterations"]), float(r["time/total_timesteps"])) for r in csv.DictReader(f)
+                    if r.get("time/iterations") and r.get("time/total_timesteps")]
+    except (OSError, KeyError, ValueError, csv.Error):
+        return None
+    if len(rows) < 2 or rows[1][0] == rows[0][0]:
+        return None
+    (i1, t1), (i2, t2) = rows[:2]
+    per_iteration = (t2 - t1) / (i2 - i1)
+    return round(t1 - i1 * per_iteration)
+
+
+def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None, episodes: int | None = None,
+                   seed: int | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
+    """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
+
+    Unset arguments take the run's values (config.json and results.json beside the model),
+    else PPO, 50 episodes and seed 10000; the run's final evaluation is replayed when the
+    seed is the run's.
+    """
+    from gymnasium import spaces
+
+    from visualenv.env import VisualEnv
+    from visualenv.play import load_model, stacked_like
+    from visualenv.registration import resolve
+    from visualenv.spec import load_spec
+    from visualenv.wrappers import FrameStack
+
+    recorded = recorded_evaluation(Path(model_path).parent)
+    if seed is None:
+        seed = recorded.seed if recorded else eval_seed(0)
+    replayed = recorded if recorded is not None and seed == recorded.seed else None
+    model = load_model(str(model_path), algo or (recorded.algo if recorded else "ppo"))
+    space = model.observation_space
+    render = recorded.render if recorded else not (isinstance(space, spaces.Box) and len(space.shape) == 1)
+    spec_path = str(resolve(spec))
+    probe = stacked_like(VisualEnv(load_spec(spec_path), render=render), model, str(model_path))  # refuses a model of another env
+    probe.close()
+    frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
+    vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render)
+    try:
+        results = final_evaluation(model, vec_env, episodes or (recorded.episodes if recorded else 50), seed,
+                                   resets_before=replayed.resets_before if replayed else 0)
+    finally:
+        vec_env.close()
+    return results, replayed
+
+
+def differences(results: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
+    """The figures of results.json that `results` does not reproduce exactly."""
+    return [f"{key} {results.get(key)} (results.json: {recorded[key]})" for key in RESULT_KEYS
+            if key in recorded and results.get(key) != recorded[key]]
+
+
+def pretrained_model(env_id: str) -> Path:
+    """The shipped agent of a bundled env: results/<Id>/best_model.zip in the source checkout."""
+    path = Path(__file__).resolve().parent.parent / "results" / env_id / "best_model.zip"
+    if not path.is_file():
+        raise VisualEnvError(f"no shipped model for {env_id}: {path} does not exist "
+                             "(the shipped models come with a checkout of the repository; train one with `visualenv train`)")
+    return path
