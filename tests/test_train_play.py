@@ -39,6 +39,39 @@ def test_train_writes_a_complete_run_folder(run_dir):
     assert list(iio.imread(run_dir / "plots" / "rewards.png").shape[2:]) in ([3], [4])
 
 
+FIGURES = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "reward_ci95", "length_ci95", "success_ci95", "eval_seed")
+
+
+def test_eval_replays_the_runs_final_evaluation(run_dir, tmp_path):
+    recorded = json.loads((run_dir / "results.json").read_text())
+    assert recorded["eval_seed"] == 10_000  # the run's seed 0 + 10000
+    out = tmp_path / "eval.json"
+    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "2 deterministic episodes, the first reset with seed 10000" in result.output  # the run's count and seed by default
+    assert "(bootstrap)" in result.output and "(Wilson)" in result.output and "reproduces its run's results.json" in result.output
+    figures = json.loads(out.read_text())
+    assert {k: figures[k] for k in FIGURES} == {k: recorded[k] for k in FIGURES} and figures["matches_results_json"] is True
+
+
+def test_eval_of_a_model_alone_and_its_refusals(run_dir, tmp_path):
+    import shutil
+
+    alone = tmp_path / "goalie.zip"  # no config.json beside it: the frame stack comes from the model
+    shutil.copy(run_dir / "best_model.zip", alone)
+    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(alone), "--episodes", "3", "--seed", "5"])
+    assert result.exit_code == 0, result.output
+    assert "3 deterministic episodes, the first reset with seed 5" in result.output and "results.json" not in result.output
+    missing = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(tmp_path / "none.zip")])
+    assert missing.exit_code == 2 and "none.zip: no such file (or 'pretrained' for the shipped agent)" in missing.output
+    other_env = CliRunner().invoke(main, ["eval", "Hover2D-v0", "--model", str(alone)])
+    assert other_env.exit_code == 1 and "was trained on observations (4, 100, 100) and actions Discrete(2)" in other_env.output
+    unwritable = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(alone), "-o", str(alone / "eval.json")])
+    assert unwritable.exit_code == 2 and "cannot write" in unwritable.output
+    not_shipped = CliRunner().invoke(main, ["play", multi_camera_cartpole(tmp_path, "[48, 48]"), "--model", "pretrained"])
+    assert not_shipped.exit_code == 1 and "no shipped model for MultiCart-v0" in not_shipped.output
+
+
 def test_linear_schedule_lowers_the_learning_rate_over_the_run(run_dir):
     from visualenv.plots import read_progress
 

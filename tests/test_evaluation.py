@@ -1,0 +1,73 @@
+"""The statistics of `visualenv eval` and what it reads from a run folder to replay its final evaluation (no Blender)."""
+
+import csv
+import json
+
+import numpy as np
+import pytest
+
+from visualenv.evaluation import bootstrap_mean_interval, differences, eval_seed, recorded_evaluation, wilson_interval
+
+
+def test_wilson_interval_matches_the_formula_and_reaches_the_bounds():
+    low, high = wilson_interval(42, 50)
+    assert low == pytest.approx(0.7149, abs=1e-4) and high == pytest.approx(0.9166, abs=1e-4)
+    assert wilson_interval(0, 10)[0] == 0.0 and wilson_interval(0, 10)[1] == pytest.approx(0.2775, abs=1e-4)
+    assert wilson_interval(10, 10) == [pytest.approx(0.7225, abs=1e-4), 1.0]
+
+
+def test_bootstrap_interval_is_reproducible_and_brackets_the_mean():
+    values = np.random.default_rng(3).normal(5.0, 2.0, 50)
+    low, high = bootstrap_mean_interval(values)
+    assert low < values.mean() < high and high - low == pytest.approx(2 * 1.96 * values.std() / np.sqrt(50), rel=0.15)
+    assert bootstrap_mean_interval(values) == [low, high]
+    assert bootstrap_mean_interval([7.0] * 5) == [7.0, 7.0]
+
+
+def _run_folder(path, *, results, evaluations=(), first_logged=None, per_iteration=512, eval_episodes=20):
+    path.mkdir()
+    config = {"spec": "Goalie-v0", "algo": "ppo", "envs": 4, "frame_stack": 4, "eval_episodes": eval_episodes,
+              "final_eval_episodes": 50, "seed": 3, "render": True, "hyperparams": {"n_steps": 128}}
+    (path / "config.json").write_text(json.dumps({"command": "visualenv train Goalie-v0", "config": config}))
+    (path / "results.json").write_text(json.dumps(results))
+    np.savez(path / "evaluations.npz", timesteps=np.array(evaluations), results=np.zeros((len(evaluations), eval_episodes)))
+    if first_logged is not None:
+        (path / "logs").mkdir()
+        with (path / "logs" / "progress.csv").open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(["time/fps", "time/iterations", "time/total_timesteps"])
+            for i in range(1, 4):
+                writer.writerow([30, i, first_logged + (i - 1) * per_iteration])
+    return path
+
+
+OLD_RESULTS = {"episodes": 50, "mean_reward": 6.8, "std_reward": 7.3, "mean_length": 21.4, "success_rate": 0.84}
+
+
+def test_a_run_that_records_its_eval_seed_is_replayed_from_it(tmp_path):
+    run = _run_folder(tmp_path / "run", results={**OLD_RESULTS, "eval_seed": 10_003}, evaluations=[10_000, 20_000])
+    recorded = recorded_evaluation(run)
+    assert (recorded.seed, recorded.episodes, recorded.resets_before, recorded.frame_stack, recorded.algo) == (10_003, 50, 0, 4, "ppo")
+
+
+def test_an_older_run_is_replayed_after_the_resets_of_its_periodic_evaluations(tmp_path):
+    # never resumed: the eval env was reset once at the start and 20 + 1 times by each of the 3 periodic evaluations
+    run = _run_folder(tmp_path / "fresh", results=OLD_RESULTS, evaluations=[10_000, 20_000, 30_000], first_logged=512)
+    recorded = recorded_evaluation(run)
+    assert recorded.seed == eval_seed(3) == 10_003 and recorded.resets_before == 1 + 3 * 21 and recorded.note is None
+    # resumed at step 36356 (a stop between two evaluations): only the evaluations after it used the final evaluation's env
+    run = _run_folder(tmp_path / "resumed", results=OLD_RESULTS, evaluations=[10_000, 20_000, 30_000, 46_356, 56_356, 66_356],
+                      first_logged=36_868)
+    assert recorded_evaluation(run).resets_before == 1 + 3 * 21
+
+
+def test_an_older_run_without_its_progress_log_is_evaluated_with_a_note(tmp_path):
+    run = _run_folder(tmp_path / "run", results=OLD_RESULTS, evaluations=[10_000])
+    recorded = recorded_evaluation(run)
+    assert recorded.resets_before == 0 and "cannot be counted" in recorded.note
+    assert recorded_evaluation(tmp_path) is None  # no config.json: not a run folder
+
+
+def test_differences_names_each_figure_that_does_not_match():
+    assert differences(dict(OLD_RESULTS, reward_ci95=[1, 2]), OLD_RESULTS) == []
+    assert differences(dict(OLD_RESULTS, success_rate=0.82), OLD_RESULTS) == ["success_rate 0.82 (results.json: 0.84)"]
