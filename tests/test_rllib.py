@@ -166,6 +166,8 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
 
     played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"])
     assert played.exit_code == 0 and "episode 0: return" in played.output, played.output
+    replayed = CliRunner().invoke(main, ["eval", spec, "--model", str(run / results["model"])])  # the final evaluation again
+    assert replayed.exit_code == 0 and "reproduces its run's results.json" in replayed.output, replayed.output
 
     stopped_at = results["steps"]
     resumed = CliRunner().invoke(main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress"])

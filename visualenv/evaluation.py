@@ -37,14 +37,17 @@ def eval_seed(train_seed: int) -> int:
     return train_seed + EVAL_SEED_OFFSET
 
 
-def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True) -> Any:
-    """One in-process env seeded `seed`, frames stacked and images transposed as SB3 does to the training env."""
+def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True, transpose: bool = True) -> Any:
+    """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.
+
+    RLlib's policies take the images channels last (``transpose=False``).
+    """
     from stable_baselines3.common.vec_env import VecTransposeImage
 
     from visualenv.sb3_vec import make_sb3_vec
 
     env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **({} if render else {"render": False}))
-    return VecTransposeImage(env) if channels_last_images(env.observation_space) else env
+    return VecTransposeImage(env) if transpose and channels_last_images(env.observation_space) else env
 
 
 def channels_last_images(space: Any) -> bool:
@@ -140,14 +143,15 @@ class RecordedEvaluation:
 def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
     """The final evaluation recorded in `run_dir` (results.json, config.json); None without config.json.
 
-    results.json names its ``eval_seed`` since `eval` exists. Earlier runs evaluated on
+    results.json names its ``eval_seed`` since `eval` exists. Earlier SB3 runs evaluated on
     the env of their periodic evaluations, seeded ``seed + 10000`` at the start of the
     run's last segment (its start or latest ``--resume``), reset once then and
     ``eval_episodes + 1`` times by each periodic evaluation since: the replay makes the
     same resets, counted from evaluations.npz and the segment's progress.csv.
     """
     try:
-        config = json.loads((run_dir / "config.json").read_text())["config"]
+        record = json.loads((run_dir / "config.json").read_text())
+        config = record["config"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
     try:
@@ -163,10 +167,10 @@ def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
     seed = eval_seed(int(config.get("seed", 0)))
     if results is None:
         return RecordedEvaluation(seed=seed, **common)
-    periodic = _periodic_evaluations_in_last_segment(run_dir)
+    periodic = _periodic_evaluations_in_last_segment(run_dir) if record.get("backend", "sb3") == "sb3" else None
     if periodic is None:
-        return RecordedEvaluation(seed=seed, **common, note="results.json predates eval_seed and the run's progress.csv is missing: "
-                                                              "the periodic evaluations before its final one cannot be counted")
+        return RecordedEvaluation(seed=seed, **common, note="results.json predates eval_seed: the periodic evaluations before its final one "
+                                                              "(on the same env) cannot be counted, so its episodes differ")
     return RecordedEvaluation(seed=seed, **common, resets_before=1 + periodic * (int(config.get("eval_episodes", 10)) + 1))
 
 
@@ -226,7 +230,7 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
     probe = stacked_like(VisualEnv(load_spec(spec_path), render=render), model, str(model_path))  # refuses a model of another env
     probe.close()
     frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
-    vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render)
+    vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render, transpose=not channels_last_images(space))
     try:
         results = final_evaluation(model, vec_env, episodes or (recorded.episodes if recorded else 50), seed,
                                    resets_before=replayed.resets_before if replayed else 0)

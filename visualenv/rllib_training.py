@@ -6,7 +6,7 @@ checkpoint folders in place of SB3's zip files: ``best_model/``,
 ``visualenv play --model`` takes any of them). ``logs/progress.csv`` uses SB3's
 column names, ``evaluations.npz`` EvalCallback's arrays, and the plots and
 ``results.json`` are drawn and computed by the same code as the SB3 backend's
-(:func:`visualenv.plots.training_plots`, :func:`visualenv.training.evaluate`).
+(:func:`visualenv.plots.training_plots`, :func:`visualenv.evaluation.final_evaluation`).
 The evaluation env runs in the driver, as SB3's does, so the driver renders only
 while it evaluates; the runners sample on the cluster.
 
@@ -211,9 +211,8 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     from visualenv.versions import versions
     from visualenv.plots import training_plots
     from visualenv.rllib import RLlibPolicy, check_address
-    from visualenv.training import evaluate
     from visualenv.cores import usable_cores
-    from visualenv.sb3_vec import make_sb3_vec
+    from visualenv.evaluation import eval_seed, final_evaluation, make_eval_env
 
     check_address(address)
     algo_config = algorithm_config(config)
@@ -227,8 +226,7 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
         record.setdefault("resumes", []).append({"command": shlex.join(sys.argv), "hyperparams": dict(changes or {})})
     (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
     frame_stack = config.frame_stack if config.render else 0
-    render = {} if config.render else {"render": False}
-    eval_env = make_sb3_vec(config.spec, 1, seed=config.seed + 10_000, frame_stack=frame_stack, threads=1, **render)
+    eval_env = make_eval_env(config.spec, seed=eval_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
     stop = _StopRequest()
     cpus = max(len(usable_cores()), config.env_runners)  # a local cluster: one CPU per runner even on a small machine
     try:
@@ -240,12 +238,12 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
                 algo.stop()
         best = run_dir / "best_model"
         model = best if best.exists() else run_dir / "final_model"
-        results.update(evaluate(RLlibPolicy.load(model), eval_env, config.final_eval_episodes))
+        results.update(final_evaluation(RLlibPolicy.load(model), eval_env, config.final_eval_episodes, eval_seed(config.seed)))
     finally:
         eval_env.close()
     results["model"] = model.name
-    results = {k: results[k] for k in ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "steps", "wall_time_s",
-                                       "model", "stopped_early")}
+    results = {k: results[k] for k in ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "reward_ci95", "length_ci95",
+                                       "success_ci95", "ci_method", "eval_seed", "steps", "wall_time_s", "model", "stopped_early")}
     (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     training_plots(run_dir)
     return results
