@@ -376,7 +376,7 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 50]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
-              help="seed of the first episode's reset  [default: its run's final evaluation's (results.json's eval_seed), else 10000]")
+              help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 10000]")
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None) -> None:

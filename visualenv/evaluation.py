@@ -46,7 +46,8 @@ def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool =
 
     from visualenv.sb3_vec import make_sb3_vec
 
-    env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **({} if render else {"render": False}))
+    state_only: dict[str, Any] = {} if render else {"render": False}
+    env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **state_only)
     return VecTransposeImage(env) if transpose and channels_last_images(env.observation_space) else env
 
 
@@ -54,7 +55,7 @@ def channels_last_images(space: Any) -> bool:
     """Whether SB3 wraps an env of this space in VecTransposeImage (its rule in ``BaseAlgorithm._wrap_env``)."""
     from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
 
-    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())
+    return any(is_image_space(s) and not is_image_space_channels_first(s) for s in subspaces(space).values())  # type: ignore[arg-type]
 
 
 def final_evaluation(model: Any, vec_env: Any, episodes: int, seed: int, *, resets_before: int = 0) -> dict[str, Any]:

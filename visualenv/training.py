@@ -36,7 +36,7 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from visualenv.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
-from visualenv.evaluation import eval_seed, evaluate, final_evaluation, make_eval_env  # evaluate: also the RLlib backend's
+from visualenv.evaluation import eval_seed, final_evaluation, make_eval_env
 
 ALGORITHMS = ("ppo", "a2c", "dqn")
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
