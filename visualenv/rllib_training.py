@@ -210,6 +210,7 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
     from visualenv.versions import versions
     from visualenv.plots import training_plots
+    from visualenv.registration import resolve
     from visualenv.rllib import RLlibPolicy, check_address
     from visualenv.cores import usable_cores
     from visualenv.evaluation import eval_seed, final_evaluation, make_eval_env
@@ -219,7 +220,8 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "logs").mkdir(exist_ok=True)
     if not resume:
-        record = {"command": shlex.join(sys.argv), "backend": BACKEND, "config": asdict(config), "versions": versions(), "spec_path": str(config.spec)}
+        record = {"command": shlex.join(sys.argv), "backend": BACKEND, "config": asdict(config), "versions": versions(),
+                  "spec_path": str(resolve(config.spec))}
     else:
         record = json.loads((run_dir / "config.json").read_text())
         record["config"] = asdict(config)
