@@ -211,6 +211,7 @@ def test_two_node_cluster_samples_on_both_and_survives_a_killed_runner(tmp_path)
     from ray.cluster_utils import Cluster
 
     spec, out = tiny_goalie(tmp_path), tmp_path / "runs"
+    earlier = {p.pid for p in _descendants()}  # e.g. this process's multiprocessing resource tracker, from earlier tests
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
     try:
         worker = cluster.add_node(num_cpus=1)
@@ -247,7 +248,11 @@ def test_two_node_cluster_samples_on_both_and_survives_a_killed_runner(tmp_path)
     finally:
         cluster.shutdown()
     deadline = time.monotonic() + 30
-    while time.monotonic() < deadline and any(p.is_running() and p.status() != psutil.STATUS_ZOMBIE for p in _descendants()):
+
+    def left_over() -> list[str]:
+        return [_cmdline(p) for p in _descendants() if p.pid not in earlier and p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+
+    while time.monotonic() < deadline and left_over():
         time.sleep(0.5)
-    left = [_cmdline(p) for p in _descendants() if p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+    left = left_over()
     assert not left, left
