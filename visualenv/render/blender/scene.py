@@ -198,7 +198,7 @@ def _check_readable(path: Path, source: SourceMap) -> None:
     missing = [lib for lib in info["libraries"] if not lib["found"]]
     if missing:
         raise SpecError([source.diagnostic(where, f"linked library not found: {lib['path']} (resolved: {_resolve_blender_path(lib['path'], path)}), "
-                                           f"which {', '.join(lib['uses']) or 'nothing'} come from: put it back, or make the data local in Blender "
+                                           f"the source of {', '.join(lib['uses']) or 'no data'}: put it back, or make the data local in Blender "
                                            "(Object > Relations > Make Local) and save") for lib in missing])
     for image in info["missing_images"]:
         warnings.warn(str(source.diagnostic(where, f"image file not found: {image['path']} (image '{image['name']}' in {path.name}) "
