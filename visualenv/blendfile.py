@@ -9,6 +9,7 @@ renderer's checks. Answers are remembered per file path, size and modification t
 
 from __future__ import annotations
 
+import atexit
 import json
 import os
 import select
@@ -75,10 +76,17 @@ class _Reader:
         raise AssertionError("unreachable")  # pragma: no cover
 
     def close(self) -> None:
-        if self.proc is not None and self.proc.poll() is None:
-            self.proc.stdin.close()  # type: ignore[union-attr]
-            self.proc.wait(timeout=10)
-        self.proc = None
+        proc, self.proc = self.proc, None
+        if proc is None or self.owner != os.getpid():
+            return
+        for stream in (proc.stdin, proc.stdout):
+            if stream is not None:
+                stream.close()  # the reader ends at the end of its input
+        try:
+            proc.wait(timeout=10)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
 
 
 def is_blend_file(path: str | Path) -> bool:
@@ -89,6 +97,7 @@ def is_blend_file(path: str | Path) -> bool:
 
 
 _reader = _Reader()
+atexit.register(lambda: _reader.close())
 _answers: dict[tuple[str, int, int], dict[str, Any]] = {}
 
 
