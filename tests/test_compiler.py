@@ -60,6 +60,30 @@ def test_discrete_inputs_rewards_and_success_outcome():
     assert info["outcome"] == "home" and info["is_success"] and info["milestones"] == ["halfway"]
 
 
+def test_several_milestones_are_named_and_rewarded_in_spec_order():
+    env = env_from("""
+        id: Steps-v0
+        state:
+          x: {init: 0.0}
+        actions:
+          discrete:
+            - {move: 1}
+        dynamics:
+          update: {x: x + move}
+        reward: 0
+        outcomes:
+          first:  {when: x >= 1, reward: 1, end: none}
+          second: {when: x >= 3, reward: 10, end: none, success: true}
+        max_steps: 10
+    """)
+    env.reset(seed=0)
+    seen = []
+    for _ in range(3):
+        _, r, _, _, info = env.step(0)
+        seen.append((r, info["milestones"], info["is_success"]))
+    assert seen == [(1.0, ["first"], False), (0.0, ["first"], False), (10.0, ["first", "second"], True)]
+
+
 def test_failure_outcome_and_noop_action():
     env = env_from(WALKER)
     env.reset(seed=0)

@@ -379,9 +379,10 @@ class _Compiler:
         """Ending outcomes as an if-chain in spec order (the first that holds wins); milestones fire once each (a bit in _fired)."""
         fb.assign("_outcome", const(-1))
         ending: ast.stmt | None = None
-        milestone_bit = 0
         milestones: list[ast.stmt] = []
         rules = list(self.spec.outcomes.items())
+        # milestone i (in spec order) owns bit i of _fired: the env names fired milestones by that order
+        milestone_bits = {n: 1 << i for i, n in enumerate(n for n, r in rules if r.end == "none")}
         for index in reversed(range(len(rules))):
             rule_name, rule = rules[index]
             when = self.expr(("outcomes", rule_name, "when"), rule.when, scope, expect=BOOL)
@@ -393,8 +394,7 @@ class _Compiler:
             add_reward = ast.AugAssign(ast.Name("_reward", ast.Store()), ast.Add(), lower(reward.tree))
             set_outcome = ast.Assign([ast.Name("_outcome", ast.Store())], const(index))
             if rule.end == "none":
-                bit = 1 << milestone_bit
-                milestone_bit += 1
+                bit = milestone_bits[rule_name]
                 not_fired = ast.Compare(ast.BinOp(name("_fired"), ast.BitAnd(), const(bit)), [ast.Eq()], [const(0)])
                 mark = ast.AugAssign(ast.Name("_fired", ast.Store()), ast.BitOr(), const(bit))
                 milestones.insert(0, ast.If(ast.BoolOp(ast.And(), [not_fired, lower(when.tree)]), [add_reward, mark], []))
