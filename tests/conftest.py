@@ -1,4 +1,11 @@
-"""Fixtures shared by several test modules."""
+"""Fixtures shared by several test modules, and the `blender` marker.
+
+``pytest -m "not blender"`` runs the bpy-free core (spec loading, expressions,
+the compiler, the state-only env, wrappers, the CLI's checks) without
+rendering; ``pytest`` runs everything. Tests that need Blender are marked here,
+in one place, by module (and by test for a module that is mostly bpy-free), so
+a new test file that renders is added to BLENDER_MODULES.
+"""
 
 from __future__ import annotations
 
@@ -9,6 +16,23 @@ from pathlib import Path
 import pytest
 
 CORPUS_SCRIPT = Path(__file__).parent / "fixtures" / "blend_corpus.py"
+
+#: modules whose tests render with real Blender, read .blend files, or start processes that do
+BLENDER_MODULES = {
+    "test_bench_and_soak", "test_blend_corpus", "test_build_and_preview", "test_capture", "test_determinism",
+    "test_inspect_init", "test_parallel", "test_render_blender", "test_rllib", "test_train_play",
+}
+#: single tests that render, in modules that otherwise do not
+BLENDER_TESTS = {
+    "test_runtime_faults.py::test_a_binding_fault_while_rendering_obeys_on_fault",
+}
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    for item in items:
+        module = item.path.stem
+        if module in BLENDER_MODULES or f"{item.path.name}::{item.name}" in BLENDER_TESTS:
+            item.add_marker(pytest.mark.blender)
 
 
 @pytest.fixture(scope="session")

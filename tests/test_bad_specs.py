@@ -85,7 +85,7 @@ CASES = _cases()
 
 
 def _param(case: Case):
-    marks = [needs_blender] if case.command == "build" else []
+    marks = [needs_blender, pytest.mark.blender] if case.command == "build" else []
     return pytest.param(case, id=case.path.name, marks=marks)
 
 
@@ -192,6 +192,7 @@ def _tree_digest(folder: Path) -> dict[str, str]:
 
 
 @needs_blender
+@pytest.mark.blender
 def test_failed_build_keeps_the_earlier_build(tmp_path: Path):
     spec = tmp_path / "env.yaml"
     spec.write_text(VALID_SCENE_SPEC.format(id="KeepMe-v0"))
