@@ -79,7 +79,7 @@ class WorkerVectorEnv(AsyncVectorEnv):
         what = ", ".join(dead) or "a worker"
         return WorkerError(f"vector env worker {what} died during {call}(); close the vector env and make a new one")
 
-    def close_extras(self, timeout: float | None = None, terminate: bool = False) -> None:
+    def close_extras(self, timeout: float | None = None, terminate: bool = False, **kwargs: Any) -> None:
         if any(not p.is_alive() for p in self.processes):
             terminate = True
             self._state = AsyncState.DEFAULT
