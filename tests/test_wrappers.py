@@ -37,13 +37,23 @@ class Counter(gym.Env):
         return self._obs(), 0.0, False, False, {}
 
 
+def test_frame_stack_matches_sb3_vec_frame_stack():
+    # play and visualenv.make(frame_stack=...) must show an SB3-trained agent what VecFrameStack showed it
+    vec_env = pytest.importorskip("stable_baselines3.common.vec_env")
+    ours = FrameStack(Counter((6, 8, 1)), 4)
+    theirs = vec_env.VecFrameStack(vec_env.DummyVecEnv([lambda: Counter((6, 8, 1))]), 4)
+    assert np.array_equal(ours.reset()[0], theirs.reset()[0])
+    for _ in range(5):
+        assert np.array_equal(ours.step(0)[0], theirs.step(np.array([0]))[0][0])
+
+
 def test_frame_stack_is_on_the_channel_axis_oldest_first():
     env = FrameStack(Counter((6, 8, 1)), 4)
     assert env.observation_space.shape == (6, 8, 4) and env.observation_space.dtype == np.uint8
     obs, _ = env.reset()
-    assert obs.shape == (6, 8, 4) and obs[0, 0].tolist() == [10, 10, 10, 10]  # reset pads with the first frame
+    assert obs.shape == (6, 8, 4) and obs[0, 0].tolist() == [0, 0, 0, 10]  # reset pads with zeros, as SB3 does
     obs = env.step(0)[0]
-    assert obs[0, 0].tolist() == [10, 10, 10, 11]
+    assert obs[0, 0].tolist() == [0, 0, 10, 11]
     for _ in range(3):
         obs = env.step(0)[0]
     assert obs[0, 0].tolist() == [11, 12, 13, 14]
@@ -61,7 +71,7 @@ def test_frame_stack_of_dict_observations():
     env = FrameStack(Counter((4, 4, 1), dict_obs=True), 3)
     obs, _ = env.reset()
     obs = env.step(0)[0]
-    assert obs["a"][0, 0].tolist() == [10, 10, 11] and obs["b"][0, 0].tolist() == [110, 110, 111]
+    assert obs["a"][0, 0].tolist() == [0, 10, 11] and obs["b"][0, 0].tolist() == [0, 110, 111]
     assert env.observation_space.contains(obs)
 
 

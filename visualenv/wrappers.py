@@ -88,8 +88,10 @@ class FrameStack(gym.Wrapper):
     """Stack the last `depth` frames on the channel axis: (H, W, C) -> (H, W, C * depth).
 
     Oldest first: channels ``[0:C]`` are the frame from ``depth - 1`` steps ago,
-    the last ``C`` channels are the newest. Reset fills every slot with the
-    first frame, as SB3's ``VecFrameStack`` and Atari wrappers do.
+    the last ``C`` channels are the newest. Reset zeroes the older slots, as
+    SB3's ``VecFrameStack`` does, so an agent trained through SB3 sees at play
+    time what it saw in training (a repeated first frame instead reads as a
+    still ball to the Goalie agent, which then misses).
     """
 
     def __init__(self, env: gym.Env, depth: int = 4):
@@ -116,14 +118,19 @@ class FrameStack(gym.Wrapper):
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self._frames.clear()
-        for _ in range(self.depth):
-            self._frames.append(obs)
+        for _ in range(self.depth - 1):
+            self._frames.append(_zeros_like(obs))
+        self._frames.append(obs)
         return self._stacked(), info
 
     def step(self, action: Any) -> tuple[Any, Any, bool, bool, dict[str, Any]]:
         obs, reward, terminated, truncated, info = self.env.step(action)
         self._frames.append(obs)
         return self._stacked(), reward, terminated, truncated, info
+
+
+def _zeros_like(obs: Any) -> Any:
+    return {k: np.zeros_like(v) for k, v in obs.items()} if isinstance(obs, dict) else np.zeros_like(obs)
 
 
 def wrap_observation(env: gym.Env, *, grayscale: bool = False, resize: tuple[int, int] | None = None, frame_stack: int | None = None) -> gym.Env:
