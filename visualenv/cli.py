@@ -19,6 +19,9 @@ import numpy as np
 from visualenv.errors import SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
+#: the SB3 algorithms `train` and `play` take (training.algorithm_class maps them to classes)
+ALGORITHMS = ("ppo", "a2c", "dqn")
+
 EXIT_INVALID = 2
 PRETRAINED = "pretrained"  # --model's name for the shipped agent
 
@@ -202,7 +205,7 @@ def _parse_value(text: str) -> Any:
 
 @main.command()
 @click.argument("spec")
-@click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
+@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
 @click.option("--steps", type=click.IntRange(min=1), default=None, help="total env steps  [default: 200000, or the resumed run's]")
 @click.option("--envs", default=2, show_default=True, type=click.IntRange(min=1), help="parallel envs, one Blender process each")
 @click.option("--frame-stack", default=4, show_default=True, type=click.IntRange(min=1), help="frames per observation (1: no stacking)")
@@ -343,7 +346,7 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
 @main.command()
 @click.argument("spec")
 @click.option("--model", "model_path", help="a trained model (.zip, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/best_model.zip); default: random actions")
-@click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default="ppo", show_default=True)
+@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--record", type=click.Path(dir_okay=False), callback=lambda ctx, param, value: _video_path(value),
@@ -373,7 +376,7 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.argument("spec")
 @click.option("--model", "model_path", required=True,
               help="a trained model (.zip, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/best_model.zip)")
-@click.option("--algo", type=click.Choice(["ppo", "a2c", "dqn"]), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
+@click.option("--algo", type=click.Choice(ALGORITHMS), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 50]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 10000]")

@@ -38,7 +38,6 @@ from visualenv.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.evaluation import eval_seed, final_evaluation, make_eval_env
 
-ALGORITHMS = ("ppo", "a2c", "dqn")
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
 SET_BY_TRAIN = ("policy", "env", "seed", "verbose", "tensorboard_log", "_init_setup_model")  # not hyperparameters
 

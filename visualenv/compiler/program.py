@@ -182,7 +182,6 @@ class _Compiler:
         self.params = self.resolve_params()
         state_names = list(spec.state)
         input_names, discrete, continuous = self.resolve_actions()
-        self.input_names = input_names
         builders = {"init": self.build_init(state_names), "step": self.build_step(state_names, input_names, discrete)}
         builders["bind"], bindings = self.build_bindings(state_names)
         outcomes = [OutcomeRule(n, o.end, o.success) for n, o in spec.outcomes.items()]
@@ -404,7 +403,6 @@ class _Compiler:
             fb.add(ending, Site("outcomes", "the outcome conditions"))
         for stmt in milestones:
             fb.add(stmt, Site("outcomes", "the milestone conditions"))
-        self.milestone_rules = [n for n, r in rules if r.end == "none"]
 
     def python_call(self, fb: FunctionBuilder, state_names: list[str], input_names: list[str]) -> None:
         """Call the trusted 'module:function' escape hatch with plain dicts."""

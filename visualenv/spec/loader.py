@@ -39,7 +39,6 @@ class LoadedSpec:
     spec: Spec
     source: SourceMap
     base_dir: Path
-    raw: dict[str, Any]
 
     @property
     def file(self) -> str:
@@ -68,7 +67,7 @@ def validate_data(data: Any, smap: SourceMap, base_dir: Path) -> LoadedSpec:
     unused = unused_fields(spec)
     if unused:
         raise SpecError([smap.diagnostic(path, message, key=True) for path, message in unused])
-    return LoadedSpec(spec, smap, base_dir, data)
+    return LoadedSpec(spec, smap, base_dir)
 
 
 # -- turning pydantic errors into located, readable diagnostics ----------------------------------------

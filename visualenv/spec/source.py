@@ -20,7 +20,8 @@ import yaml
 
 from visualenv.errors import Diagnostic, SpecError
 
-Path_ = tuple[str | int, ...]
+#: where a value sits in the spec: keys and list indexes from the top
+SpecPath = tuple[str | int, ...]
 
 
 @dataclass
@@ -37,10 +38,10 @@ class SourceMap:
     """Where each value (and each mapping key) of a loaded document is written."""
 
     file: str
-    values: dict[Path_, Position] = field(default_factory=dict)
-    keys: dict[Path_, Position] = field(default_factory=dict)
+    values: dict[SpecPath, Position] = field(default_factory=dict)
+    keys: dict[SpecPath, Position] = field(default_factory=dict)
 
-    def locate(self, path: Path_, *, key: bool = False) -> Position | None:
+    def locate(self, path: SpecPath, *, key: bool = False) -> Position | None:
         """The position of `path`, or of its closest ancestor that has one."""
         path = tuple(path)
         if key and path in self.keys:
@@ -51,7 +52,7 @@ class SourceMap:
             path = path[:-1]
         return self.values.get(())
 
-    def diagnostic(self, path: Path_, message: str, *, key: bool = False, column_offset: int | None = None) -> Diagnostic:
+    def diagnostic(self, path: SpecPath, message: str, *, key: bool = False, column_offset: int | None = None) -> Diagnostic:
         pos = self.locate(path, key=key)
         line = pos.line if pos else None
         column = pos.column if pos else None
@@ -60,7 +61,7 @@ class SourceMap:
         return Diagnostic(self.file, line, column, format_path(path), message)
 
 
-def format_path(path: Path_) -> str:
+def format_path(path: SpecPath) -> str:
     """`('state', 'theta', 'init')` -> `state.theta.init`; list indexes as `[0]`."""
     out = ""
     for part in path:
@@ -102,7 +103,7 @@ def load_document(path: str | Path) -> tuple[Any, SourceMap]:
 BASE60 = re.compile(r"^[-+]?[0-9][0-9_]*(?::[0-5]?[0-9])+(?:\.[0-9_]*)?$")
 
 
-class _UniqueKeyLoader(yaml.SafeLoader):
+class _PositionLoader(yaml.SafeLoader):
     """SafeLoader (no Python tags, no code) that keeps node positions."""
 
     def resolve(self, kind: type, value: Any, implicit: Any) -> str:
@@ -136,7 +137,7 @@ def _check_structure(text: str, name: str) -> bool:
     depth = 0
     aliases = False
     open_anchors: list[str | None] = []
-    for event in yaml.parse(text, Loader=_UniqueKeyLoader):
+    for event in yaml.parse(text, Loader=_PositionLoader):
         if isinstance(event, yaml.CollectionStartEvent):
             depth += 1
             if depth > MAX_NESTING:
@@ -158,7 +159,7 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     smap = SourceMap(name)
     try:
         aliases = _check_structure(text, name)
-        node = yaml.compose(text, Loader=_UniqueKeyLoader)
+        node = yaml.compose(text, Loader=_PositionLoader)
     except yaml.reader.ReaderError as exc:  # a character YAML does not allow, such as a NUL byte
         before = text[: exc.position]
         line, column = before.count("\n") + 1, exc.position - (before.rfind("\n") + 1) + 1
@@ -197,7 +198,7 @@ def _pos(node: yaml.Node) -> Position:
     return Position(node.start_mark.line + 1, node.start_mark.column + 1, text_offset)
 
 
-def _convert(node: yaml.Node, path: Path_, smap: SourceMap, problems: list[Diagnostic], count: list[int]) -> Any:
+def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Diagnostic], count: list[int]) -> Any:
     count[0] += 1
     if count[0] > MAX_VALUES:
         raise _TooLarge(node)
@@ -253,18 +254,18 @@ def _lc(node: yaml.Node) -> tuple[int, int]:
 
 
 def _scalar(node: yaml.ScalarNode) -> Any:
-    return _UniqueKeyLoader.construct_scalar_value(node)
+    return _PositionLoader.construct_scalar_value(node)
 
 
 def _construct_scalar_value(node: yaml.ScalarNode) -> Any:
-    loader = _UniqueKeyLoader("")
+    loader = _PositionLoader("")
     try:
         return loader.construct_object(node, deep=True)
     except yaml.constructor.ConstructorError:
         return node.value
 
 
-_UniqueKeyLoader.construct_scalar_value = staticmethod(_construct_scalar_value)  # type: ignore[attr-defined]
+_PositionLoader.construct_scalar_value = staticmethod(_construct_scalar_value)  # type: ignore[attr-defined]
 
 
 # -- TOML -------------------------------------------------------------------------------------
@@ -296,8 +297,8 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a table with at least 'id'")])
     smap = SourceMap(name)
     smap.values[()] = Position(1, 1)
-    prefix: Path_ = ()
-    array_counts: dict[Path_, int] = {}
+    prefix: SpecPath = ()
+    array_counts: dict[SpecPath, int] = {}
     for lineno, line in enumerate(text.splitlines(), start=1):
         stripped = line.split("#", 1)[0] if '"' not in line and "'" not in line else line
         m = _TABLE.match(stripped)

@@ -149,10 +149,10 @@ class BlenderRenderer(Renderer):
             for key, v in plan.views.items()
         ]
         view_camera = plan.view_camera
-        self._human = None
+        self._view = None
         if view_camera is not None:
             w, h = plan.settings.view.resolution
-            self._human = _View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
+            self._view = _View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
         self._depth_override = None
         if any(v.color == "depth" for v in self._views):
             mat, self._set_depth_range = depth_material(f"{scene.name}-depth", lambda d: d)
@@ -289,10 +289,10 @@ class BlenderRenderer(Renderer):
 
     def render_view(self, values: Sequence[Any]) -> np.ndarray:
         self._check_open()
-        if self._human is None:
+        if self._view is None:
             raise RenderError("the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')")
         self.apply(values)
-        return self._render(self._human)
+        return self._render(self._view)
 
     def _render(self, view: _View) -> np.ndarray:
         scene = self._scene
@@ -372,7 +372,7 @@ class BlenderRenderer(Renderer):
         self._closed = True
         self._setters = []
         self._objects = {}
-        self._camera = self._human = self._depth_override = None
+        self._camera = self._view = self._depth_override = None
         self._views = []
         scene_ids, self._ids = self._ids, []
         with contextlib.suppress(ReferenceError, AttributeError):

@@ -86,9 +86,6 @@ class BuiltScene:
     collection: Any
     objects: dict[str, Any] = field(default_factory=dict)  # spec/file name -> object
 
-    def names(self) -> list[str]:
-        return list(self.objects)
-
 
 def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
     """The scene: a scene of the .blend (appended) or a new one, plus every declared object.
