@@ -197,6 +197,31 @@ def test_fault_in_an_actor_binding_is_a_step_error_naming_the_binding():
     assert env.binding_values() == (1.0, 0.0, 0.0, True)
 
 
+AFTER_A_VECTOR = """\
+id: After-v0
+scene:
+  objects:
+    Box: {primitive: cube}
+    Lamp: {light: point}
+state:
+  x: {init: 0}
+actions: {discrete: [{u: 1}]}
+dynamics: {update: {x: x + u}}
+actors:
+  Box: {location: "[x, 0, 1] if x < 3 else [0, 0, 0]"}
+  Lamp: {strength: x * inf}
+"""
+
+
+def test_a_binding_fault_after_a_vector_binding_names_its_own_binding():
+    # Box's location is one vector expression (its own generated line) before its three values: Lamp's value is the 4th
+    env = VisualEnv(load_spec_text(AFTER_A_VECTOR, "after.yaml"), render=False)
+    env.reset(seed=0)
+    env.step(0)
+    with pytest.raises(StepError, match=r"after\.yaml:12: actors\.Lamp\.strength = 'x \* inf': a binding became inf .*x=1\.0"):
+        env.binding_values()
+
+
 SEEN = """\
 id: Seen-v0
 scene:

@@ -13,6 +13,7 @@ from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
+from visualenv.expr.codegen import Site
 from visualenv.expr.functions import RandomSource
 from visualenv.render.base import BLENDER_BACKEND, Renderer, check_renderer_options, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
@@ -133,7 +134,7 @@ class VisualEnv(gym.Env):
         self._steps = 0
         for key, value in zip(self.program.state_names, state):
             if not math.isfinite(value):  # e.g. init: inf, or a draw such as normal(0, inf)
-                site = next((s for s in self.program.sites["init"] if s.what == f"state.{key}.init"), None)
+                site = self.program.line_maps["init"].find(f"state.{key}.init")
                 raise self._describe(site, f"state '{key}' is {value} at reset", dict(zip(self.program.state_names, state)))
         if not self.uses_camera:
             self._check_observable(state, "state.{}.init", dict(zip(self.program.state_names, state)))
@@ -288,9 +289,7 @@ class VisualEnv(gym.Env):
         if total - total != 0:  # NaN or infinity: Blender would silently draw nothing or garbage
             for i, value in enumerate(values):
                 if not math.isfinite(value):
-                    sites = self.program.sites["bind"]  # one site per value, in order
-                    site = sites[i] if i < len(sites) else None
-                    raise self._describe(site, f"a binding became {value}", self.state)
+                    raise self._describe(self._binding_site(i), f"a binding became {value}", self.state)
         return values
 
     def _end_on_fault(self, err: StepError, obs: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
@@ -312,10 +311,10 @@ class VisualEnv(gym.Env):
         program = self.program
         for name, value in zip(program.state_names, state):
             if not math.isfinite(value):
-                site = next((s for s in program.sites["step"] if s.what == f"dynamics.update.{name}"), None)
+                site = program.line_maps["step"].find(f"dynamics.update.{name}")
                 raise self._describe(site, f"state '{name}' became {value}", self._values(old, action))
         if not math.isfinite(reward):
-            site = next((s for s in program.sites["step"] if s.what == "reward"), None)
+            site = program.line_maps["step"].find("reward")
             raise self._describe(site, f"the reward became {reward}", self._values(old, action))
 
     def _check_observable(self, state: tuple, what: str, values: dict[str, Any]) -> None:
@@ -324,22 +323,24 @@ class VisualEnv(gym.Env):
             if not -_FLOAT32_MAX <= state[i] <= _FLOAT32_MAX:
                 name = self.program.state_names[i]
                 function = "init" if what.startswith("state.") else "step"
-                site = next((s for s in self.program.sites[function] if s.what == what.format(name)), None)
+                site = self.program.line_maps[function].find(what.format(name))
                 raise self._describe(site, f"state '{name}' = {state[i]!r} is too large for the float32 observation", values)
 
+    def _binding_site(self, index: int) -> Site | None:
+        """The site of the actor binding that yields value ``index`` of bind()."""
+        for target in self.program.bindings:
+            if index < target.size:
+                return self.program.line_maps["bind"].find(f"actors.{target.object}.{target.property}")
+            index -= target.size
+        return None
+
     def _fault_error(self, function: str, exc: BaseException, values: dict[str, Any]) -> StepError:
-        tb = exc.__traceback__
-        line = None
-        while tb is not None:
-            if tb.tb_frame.f_code.co_filename == f"<visualenv:{function}>":
-                line = tb.tb_lineno
-            tb = tb.tb_next
-        site = self.program.site(function, line) if line else None
+        site = self.program.line_maps[function].site_in(exc.__traceback__)
         messages: dict[type, str] = {ZeroDivisionError: "division by zero", OverflowError: "numeric overflow"}
         message = messages.get(type(exc), str(exc))
         return self._describe(site, message, values)
 
-    def _describe(self, site: Any, message: str, values: dict[str, Any]) -> StepError:
+    def _describe(self, site: Site | None, message: str, values: dict[str, Any]) -> StepError:
         where = ""
         if site is not None:
             path = tuple(int(p) if p.isdigit() else p for p in site.what.split("."))

@@ -23,7 +23,7 @@ from typing import Any, Callable, Mapping
 
 from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
-from visualenv.expr.codegen import FunctionBuilder, Site, const, function_globals, local, lower, name, tuple_of
+from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
@@ -90,7 +90,7 @@ class Program:
     continuous: list[tuple[float, float]]
     outcomes: list[OutcomeRule]
     bindings: list[BindingTarget]
-    sites: dict[str, list[Site]] = field(default_factory=dict)
+    line_maps: dict[str, LineMap] = field(default_factory=dict)  # per generated function: its lines' spec sites
     _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
     _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
 
@@ -119,11 +119,6 @@ class Program:
             base_dir=self.loaded.base_dir,
             source=self.loaded.source,
         )
-
-    def site(self, function: str, line: int) -> Site | None:
-        sites = self.sites.get(function, [])
-        index = line - 2
-        return sites[index] if 0 <= index < len(sites) else None
 
 
 @dataclass(frozen=True)
@@ -191,7 +186,7 @@ class _Compiler:
         observed = [i for i, n in enumerate(state_names) if spec.state[n].observe]
         return Program(
             self.loaded, self.params, state_names, observed, input_names, discrete, continuous, outcomes, bindings,
-            sites={k: b.sites for k, b in builders.items()}, _builders=builders, _python_dynamics=python_dynamics,
+            line_maps={k: b.line_map() for k, b in builders.items()}, _builders=builders, _python_dynamics=python_dynamics,
         )
 
     def check_names(self) -> None:

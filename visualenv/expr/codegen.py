@@ -7,8 +7,10 @@ assembled :mod:`ast` module is compiled with empty builtins. Because the trees
 were built by :mod:`visualenv.expr.checker` from allowed nodes only, nothing in
 a spec can reach Python's attributes, imports or builtins.
 
-Each generated statement carries a distinct line number, so a runtime fault
-can be traced back to the expression (and spec line) that raised it.
+Each generated statement that evaluates a spec expression gets a line number of
+its own, and the builder hands out a :class:`LineMap` from those numbers to the
+spec sites: the one place that knows how generated lines were numbered, asked
+whenever a runtime fault must name the expression (and spec line) that raised it.
 """
 
 from __future__ import annotations
@@ -16,6 +18,7 @@ from __future__ import annotations
 import ast
 import copy
 from dataclasses import dataclass, field
+from types import TracebackType
 from typing import Any, Callable, Mapping
 
 from visualenv.expr.functions import FUNCTIONS
@@ -87,6 +90,41 @@ class Site:
     names: tuple[str, ...] = ()
 
 
+#: the line of the ``def``: statements without a site share it, so no site ever maps to it
+_DEF_LINE = 1
+
+
+@dataclass(frozen=True)
+class LineMap:
+    """Which spec site each line of one generated function came from.
+
+    The generated code alone knows how its lines were numbered, so callers ask
+    this map, never do arithmetic on line numbers (jinja2's
+    ``Template.get_corresponding_lineno`` plays the same part for templates).
+    """
+
+    filename: str  # the co_filename of the generated code, which tells its frames apart
+    sites: tuple[Site, ...]  # sites[i] is line _DEF_LINE + 1 + i
+
+    def site_at(self, lineno: int) -> Site | None:
+        """The site a line number of the generated function (a frame's ``f_lineno``) came from, or None."""
+        index = lineno - _DEF_LINE - 1
+        return self.sites[index] if 0 <= index < len(self.sites) else None
+
+    def site_in(self, tb: TracebackType | None) -> Site | None:
+        """The site of the innermost frame of this function in a traceback; None if the fault was raised elsewhere."""
+        line = None
+        while tb is not None:
+            if tb.tb_frame.f_code.co_filename == self.filename:
+                line = tb.tb_lineno
+            tb = tb.tb_next
+        return self.site_at(line) if line is not None else None
+
+    def find(self, what: str) -> Site | None:
+        """The first site of a spec field (e.g. ``"reward"``), for a fault found after the function returned."""
+        return next((s for s in self.sites if s.what == what), None)
+
+
 @dataclass
 class FunctionBuilder:
     """Collects statements and compiles them into one function."""
@@ -96,11 +134,19 @@ class FunctionBuilder:
     body: list[ast.stmt] = field(default_factory=list)
     sites: list[Site] = field(default_factory=list)
 
+    @property
+    def filename(self) -> str:
+        return f"<visualenv:{self.name}>"
+
+    def line_map(self) -> LineMap:
+        """The map from this function's line numbers to the spec sites they evaluate."""
+        return LineMap(self.filename, tuple(self.sites))
+
     def _line(self, site: Site | None) -> int:
         if site is None:
-            return 1
+            return _DEF_LINE
         self.sites.append(site)
-        return len(self.sites) + 1  # line 1 is the def
+        return _DEF_LINE + len(self.sites)
 
     def assign(self, target: str, value: ast.expr, site: Site | None = None) -> None:
         stmt = ast.Assign([ast.Name(target, ast.Store())], value)
@@ -137,8 +183,8 @@ class FunctionBuilder:
         fn = ast.FunctionDef(self.name, args, self.body or [ast.Pass()], [], None, type_params=[])  # type: ignore[call-arg]  # 3.12 field, harmless on 3.11
         module = ast.Module([fn], type_ignores=[])
         ast.fix_missing_locations(module)
-        fn.lineno = 1
-        code = compile(module, f"<visualenv:{self.name}>", "exec")
+        fn.lineno = _DEF_LINE
+        code = compile(module, self.filename, "exec")
         namespace = dict(env)
         exec(code, namespace)  # noqa: S102 - compiles a tree assembled from checked nodes
         return namespace[self.name]
