@@ -13,13 +13,11 @@ from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
-from visualenv.expr.codegen import Site
 from visualenv.expr.functions import RandomSource
+from visualenv.faults import FaultDiagnosis
 from visualenv.render.base import BLENDER_BACKEND, Renderer, check_renderer_options, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
 
-
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
 #: the keys reset(options=...) understands
 RESET_OPTIONS = ("state",)
 
@@ -94,6 +92,7 @@ class VisualEnv(gym.Env):
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
         self._fns = program.functions(self._random)
+        self._faults = FaultDiagnosis(program)
         self._state: tuple[float, ...] = tuple(0.0 for _ in program.state_names)
         self._steps = 0
         self._fired = 0
@@ -123,7 +122,7 @@ class VisualEnv(gym.Env):
         try:
             state = self._fns.init()
         except (ArithmeticError, ValueError) as exc:
-            raise self._fault_error("init", exc, {}) from None
+            raise self._faults.raised("init", exc, {}, self._steps) from None
         given = self._reset_options(options)
         if given:
             names = self.program.state_names
@@ -132,12 +131,9 @@ class VisualEnv(gym.Env):
                 values[names.index(key)] = value
             state = tuple(values)
         self._steps = 0
-        for key, value in zip(self.program.state_names, state):
-            if not math.isfinite(value):  # e.g. init: inf, or a draw such as normal(0, inf)
-                site = self.program.line_maps["init"].find(f"state.{key}.init")
-                raise self._describe(site, f"state '{key}' is {value} at reset", dict(zip(self.program.state_names, state)))
+        self._faults.check_reset(state, self._steps)
         if not self.uses_camera:
-            self._check_observable(state, "state.{}.init", dict(zip(self.program.state_names, state)))
+            self._faults.check_observable(state, "state.{}.init", dict(zip(self.program.state_names, state)), self._steps)
         self._state = tuple(float(v) for v in state)
         self._steps = 0
         self._fired = 0
@@ -156,11 +152,11 @@ class VisualEnv(gym.Env):
             state, reward, outcome, fired = self._fns.step(old, a, self._steps, self._fired)
             total = sum(state) + reward
             if total - total != 0:  # NaN or infinity somewhere
-                self._check_finite(state, reward, old, a)
+                self._faults.check_step(state, reward, self._values(old, a), self._steps)
             if not self.uses_camera:
-                self._check_observable(state, "dynamics.update.{}", self._values(old, a))
+                self._faults.check_observable(state, "dynamics.update.{}", self._values(old, a), self._steps)
         except (ArithmeticError, ValueError, StepError) as exc:
-            err = exc if isinstance(exc, StepError) else self._fault_error("step", exc, self._values(old, a))
+            err = exc if isinstance(exc, StepError) else self._faults.raised("step", exc, self._values(old, a), self._steps)
             if program.spec.on_fault == "raise":
                 raise err from None
             self._steps += 1
@@ -285,11 +281,9 @@ class VisualEnv(gym.Env):
             values = self._fns.bind(self._state, self._steps)
             total = sum(values)
         except (ArithmeticError, ValueError) as exc:
-            raise self._fault_error("bind", exc, self.state) from None
-        if total - total != 0:  # NaN or infinity: Blender would silently draw nothing or garbage
-            for i, value in enumerate(values):
-                if not math.isfinite(value):
-                    raise self._describe(self._binding_site(i), f"a binding became {value}", self.state)
+            raise self._faults.raised("bind", exc, self.state, self._steps) from None
+        if total - total != 0:  # NaN or infinity somewhere
+            self._faults.check_bindings(values, self.state, self._steps)
         return values
 
     def _end_on_fault(self, err: StepError, obs: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
@@ -306,52 +300,6 @@ class VisualEnv(gym.Env):
         values: dict[str, Any] = dict(zip(self.program.state_names, state))
         values["action"] = action
         return values
-
-    def _check_finite(self, state: tuple, reward: float, old: tuple, action: Any) -> None:
-        program = self.program
-        for name, value in zip(program.state_names, state):
-            if not math.isfinite(value):
-                site = program.line_maps["step"].find(f"dynamics.update.{name}")
-                raise self._describe(site, f"state '{name}' became {value}", self._values(old, action))
-        if not math.isfinite(reward):
-            site = program.line_maps["step"].find("reward")
-            raise self._describe(site, f"the reward became {reward}", self._values(old, action))
-
-    def _check_observable(self, state: tuple, what: str, values: dict[str, Any]) -> None:
-        """A finite state can still overflow the float32 observation (it would read inf)."""
-        for i in self._observed:
-            if not -_FLOAT32_MAX <= state[i] <= _FLOAT32_MAX:
-                name = self.program.state_names[i]
-                function = "init" if what.startswith("state.") else "step"
-                site = self.program.line_maps[function].find(what.format(name))
-                raise self._describe(site, f"state '{name}' = {state[i]!r} is too large for the float32 observation", values)
-
-    def _binding_site(self, index: int) -> Site | None:
-        """The site of the actor binding that yields value ``index`` of bind()."""
-        for target in self.program.bindings:
-            if index < target.size:
-                return self.program.line_maps["bind"].find(f"actors.{target.object}.{target.property}")
-            index -= target.size
-        return None
-
-    def _fault_error(self, function: str, exc: BaseException, values: dict[str, Any]) -> StepError:
-        site = self.program.line_maps[function].site_in(exc.__traceback__)
-        messages: dict[type, str] = {ZeroDivisionError: "division by zero", OverflowError: "numeric overflow"}
-        message = messages.get(type(exc), str(exc))
-        return self._describe(site, message, values)
-
-    def _describe(self, site: Site | None, message: str, values: dict[str, Any]) -> StepError:
-        where = ""
-        if site is not None:
-            path = tuple(int(p) if p.isdigit() else p for p in site.what.split("."))
-            pos = self.program.loaded.source.locate(path)
-            line = f"{self.program.loaded.file}:{pos.line}" if pos else self.program.loaded.file
-            where = f"{line}: {site.what} = {site.text!r}: "
-            relevant = {k: v for k, v in values.items() if k in site.names} or values
-        else:
-            relevant = values
-        shown = ", ".join(f"{k}={v!r}" for k, v in relevant.items())
-        return StepError(f"{where}{message} (step {self._steps}; values: {shown})")
 
     # -- pickling: rebuild from the spec in the receiving process -------------------------------------
 
