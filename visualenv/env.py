@@ -20,6 +20,9 @@ from visualenv.spec.loader import LoadedSpec, load_spec
 
 #: the keys reset(options=...) understands
 RESET_OPTIONS = ("state",)
+#: (terminated, truncated, info["outcome"]) of a step that no outcome ended
+_GOES_ON = (False, False, None)
+_OUT_OF_STEPS = (False, True, "max_steps")
 
 
 class VisualEnv(gym.Env):
@@ -113,6 +116,8 @@ class VisualEnv(gym.Env):
         self._observed = program.observed
         self._milestones = [r.name for r in program.outcomes if r.end == "none"]
         self._milestone_success = [r.success for r in program.outcomes if r.end == "none"]
+        #: (terminated, truncated, info["outcome"]) when outcome i ends the episode, built once
+        self._endings = [(r.end == "terminate", r.end == "truncate", r.name) for r in program.outcomes]
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
@@ -143,24 +148,60 @@ class VisualEnv(gym.Env):
         return self._observe(), self._info(None)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
-        program = self.program
+        """The action, the generated step (checked, not yet committed), the commit, the episode's end, the observation."""
         if not self._was_reset:
             raise ResetNeeded("call reset() before step(): the state is set by reset (Gymnasium's order)")
-        a: Any = self._discrete_action(action, program.discrete) if program.discrete is not None else self._continuous_action(action)
-        old = self._state
+        a = self._action(action)
         try:
-            state, reward, outcome, fired = self._fns.step(old, a, self._steps, self._fired)
-            total = sum(state) + reward
-            if total - total != 0:  # NaN or infinity somewhere
-                self._faults.check_step(state, reward, self._values(old, a), self._steps)
-            if not self.uses_camera:
-                self._faults.check_observable(state, "dynamics.update.{}", self._values(old, a), self._steps)
+            state, reward, outcome, fired = self._advance(a)
         except (ArithmeticError, ValueError, StepError) as exc:
-            err = exc if isinstance(exc, StepError) else self._faults.raised("step", exc, self._values(old, a), self._steps)
-            if program.spec.on_fault == "raise":
-                raise err from None
-            self._steps += 1
-            return self._end_on_fault(err, self._last_obs if self.uses_camera else self._observe())
+            return self._fault_in_step(exc, a)
+        self._commit(state, outcome, fired)
+        terminated, truncated, name = self._ending(outcome)
+        try:
+            obs = self._observe()
+        except StepError as err:  # an actor binding of the new state faulted: nothing to render
+            return self._fault_in_observation(err)
+        return obs, float(reward), terminated, truncated, self._info(name)
+
+    def render(self) -> np.ndarray | None:  # type: ignore[override]
+        """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
+            return None
+        return self.renderer.render_view(self._bind())
+
+    def close(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+            self._renderer = None
+        super().close()
+
+    # -- the step, in order ---------------------------------------------------------------------------
+
+    def _action(self, action: Any) -> Any:
+        """The action as the generated step takes it: a discrete index, or one float per continuous input."""
+        n = self.program.discrete
+        return self._discrete_action(action, n) if n is not None else self._continuous_action(action)
+
+    def _advance(self, action: Any) -> tuple:
+        """The generated step on the current state: (state, reward, outcome, fired), checked; nothing is committed yet.
+
+        A NaN or infinity anywhere, or (without a camera) a state the float32
+        observation cannot hold, raises a located StepError.
+        """
+        old = self._state
+        result = self._fns.step(old, action, self._steps, self._fired)
+        state, reward = result[0], result[1]
+        total = sum(state) + reward
+        if total - total != 0:  # NaN or infinity somewhere
+            self._faults.check_step(state, reward, self._values(old, action), self._steps)
+        if not self.uses_camera:
+            self._faults.check_observable(state, "dynamics.update.{}", self._values(old, action), self._steps)
+        return result
+
+    def _commit(self, state: tuple, outcome: int, fired: int) -> None:
+        """The step's result becomes the env's: the state, the step count, the fired milestones, and success."""
         self._state = state
         self._steps += 1
         newly = fired & ~self._fired
@@ -169,24 +210,32 @@ class VisualEnv(gym.Env):
             for i, ok in enumerate(self._milestone_success):
                 if ok and newly & (1 << i):
                     self._success = True
-        terminated = truncated = False
-        name = None
+        if outcome >= 0 and self.program.outcomes[outcome].success:
+            self._success = True
+
+    def _ending(self, outcome: int) -> tuple[bool, bool, str | None]:
+        """(terminated, truncated, info["outcome"]): the ending outcome that held, else max_steps, else the episode goes on."""
         if outcome >= 0:
-            rule = program.outcomes[outcome]
-            name = rule.name
-            terminated = rule.end == "terminate"
-            truncated = rule.end == "truncate"
-            self._success = self._success or rule.success
-        elif self._steps >= program.spec.max_steps:
-            truncated = True
-            name = "max_steps"
-        try:
-            obs = self._observe()
-        except StepError as err:  # an actor binding of the new state faulted: nothing to render
-            if program.spec.on_fault == "raise":
-                raise
-            return self._end_on_fault(err, self._last_obs)
-        return obs, float(reward), terminated, truncated, self._info(name)
+            return self._endings[outcome]
+        if self._steps >= self.program.spec.max_steps:
+            return _OUT_OF_STEPS
+        return _GOES_ON
+
+    def _fault_in_step(self, exc: BaseException, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """A fault computing the step, which leaves the state as it was: raised located, or (``on_fault: terminate``) the episode's end."""
+        err = exc if isinstance(exc, StepError) else self._faults.raised("step", exc, self._values(self._state, action), self._steps)
+        if self.program.spec.on_fault == "raise":
+            raise err from None
+        self._steps += 1
+        return self._end_on_fault(err, self._last_obs if self.uses_camera else self._observe())
+
+    def _fault_in_observation(self, err: StepError) -> tuple[Any, float, bool, bool, dict[str, Any]]:
+        """A binding of the committed state faulted before the render: raised, or the episode ends on the last frame."""
+        if self.program.spec.on_fault == "raise":
+            raise err
+        return self._end_on_fault(err, self._last_obs)
+
+    # -- actions and reset options --------------------------------------------------------------------
 
     def _discrete_action(self, action: Any, n: int) -> int:
         """An int, a numpy integer or a 0-d integer array (as SB3 passes them); a bool, float or text is refused."""
@@ -230,19 +279,6 @@ class VisualEnv(gym.Env):
                 raise ValueError(f"options['state'][{key!r}]: expected a finite number, got {value!r}")
             values[key] = float(value)
         return values
-
-    def render(self) -> np.ndarray | None:  # type: ignore[override]
-        """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode."""
-        if self.render_mode is None:
-            gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
-            return None
-        return self.renderer.render_view(self._bind())
-
-    def close(self) -> None:
-        if self._renderer is not None:
-            self._renderer.close()
-            self._renderer = None
-        super().close()
 
     # -- state access -------------------------------------------------------------------------------
 
