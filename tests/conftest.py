@@ -26,6 +26,7 @@ BLENDER_MODULES = {
 #: single tests that render, in modules that otherwise do not
 BLENDER_TESTS = {
     "test_runtime_faults.py::test_a_binding_fault_while_rendering_obeys_on_fault",
+    "test_bindables.py::test_the_blender_backend_has_a_setter_for_every_bindable_property",
 }
 
 

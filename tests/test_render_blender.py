@@ -117,6 +117,20 @@ def test_opaque_scenes_skip_transparent_passes(env):
     assert env.renderer._scene.cycles.transparent_max_bounces == 0
 
 
+def test_bound_colour_on_an_empty_colours_the_meshes_under_it(tmp_path):
+    objects = OBJECTS.replace("    Box:  {primitive: cube, size: 1.0,", "    Rig:  {empty: true}\n    Box:  {primitive: cube, size: 1.0, parent: Rig,")
+    e = make_env(tmp_path, objects=objects, actors="Rig: {color: [1 - x, 0.05, x]}")
+    try:
+        red, blue = observe(e, x=0.0).astype(int)[16, 24], observe(e, x=1.0).astype(int)[16, 24]
+        assert red[0] > red[2] + 50 and blue[2] > blue[0] + 50
+    finally:
+        e.close()
+    lonely = make_env(tmp_path, objects=OBJECTS + "    Rig:  {empty: true}\n", actors="Rig: {color: [1, 0, 0]}")
+    with pytest.raises(SpecError, match="actors.Rig.color: a bound colour sets the materials of 'Rig' and the meshes under it, but it has none"):
+        lonely.renderer
+    lonely.close()
+
+
 def test_colour_binding_does_not_leak_to_other_objects(tmp_path):
     objects = OBJECTS + "    Other: {primitive: cube, size: 1.0, location: [2, 0, 0], material: {color: [0.9, 0.9, 0.9]}}\n"
     e = make_env(tmp_path, objects=objects, actors="Box: {color: [0.0, 0.0, x]}")

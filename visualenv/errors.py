@@ -34,6 +34,11 @@ class Diagnostic:
         return f"{where}:{field} {self.message}"
 
 
+def in_file_order(diagnostics: Iterable[Diagnostic]) -> list[Diagnostic]:
+    """Diagnostics sorted by line and column, as a reader meets them (unlocated ones first)."""
+    return sorted(diagnostics, key=lambda d: (d.line or 0, d.column or 0))
+
+
 class VisualEnvError(Exception):
     """Base class of the errors visualenv raises for its users."""
 

@@ -21,14 +21,15 @@ import keyword
 from dataclasses import dataclass, field
 from typing import Any, Callable, Mapping
 
-from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean
+from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean, in_file_order
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
-from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Spec
+from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem
+from visualenv.spec.models import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Spec
 
 #: names every expression may read besides the spec's own (not all in every context)
 BUILTIN_NAMES = ("steps", "max_steps", "dt", "action")
@@ -63,11 +64,15 @@ def checked_dynamics(func: Callable[..., Any], state_names: list[str]) -> Callab
     return call
 
 
-#: properties an actor binding may set: (expected type, values it produces)
-BINDABLE: dict[str, Type] = {
-    "location": vec(3), "rotation": vec(3), "scale": vec(3), "visible": BOOL, "color": vec(0),
-    "strength": NUM, "look_at": vec(3), "lens": NUM,
-}
+#: the expression type of each kind of binding value (BINDABLES' ``value``); a colour's size (3 or 4) is checked apart
+VALUE_TYPES: dict[str, Type] = {"vector": vec(3), "scale": vec(3), "color": vec(0), "number": NUM, "condition": BOOL}
+#: the Blender object type each kind of declared object becomes
+OBJECT_TYPES = ((PrimitiveObject, "MESH"), (MeshObject, "MESH"), (LightObject, "LIGHT"), (CameraObject, "CAMERA"), (EmptyObject, "EMPTY"))
+
+
+def object_type(obj: Any) -> str:
+    """The Blender object type (MESH, LIGHT, CAMERA, EMPTY) a declared scene object becomes."""
+    return next(t for cls, t in OBJECT_TYPES if isinstance(obj, cls))
 
 
 @dataclass(frozen=True)
@@ -118,6 +123,7 @@ class Program:
             bindings=tuple(self.bindings),
             base_dir=self.loaded.base_dir,
             source=self.loaded.source,
+            cameras=tuple(spec.camera_uses()),
         )
 
 
@@ -182,7 +188,7 @@ class _Compiler:
         outcomes = [OutcomeRule(n, o.end, o.success) for n, o in spec.outcomes.items()]
         python_dynamics = self.resolve_python_dynamics()
         if self.problems:
-            raise SpecError(sorted(self.problems, key=lambda d: (d.line or 0, d.column or 0)))
+            raise SpecError(in_file_order(self.problems))
         observed = [i for i, n in enumerate(state_names) if spec.state[n].observe]
         return Program(
             self.loaded, self.params, state_names, observed, input_names, discrete, continuous, outcomes, bindings,
@@ -413,74 +419,74 @@ class _Compiler:
 
     def build_bindings(self, state_names: list[str]) -> tuple[FunctionBuilder, list[BindingTarget]]:
         """bind(state, steps): the value of every actor property, flattened in order."""
-        spec = self.spec
         fb = FunctionBuilder("bind", ["_state", "_steps"])
         fb.unpack([local(n) for n in state_names], "_state")
         fb.assign(local("steps"), name("_steps"))
         scope: dict[str, Type] = {n: NUM for n in state_names}
         scope["steps"] = NUM
-        declared = spec.scene.objects
         targets: list[BindingTarget] = []
         values: list[ast.expr] = []
-        for obj_name, actor in spec.actors.items():
-            if spec.scene.file is None and obj_name not in declared:
-                self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, declared).replace("names:", "objects:"), key=True)
-                continue
-            obj = declared.get(obj_name)
-            for prop in type(actor).model_fields:
-                raw = getattr(actor, prop)
-                if raw is None:
-                    continue
-                path: tuple = ("actors", obj_name, prop)
-                if prop == "strength" and obj is not None and not isinstance(obj, LightObject):
-                    self.error(path, f"'strength' binds a light's power, but '{obj_name}' is not a light", key=True)
-                    continue
-                if prop == "color" and isinstance(obj, (CameraObject, EmptyObject)):
-                    kind = "a camera" if isinstance(obj, CameraObject) else "an empty"
-                    self.error(path, f"'color' binds a material or light colour, but '{obj_name}' is {kind}, which has none", key=True)
-                    continue
-                if prop == "lens" and obj is not None and not isinstance(obj, CameraObject):
-                    self.error(path, f"'lens' binds a camera's focal length, but '{obj_name}' is not a camera", key=True)
-                    continue
-                checked_values = self.binding_values(path, prop, raw, scope)
-                if checked_values is None:
-                    continue
-                text = "[" + ", ".join(map(str, raw)) + "]" if isinstance(raw, list) else str(raw)
-                site = Site(".".join(map(str, path)), text, tuple(sorted(scope)))
-                if isinstance(checked_values, tuple):  # a vector computed as a whole: evaluate it once
-                    whole, size = checked_values
-                    var = f"_b{len(values)}v"
-                    fb.assign(var, whole, site)
-                    checked_values = [ast.Subscript(name(var), const(i), ast.Load()) for i in range(size)]
-                for item in checked_values:  # one line per value, so a runtime fault names its binding
-                    var = f"_b{len(values)}"
-                    fb.assign(var, item, site)
-                    values.append(name(var))
-                targets.append(BindingTarget(obj_name, prop, len(checked_values)))
+        for obj_name, actor in self.spec.actors.items():
+            if self.bound_object_known(obj_name):
+                for prop in type(actor).model_fields:
+                    raw = getattr(actor, prop)
+                    if raw is not None:
+                        self.bind_property(fb, ("actors", obj_name, prop), raw, scope, targets, values)
         fb.returns(tuple_of(values))
-        if spec.observation is not None and spec.scene.file is None:
-            for key, view in spec.observation.views().items():
-                path = ("observation", "camera") if spec.observation.camera else ("observation", "cameras", key, "camera")
-                self.check_camera(path, view.camera)
-            if spec.render.view.camera:
-                self.check_camera(("render", "view", "camera"), spec.render.view.camera)
+        self.check_cameras()
         return fb, targets
 
-    def check_camera(self, path: tuple, camera: str) -> None:
+    def bound_object_known(self, obj_name: str) -> bool:
+        """A bound object must be declared, unless a .blend may hold it (the renderer checks those)."""
         declared = self.spec.scene.objects
-        cameras = [n for n, o in declared.items() if isinstance(o, CameraObject)]
-        if camera in declared and camera not in cameras:
-            kind = next(k for k in ("primitive", "mesh", "light", "empty") if hasattr(declared[camera], k))
-            self.error(path, f"'{camera}' is a {kind} object, not a camera" + (f" (cameras: {', '.join(cameras)})" if cameras else " (the scene has no camera)"))
-        elif camera not in cameras:
-            self.error(path, f"no camera '{camera}' in the scene" + did_you_mean(camera, cameras).replace("names:", "cameras:"))
+        if self.spec.scene.file is None and obj_name not in declared:
+            self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, declared).replace("names:", "objects:"), key=True)
+            return False
+        return True
+
+    def bind_property(self, fb: FunctionBuilder, path: tuple, raw: Any, scope: dict[str, Type],
+                      targets: list[BindingTarget], values: list[ast.expr]) -> None:
+        """One binding: its object's type checked, its values assigned one line each (so a fault names it), its target recorded."""
+        _, obj_name, prop = path
+        obj = self.spec.scene.objects.get(obj_name)
+        problem = type_problem(prop, obj_name, object_type(obj)) if obj is not None else None
+        if problem:
+            self.error(path, problem, key=True)
+            return
+        checked_values = self.binding_values(path, prop, raw, scope)
+        if checked_values is None:
+            return
+        text = "[" + ", ".join(map(str, raw)) + "]" if isinstance(raw, list) else str(raw)
+        site = Site(".".join(map(str, path)), text, tuple(sorted(scope)))
+        if isinstance(checked_values, tuple):  # a vector computed as a whole: evaluate it once
+            whole, size = checked_values
+            var = f"_b{len(values)}v"
+            fb.assign(var, whole, site)
+            checked_values = [ast.Subscript(name(var), const(i), ast.Load()) for i in range(size)]
+        for item in checked_values:
+            var = f"_b{len(values)}"
+            fb.assign(var, item, site)
+            values.append(name(var))
+        targets.append(BindingTarget(obj_name, prop, len(checked_values)))
+
+    def check_cameras(self) -> None:
+        """The observation and view cameras of a scene declared in full (a .blend's are checked when it is loaded)."""
+        spec = self.spec
+        if spec.observation is None or spec.scene.file is not None:
+            return
+        types = {n: object_type(o) for n, o in spec.scene.objects.items()}
+        for path, camera in spec.camera_uses():
+            problem = camera_problem(camera, types)
+            if problem:
+                self.error(path, problem)
 
     def binding_values(self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]) -> list[ast.expr] | tuple[ast.expr, int] | None:
         """A binding's value as a list of scalar trees, or (vector tree, size) when it is not a literal."""
-        wanted = BINDABLE[prop]
+        kind = BINDABLES[prop].value
+        wanted = VALUE_TYPES[kind]
         if wanted.kind == "vec":
             if isinstance(raw, list):
-                if prop == "color" and len(raw) not in (3, 4):
+                if kind == "color" and len(raw) not in (3, 4):
                     self.error(path, "a colour needs 3 (RGB) or 4 (RGBA) values")
                     return None
                 out = []
@@ -490,15 +496,15 @@ class _Compiler:
                         return None
                     out.append(lower(checked.tree))
                 return out
-            if prop == "scale" and not (isinstance(raw, str) and raw.strip().startswith("[")):
+            if kind == "scale" and not (isinstance(raw, str) and raw.strip().startswith("[")):
                 checked = self.expr(path, raw, scope, expect=NUM)
                 return [lower(checked.tree)] * 3 if checked else None
             checked = self.expr(path, raw, scope)
             if checked is None:
                 return None
             size = checked.type.size if checked.type.kind == "vec" else 0
-            if checked.type.kind != "vec" or (wanted.size and size != wanted.size) or (prop == "color" and size not in (3, 4)):
-                need = "3 or 4 values" if prop == "color" else f"a vector of {wanted.size}"
+            if checked.type.kind != "vec" or (wanted.size and size != wanted.size) or (kind == "color" and size not in (3, 4)):
+                need = "3 or 4 values" if kind == "color" else f"a vector of {wanted.size}"
                 self.error(path, f"'{prop}' needs {need}, got {checked.type}")
                 return None
             tree = lower(checked.tree)

@@ -42,7 +42,7 @@ class BindingTarget:
     """One scene property a renderer sets before each render."""
 
     object: str
-    property: str  # a key of BINDABLE
+    property: str  # a key of visualenv.spec.bindables.BINDABLES
     size: int  # how many values the binding function yields for it (1 for scalars)
 
 
@@ -57,6 +57,7 @@ class RenderPlan:
     bindings: tuple[BindingTarget, ...]
     base_dir: Path
     source: SourceMap
+    cameras: tuple[tuple[tuple, str], ...] = ()  # every camera the spec names, with its field's path (Spec.camera_uses)
 
     @property
     def view_camera(self) -> str | None:

@@ -16,7 +16,7 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
-from visualenv.errors import Diagnostic, SpecError, did_you_mean
+from visualenv.errors import Diagnostic, SpecError, did_you_mean, in_file_order
 from visualenv.spec.models import Spec
 from visualenv.spec.source import BASE60, SourceMap, format_path, load_document, load_toml_text, load_yaml_text
 from visualenv.spec.unused import unused_fields
@@ -87,7 +87,7 @@ def _diagnostics(exc: ValidationError, data: Any, smap: SourceMap) -> list[Diagn
     for path, errs in grouped.items():
         message = _message(path, errs, data)
         out.append(smap.diagnostic(path, message, key=errs[0]["type"] == "extra_forbidden"))
-    out.sort(key=lambda d: (d.line or 0, d.column or 0))
+    out[:] = in_file_order(out)
     return out
 
 

@@ -9,9 +9,11 @@ docstrings and ``Field`` descriptions are what editors show.
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, Union
+from typing import Annotated, Any, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, create_model, field_validator, model_validator
+
+from visualenv.spec.bindables import BINDABLES
 
 #: An expression: a number, a boolean or the text of an expression such as ``"x + tau * x_dot"``.
 Expr = Annotated[Union[bool, int, float, str], Field(description="a number or an expression")]
@@ -231,17 +233,14 @@ class Outcome(StrictModel):
 # -- actors, observation, rendering --------------------------------------------------------------
 
 
-class Actor(StrictModel):
-    """Properties of a scene object recomputed from state before every render."""
+#: the type of a binding's value in the file, by the value kind of :mod:`bindables`
+_BINDING_TYPES: dict[str, Any] = {"vector": Vec3Expr, "scale": Union[Vec3Expr, Expr], "color": ColorExpr, "number": Expr, "condition": Expr}
 
-    location: Vec3Expr | None = None
-    rotation: Vec3Expr | None = Field(None, description="Euler XYZ, radians")
-    scale: Union[Vec3Expr, Expr, None] = None
-    visible: Expr | None = Field(None, description="a condition")
-    color: ColorExpr | None = Field(None, description="material base colour (objects; on a textured material a tint that multiplies the texture) or light colour (lights)")
-    strength: Expr | None = Field(None, description="light strength")
-    look_at: Vec3Expr | None = Field(None, description="aim the object (a camera) at this point")
-    lens: Expr | None = Field(None, description="camera focal length (mm)")
+#: Properties of a scene object recomputed from state before every render: one optional field per entry of ``BINDABLES``.
+Actor = create_model(
+    "Actor", __base__=StrictModel, __module__=__name__, __doc__="Properties of a scene object recomputed from state before every render.",
+    **{b.name: (Optional[_BINDING_TYPES[b.value]], Field(None, description=b.description)) for b in BINDABLES.values()},  # type: ignore[call-overload]
+)
 
 
 class CameraView(StrictModel):
@@ -328,7 +327,7 @@ class Spec(StrictModel):
     state: Annotated[dict[Name, StateVar], Field(min_length=1)] = Field(description="state variables, in observation order")
     actions: Actions
     dynamics: Dynamics = Field(default_factory=Dynamics)
-    actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")
+    actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")  # type: ignore[valid-type]  # Actor is made from BINDABLES
     observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
     render: Render = Field(default_factory=Render)
     reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")
@@ -338,3 +337,14 @@ class Spec(StrictModel):
     on_fault: Literal["raise", "terminate"] = Field(
         "raise", description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']"
     )
+
+    def camera_uses(self) -> list[tuple[tuple, str]]:
+        """Every camera the spec names, with the path of the field that names it (for errors located in the file)."""
+        uses: list[tuple[tuple, str]] = []
+        if self.observation is not None:
+            single = self.observation.cameras is None
+            uses += [(("observation", "camera") if single else ("observation", "cameras", key, "camera"), view.camera)
+                     for key, view in self.observation.views().items()]
+        if self.render.view.camera:
+            uses.append((("render", "view", "camera"), self.render.view.camera))
+        return uses

@@ -10,7 +10,7 @@ from typing import Any, Callable, Iterator, Sequence
 import bpy
 import numpy as np
 
-from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean
+from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, in_file_order
 from visualenv.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
 from visualenv.render.blender import settings as cfg
@@ -19,6 +19,7 @@ from visualenv.render.blender.materials import color_writer, depth_material, dep
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
+from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, Material
 
 _instances = itertools.count()
@@ -96,37 +97,27 @@ class BlenderRenderer(Renderer):
     # -- construction -------------------------------------------------------------------------------
 
     def _check_names(self, built: BuiltScene) -> None:
-        """Every bound object and every camera must be in the scene; report all that are not."""
-        plan, objects = self.plan, built.objects
-        names = list(objects)
-        cameras = [n for n, o in objects.items() if o.type == "CAMERA"]
+        """Every bound object and every camera must be in the scene, of a type that takes its binding; report all that are not."""
+        plan = self.plan
+        types = {name: obj.type for name, obj in built.objects.items()}
         problems: list[Diagnostic] = []
-        seen: set[str] = set()
+        missing: set[str] = set()
         for target in plan.bindings:
-            if target.object in seen:
+            if target.object not in types:
+                if target.object not in missing:
+                    missing.add(target.object)
+                    problems.append(plan.source.diagnostic(("actors", target.object), f"no object '{target.object}' in the scene"
+                                                           + did_you_mean(target.object, types).replace("names:", "objects:"), key=True))
                 continue
-            obj = objects.get(target.object)
-            if obj is None:
-                seen.add(target.object)
-                problems.append(plan.source.diagnostic(("actors", target.object), f"no object '{target.object}' in the scene" + did_you_mean(target.object, names).replace("names:", "objects:"), key=True))
-            elif target.property in ("strength",) and obj.type != "LIGHT":
-                problems.append(plan.source.diagnostic(("actors", target.object, target.property), f"'strength' binds a light's power, but '{target.object}' is a {obj.type.lower()}", key=True))
-            elif target.property == "lens" and obj.type != "CAMERA":
-                problems.append(plan.source.diagnostic(("actors", target.object, target.property), f"'lens' binds a camera's focal length, but '{target.object}' is a {obj.type.lower()}", key=True))
-
-        def check_camera(path: tuple, name: str) -> None:
-            obj = objects.get(name)
-            if obj is None:
-                problems.append(plan.source.diagnostic(path, f"no camera '{name}' in the scene" + did_you_mean(name, cameras).replace("names:", "cameras:") + f"; objects: {', '.join(names) or 'none'}"))
-            elif obj.type != "CAMERA":
-                problems.append(plan.source.diagnostic(path, f"'{name}' is a {obj.type.lower()}, not a camera" + (f" (cameras: {', '.join(cameras)})" if cameras else " (the scene has no camera)")))
-
-        for key, view in plan.views.items():
-            check_camera(("observation", "camera") if plan.single else ("observation", "cameras", key, "camera"), view.camera)
-        if plan.settings.view.camera:
-            check_camera(("render", "view", "camera"), plan.settings.view.camera)
+            problem = type_problem(target.property, target.object, types[target.object])
+            if problem:
+                problems.append(plan.source.diagnostic(("actors", target.object, target.property), problem, key=True))
+        for path, camera in plan.cameras:
+            problem = camera_problem(camera, types)
+            if problem:
+                problems.append(plan.source.diagnostic(path, problem))
         if problems:
-            raise SpecError(sorted(problems, key=lambda d: (d.line or 0, d.column or 0)))
+            raise SpecError(in_file_order(problems))
 
     def _setup(self, built: BuiltScene, threads: int) -> None:
         plan = self.plan
@@ -197,22 +188,20 @@ class BlenderRenderer(Renderer):
         self._size = start
         # aimed objects to re-aim after the setters ran: those that move, or whose parents move, or whose target does
         aimed = set(targets) | {t.object for t in plan.bindings if t.property == "look_at"}
-        moved = {objects[t.object].as_pointer() for t in plan.bindings if t.property in ("location", "rotation", "scale", "look_at")}
+        moved = {objects[t.object].as_pointer() for t in plan.bindings if BINDABLES[t.property].moves}
         self._aimed = [(objects[name], name) for name in sorted(aimed) if any(o.as_pointer() in moved for o in _with_ancestors(objects[name]))]
         self._targets = targets
         return setters
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Callable[[tuple], None]:
         """The function that writes a binding's values into the scene (a closure: no lookups per render)."""
-        if prop in _SETTERS:
-            return _SETTERS[prop](obj)
         if prop == "look_at":
             def set_look_at(v: tuple) -> None:
                 targets[name] = v  # aimed in apply(), once every location is set
             return set_look_at
         if prop == "color":
             return self._color_setter(name, obj)
-        raise RenderError(f"cannot bind '{prop}' of '{name}'")  # pragma: no cover - BINDABLE is checked by the compiler
+        return _SETTERS[prop](obj)
 
     def _color_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
         """A light's colour, or the colour of the object's own copies of its materials."""
@@ -239,6 +228,9 @@ class BlenderRenderer(Renderer):
         may have) is a spec error rather than a binding that silently does nothing.
         """
         meshes = [obj] if obj.type == "MESH" else [c for c in obj.children_recursive if c.type == "MESH"]
+        if not meshes:
+            raise SpecError([self.plan.source.diagnostic(("actors", name, "color"),
+                f"a bound colour sets the materials of '{name}' and the meshes under it, but it has none", key=True)])
         out, unreachable = [], []
         for mesh_obj in meshes:
             if len(mesh_obj.material_slots) == 0:
@@ -435,7 +427,9 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
     return set_lens
 
 
-#: setters of the properties that need only the object (look_at and color need the renderer's state)
+#: setters of the bindable properties that need only the object; look_at and color need the renderer's state
+#: (BlenderRenderer._setter). Together they cover visualenv.spec.bindables.BINDABLES (tests/test_bindables.py checks).
+SETTERS_WITH_STATE = ("look_at", "color")
 _SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
     "location": _set_location, "rotation": _set_rotation, "scale": _set_scale,
     "visible": _set_visible, "strength": _set_strength, "lens": _set_lens,
