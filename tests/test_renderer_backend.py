@@ -8,7 +8,8 @@ import numpy as np
 import pytest
 
 from visualenv import VisualEnv, load_spec_text
-from visualenv.render.base import RenderPlan, Renderer, load_backend
+from visualenv.errors import SpecError
+from visualenv.render.base import RenderPlan, Renderer, RendererOptions, load_backend
 
 SPEC = """
 id: Mover-v0
@@ -40,7 +41,7 @@ class FakeRenderer(Renderer):
 
     made: list["FakeRenderer"] = []
 
-    def __init__(self, plan: RenderPlan, **options: Any) -> None:
+    def __init__(self, plan: RenderPlan, options: RendererOptions) -> None:
         self.plan = plan
         self.options = options
         self.closed = False
@@ -75,7 +76,8 @@ def test_the_backend_gets_the_plan_the_options_and_the_binding_values():
     obs, *_ = env.step(1)
     renderer = FakeRenderer.made[-1]
     assert [(t.object, t.property, t.size) for t in renderer.plan.bindings] == [("ball", "location", 3)]
-    assert renderer.options == {"samples": 2}
+    assert renderer.options == RendererOptions(samples=2)
+    assert renderer.plan.settings.samples == 2  # merged into the plan's settings once, before the backend sees them
     assert obs.shape == (6, 8, 1) and obs.flat[:3].tolist() == [2, 0, 4]
     env.close()
     assert renderer.closed
@@ -91,3 +93,12 @@ def test_the_backend_survives_pickling():
 def test_a_backend_that_is_not_module_colon_attribute_is_refused():
     with pytest.raises(ValueError, match="module:attribute"):
         load_backend("visualenv.render.blender")
+
+
+def test_renderer_options_are_checked_when_made():
+    with pytest.raises(TypeError, match="unknown renderer option.s. colour: use engine, samples, device, threads, readback"):
+        fake_env(renderer_options={"colour": 1})
+    with pytest.raises(ValueError, match="unknown readback 'gpu'"):
+        RendererOptions(readback="gpu")  # type: ignore[arg-type]
+    with pytest.raises(SpecError, match=r"visualenv.make\(\): samples: expected a value greater than or equal to 1, got 0"):
+        fake_env(renderer_options={"samples": 0})

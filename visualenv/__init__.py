@@ -18,6 +18,7 @@ from visualenv.compiler import compile_spec
 from visualenv.env import VisualEnv
 from visualenv.errors import ExpressionError, RenderError, SpecError, StepError, VisualEnvError, WorkerError
 from visualenv.options import check_make_options
+from visualenv.render.base import RendererOptions
 from visualenv.registration import register_bundled, resolve
 from visualenv.spec import load_spec, load_spec_text
 from visualenv.sb3_vec import make_sb3_vec
@@ -52,18 +53,16 @@ def make(
     Every option is checked as the same value in a spec would be (``device="tpu"``,
     ``samples=0`` or ``resize="64"`` raise :class:`SpecError` naming the option).
     """
-    check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale,
-                       resize=resize, **renderer_options)
-    env: gym.Env = VisualEnv(
-        load_spec(resolve(target)), render=render, render_mode=render_mode, params=params, renderer_options=renderer_options or None
-    )
+    check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize)
+    options = RendererOptions.parse(renderer_options)
+    env: gym.Env = VisualEnv(load_spec(resolve(target)), render=render, render_mode=render_mode, params=params, renderer_options=options)
     return wrap_observation(env, grayscale=grayscale, resize=resize, frame_stack=frame_stack)
 
 
 register_bundled()
 
 __all__ = [
-    "ExpressionError", "FrameStack", "Grayscale", "RenderError", "Resize", "SpecError", "StepError", "VisualEnv",
+    "ExpressionError", "FrameStack", "Grayscale", "RenderError", "RendererOptions", "Resize", "SpecError", "StepError", "VisualEnv",
     "VisualEnvError", "WorkerError", "compile_spec", "load_spec", "load_spec_text", "make", "make_sb3_vec", "make_vec", "register_bundled",
     "resolve", "wrap_observation",
 ]

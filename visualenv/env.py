@@ -15,7 +15,7 @@ from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.faults import FaultDiagnosis
-from visualenv.render.base import BLENDER_BACKEND, Renderer, check_renderer_options, create_renderer, observation_space
+from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 #: the keys reset(options=...) understands
@@ -70,7 +70,7 @@ class VisualEnv(gym.Env):
         render: bool | None = None,
         render_mode: str | None = None,
         params: dict[str, Any] | None = None,
-        renderer_options: dict[str, Any] | None = None,
+        renderer_options: RendererOptions | Mapping[str, Any] | None = None,
         backend: str = BLENDER_BACKEND,
     ) -> None:
         super().__init__()
@@ -89,8 +89,7 @@ class VisualEnv(gym.Env):
         self.render_mode = render_mode
         self.uses_camera = s.observation is not None and render is not False
         self._backend = backend
-        self._renderer_options = dict(renderer_options or {})
-        check_renderer_options(self._renderer_options)
+        self._renderer_options = RendererOptions.parse(renderer_options)
         self._renderer: Renderer | None = None
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
@@ -295,7 +294,7 @@ class VisualEnv(gym.Env):
     def renderer(self) -> Renderer:
         """The renderer, built on first use (in the process that uses it)."""
         if self._renderer is None:
-            self._renderer = create_renderer(self.program.render_plan(), self._backend, **self._renderer_options)
+            self._renderer = create_renderer(self.program.render_plan(), self._backend, self._renderer_options)
         return self._renderer
 
     def binding_values(self) -> tuple:

@@ -21,7 +21,7 @@ from visualenv.spec.source import SourceMap
 
 #: where option errors are reported (in place of file:line)
 WHERE = "visualenv.make()"
-#: the render fields an option of the same name overrides
+#: the render fields an option of the same name overrides (render.base.RendererOptions holds them)
 RENDER_OVERRIDES = ("engine", "samples", "device", "threads")
 
 _Pixels = Annotated[int, Field(ge=1, le=8192)]
@@ -39,9 +39,10 @@ class MakeOptions(StrictModel):
 
 
 def check_make_options(**options: Any) -> None:
-    """Raise :class:`SpecError` for any option a spec would refuse (unknown renderer options are left to the renderer).
+    """Raise :class:`SpecError` for any of the given options a spec would refuse.
 
-    The render overrides are validated by the spec's own ``Render`` model, the rest by :class:`MakeOptions`.
+    The render overrides are validated by the spec's own ``Render`` model (``RendererOptions``
+    asks for them when it is made), the rest by :class:`MakeOptions` (``make`` asks).
     """
     if isinstance(options.get("resize"), list):  # [w, h] reads as well as (w, h)
         options["resize"] = tuple(options["resize"])

@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Literal, Mapping, Sequence, get_args
 
 import numpy as np
 from gymnasium import spaces
 
+from visualenv.options import RENDER_OVERRIDES, check_make_options
 from visualenv.spec.models import CameraView, Observation, Render, Scene
 from visualenv.spec.source import SourceMap
 
@@ -59,6 +60,11 @@ class RenderPlan:
     source: SourceMap
     cameras: tuple[tuple[tuple, str], ...] = ()  # every camera the spec names, with its field's path (Spec.camera_uses)
 
+    def with_options(self, options: "RendererOptions") -> "RenderPlan":
+        """This plan with the options' overrides written into its render settings (validated as the spec's were, by make())."""
+        overrides = options.overrides()
+        return replace(self, settings=self.settings.model_copy(update=overrides)) if overrides else self
+
     @property
     def view_camera(self) -> str | None:
         """The camera of the human view: render.view.camera, else the first observation camera."""
@@ -68,7 +74,11 @@ class RenderPlan:
 
 
 class Renderer(ABC):
-    """Turns binding values into observation arrays and a human view."""
+    """Turns binding values into observation arrays and a human view.
+
+    A backend is created as ``cls(plan, options)`` by :func:`create_renderer`: the plan's
+    settings already hold the options' overrides; the options add the readback.
+    """
 
     plan: RenderPlan
 
@@ -85,19 +95,53 @@ class Renderer(ABC):
         """Free everything this renderer created (idempotent)."""
 
 
-#: keyword options a renderer accepts (documented on :class:`BlenderRenderer`)
-RENDERER_OPTIONS = ("device", "threads", "engine", "samples", "readback")
-READBACKS = ("auto", "memory", "file")
+Readback = Literal["auto", "memory", "file"]
+READBACKS: tuple[str, ...] = get_args(Readback)
 
 
-def check_renderer_options(options: dict[str, Any]) -> None:
-    """Fail at ``make()`` time, not at the first render, on an option the renderer would refuse."""
-    unknown = sorted(set(options) - set(RENDERER_OPTIONS))
-    if unknown:
-        raise TypeError(f"unknown renderer option(s) {', '.join(unknown)}: use {', '.join(RENDERER_OPTIONS)}")
-    readback = options.get("readback", "auto")
-    if readback not in READBACKS:
-        raise ValueError(f"unknown readback {readback!r}: use {', '.join(READBACKS)}")
+@dataclass(frozen=True)
+class RendererOptions:
+    """What a renderer is told besides the plan: overrides of the spec's render settings given in Python, and the readback.
+
+    Made once from the keyword options of ``visualenv.make`` (or ``VisualEnv(renderer_options=...)``)
+    and merged into the plan's settings once (:meth:`RenderPlan.with_options`), so a backend
+    reads one ``Render`` and never looks at loose keyword arguments.
+
+    ``readback`` says how pixels leave Blender: ``"memory"`` (Cycles only: the render result
+    copied in place), ``"file"`` (a BMP in shared memory, any engine) or ``"auto"`` (memory where possible).
+    """
+
+    engine: str | None = None
+    samples: int | None = None
+    device: str | None = None
+    threads: int | None = None
+    readback: Readback = "auto"
+
+    def __post_init__(self) -> None:
+        """Checked when made, not at the first render: a value the spec's ``render`` would refuse is refused here, in its words."""
+        if self.readback not in READBACKS:
+            raise ValueError(f"unknown readback {self.readback!r}: use {', '.join(READBACKS)}")
+        check_make_options(**self.overrides())
+
+    @classmethod
+    def parse(cls, options: "Mapping[str, Any] | RendererOptions | None") -> "RendererOptions":
+        """The options of a ``**renderer_options`` mapping (an unknown name is a TypeError listing the known ones)."""
+        if isinstance(options, RendererOptions):
+            return options
+        options = dict(options or {})
+        known = (*RENDER_OVERRIDES, "readback")
+        unknown = sorted(set(options) - set(known))
+        if unknown:
+            raise TypeError(f"unknown renderer option(s) {', '.join(unknown)}: use {', '.join(known)}")
+        return cls(**options)
+
+    def overrides(self) -> dict[str, Any]:
+        """The render fields these options set."""
+        return {name: getattr(self, name) for name in RENDER_OVERRIDES if getattr(self, name) is not None}
+
+
+#: the spec's settings as they are, the readback chosen by the renderer
+DEFAULT_OPTIONS = RendererOptions()
 
 
 #: the default backend, as a ``module:attribute`` entry point (imported on first render, so state-only envs never load bpy)
@@ -112,6 +156,6 @@ def load_backend(entry_point: str) -> Callable[..., Renderer]:
     return getattr(importlib.import_module(module_name), attribute)
 
 
-def create_renderer(plan: RenderPlan, backend: str = BLENDER_BACKEND, **options: Any) -> Renderer:
-    """The renderer of `backend` for `plan`, given the renderer `options`."""
-    return load_backend(backend)(plan, **options)
+def create_renderer(plan: RenderPlan, backend: str = BLENDER_BACKEND, options: RendererOptions = DEFAULT_OPTIONS) -> Renderer:
+    """The renderer of `backend` for `plan`, its settings merged with `options` (a backend is called as ``cls(plan, options)``)."""
+    return load_backend(backend)(plan.with_options(options), options)

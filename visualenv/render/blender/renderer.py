@@ -12,7 +12,7 @@ import numpy as np
 
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, in_file_order
 from visualenv.pixels import first_channel, read_bmp, to_grayscale
-from visualenv.render.base import RenderPlan, Renderer, check_renderer_options
+from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through
@@ -51,28 +51,21 @@ class BlenderRenderer(Renderer):
     and ``depth`` (C=1, the camera's Z depth mapped linearly from
     ``depth_range`` [near, far] to 0..255 and clipped; the background is 255).
 
-    Keyword options (each overrides the spec's ``render`` section):
-
-    * ``device``: ``"cpu"``, ``"gpu"`` or ``"auto"`` (Cycles device; a missing GPU
-      falls back to the CPU with a one-time warning for ``"gpu"``);
-    * ``threads``: render threads, 0 for all cores;
-    * ``engine``: ``"cycles"``, ``"workbench"`` or ``"eevee"``;
-    * ``samples``: samples per pixel of observation renders;
-    * ``readback``: how pixels leave Blender: ``"memory"`` (Cycles only: the
-      render result copied in place, see :mod:`capture`), ``"file"`` (a BMP in
-      shared memory, any engine) or ``"auto"`` (memory where possible; the default).
+    ``plan.settings`` hold the spec's ``render`` section with the Python options' overrides
+    (``device``: a missing GPU falls back to the CPU with a one-time warning for ``"gpu"``;
+    ``threads``: 0 for all cores); ``options.readback`` says how pixels leave Blender:
+    ``"memory"`` (Cycles only: the render result copied in place, see :mod:`capture`),
+    ``"file"`` (a BMP in shared memory, any engine) or ``"auto"`` (memory where possible).
     """
 
-    def __init__(self, plan: RenderPlan, **options: Any) -> None:
-        check_renderer_options(options)
+    def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS) -> None:
         self.plan = plan
         self._closed = True
         settings = plan.settings
-        self.obs_config = cfg.make_config(settings, settings.preset, engine=options.get("engine"), samples=options.get("samples"))
+        self.obs_config = cfg.make_config(settings, settings.preset)
         self.view_config = cfg.view_config(self.obs_config, settings.view.preset)
-        self.device = cfg.resolve_device(options.get("device", settings.device))
-        threads = int(options.get("threads", settings.threads))
-        readback = options.get("readback", "auto")
+        self.device = cfg.resolve_device(settings.device)
+        readback = options.readback
         if readback == "memory" and "cycles" not in (self.obs_config.engine, self.view_config.engine):
             raise ValueError("readback 'memory' needs the Cycles engine; use 'file' or 'auto'")
         can_capture = readback != "file" and install_capture()
@@ -86,7 +79,7 @@ class BlenderRenderer(Renderer):
         try:
             built = build_scene(plan.scene, base_dir=plan.base_dir, source=plan.source, prefix=f"visualenv{next(_instances)}")
             self._check_names(built)
-            self._setup(built, threads)
+            self._setup(built, settings.threads)
         except BaseException:
             remove_ids(tracker.new())
             self._output.close()

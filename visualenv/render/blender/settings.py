@@ -69,19 +69,14 @@ def depth_config(obs: RenderConfig) -> RenderConfig:
     return obs if obs.engine == "cycles" else DEPTH_CONFIG
 
 
-def make_config(settings: Render, preset: str, *, engine: str | None = None, samples: int | None = None) -> RenderConfig:
-    """The config of `preset` with the spec's (and the options') overrides."""
+def make_config(settings: Render, preset: str) -> RenderConfig:
+    """The config of `preset` with the spec's overrides (samples, bounces; make()'s options are merged into `settings`)."""
     values = dict(PRESETS[preset])
     if settings.samples is not None:
         values["samples"] = settings.samples
     if settings.bounces is not None:
         values["bounces"] = settings.bounces
-    if samples is not None:
-        values["samples"] = int(samples)
-    engine = engine or settings.engine
-    if engine not in ENGINE_IDS:
-        raise ValueError(f"unknown engine {engine!r}: use one of {', '.join(ENGINE_IDS)}")
-    return RenderConfig(engine=engine, **values)
+    return RenderConfig(engine=settings.engine, **values)
 
 
 def view_config(obs: RenderConfig, preset: str) -> RenderConfig:
