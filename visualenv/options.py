@@ -16,7 +16,7 @@ from pydantic import Field, ValidationError
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
-from visualenv.spec.models import Name, Render, StrictModel
+from visualenv.spec.models import Name, RenderSettings, StrictModel
 from visualenv.spec.source import SourceMap
 
 #: where option errors are reported (in place of file:line)
@@ -41,13 +41,13 @@ class MakeOptions(StrictModel):
 def check_make_options(**options: Any) -> None:
     """Raise :class:`SpecError` for any of the given options a spec would refuse.
 
-    The render overrides are validated by the spec's own ``Render`` model (``RendererOptions``
+    The render overrides are validated by the spec's own ``RenderSettings`` model (``RendererOptions``
     asks for them when it is made), the rest by :class:`MakeOptions` (``make`` asks).
     """
     if isinstance(options.get("resize"), list):  # [w, h] reads as well as (w, h)
         options["resize"] = tuple(options["resize"])
     problems = []
-    for model, names in ((Render, RENDER_OVERRIDES), (MakeOptions, tuple(MakeOptions.model_fields))):
+    for model, names in ((RenderSettings, RENDER_OVERRIDES), (MakeOptions, tuple(MakeOptions.model_fields))):
         given = {k: options[k] for k in names if options.get(k) is not None}
         try:
             model.model_validate(given)

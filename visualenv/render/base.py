@@ -19,7 +19,7 @@ import numpy as np
 from gymnasium import spaces
 
 from visualenv.options import RENDER_OVERRIDES, check_make_options
-from visualenv.spec.models import CameraView, Observation, Render, Scene
+from visualenv.spec.models import CameraView, Observation, RenderSettings, Scene
 from visualenv.spec.source import SourceMap
 
 CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1}
@@ -54,7 +54,7 @@ class RenderPlan:
     scene: Scene
     views: dict[str, CameraView]  # observation cameras by observation key
     single: bool  # one camera (Box) rather than several (Dict)
-    settings: Render
+    settings: RenderSettings
     bindings: tuple[BindingTarget, ...]
     base_dir: Path
     source: SourceMap
@@ -105,7 +105,7 @@ class RendererOptions:
 
     Made once from the keyword options of ``visualenv.make`` (or ``VisualEnv(renderer_options=...)``)
     and merged into the plan's settings once (:meth:`RenderPlan.with_options`), so a backend
-    reads one ``Render`` and never looks at loose keyword arguments.
+    reads one ``RenderSettings`` and never looks at loose keyword arguments.
 
     ``readback`` says how pixels leave Blender: ``"memory"`` (Cycles only: the render result
     copied in place), ``"file"`` (a BMP in shared memory, any engine) or ``"auto"`` (memory where possible).

@@ -300,7 +300,9 @@ class ViewSettings(StrictModel):
         return CameraView._pixels(value)
 
 
-class Render(StrictModel):
+class RenderSettings(StrictModel):
+    """The spec's ``render`` section: engine, quality preset, device and threads of every render, and the human view."""
+
     engine: Literal["cycles", "workbench", "eevee"] = "cycles"
     preset: Literal["fast", "quality"] = Field("fast", description="fast: 1 sample, no bounces (training); quality: previews")
     samples: int | None = Field(None, ge=1, le=4096, description="overrides the preset's samples")
@@ -329,7 +331,7 @@ class Spec(StrictModel):
     dynamics: Dynamics = Field(default_factory=Dynamics)
     actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")  # type: ignore[valid-type]  # Actor is made from BINDABLES
     observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
-    render: Render = Field(default_factory=Render)
+    render: RenderSettings = Field(default_factory=RenderSettings)
     reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")
     outcomes: dict[Name, Outcome] = Field(default_factory=dict, description="named rules checked in order; the first ending one ends the episode")
     max_steps: int = Field(1000, ge=1, le=100_000_000, description="episodes are truncated after this many steps")

@@ -33,7 +33,7 @@ class _View:
     height: int
     color: str  # rgb | grayscale | depth
     depth_range: tuple[float, float]
-    config: cfg.RenderConfig
+    config: cfg.EngineConfig
 
 
 class BlenderRenderer(Renderer):
@@ -144,7 +144,7 @@ class BlenderRenderer(Renderer):
         # what the scene is set to now (only changes are written)
         self._camera: Any = None
         self._resolution: tuple[int, int] | None = None
-        self._config: cfg.RenderConfig | None = None
+        self._config: cfg.EngineConfig | None = None
         self._depth = False
         self._depth_range: tuple[float, float] | None = None
         self._set_depth_mode(False)

@@ -1,6 +1,6 @@
 """Engine, preset, device and thread configuration of a Blender scene.
 
-A :class:`RenderConfig` is the complete set of engine knobs one render needs
+An :class:`EngineConfig` is the complete set of engine knobs one render needs
 (engine, samples, bounces, denoising, pixel filter). :func:`apply_config` writes
 only the fields that differ from the previously applied config, so switching
 between the observation settings and the human-view settings costs a few
@@ -28,7 +28,7 @@ from typing import Any
 
 import bpy
 
-from visualenv.spec.models import Render
+from visualenv.spec.models import RenderSettings
 
 log = logging.getLogger("visualenv.render")
 
@@ -43,7 +43,7 @@ _WORKBENCH_AA = ((1, "OFF"), (4, "FXAA"), (5, "5"), (8, "8"), (11, "11"), (16, "
 
 
 @dataclass(frozen=True)
-class RenderConfig:
+class EngineConfig:
     """Engine settings for one kind of render (observation or human view)."""
 
     engine: str  # cycles | workbench | eevee
@@ -61,31 +61,31 @@ PRESETS: dict[str, dict[str, Any]] = {
 }
 
 #: a depth observation is a Cycles render of camera depth (Workbench and EEVEE cannot override materials)
-DEPTH_CONFIG = RenderConfig("cycles", 1, 0, False, "BOX", 1.0)
+DEPTH_CONFIG = EngineConfig("cycles", 1, 0, False, "BOX", 1.0)
 
 
-def depth_config(obs: RenderConfig) -> RenderConfig:
+def depth_config(obs: EngineConfig) -> EngineConfig:
     """Depth renders share the observations' Cycles config (no setting changes between views)."""
     return obs if obs.engine == "cycles" else DEPTH_CONFIG
 
 
-def make_config(settings: Render, preset: str) -> RenderConfig:
+def make_config(settings: RenderSettings, preset: str) -> EngineConfig:
     """The config of `preset` with the spec's overrides (samples, bounces; make()'s options are merged into `settings`)."""
     values = dict(PRESETS[preset])
     if settings.samples is not None:
         values["samples"] = settings.samples
     if settings.bounces is not None:
         values["bounces"] = settings.bounces
-    return RenderConfig(engine=settings.engine, **values)
+    return EngineConfig(engine=settings.engine, **values)
 
 
-def view_config(obs: RenderConfig, preset: str) -> RenderConfig:
+def view_config(obs: EngineConfig, preset: str) -> EngineConfig:
     """The human view's config: 'fast' is the observations' config; 'quality' is the
     quality preset on the observations' engine, with at least their samples and bounces."""
     if preset == "fast":
         return obs
     q = PRESETS["quality"]
-    return RenderConfig(obs.engine, max(q["samples"], obs.samples), max(q["bounces"], obs.bounces), q["denoise"], q["filter"], q["filter_width"])
+    return EngineConfig(obs.engine, max(q["samples"], obs.samples), max(q["bounces"], obs.bounces), q["denoise"], q["filter"], q["filter_width"])
 
 
 # -- devices -----------------------------------------------------------------------------------------
@@ -213,7 +213,7 @@ def set_color_management(scene: Any, *, depth: bool) -> None:
     vs.use_white_balance = False
 
 
-def apply_config(scene: Any, config: RenderConfig, previous: RenderConfig | None, *, see_through: bool = False) -> None:
+def apply_config(scene: Any, config: EngineConfig, previous: EngineConfig | None, *, see_through: bool = False) -> None:
     """Write the fields of `config` that differ from `previous` (all of them when None).
 
     `see_through`: the scene has surfaces with alpha below 1, which need passes of their own.
@@ -245,7 +245,7 @@ def _oidn_available() -> bool:
     return bool(getattr(bpy.app.build_options, "openimagedenoise", True))
 
 
-def engine_warnings(config: RenderConfig, device: str) -> None:
+def engine_warnings(config: EngineConfig, device: str) -> None:
     """Say once when a choice will be slow."""
     if config.engine == "eevee" and detect_gpu() is None:
         _warn_once("eevee", "EEVEE without a GPU renders in software and takes seconds per frame: use engine 'cycles' (or 'workbench') for training")
