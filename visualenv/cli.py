@@ -10,13 +10,13 @@ import functools
 import json
 import sys
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import click
 from click.core import ParameterSource
 import numpy as np
 
-from visualenv.errors import SpecError, VisualEnvError
+from visualenv.errors import ConfigError, SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
 #: the SB3 algorithms `train` and `play` take (training.algorithm_class maps them to classes)
@@ -234,11 +234,33 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
     With --backend rllib the envs run in Ray RLlib EnvRunners, on this machine or a cluster (--address).
     """
-    import yaml
-
     from visualenv.registration import resolve
     from visualenv.spec.loader import load_spec
     from visualenv.training import TrainConfig, check_config, new_run_dir, train as run_training
+
+    ctx = click.get_current_context()
+    hyper = _hyperparameters(config_file, overrides)
+    if _chosen_backend(ctx, backend, resume_dir) == "rllib":
+        _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
+        return
+    if resume_dir:
+        _refuse_fixed_on_resume(ctx, ("algo", "envs", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root"),
+                                "only --steps, --set and --config change on --resume")
+        config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
+    else:
+        config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
+                             eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
+                             render=not state_only, hyperparams=hyper, progress=not no_progress)
+    check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
+    run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
+    click.echo(f"run folder: {run_dir}")
+    results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
+    _report(results, run_dir)
+
+
+def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dict[str, Any]:
+    """--config's mapping, then each --set KEY=VALUE over it."""
+    import yaml
 
     hyper: dict[str, Any] = {}
     if config_file:
@@ -254,41 +276,44 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         if not sep:
             raise click.BadParameter(f"expected KEY=VALUE, got {item!r}", param_hint="--set")
         hyper[key] = _parse_value(value)
+    return hyper
+
+
+def _given(ctx: click.Context, names: Sequence[str]) -> list[str]:
+    """The options among `names` given on the command line, as the user spelt them."""
+    flags = {"out_root": "--out"}
+    return [flags.get(n, f"--{n.replace('_', '-')}") for n in names if ctx.get_parameter_source(n) is ParameterSource.COMMANDLINE]
+
+
+def _chosen_backend(ctx: click.Context, backend: str, resume_dir: str | None) -> str:
+    """The run's backend (a resumed run keeps its own); options of the other backend are refused."""
     saved_backend = _run_backend(resume_dir) if resume_dir else backend
-    ctx = click.get_current_context()
-    if resume_dir and ctx.get_parameter_source("backend") is ParameterSource.COMMANDLINE and backend != saved_backend:
+    if resume_dir and _given(ctx, ["backend"]) and backend != saved_backend:
         raise click.UsageError(f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend")
     if saved_backend == "rllib" or backend == "rllib":
-        sb3_only = [f"--{name.replace('_', '-')}" for name in ("algo", "envs") if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
+        sb3_only = _given(ctx, ["algo", "envs"])
         if sb3_only:
             raise click.UsageError(f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)")
-        _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
-        return
-    rllib_only = [f"--{name.replace('_', '-')}" for name in ("env_runners", "envs_per_runner", "address")
-                  if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
+        return "rllib"
+    rllib_only = _given(ctx, ["env_runners", "envs_per_runner", "address"])
     if rllib_only:
         raise click.UsageError(f"{', '.join(rllib_only)}: only with --backend rllib")
-    if resume_dir:
-        fixed = [f"--{name.replace('_', '-')}" for name in ("algo", "envs", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root")
-                 if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
-        if fixed:
-            raise click.UsageError(f"{', '.join(fixed).replace('--out-root', '--out')}: a resumed run keeps its settings; "
-                                   "only --steps, --set and --config change on --resume")
-        try:
-            saved = json.loads((Path(resume_dir) / "config.json").read_text())["config"]
-        except (OSError, ValueError, KeyError) as exc:
-            raise click.BadParameter(f"{resume_dir} is not a run folder of `visualenv train` (config.json: {exc})", param_hint="--resume") from None
-        config = TrainConfig(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyper},
-                                "progress": not no_progress})
-    else:
-        config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
-                             eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
-                             render=not state_only, hyperparams=hyper, progress=not no_progress)
-    check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
-    run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
-    click.echo(f"run folder: {run_dir}")
-    results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
-    _report(results, run_dir)
+    return "sb3"
+
+
+def _refuse_fixed_on_resume(ctx: click.Context, names: Sequence[str], what_changes: str) -> None:
+    fixed = _given(ctx, names)
+    if fixed:
+        raise click.UsageError(f"{', '.join(fixed)}: a resumed run keeps its settings; {what_changes}")
+
+
+def _resumed(config_class: Any, resume_dir: str, steps: int | None, hyper: dict[str, Any], progress: bool) -> Any:
+    from visualenv.training import resumed_config
+
+    try:
+        return resumed_config(config_class, Path(resume_dir), steps=steps, hyperparams=hyper, progress=progress)
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="--resume") from None
 
 
 def _run_backend(run_dir: str) -> str:
@@ -316,14 +341,9 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
     logging.getLogger("ray.rllib").setLevel(logging.ERROR)  # RLlib's notes on its own API changes are not the user's business
     params = ctx.params
     if resume_dir:
-        fixed = [f"--{name.replace('_', '-')}" for name in ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
-                                                            "out_root", "env_runners", "envs_per_runner")
-                 if ctx.get_parameter_source(name) is ParameterSource.COMMANDLINE]
-        if fixed:
-            raise click.UsageError(f"{', '.join(fixed).replace('--out-root', '--out')}: a resumed run keeps its settings; "
-                                   "only --steps, --set, --config and --address change on --resume")
-        saved = json.loads((Path(resume_dir) / "config.json").read_text())["config"]
-        config = RLlibTrainConfig(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyper}, "progress": progress})
+        _refuse_fixed_on_resume(ctx, ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root", "env_runners",
+                                      "envs_per_runner"), "only --steps, --set, --config and --address change on --resume")
+        config = _resumed(RLlibTrainConfig, resume_dir, steps, hyper, progress)
     else:
         config = RLlibTrainConfig(spec=spec, steps=steps or RLlibTrainConfig.steps, env_runners=params["env_runners"],
                                   envs_per_runner=params["envs_per_runner"], frame_stack=params["frame_stack"], eval_every=params["eval_every"],

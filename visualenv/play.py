@@ -55,47 +55,56 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
          record: str | None = None, fps: int = 15, max_frames: int = 2000, view_preset: str | None = None,
          view_size: int | None = None) -> list[Episode]:
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation."""
-    from visualenv.env import VisualEnv
-    from visualenv.registration import resolve
-    from visualenv.spec import load_spec
-    from visualenv.wrappers import FrameStack
-
     if record:
         check_recording(record)
-    model = None
-    if model_path:
-        model = load_model(model_path, algo)
-    loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
-    env: Any = VisualEnv(loaded, render_mode="rgb_array")
-    if model is not None:
-        try:
-            env = stacked_like(env, model, str(model_path))
-        except BaseException:
-            env.close()
-            raise
+    model = load_model(model_path, algo) if model_path else None
+    env = _play_env(spec, model, model_path, view_preset, view_size)
     env.action_space.seed(seed)
-    frames: list[np.ndarray] = []
-    results = []
+    frames: list[np.ndarray] | None = [] if record else None
     try:
-        for episode in range(episodes):
-            obs, info = env.reset(seed=seed + episode)
-            ret, length = 0.0, 0
-            while True:
-                if record and len(frames) < max_frames:
-                    latest = env.latest if isinstance(env, FrameStack) else obs
-                    frames.append(side_by_side(latest, env.render()))
-                action = model.predict(obs, deterministic=True)[0] if model is not None else env.action_space.sample()
-                obs, reward, terminated, truncated, info = env.step(action)
-                ret += float(reward)
-                length += 1
-                if terminated or truncated:
-                    break
-            results.append(Episode(ret, length, bool(info.get("is_success")), info.get("outcome")))
+        results = [_play_episode(env, model, seed + episode, frames, max_frames) for episode in range(episodes)]
     finally:
         env.close()
     if record and frames:
         save_video(frames, record, fps)
     return results
+
+
+def _play_env(spec: str, model: Any, model_path: str | None, view_preset: str | None, view_size: int | None) -> Any:
+    """The env with the recorded view's settings, its frames stacked as the model was trained."""
+    from visualenv.env import VisualEnv
+    from visualenv.registration import resolve
+    from visualenv.spec import load_spec
+
+    loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
+    env: Any = VisualEnv(loaded, render_mode="rgb_array")
+    if model is None:
+        return env
+    try:
+        return stacked_like(env, model, str(model_path))
+    except BaseException:
+        env.close()
+        raise
+
+
+def _play_episode(env: Any, model: Any, seed: int, frames: list[np.ndarray] | None, max_frames: int) -> Episode:
+    """One episode from a reset seeded `seed`: the model's deterministic actions (random ones without a model).
+
+    With `frames`, each step's observation beside the view is appended, up to `max_frames` in all."""
+    from visualenv.wrappers import FrameStack
+
+    obs, info = env.reset(seed=seed)
+    ret, length = 0.0, 0
+    while True:
+        if frames is not None and len(frames) < max_frames:
+            latest = env.latest if isinstance(env, FrameStack) else obs
+            frames.append(side_by_side(latest, env.render()))
+        action = model.predict(obs, deterministic=True)[0] if model is not None else env.action_space.sample()
+        obs, reward, terminated, truncated, info = env.step(action)
+        ret += float(reward)
+        length += 1
+        if terminated or truncated:
+            return Episode(ret, length, bool(info.get("is_success")), info.get("outcome"))
 
 
 def load_model(model_path: str, algo: str = "ppo") -> Any:

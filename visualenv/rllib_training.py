@@ -19,7 +19,6 @@ from __future__ import annotations
 
 import csv
 import json
-import shlex
 import shutil
 import signal
 import sys
@@ -27,7 +26,7 @@ import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -208,8 +207,8 @@ def _append_progress(path: Path, row: dict[str, Any]) -> None:
 def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None,
           address: str | None = None) -> dict[str, Any]:
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
-    from visualenv.versions import versions
     from visualenv.plots import training_plots
+    from visualenv.training import record_run
     from visualenv.registration import resolve
     from visualenv.rllib import RLlibPolicy, check_address
     from visualenv.cores import usable_cores
@@ -219,14 +218,7 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     algo_config = algorithm_config(config)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "logs").mkdir(exist_ok=True)
-    if not resume:
-        record = {"command": shlex.join(sys.argv), "backend": BACKEND, "config": asdict(config), "versions": versions(),
-                  "spec_path": str(resolve(config.spec))}
-    else:
-        record = json.loads((run_dir / "config.json").read_text())
-        record["config"] = asdict(config)
-        record.setdefault("resumes", []).append({"command": shlex.join(sys.argv), "hyperparams": dict(changes or {})})
-    (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    record_run(run_dir, config, str(resolve(config.spec)), resume=resume, changes=dict(changes or {}), backend=BACKEND)
     frame_stack = config.frame_stack if config.render else 0
     eval_env = make_eval_env(config.spec, seed=eval_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
     stop = _StopRequest()

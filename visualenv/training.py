@@ -117,6 +117,16 @@ def new_run_dir(root: str | Path, env_id: str) -> Path:
     return run
 
 
+def resumed_config(config_class: Any, run_dir: Path, *, steps: int | None, hyperparams: dict[str, Any], progress: bool) -> Any:
+    """The configuration of the run in `run_dir`, carried on: its settings as saved, with the total steps (if given),
+    the changed hyperparameters and the progress display of this command. Used by both backends (`config_class`)."""
+    try:
+        saved = json.loads((run_dir / "config.json").read_text())["config"]
+    except (OSError, ValueError, KeyError, TypeError) as exc:
+        raise ConfigError(f"{run_dir} is not a run folder of `visualenv train` (config.json: {exc})") from None
+    return config_class(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyperparams}, "progress": progress})
+
+
 def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
     return {} if config.render else {"render": False}
 
@@ -127,28 +137,48 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     A resumed run continues from ``checkpoints/latest.zip``; `changes` are hyperparameters
     that differ from the saved model's from now on (recorded in config.json under ``resumes``).
     """
-    from stable_baselines3.common.callbacks import CallbackList
-    from stable_baselines3.common.logger import configure
-
-    from visualenv.play import load_model
-    from visualenv.versions import versions
     from visualenv.registration import resolve
-    from visualenv.sb3_vec import make_sb3_vec
 
     spec_path = str(resolve(config.spec))
     changes = dict(changes or {})
     kwargs, changed_kwargs = check_config(config, changes)
     run_dir.mkdir(parents=True, exist_ok=True)
+    record_run(run_dir, config, spec_path, resume=resume, changes=changes)
+    if resume:
+        _keep_earlier_logs(run_dir / "logs")
+    train_env, eval_env = _make_envs(config, spec_path, run_dir, resume)
+    latest = run_dir / "checkpoints" / "latest.zip"
+    started = time.perf_counter()
+    stopper = _StopOnSignal()
+    try:
+        model = _make_model(config, train_env, latest if resume else None, kwargs, changed_kwargs)
+        _learn(model, config, eval_env, run_dir, latest, stopper, resume)
+    except BaseException:
+        eval_env.close()
+        raise
+    finally:
+        train_env.close()
+    return _finish(model, config, eval_env, run_dir, wall=time.perf_counter() - started, stopped_early=stopper.requested)
+
+
+def record_run(run_dir: Path, config: Any, spec_path: str, *, resume: bool, changes: dict[str, Any], **extra: Any) -> None:
+    """config.json: the command, settings and versions of a new run; a resumed run appends its command and changed hyperparameters."""
+    from visualenv.versions import versions
+
     if not resume:
-        record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path}
+        record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path, **extra}
     else:
         record = json.loads((run_dir / "config.json").read_text())
         record["config"] = asdict(config)
         record.setdefault("resumes", []).append({"command": shlex.join(sys.argv), "hyperparams": changes})
     (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+
+
+def _make_envs(config: TrainConfig, spec_path: str, run_dir: Path, resume: bool) -> tuple[Any, Any]:
+    """The training envs (subprocesses, one Blender each) and the evaluation env, which renders once now to fail early."""
+    from visualenv.sb3_vec import make_sb3_vec
+
     frame_stack = config.frame_stack if config.render else 0
-    if resume:
-        _keep_earlier_logs(run_dir / "logs")
     train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
                              monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     try:
@@ -157,55 +187,58 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     except BaseException:
         train_env.close()
         raise
+    return train_env, eval_env
+
+
+def _make_model(config: TrainConfig, train_env: Any, checkpoint: Path | None, kwargs: dict[str, Any], changed_kwargs: dict[str, Any]) -> Any:
+    """A new model, or the checkpoint's (a resumed run) with the changed hyperparameters set before it is built."""
     algo = algorithm_class(config.algo)
-    latest = run_dir / "checkpoints" / "latest.zip"
-    started = time.perf_counter()
-    stopper = _StopOnSignal()
+    if checkpoint is not None and checkpoint.exists():
+        return algo.load(checkpoint, env=train_env, **changed_kwargs)
     try:
-        if resume and latest.exists():
-            model = algo.load(latest, env=train_env, **changed_kwargs)  # SB3 sets these on the model before building it
-            done = model.num_timesteps
-        else:
-            try:
-                model = algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
-            except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
-                raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
-            done = 0
-        model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard"]))
-        per_env = max(1, config.eval_every // config.envs)
-        callbacks = [
-            _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
-                           best_model_save_path=str(run_dir), deterministic=True, verbose=0),
-            _LatestCheckpoint(latest, every=per_env),
-            _PhaseThreads(),
-            stopper,
-        ]
-        if config.progress:
-            callbacks.append(_ProgressBar(config.steps, done))
-        remaining = max(0, config.steps - done)
-        with stopper.listening(), warnings.catch_warnings():
-            # one eval env runs in-process (DummyVecEnv), the training envs in subprocesses: same env, different wrapper
-            warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-            model.learn(total_timesteps=remaining, callback=CallbackList(callbacks), reset_num_timesteps=not resume)
-        model.save(latest)
-        model.save(run_dir / "final_model.zip")
-    except BaseException:
-        eval_env.close()
-        raise
-    finally:
-        train_env.close()
-    wall = time.perf_counter() - started
-    best = run_dir / "best_model.zip"
-    try:
-        results = final_evaluation(load_model(str(best if best.exists() else latest), config.algo), eval_env,
-                                   config.final_eval_episodes, eval_seed(config.seed))
-    finally:
-        eval_env.close()
-    results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": best.name if best.exists() else latest.name,
-                    "stopped_early": stopper.requested})
-    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+        return algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
+    except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
+        raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
+
+
+def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest: Path, stopper: _StopOnSignal, resume: bool) -> None:
+    """Learn up to config.steps with periodic evaluation, checkpoints and the progress bar; save the latest and final models."""
+    from stable_baselines3.common.callbacks import CallbackList
+    from stable_baselines3.common.logger import configure
+
+    model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard"]))
+    per_env = max(1, config.eval_every // config.envs)
+    callbacks = [
+        _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
+                       best_model_save_path=str(run_dir), deterministic=True, verbose=0),
+        _LatestCheckpoint(latest, every=per_env),
+        _PhaseThreads(),
+        stopper,
+    ]
+    done = model.num_timesteps if resume else 0
+    if config.progress:
+        callbacks.append(_ProgressBar(config.steps, done))
+    with stopper.listening(), warnings.catch_warnings():
+        # one eval env runs in-process (DummyVecEnv), the training envs in subprocesses: same env, different wrapper
+        warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
+        model.learn(total_timesteps=max(0, config.steps - done), callback=CallbackList(callbacks), reset_num_timesteps=not resume)
+    model.save(latest)
+    model.save(run_dir / "final_model.zip")
+
+
+def _finish(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, *, wall: float, stopped_early: bool) -> dict[str, Any]:
+    """The best model's final evaluation (closing the eval env), results.json and the plots."""
+    from visualenv.play import load_model
     from visualenv.plots import training_plots
 
+    best, latest = run_dir / "best_model.zip", run_dir / "checkpoints" / "latest.zip"
+    evaluated = best if best.exists() else latest
+    try:
+        results = final_evaluation(load_model(str(evaluated), config.algo), eval_env, config.final_eval_episodes, eval_seed(config.seed))
+    finally:
+        eval_env.close()
+    results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": evaluated.name, "stopped_early": stopped_early})
+    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     training_plots(run_dir)
     return results
 
