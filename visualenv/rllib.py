@@ -90,9 +90,10 @@ def model_config(observation_space: spaces.Space) -> Any:
     """RLlib's DefaultModelConfig for this observation: a CNN sized for images, an MLP for a state vector."""
     from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
 
-    if len(observation_space.shape) == 3:
-        height, width = observation_space.shape[:2]
-        return DefaultModelConfig(conv_filters=conv_filters(height, width), conv_activation="relu", head_fcnet_hiddens=[512],
+    shape = observation_space.shape or ()
+    if len(shape) == 3:
+        height, width = shape[:2]
+        return DefaultModelConfig(conv_filters=conv_filters(height, width), conv_activation="relu", head_fcnet_hiddens=[512],  # type: ignore[arg-type]
                                   vf_share_layers=True)
     return DefaultModelConfig(fcnet_hiddens=[64, 64], vf_share_layers=False)
 
@@ -144,7 +145,8 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
     check_hyperparameters(hyperparams)
     space = check_observation(target, render)
     if render:
-        space = spaces.Box(0.0, 1.0, space.shape[:2] + (space.shape[2] * max(1, frame_stack),), np.float32)
+        height, width, channels = space.shape or (0, 0, 0)
+        space = spaces.Box(0.0, 1.0, (height, width, channels * max(1, frame_stack)), np.float32)
     threads = max(1, cpus_per_runner // envs_per_runner)
     name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads)
     defaults = {"train_batch_size_per_learner": 512, "minibatch_size": 128, "num_epochs": 4,

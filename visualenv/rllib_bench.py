@@ -13,6 +13,7 @@ Figures vary from run to run on a shared machine: this prints, it asserts nothin
 
 from __future__ import annotations
 
+import logging
 import os
 import time
 from dataclasses import asdict, dataclass
@@ -89,7 +90,7 @@ def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20) ->
     figures = RLlibFigures(spec=spec, envs=envs, steps_per_env=steps)
     process_start = psutil.Process().create_time()
     ray.init(address="local", num_cpus=max(envs, len(os.sched_getaffinity(0))), include_dashboard=False, log_to_driver=False,
-             logging_level="ERROR")
+             logging_level=logging.ERROR)
     try:
         algo = ppo_config(spec, env_runners=envs, envs_per_runner=1).build_algo()
         try:

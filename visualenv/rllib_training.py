@@ -171,6 +171,7 @@ def _episodes(policy: Any, vec_env: Any, episodes: int) -> tuple[list[float], li
 
     returns, lengths = evaluate_policy(policy, vec_env, n_eval_episodes=episodes, deterministic=True, return_episode_rewards=True,
                                        callback=record, warn=False)
+    assert isinstance(returns, list) and isinstance(lengths, list)  # return_episode_rewards=True: one entry per episode
     return [float(r) for r in returns], [int(n) for n in lengths], successes[:episodes]
 
 
