@@ -1,4 +1,4 @@
-"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id."""
+"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id; README lists every module."""
 
 import subprocess
 import sys
@@ -22,3 +22,10 @@ def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env={"PYTHONPATH": str(tmp_path / "site")},
                          check=True, capture_output=True, text=True).stdout.strip()
     assert out == str((tmp_path / "site" / "visualenv" / "specs" / "goalie.yaml").resolve())
+
+
+def test_the_readme_layout_lists_every_module():
+    readme = (ROOT / "README.md").read_text(encoding="utf-8").split("## Layout")[1]
+    modules = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "visualenv").rglob("*.py") if p.name != "__init__.py")
+    missing = [m for m in modules if f"`{m}`" not in readme]
+    assert not missing, f"README's Layout table misses {missing}"
