@@ -61,7 +61,7 @@ class RenderPlan:
     cameras: tuple[tuple[tuple, str], ...] = ()  # every camera the spec names, with its field's path (Spec.camera_uses)
 
     def with_options(self, options: "RendererOptions") -> "RenderPlan":
-        """This plan with the options' overrides written into its render settings (validated as the spec's were, by make())."""
+        """This plan with the options' overrides written into its render settings (RendererOptions checked them when it was made)."""
         overrides = options.overrides()
         return replace(self, settings=self.settings.model_copy(update=overrides)) if overrides else self
 

@@ -60,7 +60,8 @@ def type_problem(prop: str, name: str, object_type: str) -> str | None:
     bindable = BINDABLES[prop]
     if not bindable.types or object_type in bindable.types:
         return None
-    wanted = " or ".join(a_type(t) for t in bindable.types if t != "EMPTY")
+    kinds = [a_type(t) for t in bindable.types]
+    wanted = kinds[0] if len(kinds) == 1 else ", ".join(kinds[:-1]) + " or " + kinds[-1]
     return f"'{prop}' binds {bindable.binds}, but '{name}' is {a_type(object_type)}, not {wanted}"
 
 
