@@ -158,7 +158,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
         raise
     finally:
         train_env.close()
-    return _finish(model, config, eval_env, run_dir, wall=time.perf_counter() - started, stopped_early=stopper.requested)
+    return _finish(model, config, eval_env, run_dir, latest, wall=time.perf_counter() - started, stopped_early=stopper.requested)
 
 
 def record_run(run_dir: Path, config: Any, spec_path: str, *, resume: bool, changes: dict[str, Any], **extra: Any) -> None:
@@ -226,12 +226,12 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest
     model.save(run_dir / "final_model.zip")
 
 
-def _finish(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, *, wall: float, stopped_early: bool) -> dict[str, Any]:
+def _finish(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest: Path, *, wall: float, stopped_early: bool) -> dict[str, Any]:
     """The best model's final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.play import load_model
     from visualenv.plots import training_plots
 
-    best, latest = run_dir / "best_model.zip", run_dir / "checkpoints" / "latest.zip"
+    best = run_dir / "best_model.zip"
     evaluated = best if best.exists() else latest
     try:
         results = final_evaluation(load_model(str(evaluated), config.algo), eval_env, config.final_eval_episodes, eval_seed(config.seed))
