@@ -55,6 +55,19 @@ def test_conv_filters_are_sized_from_the_observation(size):
             get_filter_config((100, 100, 4))
 
 
+def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
+    """RLlib's own PPO clips the value loss at 10 and adds a KL penalty; from pixels it then never learned Goalie."""
+    import yaml
+
+    from visualenv.rllib import SB3_PPO_DEFAULTS, ppo_config
+
+    assert yaml.safe_load((REPO / "examples/hyperparams/goalie-rllib.yaml").read_text()) == {
+        k: v for k, v in SB3_PPO_DEFAULTS.items() if k != "grad_clip_by"}
+    config = ppo_config(tiny_goalie(tmp_path))
+    assert config.vf_clip_param == float("inf") and config.use_kl_loss is False and config.grad_clip == 0.5
+    assert ppo_config(tiny_goalie(tmp_path), hyperparams={"use_kl_loss": True}).use_kl_loss is True
+
+
 def test_runner_env_stacks_four_scaled_frames():
     from visualenv.rllib import make_rllib_env
 

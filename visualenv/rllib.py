@@ -111,6 +111,14 @@ def check_observation(target: str, render: bool = True) -> spaces.Space:
     return space
 
 
+# SB3's PPO as the SB3 backend runs it for Goalie (examples/hyperparams/goalie.yaml), in RLlib's names. RLlib's own
+# defaults differ where it matters from pixels: its value loss is clipped at 10 (a +10 catch seen by a value near
+# -10 gives no gradient, so the shared CNN never learns where the ball is), and it adds an adaptive KL penalty.
+SB3_PPO_DEFAULTS: dict[str, Any] = {
+    "train_batch_size_per_learner": 512, "minibatch_size": 128, "num_epochs": 4, "lr": 2.5e-4, "gamma": 0.99, "lambda_": 0.95,
+    "clip_param": 0.1, "entropy_coeff": 0.01, "vf_loss_coeff": 0.5,
+    "vf_clip_param": float("inf"), "use_kl_loss": False, "grad_clip": 0.5, "grad_clip_by": "global_norm",
+}
 PPO_NAMES_SET_HERE = ("model_config", "learner_class", "learner_connector", "add_default_connectors_to_learner_pipeline")
 
 
@@ -149,8 +157,6 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
         space = spaces.Box(0.0, 1.0, (height, width, channels * max(1, frame_stack)), np.float32)
     threads = max(1, cpus_per_runner // envs_per_runner)
     name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads)
-    defaults = {"train_batch_size_per_learner": 512, "minibatch_size": 128, "num_epochs": 4,
-                "lr": 2.5e-4, "gamma": 0.99, "lambda_": 0.95, "clip_param": 0.1, "entropy_coeff": 0.01, "vf_loss_coeff": 0.5}
     return (
         PPOConfig()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
@@ -159,7 +165,7 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
                      rollout_fragment_length="auto", sample_timeout_s=600.0)
         .fault_tolerance(restart_failed_env_runners=True, max_num_env_runner_restarts=100)
         .rl_module(model_config=model_config(space))
-        .training(**{**defaults, **hyperparams})
+        .training(**{**SB3_PPO_DEFAULTS, **hyperparams})
         .callbacks(VisualEnvCallbacks)
         .debugging(seed=seed, log_level="ERROR")
     )
