@@ -40,19 +40,41 @@ def tiny_goalie(tmp_path: Path, size: int = 24) -> str:
     return str(path)
 
 
-@pytest.mark.parametrize("size", [100, 24, 6])
+@pytest.mark.parametrize("size", [(100, 100), (100, 120), (24, 24), (6, 6)])
 def test_conv_filters_are_sized_from_the_observation(size):
+    """Every image size ends in NatureCNN's 512 features, one dense layer that both heads read."""
     from ray.rllib.core.models.configs import CNNEncoderConfig
 
-    from visualenv.rllib import conv_filters
+    from visualenv.rllib import FEATURES, conv_filters
 
-    encoder = CNNEncoderConfig(input_dims=(size, size, 4), cnn_filter_specifiers=conv_filters(size, size))
-    assert encoder.output_dims[0] > 0
-    if size == 100:  # RLlib's own defaults stop at 84x84: sizing the filters is what lets the paper's 100x100 through
+    encoder = CNNEncoderConfig(input_dims=(*size, 4), cnn_filter_specifiers=conv_filters(*size))
+    assert encoder.output_dims == (FEATURES,)
+    if size == (100, 100):  # RLlib's own defaults stop at 84x84: sizing the filters is what lets the paper's 100x100 through
         from ray.rllib.models.utils import get_filter_config
 
         with pytest.raises(ValueError, match="No default CNN configuration"):
             get_filter_config((100, 100, 4))
+
+
+def test_the_image_model_is_sb3s_nature_cnn_initialised_as_sb3_does():
+    """RLlib's default (PyTorch's) initialisation gave Goalie features that hardly varied with the image; SB3's orthogonal one does not."""
+    import torch
+    from gymnasium import spaces
+    from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import DefaultPPOTorchRLModule
+    from ray.rllib.core.rl_module.rl_module import RLModuleSpec
+
+    from visualenv.rllib import model_config
+
+    space = spaces.Box(0.0, 1.0, (100, 100, 4), np.float32)
+    module = RLModuleSpec(module_class=DefaultPPOTorchRLModule, observation_space=space, action_space=spaces.Discrete(2),
+                          model_config=model_config(space)).build()
+    assert sum(p.numel() for p in module.parameters()) == 2_734_243  # SB3's CnnPolicy on (4, 100, 100) with 2 actions: the same count
+    convolutions = [m for m in module.modules() if isinstance(m, torch.nn.Conv2d)]
+    assert len(convolutions) == 4
+    for conv in convolutions:
+        rows = conv.weight.detach().flatten(1)
+        gram = rows @ rows.T if rows.shape[0] <= rows.shape[1] else rows.T @ rows
+        assert torch.allclose(gram, 2 * torch.eye(len(gram)), atol=1e-4)  # orthogonal, gain sqrt(2)
 
 
 def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):

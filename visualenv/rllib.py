@@ -19,6 +19,7 @@ This module imports ray; ``import visualenv`` never imports it.
 from __future__ import annotations
 
 import inspect
+import math
 from pathlib import Path
 from typing import Any
 
@@ -32,6 +33,7 @@ from visualenv.errors import ConfigError, did_you_mean
 ENV_PREFIX = "visualenv-rllib:"
 MODULE_DIR = Path("learner_group") / "learner" / "rl_module" / "default_policy"  # the RLModule inside an Algorithm checkpoint
 NATURE_FILTERS = [[32, 8, 4, "valid"], [64, 4, 2, "valid"], [64, 3, 1, "valid"]]  # the paper's (and SB3's NatureCNN) conv stack
+FEATURES = 512  # NatureCNN's features: the one dense layer both heads read
 
 
 class ScaledImage(gym.ObservationWrapper):
@@ -77,24 +79,38 @@ def register(target: str, **env_config: Any) -> tuple[str, dict[str, Any]]:
 
 
 def conv_filters(height: int, width: int) -> list[list[Any]]:
-    """Conv filters for an image of this size: the Nature CNN where it fits (36 px and up), a small stack below."""
+    """Conv filters for an image of this size: SB3's NatureCNN where it fits (36 px and up), a small stack below.
+
+    Both end in NatureCNN's 512-unit dense layer, written as a convolution whose kernel
+    covers the whole last feature map: RLlib's encoder has no dense layer after its
+    convolutions, and its heads would otherwise each hold their own (two 2.7M-weight
+    layers where SB3 shares one).
+    """
+    from ray.rllib.core.models.configs import CNNEncoderConfig
+
     size = min(height, width)
-    if size >= 36:
-        return NATURE_FILTERS
-    if size >= 8:
-        return [[16, 3, 2, "valid"], [32, 3, 1, "valid"]]
-    return [[16, 2, 1, "valid"]]
+    stack = NATURE_FILTERS if size >= 36 else [[16, 3, 2, "valid"], [32, 3, 1, "valid"]] if size >= 8 else [[16, 2, 1, "valid"]]
+    rows, columns, _ = CNNEncoderConfig(input_dims=[height, width, 1], cnn_filter_specifiers=stack, flatten_at_end=False).output_dims
+    return [*stack, [FEATURES, [rows, columns], 1, "valid"]]
 
 
 def model_config(observation_space: spaces.Space) -> Any:
-    """RLlib's DefaultModelConfig for this observation: a CNN sized for images, an MLP for a state vector."""
+    """RLlib's DefaultModelConfig for this observation: SB3's CnnPolicy for images, an MLP for a state vector.
+
+    The CNN is initialised as SB3 initialises its NatureCNN (orthogonal, gain sqrt 2).
+    With PyTorch's default initialisation, RLlib's default, four stacked Goalie frames
+    gave features that hardly varied between observations, and the policy stayed
+    uniform through 60k steps. (RLlib's PPO builds its two output layers with
+    PyTorch's default initialisation whatever the config says.)
+    """
     from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
 
     shape = observation_space.shape or ()
     if len(shape) == 3:
         height, width = shape[:2]
-        return DefaultModelConfig(conv_filters=conv_filters(height, width), conv_activation="relu", head_fcnet_hiddens=[512],  # type: ignore[arg-type]
-                                  vf_share_layers=True)
+        return DefaultModelConfig(conv_filters=conv_filters(height, width), conv_activation="relu",  # type: ignore[arg-type]
+                                  conv_kernel_initializer="orthogonal_", conv_kernel_initializer_kwargs={"gain": math.sqrt(2)},
+                                  conv_bias_initializer="zeros_", head_fcnet_hiddens=[], vf_share_layers=True)
     return DefaultModelConfig(fcnet_hiddens=[64, 64], vf_share_layers=False)
 
 
