@@ -6,6 +6,7 @@ through `visualenv eval`'s code. A missing model fails. Nothing here trains.
 """
 
 import json
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -74,3 +75,14 @@ def test_play_shows_the_shipped_agent_what_training_showed_it():
     result = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", "pretrained", "--episodes", "5", "--seed", "0"])
     assert result.exit_code == 0, result.output
     assert result.output.count("success (caught)") >= 3, result.output
+
+
+def test_the_rllib_agent_reproduces_its_results_json(tmp_path):
+    """results/Goalie-v0-rllib/best_model, trained with --backend rllib, ships only its policy: eval and play load it as they load a run's."""
+    pytest.importorskip("ray.rllib", reason="the [ray] extra is not installed")
+    model = Path(__file__).resolve().parents[1] / "results" / "Goalie-v0-rllib" / "best_model"
+    out = tmp_path / "eval.json"
+    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(model), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "reproduces its run's results.json" in result.output, result.output
+    assert json.loads(out.read_text())["success_rate"] >= 0.8
