@@ -78,7 +78,7 @@ def test_the_image_model_is_sb3s_nature_cnn_initialised_as_sb3_does():
 
 
 def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
-    """RLlib's own PPO clips the value loss at 10 and adds a KL penalty; from pixels it then never learned Goalie."""
+    """RLlib's own PPO clips the value loss at 10 and adds a KL penalty; the backend runs SB3's PPO, and its file says so."""
     import yaml
 
     from visualenv.rllib import SB3_PPO_DEFAULTS, ppo_config

@@ -127,9 +127,9 @@ def check_observation(target: str, render: bool = True) -> spaces.Space:
     return space
 
 
-# SB3's PPO as the SB3 backend runs it for Goalie (examples/hyperparams/goalie.yaml), in RLlib's names. RLlib's own
-# defaults differ where it matters from pixels: its value loss is clipped at 10 (a +10 catch seen by a value near
-# -10 gives no gradient, so the shared CNN never learns where the ball is), and it adds an adaptive KL penalty.
+# SB3's PPO as the SB3 backend runs it for Goalie (examples/hyperparams/goalie.yaml), in RLlib's names. Where RLlib's
+# own defaults differ, SB3's are kept: RLlib clips the value loss at 10 (returns of +-10 give squared errors of
+# hundreds, whose gradient the clip zeroes), adds an adaptive KL penalty and does not clip gradients.
 SB3_PPO_DEFAULTS: dict[str, Any] = {
     "train_batch_size_per_learner": 512, "minibatch_size": 128, "num_epochs": 4, "lr": 2.5e-4, "gamma": 0.99, "lambda_": 0.95,
     "clip_param": 0.1, "entropy_coeff": 0.01, "vf_loss_coeff": 0.5,
