@@ -131,6 +131,23 @@ def test_bad_rllib_runs_are_refused_with_one_line(tmp_path, args, message):
     assert not (tmp_path / "runs").exists()
 
 
+def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
+    """--resume of a run whose checkpoint holds another model (an older visualenv's, say) names the run, not torch's traceback."""
+    from visualenv.errors import ConfigError
+    from visualenv.rllib_training import _restore
+
+    class OtherModel:
+        def restore_from_path(self, path: str) -> None:
+            raise RuntimeError("Error(s) in loading state_dict for DefaultPPOTorchRLModule:\n\tsize mismatch for pi.net.mlp.0.weight")
+
+    latest = tmp_path / "checkpoints" / "latest"
+    latest.mkdir(parents=True)
+    (latest / "visualenv.json").write_text('{"steps": 1024}')
+    with pytest.raises(ConfigError, match=r"cannot resume .*does not fit this run's model.*size mismatch for pi.net.mlp.0.weight"):
+        _restore(OtherModel(), tmp_path)
+    assert _restore(type("Fits", (), {"restore_from_path": lambda self, path: None})(), tmp_path) == 1024
+
+
 def test_a_resumed_run_keeps_its_backend(tmp_path):
     (tmp_path / "config.json").write_text(json.dumps({"config": {"spec": "Goalie-v0"}}))  # an SB3 run: no 'backend' key
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--resume", str(tmp_path)])

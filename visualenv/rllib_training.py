@@ -219,7 +219,6 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     algo_config = algorithm_config(config)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "logs").mkdir(exist_ok=True)
-    record_run(run_dir, config, str(resolve(config.spec)), resume=resume, changes=dict(changes or {}), backend=BACKEND)
     frame_stack = config.frame_stack if config.render else 0
     eval_env = make_eval_env(config.spec, seed=eval_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
     stop = _StopRequest()
@@ -228,7 +227,9 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
         with ray_cluster(address, cpus):
             algo = algo_config.build_algo()
             try:
-                results = _train_loop(config, run_dir, algo, eval_env, stop, resume)
+                steps = _restore(algo, run_dir) if resume else 0
+                record_run(run_dir, config, str(resolve(config.spec)), resume=resume, changes=dict(changes or {}), backend=BACKEND)
+                results = _train_loop(config, run_dir, algo, eval_env, stop, steps)
             finally:
                 algo.stop()
         best = run_dir / "best_model"
@@ -244,16 +245,27 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     return results
 
 
-def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: Any, stop: _StopRequest, resume: bool) -> dict[str, Any]:
+def _restore(algo: Any, run_dir: Path) -> int:
+    """Load the run's latest checkpoint into `algo`; the steps it had trained. A checkpoint of another model is refused."""
+    from visualenv.errors import ConfigError
+
+    earlier = latest_checkpoint(run_dir)
+    if earlier is None:
+        return 0
+    try:
+        algo.restore_from_path(str(earlier.resolve()))
+    except Exception as exc:  # RLlib raises whatever torch or its unpickling met; a model of another shape is the usual one
+        detail = " ".join(str(exc).split())[:300]
+        raise ConfigError(f"cannot resume {run_dir}: its checkpoint does not fit this run's model (saved by another version of "
+                          f"visualenv or with other settings?): {detail}") from None
+    return int(json.loads((earlier / "visualenv.json").read_text())["steps"])
+
+
+def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: Any, stop: _StopRequest, steps: int) -> dict[str, Any]:
     from tqdm import tqdm
 
     from visualenv.rllib import RLlibPolicy
 
-    steps = 0
-    earlier = latest_checkpoint(run_dir) if resume else None
-    if earlier is not None:
-        algo.restore_from_path(str(earlier.resolve()))
-        steps = json.loads((earlier / "visualenv.json").read_text())["steps"]
     evaluations = _Evaluations(run_dir / "evaluations.npz")
     last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps
     latest = run_dir / "checkpoints" / "latest"
