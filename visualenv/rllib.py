@@ -89,7 +89,13 @@ def conv_filters(height: int, width: int) -> list[list[Any]]:
     from ray.rllib.core.models.configs import CNNEncoderConfig
 
     size = min(height, width)
-    stack: list[list[Any]] = NATURE_FILTERS if size >= 36 else [[16, 3, 2, "valid"], [32, 3, 1, "valid"]] if size >= 8 else [[16, 2, 1, "valid"]]
+    stack: list[list[Any]]
+    if size >= 36:
+        stack = NATURE_FILTERS
+    elif size >= 8:
+        stack = [[16, 3, 2, "valid"], [32, 3, 1, "valid"]]
+    else:
+        stack = [[16, 2, 1, "valid"]]
     rows, columns, _ = CNNEncoderConfig(input_dims=[height, width, 1], cnn_filter_specifiers=stack, flatten_at_end=False).output_dims
     return [*stack, [FEATURES, [rows, columns], 1, "valid"]]
 
