@@ -32,7 +32,7 @@ from visualenv.errors import ConfigError, did_you_mean
 
 ENV_PREFIX = "visualenv-rllib:"
 MODULE_DIR = Path("learner_group") / "learner" / "rl_module" / "default_policy"  # the RLModule inside an Algorithm checkpoint
-NATURE_FILTERS = [[32, 8, 4, "valid"], [64, 4, 2, "valid"], [64, 3, 1, "valid"]]  # the paper's (and SB3's NatureCNN) conv stack
+NATURE_FILTERS: list[list[Any]] = [[32, 8, 4, "valid"], [64, 4, 2, "valid"], [64, 3, 1, "valid"]]  # the paper's (and SB3's NatureCNN) conv stack
 FEATURES = 512  # NatureCNN's features: the one dense layer both heads read
 
 
