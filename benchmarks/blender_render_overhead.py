@@ -15,7 +15,7 @@ import time
 import numpy as np
 
 from visualenv.env import VisualEnv
-from visualenv.pixels import read_bmp, to_grayscale
+from visualenv.render.pixels import read_bmp, to_grayscale
 
 
 def main(spec: str = "specs/visual_cartpole.yaml", n: int = 200) -> None:

@@ -18,7 +18,7 @@ import subprocess
 import sys
 import time
 
-from visualenv.cores import usable_cores
+from visualenv.env.cores import usable_cores
 
 CASES = ("single", "single:1", "single:1:pin", "vec", "vec:pin")
 
@@ -32,7 +32,7 @@ def run_single(spec: str, steps: int, threads: int | None, pin: bool) -> tuple[f
     if pin:
         os.sched_setaffinity(0, {min(os.sched_getaffinity(0))})
     import visualenv
-    from visualenv.bench import random_actions, run_env
+    from visualenv.tools.bench import random_actions, run_env
 
     env = visualenv.make(spec, **({"threads": threads} if threads else {}))
     actions = random_actions(env, 50 + steps, seed=0)
@@ -47,7 +47,7 @@ def run_single(spec: str, steps: int, threads: int | None, pin: bool) -> tuple[f
 def run_vec(spec: str, steps: int, workers: int, pin: bool) -> tuple[float, float]:
     import psutil
 
-    from visualenv.vector import make_vec
+    from visualenv.env.vector import make_vec
 
     vec = make_vec(spec, workers, threads=1, pin=pin)
     vec.reset(seed=0)

@@ -21,7 +21,7 @@ from typing import Any, Callable
 import numpy as np
 
 import visualenv
-from visualenv.bench import render_call_times
+from visualenv.tools.bench import render_call_times
 
 
 def median_ms(scene_name: str, n: int, before: Callable[[int], None] | None = None) -> float:

@@ -5,7 +5,7 @@ import json
 from click.testing import CliRunner
 
 import visualenv
-from visualenv.bench import StepTimes, soak
+from visualenv.tools.bench import StepTimes, soak
 from visualenv.cli import main
 
 
@@ -82,7 +82,7 @@ def test_short_soak_keeps_blender_data_blocks_and_memory_flat():
 
 
 def test_repeated_make_and_close_do_not_leak_blender_data():
-    from visualenv.bench import blender_data_blocks
+    from visualenv.tools.bench import blender_data_blocks
 
     env = visualenv.make("VisualCartPole-v0")
     env.reset(seed=0)

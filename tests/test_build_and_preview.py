@@ -85,8 +85,8 @@ def test_domain_randomization_changes_the_scene_per_episode():
 def test_play_view_override_changes_preset_and_size_keeping_aspect():
     from dataclasses import replace
 
-    from visualenv.play import with_view
-    from visualenv.registration import resolve
+    from visualenv.train.play import with_view
+    from visualenv.env.registration import resolve
 
     loaded = visualenv.load_spec(resolve("Goalie-v0"))
     assert with_view(loaded) is loaded  # nothing asked: the same spec

@@ -5,7 +5,7 @@ import pytest
 
 from visualenv.errors import RenderError
 from visualenv.render.blender.capture import Capture
-from visualenv.pixels import to_grayscale
+from visualenv.render.pixels import to_grayscale
 
 
 def srgb_bytes(linear: np.ndarray) -> np.ndarray:

@@ -6,7 +6,10 @@ import json
 import numpy as np
 import pytest
 
-from visualenv.evaluation import bootstrap_mean_interval, differences, eval_seed, recorded_evaluation, wilson_interval
+from hypothesis import given, strategies as st
+
+from visualenv.train.evaluation import (FRESH_SEED, MAX_TRAIN_SEED, bootstrap_mean_interval, differences, final_seed, legacy_eval_seed,
+                                        recorded_evaluation, seed_purpose, selection_record, selection_seed, wilson_interval)
 
 
 def test_wilson_interval_matches_the_formula_and_reaches_the_bounds():
@@ -54,7 +57,7 @@ def test_an_older_run_is_replayed_after_the_resets_of_its_periodic_evaluations(t
     # never resumed: the eval env was reset once at the start and 20 + 1 times by each of the 3 periodic evaluations
     run = _run_folder(tmp_path / "fresh", results=OLD_RESULTS, evaluations=[10_000, 20_000, 30_000], first_logged=512)
     recorded = recorded_evaluation(run)
-    assert recorded.seed == eval_seed(3) == 10_003 and recorded.resets_before == 1 + 3 * 21 and recorded.note is None
+    assert recorded.seed == legacy_eval_seed(3) == 10_003 and recorded.resets_before == 1 + 3 * 21 and recorded.note is None
     # resumed at step 36356 (a stop between two evaluations): only the evaluations after it used the final evaluation's env
     run = _run_folder(tmp_path / "resumed", results=OLD_RESULTS, evaluations=[10_000, 20_000, 30_000, 46_356, 56_356, 66_356],
                       first_logged=36_868)
@@ -71,3 +74,21 @@ def test_an_older_run_without_its_progress_log_is_evaluated_with_a_note(tmp_path
 def test_differences_names_each_figure_that_does_not_match():
     assert differences(dict(OLD_RESULTS, reward_ci95=[1, 2]), OLD_RESULTS) == []
     assert differences(dict(OLD_RESULTS, success_rate=0.82), OLD_RESULTS) == ["success_rate 0.82 (results.json: 0.84)"]
+
+
+@given(run=st.integers(0, MAX_TRAIN_SEED), other=st.integers(0, MAX_TRAIN_SEED), env=st.integers(0, 2**31))
+def test_training_selection_and_final_seeds_never_meet(run, other, env):
+    """No run's training envs or selection stream start on a seed that any run's final evaluation (or eval's default) uses."""
+    trained, picked = run + env, selection_seed(run)
+    reported = {final_seed(other), FRESH_SEED}
+    assert trained not in reported and picked not in reported and trained != selection_seed(other)
+    assert (seed_purpose(trained), seed_purpose(picked), seed_purpose(final_seed(other)), seed_purpose(FRESH_SEED)) == \
+        ("training", "selection", "final", "fresh")
+
+
+def test_the_selection_record_is_the_evaluation_that_picked_the_best_model(tmp_path):
+    np.savez(tmp_path / "evaluations.npz", timesteps=np.array([10, 20, 30]), results=np.array([[1.0, 3.0], [5.0, 5.0], [5.0, 5.0]]),
+             successes=np.array([[0, 1], [1, 0], [1, 1]]))
+    record = selection_record(tmp_path, selection_seed(7))
+    assert record == {"eval_seed": selection_seed(7), "evaluations": 3, "best_at_step": 20, "episodes": 2, "mean_reward": 5.0, "success_rate": 0.5}
+    assert selection_record(tmp_path / "missing", 0) is None

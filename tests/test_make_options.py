@@ -47,7 +47,7 @@ def test_a_bad_option_is_refused_like_the_same_value_in_a_spec(options: dict, me
 @given(st.integers(-1000, 1000))
 def test_threads_follow_the_spec_range(threads: int):
     if 0 <= threads <= 256:
-        from visualenv.options import check_make_options
+        from visualenv.spec.options import check_make_options
         check_make_options(threads=threads)
     else:
         assert "visualenv.make(): threads: expected a value" in _refusal(threads=threads)

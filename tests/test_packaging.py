@@ -1,4 +1,4 @@
-"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id; README lists every module."""
+"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id; README lists every package."""
 
 import subprocess
 import sys
@@ -18,14 +18,16 @@ def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
         archive.extractall(tmp_path / "site")
     assert shipped == bundled
     # import the unpacked wheel, not the checkout, and look a spec up by id
-    probe = "from visualenv.registration import resolve; print(resolve('Goalie-v0'))"
+    probe = "from visualenv.env.registration import resolve; print(resolve('Goalie-v0'))"
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env={"PYTHONPATH": str(tmp_path / "site")},
                          check=True, capture_output=True, text=True).stdout.strip()
     assert out == str((tmp_path / "site" / "visualenv" / "specs" / "goalie.yaml").resolve())
 
 
-def test_the_readme_layout_lists_every_module():
+def test_the_readme_layout_lists_every_package_and_top_level_module():
     readme = (ROOT / "README.md").read_text(encoding="utf-8").split("## Layout")[1]
-    modules = sorted(str(p.relative_to(ROOT)) for p in (ROOT / "visualenv").rglob("*.py") if p.name != "__init__.py")
-    missing = [m for m in modules if f"`{m}`" not in readme]
-    assert not missing, f"README's Layout table misses {missing}"
+    package = ROOT / "visualenv"
+    packages = sorted(f"visualenv/{p.parent.relative_to(package)}/" for p in package.glob("*/__init__.py"))
+    modules = sorted(p.name for p in package.glob("*.py") if p.name != "__init__.py")
+    missing = [m for m in packages if f"`{m}`" not in readme] + [m for m in modules if f"`{m}`" not in readme and f"`visualenv/{m}`" not in readme]
+    assert packages and modules and not missing, f"README's Layout table misses {missing}"

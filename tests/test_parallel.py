@@ -10,8 +10,8 @@ import pytest
 
 import visualenv
 from visualenv.errors import WorkerError
-from visualenv.sb3_vec import make_sb3_vec
-from visualenv.vector import make_vec
+from visualenv.env.sb3_vec import make_sb3_vec
+from visualenv.env.vector import make_vec
 
 
 def children() -> set[int]:
@@ -90,7 +90,7 @@ def test_a_killed_worker_raises_promptly_instead_of_hanging():
 
 
 def test_worker_cores_round_robin(monkeypatch):
-    from visualenv import cores
+    from visualenv.env import cores
 
     monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {2, 5}, raising=False)
     assert cores.worker_cores(3) == [2, 5, 2]
@@ -101,7 +101,7 @@ def test_worker_cores_round_robin(monkeypatch):
 
 
 def test_default_threads_share_the_cores_this_process_may_use(monkeypatch):
-    from visualenv import cores
+    from visualenv.env import cores
 
     monkeypatch.setattr(cores.os, "cpu_count", lambda: 64)
     monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: set(range(8)), raising=False)

@@ -16,12 +16,13 @@ import pytest
 from click.testing import CliRunner
 
 from visualenv.cli import main
+from visualenv.train.evaluation import final_seed, selection_seed
 
 REPO = Path(__file__).resolve().parents[1]
 
 
 def test_import_visualenv_never_imports_ray():
-    code = "import sys, visualenv, visualenv.cli, visualenv.training, visualenv.play; assert 'ray' not in sys.modules, 'ray imported'"
+    code = "import sys, visualenv, visualenv.cli, visualenv.train.sb3, visualenv.train.play; assert 'ray' not in sys.modules, 'ray imported'"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert result.returncode == 0, result.stderr
 
@@ -31,7 +32,7 @@ ray = pytest.importorskip("ray.rllib", reason="the [ray] extra is not installed"
 
 def tiny_goalie(tmp_path: Path, size: int = 24) -> str:
     """Goalie-v0 at a few pixels: renders in a millisecond or two (the runner tests sample many steps)."""
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
 
     text = resolve("Goalie-v0").read_text().replace("resolution: [100, 100]", f"resolution: [{size}, {size}]").replace("id: Goalie-v0", "id: TinyGoalie-v0")
     assert f"[{size}, {size}]" in text
@@ -45,7 +46,7 @@ def test_conv_filters_are_sized_from_the_observation(size):
     """Every image size ends in NatureCNN's 512 features, one dense layer that both heads read."""
     from ray.rllib.core.models.configs import CNNEncoderConfig
 
-    from visualenv.rllib import FEATURES, conv_filters
+    from visualenv.train.rllib_setup import FEATURES, conv_filters
 
     encoder = CNNEncoderConfig(input_dims=(*size, 4), cnn_filter_specifiers=conv_filters(*size))
     assert encoder.output_dims == (FEATURES,)
@@ -63,7 +64,7 @@ def test_the_image_model_is_sb3s_nature_cnn_initialised_as_sb3_does():
     from ray.rllib.algorithms.ppo.torch.default_ppo_torch_rl_module import DefaultPPOTorchRLModule
     from ray.rllib.core.rl_module.rl_module import RLModuleSpec
 
-    from visualenv.rllib import model_config
+    from visualenv.train.rllib_setup import model_config
 
     space = spaces.Box(0.0, 1.0, (100, 100, 4), np.float32)
     module = RLModuleSpec(module_class=DefaultPPOTorchRLModule, observation_space=space, action_space=spaces.Discrete(2),
@@ -81,7 +82,7 @@ def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
     """RLlib's own PPO clips the value loss at 10 and adds a KL penalty; the backend runs SB3's PPO, and its file says so."""
     import yaml
 
-    from visualenv.rllib import SB3_PPO_DEFAULTS, ppo_config
+    from visualenv.train.rllib_setup import SB3_PPO_DEFAULTS, ppo_config
 
     assert yaml.safe_load((REPO / "examples/hyperparams/goalie-rllib.yaml").read_text()) == {
         k: v for k, v in SB3_PPO_DEFAULTS.items() if k != "grad_clip_by"}
@@ -91,7 +92,7 @@ def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
 
 
 def test_runner_env_stacks_four_scaled_frames():
-    from visualenv.rllib import make_rllib_env
+    from visualenv.train.rllib_setup import make_rllib_env
 
     env = make_rllib_env({"spec": "Goalie-v0", "frame_stack": 4})
     try:
@@ -108,7 +109,7 @@ def test_runner_env_stacks_four_scaled_frames():
 
 
 def test_observations_the_encoder_cannot_take_are_refused_before_anything_starts(tmp_path):
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
 
     spec = tmp_path / "two_cameras.yaml"
     spec.write_text(resolve("Goalie-v0").read_text().replace(
@@ -134,7 +135,7 @@ def test_bad_rllib_runs_are_refused_with_one_line(tmp_path, args, message):
 def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
     """--resume of a run whose checkpoint holds another model (an older visualenv's, say) names the run, not torch's traceback."""
     from visualenv.errors import ConfigError
-    from visualenv.rllib_training import _restore
+    from visualenv.train.rllib import _restore
 
     class OtherModel:
         def restore_from_path(self, path: str) -> None:
@@ -163,7 +164,7 @@ def test_runner_options_need_the_rllib_backend(tmp_path):
 def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
     import ray
 
-    from visualenv.rllib import ppo_config
+    from visualenv.train.rllib_setup import ppo_config
 
     ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
     try:
@@ -212,6 +213,9 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     results = json.loads((run / "results.json").read_text())
     assert results["stopped_early"] is True and results["episodes"] == 2 and 64 <= results["steps"] < 100000
     assert json.loads((run / "config.json").read_text())["backend"] == "rllib"
+    # the best model was picked on one seed stream and is reported on another, as in the SB3 backend
+    assert results["selection"]["eval_seed"] == selection_seed(0) and results["eval_seed"] == final_seed(0)
+    assert results["selection"]["evaluations"] >= 1 and results["selection"]["episodes"] == 1
     with np.load(run / "evaluations.npz") as first:
         evaluated = first["timesteps"].tolist()
     assert evaluated

@@ -1,4 +1,4 @@
-"""The shipped agents (results/<Id>/best_model.zip) still beat the random policy on what they see today.
+"""The shipped agents (results/<Id>/policy.pt) still beat the random policy on what they see today.
 
 The guard that a change to rendering, the specs or the wrappers did not silently change
 what the trained agents see: each agent plays a few seeded episodes with real rendering,
@@ -14,7 +14,8 @@ from click.testing import CliRunner
 
 import visualenv
 from visualenv.cli import main
-from visualenv.evaluation import evaluate_model, pretrained_model
+from visualenv.train.evaluation import evaluate_model
+from visualenv.train.models import pretrained_model
 
 pytestmark = pytest.mark.slow
 

@@ -8,6 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 from visualenv.cli import main
+from visualenv.train.evaluation import final_seed, seed_purpose, selection_seed
 
 pytestmark = pytest.mark.slow
 
@@ -42,13 +43,22 @@ def test_train_writes_a_complete_run_folder(run_dir):
 FIGURES = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "reward_ci95", "length_ci95", "success_ci95", "eval_seed")
 
 
+def test_selection_and_final_evaluation_use_disjoint_seeds(run_dir):
+    """The SB3 backend picks its best model on one stream and reports on another; results.json records both."""
+    results = json.loads((run_dir / "results.json").read_text())
+    selection = results["selection"]
+    assert selection["eval_seed"] == selection_seed(0) and results["eval_seed"] == final_seed(0)
+    assert seed_purpose(selection["eval_seed"]) == "selection" and seed_purpose(results["eval_seed"]) == "final"
+    assert selection["evaluations"] >= 1 and selection["episodes"] == 2 and selection["best_at_step"] >= 128
+
+
 def test_eval_replays_the_runs_final_evaluation(run_dir, tmp_path):
     recorded = json.loads((run_dir / "results.json").read_text())
-    assert recorded["eval_seed"] == 10_000  # the run's seed 0 + 10000
+    assert recorded["eval_seed"] == final_seed(0)  # the run's seed 0 in the final evaluation's band
     out = tmp_path / "eval.json"
     result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "-o", str(out)])
     assert result.exit_code == 0, result.output
-    assert "2 deterministic episodes, the first reset with seed 10000" in result.output  # the run's count and seed by default
+    assert f"2 deterministic episodes, the first reset with seed {final_seed(0)}" in result.output  # the run's count and seed by default
     assert "(bootstrap)" in result.output and "(Wilson)" in result.output and "reproduces its run's results.json" in result.output
     figures = json.loads(out.read_text())
     assert {k: figures[k] for k in FIGURES} == {k: recorded[k] for k in FIGURES} and figures["matches_results_json"] is True
@@ -73,7 +83,7 @@ def test_eval_of_a_model_alone_and_its_refusals(run_dir, tmp_path):
 
 
 def test_linear_schedule_lowers_the_learning_rate_over_the_run(run_dir):
-    from visualenv.plots import read_progress
+    from visualenv.train.plots import read_progress
 
     rates = read_progress(run_dir / "logs")["train/learning_rate"]
     rates = rates[~np.isnan(rates)]
@@ -104,7 +114,7 @@ def test_config_file_must_be_a_mapping(tmp_path):
 
 
 def test_algorithm_kwargs_makes_schedules_callable():
-    from visualenv.training import algorithm_kwargs
+    from visualenv.train.sb3 import algorithm_kwargs
 
     kwargs = algorithm_kwargs("ppo", {"learning_rate": "lin_1e-3", "clip_range": 0.2, "n_steps": 64})
     assert kwargs["learning_rate"](1.0) == pytest.approx(1e-3) and kwargs["learning_rate"](0.25) == pytest.approx(2.5e-4)
@@ -129,7 +139,7 @@ def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir)
     after = np.load(run_dir / "evaluations.npz")["timesteps"].tolist()
     assert after[: len(before)] == before and len(after) > len(before)  # earlier evaluations kept, new ones added
     assert len((run_dir / "logs" / "progress-1.csv").read_text().splitlines()) == rows_before  # the first segment, kept
-    from visualenv.plots import read_progress
+    from visualenv.train.plots import read_progress
 
     steps = read_progress(run_dir / "logs")["time/total_timesteps"]
     assert steps[0] < 256 < steps[-1]  # the plots see both segments
@@ -148,10 +158,39 @@ def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
 
 
+def test_a_policy_file_plays_like_its_model_and_loads_in_sb3(run_dir, tmp_path):
+    """export-policy keeps the policy (half precision) and drops the optimizer: the shipped agents' format."""
+    import torch
+    from stable_baselines3 import PPO
+    from stable_baselines3.common.policies import ActorCriticCnnPolicy
+
+    policy_file = tmp_path / "policy.pt"
+    exported = CliRunner().invoke(main, ["export-policy", str(run_dir / "best_model.zip"), str(policy_file)])
+    assert exported.exit_code == 0, exported.output
+    assert policy_file.stat().st_size < (run_dir / "best_model.zip").stat().st_size / 4  # no optimizer, float16
+    model = PPO.load(run_dir / "best_model.zip", device="cpu")
+    policy = ActorCriticCnnPolicy.load(str(policy_file), device="cpu")  # SB3 directly: the documented recipe
+    obs = torch.as_tensor(np.random.default_rng(0).integers(0, 256, (16, *model.observation_space.shape)), dtype=torch.float32)
+    with torch.no_grad():
+        want = torch.cat([model.policy.get_distribution(obs).distribution.probs, model.policy.predict_values(obs)], 1)
+        got = torch.cat([policy.get_distribution(obs).distribution.probs, policy.predict_values(obs)], 1)
+    assert want[:, -1].std() > 1e-3  # the values differ between observations: the comparison below is not of constants
+    assert torch.allclose(want, got, atol=1e-2, rtol=1e-2)
+    webp = tmp_path / "play.webp"
+    played = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(policy_file), "--episodes", "1", "--record", str(webp),
+                                       "--view", "fast", "--view-size", "100"])
+    assert played.exit_code == 0, played.output
+    frames = iio.imread(webp)
+    assert frames.ndim == 4 and frames.shape[0] >= 10 and frames.shape[2] == 200 + 4 + 100
+    assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
+    not_a_policy = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "config.json"), "--episodes", "1"])
+    assert not_a_policy.exit_code != 0
+
+
 def test_play_refuses_what_it_cannot_do_before_playing(run_dir, tmp_path):
     model = str(run_dir / "best_model.zip")
     wrong_format = CliRunner().invoke(main, ["play", "Goalie-v0", "--episodes", "1", "--record", str(tmp_path / "play.avi")])
-    assert wrong_format.exit_code == 2 and "expected a file ending in .gif or .mp4" in wrong_format.output
+    assert wrong_format.exit_code == 2 and "expected a file ending in .gif or .webp or .mp4" in wrong_format.output
     other_env = CliRunner().invoke(main, ["play", "Hover2D-v0", "--model", model, "--episodes", "1"])
     assert other_env.exit_code == 1 and "was trained on observations (4, 100, 100) and actions Discrete(2)" in other_env.output
     assert "actions Discrete(4)" in other_env.output  # Hover2D's four pulses
@@ -170,7 +209,7 @@ def test_resume_needs_a_run_folder(tmp_path):
 
 def multi_camera_cartpole(tmp_path, side: str) -> str:
     """VisualCartPole with a Dict observation: the usual grayscale camera and a small RGB one."""
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
 
     text = resolve("VisualCartPole-v0").read_text().replace("id: VisualCartPole-v0", "id: MultiCart-v0").replace(
         "  camera: Camera\n  resolution: [100, 100]\n  color: grayscale\n",

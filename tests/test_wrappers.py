@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 from gymnasium import spaces
 
-from visualenv.wrappers import FrameStack, Grayscale, Resize, wrap_observation
+from visualenv.env.wrappers import FrameStack, Grayscale, Resize, wrap_observation
 
 
 class Counter(gym.Env):

@@ -98,7 +98,7 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
     (opens in Blender) and preview.png (observation beside the high-res view).
     An earlier build is replaced only when the new one succeeded.
     """
-    from visualenv.build import build_env
+    from visualenv.tools.build import build_env
 
     result = build_env(spec, out_dir, seed=seed, device=device)
     click.echo(f"built {result.env_id} in {result.seconds:.1f} s -> {result.folder}/")
@@ -118,8 +118,8 @@ def inspect(blend: str, as_json: bool) -> None:
 
     The file is read in a child process: a file that crashes Blender is reported, not fatal.
     """
-    from visualenv import blendfile
-    from visualenv.starter import format_report
+    from visualenv.render.blender import blendfile
+    from visualenv.tools.starter import format_report
 
     info = blendfile.describe(_blend_path(blend))
     click.echo(json.dumps(info, indent=1, ensure_ascii=False) if as_json else format_report(info))
@@ -132,8 +132,8 @@ def inspect(blend: str, as_json: bool) -> None:
 @_friendly
 def init(blend: str, out_path: str | None, force: bool) -> None:
     """Write a starter spec over BLEND that builds as it is: the file's scene, its first camera, placeholder state, actions and dynamics."""
-    from visualenv import blendfile
-    from visualenv.starter import starter_spec
+    from visualenv.render.blender import blendfile
+    from visualenv.tools.starter import starter_spec
 
     path = _blend_path(blend)
     out = Path(out_path) if out_path else Path(path.stem + ".yaml")
@@ -149,7 +149,7 @@ def init(blend: str, out_path: str | None, force: bool) -> None:
 
 
 def _blend_path(blend: str) -> Path:
-    from visualenv.blendfile import is_blend_file
+    from visualenv.render.blender.blendfile import is_blend_file
 
     path = Path(blend)
     if not is_blend_file(path):
@@ -165,7 +165,7 @@ def _blend_path(blend: str) -> Path:
 @_friendly
 def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
     """Save a few frames (observation beside the high-res view) of a random episode."""
-    from visualenv.build import preview_frames
+    from visualenv.tools.build import preview_frames
 
     paths = preview_frames(spec, out_dir, steps=steps, seed=seed)
     click.echo(f"wrote {len(paths)} frames to {out_dir}/")
@@ -173,7 +173,7 @@ def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
 
 def _video_path(value: str | None) -> str | None:
     """--record checked as play() checks it, reported as a bad option."""
-    from visualenv.play import check_recording
+    from visualenv.train.play import check_recording
 
     if value is not None:
         try:
@@ -184,10 +184,10 @@ def _video_path(value: str | None) -> str | None:
 
 
 def _model_file(spec: str, value: str) -> str:
-    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/best_model.zip)."""
+    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/policy.pt)."""
     if value == PRETRAINED:
-        from visualenv.evaluation import pretrained_model
-        from visualenv.registration import resolve
+        from visualenv.train.models import pretrained_model
+        from visualenv.env.registration import resolve
         from visualenv.spec.loader import load_spec
 
         return str(pretrained_model(load_spec(resolve(spec)).spec.id))
@@ -211,8 +211,9 @@ def _parse_value(text: str) -> Any:
 @click.option("--frame-stack", default=4, show_default=True, type=click.IntRange(min=1), help="frames per observation (1: no stacking)")
 @click.option("--eval-every", default=10_000, show_default=True, type=click.IntRange(min=1), help="env steps between evaluations")
 @click.option("--eval-episodes", default=10, show_default=True, type=click.IntRange(min=1))
-@click.option("--final-episodes", default=50, show_default=True, type=click.IntRange(min=1), help="episodes of the best model's final evaluation")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
+@click.option("--final-episodes", default=100, show_default=True, type=click.IntRange(min=1),
+              help="episodes of the best model's final evaluation, on seeds that neither training nor selection uses")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31 - 1))
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run")
 @click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
@@ -234,9 +235,9 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
     With --backend rllib the envs run in Ray RLlib EnvRunners, on this machine or a cluster (--address).
     """
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
-    from visualenv.training import TrainConfig, check_config, new_run_dir, train as run_training
+    from visualenv.train.sb3 import TrainConfig, check_config, new_run_dir, train as run_training
 
     ctx = click.get_current_context()
     hyper = _hyperparameters(config_file, overrides)
@@ -308,7 +309,7 @@ def _refuse_fixed_on_resume(ctx: click.Context, names: Sequence[str], what_chang
 
 
 def _resumed(config_class: Any, resume_dir: str, steps: int | None, hyper: dict[str, Any], progress: bool) -> Any:
-    from visualenv.training import resumed_config
+    from visualenv.train.sb3 import resumed_config
 
     try:
         return resumed_config(config_class, Path(resume_dir), steps=steps, hyperparams=hyper, progress=progress)
@@ -326,15 +327,15 @@ def _run_backend(run_dir: str) -> str:
 
 def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[str, Any], resume_dir: str | None, out_root: str,
                  address: str | None, progress: bool) -> None:
-    """`train --backend rllib`: checked before a run folder exists, then visualenv.rllib_training.train."""
+    """`train --backend rllib`: checked before a run folder exists, then visualenv.train.rllib.train."""
     try:
-        from visualenv.rllib_training import RLlibTrainConfig, algorithm_config, train as run_training
+        from visualenv.train.rllib import RLlibTrainConfig, algorithm_config, train as run_training
     except ImportError as exc:
         raise click.UsageError(f"--backend rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
-    from visualenv.registration import resolve
-    from visualenv.rllib import check_address
+    from visualenv.env.registration import resolve
+    from visualenv.train.rllib_setup import check_address
     from visualenv.spec.loader import load_spec
-    from visualenv.training import new_run_dir
+    from visualenv.train.sb3 import new_run_dir
 
     import logging
 
@@ -365,12 +366,12 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
 
 @main.command()
 @click.argument("spec")
-@click.option("--model", "model_path", help="a trained model (.zip, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/best_model.zip); default: random actions")
+@click.option("--model", "model_path", help="a trained model (.zip, a policy file .pt, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/policy.pt); default: random actions")
 @click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
 @click.option("--record", type=click.Path(dir_okay=False), callback=lambda ctx, param, value: _video_path(value),
-              help="save a .gif or .mp4 of the view beside the observation")
+              help="save a .gif, .webp (smallest) or .mp4 of the view beside the observation")
 @click.option("--view", "view_preset", type=click.Choice(["fast", "quality"]), default=None,
               help="render preset of the recorded view (default: the spec's; 'fast' records in seconds)")
 @click.option("--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels")
@@ -378,7 +379,7 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
 def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int, record: str | None, view_preset: str | None,
          view_size: int | None) -> None:
     """Run episodes with a random or trained policy; print returns, lengths and success."""
-    from visualenv.play import play as run_play
+    from visualenv.train.play import play as run_play
 
     if model_path is not None:
         model_path = _model_file(spec, model_path)
@@ -395,11 +396,11 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @main.command("eval")
 @click.argument("spec")
 @click.option("--model", "model_path", required=True,
-              help="a trained model (.zip, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/best_model.zip)")
+              help="a trained model (.zip, a policy file .pt, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/policy.pt)")
 @click.option("--algo", type=click.Choice(ALGORITHMS), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
-@click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 50]")
+@click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 100]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
-              help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 10000]")
+              help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 12884901888, a seed no run trains, selects or reports on]")
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None) -> None:
@@ -410,13 +411,17 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
     and config.json lie beside the model, as in runs/<Id>/<time>/ and results/<Id>/),
     the episodes are those of the run's final evaluation and the figures match its results.json.
     """
-    from visualenv.evaluation import differences, evaluate_model
+    from visualenv.train.evaluation import differences, evaluate_model, seed_purpose
 
     model_path = _model_file(spec, model_path)
     if json_out:
         _check_writable(json_out, "--out")
     results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed)
     click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}")
+    purpose = seed_purpose(results["eval_seed"])
+    if purpose in ("training", "selection"):
+        click.echo(f"note: seed {results['eval_seed']} lies in the {purpose} band: a run seeded near it has seen these episodes "
+                   "(the defaults play episodes no run trains or selects on)")
     (r_lo, r_hi), (l_lo, l_hi), (s_lo, s_hi) = results["reward_ci95"], results["length_ci95"], results["success_ci95"]
     click.echo(f"  mean return   {results['mean_reward']:8.2f}  95 % CI [{r_lo:.2f}, {r_hi:.2f}] (bootstrap), std {results['std_reward']:.2f}")
     click.echo(f"  mean length   {results['mean_length']:8.2f}  95 % CI [{l_lo:.2f}, {l_hi:.2f}] (bootstrap)")
@@ -432,6 +437,33 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
         record = {"spec": spec, "model": model_path, **results, "matches_results_json": matches}
         Path(json_out).write_text(json.dumps(record, indent=2) + "\n")
         click.echo(f"wrote {json_out}")
+
+
+@main.command("export-policy")
+@click.argument("model", type=click.Path(exists=True))
+@click.argument("out", type=click.Path())
+@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
+@click.option("--float32", "full", is_flag=True, help="keep float32 weights (default: float16, half the size)")
+@_friendly
+def export_policy(model: str, out: str, algo: str, full: bool) -> None:
+    """Write the policy of a trained model without the optimizer's state: what the shipped agents in results/ are.
+
+    An SB3 model (.zip) becomes a policy file (OUT ending in .pt), which `play`, `eval` and `--model`
+    take like the .zip and SB3 loads with its policy class's ``load`` (``ActorCriticCnnPolicy.load(OUT)``).
+    An RLlib checkpoint folder becomes a checkpoint folder OUT holding its RLModule only.
+    """
+    from visualenv.train.models import POLICY_SUFFIXES, load_model, save_policy, save_rllib_policy
+
+    if Path(model).is_dir():
+        folder = save_rllib_policy(model, out, half=not full)
+        size = sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())
+        click.echo(f"wrote {folder} ({size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights)")
+        return
+    if Path(out).suffix not in POLICY_SUFFIXES:
+        raise click.BadParameter(f"expected a file ending in {' or '.join(POLICY_SUFFIXES)}", param_hint="OUT")
+    _check_writable(out, "OUT")
+    path = save_policy(load_model(model, algo), out, half=not full)
+    click.echo(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights)")
 
 
 def _check_writable(path: str, option: str) -> None:
@@ -463,8 +495,8 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
 
     import psutil
 
-    from visualenv.bench import as_dict, bench_one
-    from visualenv.cores import usable_cores
+    from visualenv.tools.bench import as_dict, bench_one
+    from visualenv.env.cores import usable_cores
 
     if json_out:
         _check_writable(json_out, "--json")
@@ -492,7 +524,7 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
 def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:
     """Env steps/s through RLlib's EnvRunners vs SB3's SubprocVecEnv (same spec, same envs); memory per runner; time to first sample."""
     try:
-        from visualenv.rllib_bench import as_dict, bench_rllib as run_bench
+        from visualenv.tools.bench_rllib import as_dict, bench_rllib as run_bench
     except ImportError as exc:
         raise click.UsageError(f"bench-rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
     import logging

@@ -6,14 +6,14 @@ import platform
 
 import numpy as np
 
+__version__ = "0.1.0"
+
 
 def versions() -> dict[str, str]:
     """visualenv, Gymnasium, numpy, Python and (when bpy imports) Blender versions."""
     import gymnasium
 
-    import visualenv
-
-    out = {"visualenv": visualenv.__version__, "gymnasium": gymnasium.__version__, "numpy": np.__version__, "python": platform.python_version()}
+    out = {"visualenv": __version__, "gymnasium": gymnasium.__version__, "numpy": np.__version__, "python": platform.python_version()}
     try:
         import bpy
 

@@ -25,7 +25,7 @@ from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mea
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
-from visualenv.options import WHERE as OPTIONS_WHERE
+from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem

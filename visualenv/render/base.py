@@ -18,7 +18,7 @@ from typing import Any, Callable, Literal, Mapping, Sequence, get_args
 import numpy as np
 from gymnasium import spaces
 
-from visualenv.options import RENDER_OVERRIDES, check_make_options
+from visualenv.spec.options import RENDER_OVERRIDES, check_make_options
 from visualenv.spec.models import CameraView, Observation, RenderSettings, Scene
 from visualenv.spec.source import SourceMap
 

@@ -24,7 +24,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.errors import RenderError
-from visualenv.pixels import LUMA_601
+from visualenv.render.pixels import LUMA_601
 
 _armed: Capture | None = None
 _installed: bool | None = None

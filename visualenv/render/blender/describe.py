@@ -1,4 +1,4 @@
-"""What a .blend holds, as a spec writer needs it; run in a child process (see :mod:`visualenv.blendfile`).
+"""What a .blend holds, as a spec writer needs it; run in a child process (see :mod:`visualenv.render.blender.blendfile`).
 
 Opening a user's file can crash Blender, so this module is the body of a reader process: it reads
 requests (one JSON line: ``{"path": ...}``) on stdin and answers each with one JSON line on the

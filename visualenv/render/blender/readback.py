@@ -1,7 +1,7 @@
 """Where a file render goes, and keeping Blender's per-render line off stdout.
 
 Blender writes the render to a 24-bit BMP (``write_still``) in ``/dev/shm``
-(a RAM disk; falls back to the temp dir), and :func:`visualenv.pixels.read_bmp`
+(a RAM disk; falls back to the temp dir), and :func:`visualenv.render.pixels.read_bmp`
 views it with numpy. Each renderer owns one file, deleted on close or when the
 renderer is garbage-collected (:class:`OutputFile`).
 """

@@ -11,7 +11,7 @@ import bpy
 import numpy as np
 
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, in_file_order
-from visualenv.pixels import first_channel, read_bmp, to_grayscale
+from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file

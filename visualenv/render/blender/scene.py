@@ -24,8 +24,8 @@ import bmesh
 import bpy
 from mathutils import Matrix, Vector
 
-from visualenv.blendfile import BlendReadError
-from visualenv import blendfile
+from visualenv.render.blender.blendfile import BlendReadError
+from visualenv.render.blender import blendfile
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world

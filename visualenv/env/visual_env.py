@@ -14,7 +14,7 @@ from gymnasium.error import ResetNeeded
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
-from visualenv.faults import FaultDiagnosis
+from visualenv.env.faults import FaultDiagnosis
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
 from visualenv.spec.loader import LoadedSpec, load_spec
 

@@ -41,7 +41,7 @@ class _Reader:
         if self.proc is None or self.proc.poll() is not None or self.owner != os.getpid():
             self.owner = os.getpid()
             env = dict(os.environ)
-            root = str(Path(__file__).resolve().parent.parent)
+            root = str(Path(__file__).resolve().parents[3])  # the folder holding the visualenv package
             env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
             self.proc = subprocess.Popen(self.command, stdin=subprocess.PIPE,
                                          stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, encoding="utf-8", env=env)

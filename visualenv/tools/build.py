@@ -21,8 +21,8 @@ from typing import Any
 from PIL import Image
 
 from visualenv.files import make_dir
-from visualenv.images import ascii_art, side_by_side
-from visualenv.registration import resolve
+from visualenv.render.images import ascii_art, side_by_side
+from visualenv.env.registration import resolve
 from visualenv.versions import versions
 
 

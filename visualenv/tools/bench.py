@@ -144,12 +144,12 @@ def blender_data_blocks() -> int:
 
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
               workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = False) -> Figures:
-    import visualenv
+    from visualenv.env.make import make
 
     options: dict[str, Any] = {"readback": readback}
     if threads:
         options["threads"] = threads
-    env = StepTimes(visualenv.make(spec, **options))
+    env = StepTimes(make(spec, **options))
     base: Any = env.unwrapped  # the VisualEnv under the wrappers
     figures = Figures(spec=str(spec), steps=steps)
     actions = random_actions(env, warmup + steps, seed)
@@ -307,8 +307,8 @@ class StepTimes(gym.Wrapper):
 def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
                    pin: bool = False) -> dict[str, Any]:
     """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each)."""
-    from visualenv.cores import default_threads, worker_cores
-    from visualenv.vector import make_vec
+    from visualenv.env.cores import default_threads, worker_cores
+    from visualenv.env.vector import make_vec
 
     threads = default_threads(workers)
     pinned = any(core is not None for core in worker_cores(workers, pin))  # pinning needs two cores to choose from

@@ -1,12 +1,12 @@
 """`visualenv train --backend rllib`: PPO on a Ray cluster, writing the SB3 backend's run folder.
 
-The run folder has the layout :mod:`visualenv.training` describes, with RLlib
+The run folder has the layout :mod:`visualenv.train.sb3` describes, with RLlib
 checkpoint folders in place of SB3's zip files: ``best_model/``,
 ``final_model/`` and ``checkpoints/latest/`` (each a full Algorithm checkpoint;
 ``visualenv play --model`` takes any of them). ``logs/progress.csv`` uses SB3's
 column names, ``evaluations.npz`` EvalCallback's arrays, and the plots and
 ``results.json`` are drawn and computed by the same code as the SB3 backend's
-(:func:`visualenv.plots.training_plots`, :func:`visualenv.evaluation.final_evaluation`).
+(:func:`visualenv.train.plots.training_plots`, :func:`visualenv.train.evaluation.final_evaluation`).
 The evaluation env runs in the driver, as SB3's does, so the driver renders only
 while it evaluates; the runners sample on the cluster.
 
@@ -32,6 +32,8 @@ from typing import Any
 
 import numpy as np
 
+from visualenv.train.evaluation import FINAL_EPISODES
+
 BACKEND = "rllib"
 PROGRESS_COLUMNS = ("time/total_timesteps", "time/iterations", "time/fps", "time/time_elapsed", "rollout/ep_rew_mean",
                     "rollout/ep_len_mean", "rollout/success_rate", "train/learning_rate", "train/policy_loss", "train/value_loss",
@@ -47,7 +49,7 @@ class RLlibTrainConfig:
     frame_stack: int = 4
     eval_every: int = 10_000  # env steps between evaluations (and checkpoints)
     eval_episodes: int = 10
-    final_eval_episodes: int = 50
+    final_eval_episodes: int = FINAL_EPISODES
     seed: int = 0
     render: bool = True
     hyperparams: dict[str, Any] = field(default_factory=dict)
@@ -58,7 +60,7 @@ class RLlibTrainConfig:
 
 def algorithm_config(config: RLlibTrainConfig) -> Any:
     """The PPOConfig of this run; checks the spec and the hyperparameters before anything starts."""
-    from visualenv.rllib import ppo_config
+    from visualenv.train.rllib_setup import ppo_config
 
     return ppo_config(config.spec, env_runners=config.env_runners, envs_per_runner=config.envs_per_runner,
                       frame_stack=config.frame_stack if config.render else 0, seed=config.seed, render=config.render,
@@ -208,19 +210,19 @@ def _append_progress(path: Path, row: dict[str, Any]) -> None:
 def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None,
           address: str | None = None) -> dict[str, Any]:
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
-    from visualenv.plots import training_plots
-    from visualenv.training import record_run
-    from visualenv.registration import resolve
-    from visualenv.rllib import RLlibPolicy, check_address
-    from visualenv.cores import usable_cores
-    from visualenv.evaluation import eval_seed, final_evaluation, make_eval_env
+    from visualenv.train.plots import training_plots
+    from visualenv.train.sb3 import record_run
+    from visualenv.env.registration import resolve
+    from visualenv.train.rllib_setup import RLlibPolicy, check_address
+    from visualenv.env.cores import usable_cores
+    from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_record, selection_seed
 
     check_address(address)
     algo_config = algorithm_config(config)
     run_dir.mkdir(parents=True, exist_ok=True)
     (run_dir / "logs").mkdir(exist_ok=True)
     frame_stack = config.frame_stack if config.render else 0
-    eval_env = make_eval_env(config.spec, seed=eval_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
+    eval_env = make_eval_env(config.spec, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
     stop = _StopRequest()
     cpus = max(len(usable_cores()), config.env_runners)  # a local cluster: one CPU per runner even on a small machine
     try:
@@ -234,12 +236,13 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
                 algo.stop()
         best = run_dir / "best_model"
         model = best if best.exists() else run_dir / "final_model"
-        results.update(final_evaluation(RLlibPolicy.load(model), eval_env, config.final_eval_episodes, eval_seed(config.seed)))
+        results.update(final_evaluation(RLlibPolicy.load(model), eval_env, config.final_eval_episodes, final_seed(config.seed)))
     finally:
         eval_env.close()
     results["model"] = model.name
+    results["selection"] = selection_record(run_dir, selection_seed(config.seed))
     results = {k: results[k] for k in ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "reward_ci95", "length_ci95",
-                                       "success_ci95", "ci_method", "eval_seed", "steps", "wall_time_s", "model", "stopped_early")}
+                                       "success_ci95", "ci_method", "eval_seed", "selection", "steps", "wall_time_s", "model", "stopped_early")}
     (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     training_plots(run_dir)
     return results
@@ -264,7 +267,7 @@ def _restore(algo: Any, run_dir: Path) -> int:
 def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: Any, stop: _StopRequest, steps: int) -> dict[str, Any]:
     from tqdm import tqdm
 
-    from visualenv.rllib import RLlibPolicy
+    from visualenv.train.rllib_setup import RLlibPolicy
 
     evaluations = _Evaluations(run_dir / "evaluations.npz")
     last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps

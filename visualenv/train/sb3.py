@@ -34,9 +34,10 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
-from visualenv.cores import usable_cores
+from visualenv.env.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
-from visualenv.evaluation import eval_seed, final_evaluation, make_eval_env
+from visualenv.train.evaluation import FINAL_EPISODES, final_evaluation, final_seed, make_eval_env, selection_record, selection_seed
+from visualenv.train.models import algorithm_class, load_model
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
 SET_BY_TRAIN = ("policy", "env", "seed", "verbose", "tensorboard_log", "_init_setup_model")  # not hyperparameters
@@ -51,7 +52,7 @@ class TrainConfig:
     frame_stack: int = 4
     eval_every: int = 10_000  # env steps between evaluations
     eval_episodes: int = 10
-    final_eval_episodes: int = 50
+    final_eval_episodes: int = FINAL_EPISODES
     seed: int = 0
     render: bool = True  # False: state-only env and an MLP policy
     hyperparams: dict[str, Any] = field(default_factory=dict)
@@ -64,15 +65,6 @@ class TrainConfig:
         if isinstance(observation_space, spaces.Dict):
             return "MultiInputPolicy"
         return "CnnPolicy" if self.render else "MlpPolicy"
-
-
-def algorithm_class(name: str) -> Any:
-    import stable_baselines3 as sb3
-
-    classes = {"ppo": sb3.PPO, "a2c": sb3.A2C, "dqn": sb3.DQN}
-    if name not in classes:
-        raise ValueError(f"unknown algorithm '{name}': expected one of {', '.join(classes)}")
-    return classes[name]
 
 
 def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
@@ -137,7 +129,7 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     A resumed run continues from ``checkpoints/latest.zip``; `changes` are hyperparameters
     that differ from the saved model's from now on (recorded in config.json under ``resumes``).
     """
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
 
     spec_path = str(resolve(config.spec))
     changes = dict(changes or {})
@@ -176,13 +168,13 @@ def record_run(run_dir: Path, config: Any, spec_path: str, *, resume: bool, chan
 
 def _make_envs(config: TrainConfig, spec_path: str, run_dir: Path, resume: bool) -> tuple[Any, Any]:
     """The training envs (subprocesses, one Blender each) and the evaluation env, which renders once now to fail early."""
-    from visualenv.sb3_vec import make_sb3_vec
+    from visualenv.env.sb3_vec import make_sb3_vec
 
     frame_stack = config.frame_stack if config.render else 0
     train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
                              monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     try:
-        eval_env = make_eval_env(spec_path, seed=eval_seed(config.seed), frame_stack=frame_stack, render=config.render)
+        eval_env = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render)
         eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
     except BaseException:
         train_env.close()
@@ -228,16 +220,16 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest
 
 def _finish(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest: Path, *, wall: float, stopped_early: bool) -> dict[str, Any]:
     """The best model's final evaluation (closing the eval env), results.json and the plots."""
-    from visualenv.play import load_model
-    from visualenv.plots import training_plots
+    from visualenv.train.plots import training_plots
 
     best = run_dir / "best_model.zip"
     evaluated = best if best.exists() else latest
     try:
-        results = final_evaluation(load_model(str(evaluated), config.algo), eval_env, config.final_eval_episodes, eval_seed(config.seed))
+        results = final_evaluation(load_model(str(evaluated), config.algo), eval_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         eval_env.close()
-    results.update({"steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": evaluated.name, "stopped_early": stopped_early})
+    results.update({"selection": selection_record(run_dir, selection_seed(config.seed)), "steps": int(model.num_timesteps),
+                    "wall_time_s": round(wall, 1), "model": evaluated.name, "stopped_early": stopped_early})
     (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     training_plots(run_dir)
     return results
@@ -264,7 +256,7 @@ def check_cnn_input(loaded: Any, hyperparams: dict[str, Any]) -> None:
 
 def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """What can be wrong with a run before any env starts; the algorithm's keyword arguments (all, and the changed ones)."""
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
 
     kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})

@@ -51,7 +51,7 @@ class RLlibFigures:
 
 
 def _sb3_steps_per_s(spec: str, envs: int, steps: int, warmup: int) -> tuple[float, list[float]]:
-    from visualenv.sb3_vec import make_sb3_vec
+    from visualenv.env.sb3_vec import make_sb3_vec
 
     vec = make_sb3_vec(spec, envs, frame_stack=4)
     try:
@@ -85,7 +85,7 @@ def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20) ->
     """RLlib first (its time to first sample counts from this process's start), then SB3."""
     import ray
 
-    from visualenv.rllib import ppo_config
+    from visualenv.train.rllib_setup import ppo_config
 
     figures = RLlibFigures(spec=spec, envs=envs, steps_per_env=steps)
     process_start = psutil.Process().create_time()

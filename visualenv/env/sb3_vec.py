@@ -8,8 +8,8 @@ from typing import Any
 
 import gymnasium as gym
 
-from visualenv.cores import worker_cores
-from visualenv.vector import make_in_worker, with_render_threads
+from visualenv.env.cores import worker_cores
+from visualenv.env.vector import make_in_worker, with_render_threads
 
 
 def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None, pin: bool = False,

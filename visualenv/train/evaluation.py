@@ -4,6 +4,13 @@ Both run :func:`final_evaluation` on the env :func:`make_eval_env` makes, so
 ``visualenv eval`` with the seed a run recorded (``eval_seed`` in results.json)
 plays the same episodes and prints the same numbers as the run's results.json.
 
+Seeds come in bands that never meet, so the figure a run reports is measured on
+episodes that neither trained nor picked its model (picking the best of many close
+evaluations biases the winner's score upward). A run seeded ``s`` (below
+:data:`MAX_TRAIN_SEED`) trains on ``s, s+1, ...``, picks its best model on the stream
+:func:`selection_seed` ``(s)`` and reports :func:`final_seed` ``(s)``; ``visualenv eval``
+of a model without a run plays :data:`FRESH_SEED`.
+
 Intervals are 95 %: a percentile bootstrap of the mean (10,000 resamples, a fixed
 resampling seed, so the same episodes give the same interval) for the return and
 the length, and the Wilson score interval for the success rate (sound near 0 and 1,
@@ -21,10 +28,15 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.errors import VisualEnvError
-from visualenv.wrappers import subspaces
+from visualenv.env.wrappers import FrameStack, subspaces
+from visualenv.train.models import load_model, stacked_like
 
-EVAL_SEED_OFFSET = 10_000  # the eval env's seed is the run's seed + this: its episodes are not the training envs'
+SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
+MAX_TRAIN_SEED = 2**31 - 1  # `train --seed`: with up to 2**31 envs, training seeds stay in band 0
+SELECTION_BAND, FINAL_BAND, FRESH_BAND = 1, 2, 3
+FRESH_SEED = FRESH_BAND * SEED_BAND  # `eval` of a model without a run: no run trains, selects or reports on these episodes
+FINAL_EPISODES = 100  # the final evaluation's episodes by default
+LEGACY_EVAL_OFFSET = 10_000  # runs before the bands picked and reported on one stream, seeded the run's seed + this
 CONFIDENCE = 0.95
 Z_95 = 1.959963984540054  # standard normal quantile of 0.975
 BOOTSTRAP_RESAMPLES = 10_000
@@ -32,9 +44,42 @@ CI_METHOD = "95 %: percentile bootstrap of the mean (10,000 resamples) for retur
 RESULT_KEYS = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate")  # what results.json has always held
 
 
-def eval_seed(train_seed: int) -> int:
-    """The seed of a run's evaluation env (its periodic evaluations and the final one)."""
-    return train_seed + EVAL_SEED_OFFSET
+def selection_seed(train_seed: int) -> int:
+    """The seed of a run's periodic evaluations, which pick its best model."""
+    return SELECTION_BAND * SEED_BAND + train_seed
+
+
+def final_seed(train_seed: int) -> int:
+    """The seed of a run's final evaluation (results.json): episodes never used in training or selection."""
+    return FINAL_BAND * SEED_BAND + train_seed
+
+
+def seed_purpose(seed: int) -> str:
+    """Which use a seed's band is for: 'training', 'selection', 'final' or 'fresh'."""
+    return ("training", "selection", "final", "fresh")[min(seed // SEED_BAND, FRESH_BAND)]
+
+
+def legacy_eval_seed(train_seed: int) -> int:
+    """The one evaluation stream of runs made before selection and report were split."""
+    return train_seed + LEGACY_EVAL_OFFSET
+
+
+def selection_record(run_dir: Path, seed: int) -> dict[str, Any] | None:
+    """The periodic evaluation that picked the best model (the first with the highest mean return, as SB3's EvalCallback picks)."""
+    try:
+        with np.load(run_dir / "evaluations.npz") as saved:
+            timesteps, returns = saved["timesteps"], saved["results"]
+            successes = saved["successes"] if "successes" in saved.files else None
+    except (OSError, KeyError, ValueError):
+        return None
+    if len(timesteps) == 0:
+        return None
+    best = int(np.argmax(returns.mean(axis=1)))
+    record: dict[str, Any] = {"eval_seed": seed, "evaluations": len(timesteps), "best_at_step": int(timesteps[best]),
+                              "episodes": int(returns.shape[1]), "mean_reward": float(returns[best].mean())}
+    if successes is not None and len(successes) == len(timesteps):
+        record["success_rate"] = float(np.mean(successes[best]))
+    return record
 
 
 def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True, transpose: bool = True) -> Any:
@@ -44,7 +89,7 @@ def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool =
     """
     from stable_baselines3.common.vec_env import VecTransposeImage
 
-    from visualenv.sb3_vec import make_sb3_vec
+    from visualenv.env.sb3_vec import make_sb3_vec
 
     state_only: dict[str, Any] = {} if render else {"render": False}
     env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **state_only)
@@ -165,7 +210,7 @@ def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
               "frame_stack": int(config.get("frame_stack", 1)) if render else 0, "results": results}
     if results is not None and "eval_seed" in results:
         return RecordedEvaluation(seed=int(results["eval_seed"]), **common)
-    seed = eval_seed(int(config.get("seed", 0)))
+    seed = legacy_eval_seed(int(config.get("seed", 0)))
     if results is None:
         return RecordedEvaluation(seed=seed, **common)
     periodic = _periodic_evaluations_in_last_segment(run_dir) if record.get("backend", "sb3") == "sb3" else None
@@ -209,20 +254,18 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
 
     Unset arguments take the run's values (config.json and results.json beside the model),
-    else PPO, 50 episodes and seed 10000; the run's final evaluation is replayed when the
+    else PPO, 100 episodes and :data:`FRESH_SEED`; the run's final evaluation is replayed when the
     seed is the run's.
     """
     from gymnasium import spaces
 
     from visualenv.env import VisualEnv
-    from visualenv.play import load_model, stacked_like
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
-    from visualenv.wrappers import FrameStack
 
     recorded = recorded_evaluation(Path(model_path).parent)
     if seed is None:
-        seed = recorded.seed if recorded else eval_seed(0)
+        seed = recorded.seed if recorded else FRESH_SEED
     replayed = recorded if recorded is not None and seed == recorded.seed else None
     model = load_model(str(model_path), algo or (recorded.algo if recorded else "ppo"))
     space = model.observation_space
@@ -233,7 +276,7 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
     frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
     vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render, transpose=not channels_last_images(space))
     try:
-        results = final_evaluation(model, vec_env, episodes or (recorded.episodes if recorded else 50), seed,
+        results = final_evaluation(model, vec_env, episodes or (recorded.episodes if recorded else FINAL_EPISODES), seed,
                                    resets_before=replayed.resets_before if replayed else 0)
     finally:
         vec_env.close()
@@ -244,12 +287,3 @@ def differences(results: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
     """The figures of results.json that `results` does not reproduce exactly."""
     return [f"{key} {results.get(key)} (results.json: {recorded[key]})" for key in RESULT_KEYS
             if key in recorded and results.get(key) != recorded[key]]
-
-
-def pretrained_model(env_id: str) -> Path:
-    """The shipped agent of a bundled env: results/<Id>/best_model.zip in the source checkout."""
-    path = Path(__file__).resolve().parent.parent / "results" / env_id / "best_model.zip"
-    if not path.is_file():
-        raise VisualEnvError(f"no shipped model for {env_id}: {path} does not exist "
-                             "(the shipped models come with a checkout of the repository; train one with `visualenv train`)")
-    return path

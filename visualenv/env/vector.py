@@ -2,11 +2,11 @@
 
 bpy holds one Blender per process, so parallel rendering needs processes:
 :func:`make_vec` gives a Gymnasium ``AsyncVectorEnv`` (SB3's ``SubprocVecEnv``
-is in :mod:`visualenv.sb3_vec`). Each worker builds its env (and its renderer)
+is in :mod:`visualenv.env.sb3_vec`). Each worker builds its env (and its renderer)
 from the spec, with ``threads`` render threads: with C cores usable by this
 process (its affinity mask, not the machine's count) and N workers, C // N
 threads each keeps the cores busy without oversubscribing them. ``pin=True``
-pins worker i to core i (see :mod:`visualenv.cores`).
+pins worker i to core i (see :mod:`visualenv.env.cores`).
 """
 
 from __future__ import annotations
@@ -20,7 +20,7 @@ from typing import Any, Callable
 import gymnasium as gym
 from gymnasium.vector.async_vector_env import AsyncState, AsyncVectorEnv
 
-from visualenv.cores import default_threads, pin_to_core, worker_cores
+from visualenv.env.cores import default_threads, pin_to_core, worker_cores
 from visualenv.errors import WorkerError
 
 _BROKEN = (EOFError, BrokenPipeError, ConnectionResetError)
@@ -43,9 +43,9 @@ def make_in_worker(target: str, kwargs: dict[str, Any], core: int | None = None,
             pin_to_core(core)
         # Ctrl-C reaches the whole process group, and the parent decides how to stop.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
-    import visualenv
+    from visualenv.env.make import make
 
-    env = visualenv.make(target, **kwargs)
+    env = make(target, **kwargs)
     return wrapper_class(env) if wrapper_class is not None else env
 
 

@@ -17,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 from PIL import Image
 
-from visualenv.pixels import to_grayscale
+from visualenv.render.pixels import to_grayscale
 
 
 def _image_box(space: spaces.Space) -> spaces.Box:
@@ -44,7 +44,7 @@ def _map_obs(obs: Any, fn: Any) -> Any:
 
 
 class Grayscale(gym.ObservationWrapper):
-    """RGB (H, W, 3) -> grayscale (H, W, 1) with the renderer's BT.601 luma (:func:`visualenv.pixels.to_grayscale`); 1-channel images pass through."""
+    """RGB (H, W, 3) -> grayscale (H, W, 1) with the renderer's BT.601 luma (:func:`visualenv.render.pixels.to_grayscale`); 1-channel images pass through."""
 
     def __init__(self, env: gym.Env):
         super().__init__(env)

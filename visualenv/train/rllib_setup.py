@@ -8,7 +8,7 @@ a copy of the model when there are remote runners: it makes no env, so it never
 starts Blender (:func:`ppo_config` refuses zero remote runners for that reason).
 
 The model sees what the SB3 backend's CnnPolicy sees: the last ``frame_stack``
-frames stacked on the channel axis (:class:`~visualenv.wrappers.FrameStack`, in the
+frames stacked on the channel axis (:class:`~visualenv.env.wrappers.FrameStack`, in the
 runner), scaled to [0, 1] (:class:`ScaledImage`: RLlib's CNN encoder convolves
 its input as it comes). RLlib has default conv filters only for 42x42, 64x64 and
 84x84 images; :func:`conv_filters` sizes them from the spec's observation.
@@ -54,11 +54,11 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env:
     `env_config` keys: ``spec`` (a path the runner's node can read), ``frame_stack``,
     ``render`` (False: the state vector, no Blender), ``threads`` (render threads).
     """
-    import visualenv
+    from visualenv.env.make import make
 
     if not env_config.get("render", True):
-        return visualenv.make(env_config["spec"], render=False)
-    env = visualenv.make(env_config["spec"], frame_stack=env_config.get("frame_stack", 4), threads=env_config.get("threads", 1))
+        return make(env_config["spec"], render=False)
+    env = make(env_config["spec"], frame_stack=env_config.get("frame_stack", 4), threads=env_config.get("threads", 1))
     return ScaledImage(env)
 
 
@@ -69,7 +69,7 @@ def register(target: str, **env_config: Any) -> tuple[str, dict[str, Any]]:
     """
     from ray.tune.registry import register_env
 
-    from visualenv.registration import resolve
+    from visualenv.env.registration import resolve
 
     resolve(target)  # a bad target fails here, in the driver
     spec = str(Path(target).resolve()) if Path(target).exists() else str(target)  # a bundled id resolves on every node
@@ -122,9 +122,9 @@ def model_config(observation_space: spaces.Space) -> Any:
 
 def check_observation(target: str, render: bool = True) -> spaces.Space:
     """The observation space the model will see (no Blender started); a Dict observation is refused."""
-    import visualenv
+    from visualenv.env.make import make
 
-    env = visualenv.make(target, render=render)
+    env = make(target, render=render)
     space = env.observation_space
     env.close()
     if isinstance(space, spaces.Dict):

@@ -1,7 +1,7 @@
 """Numpy-only pixel conversions shared by the renderer and the wrappers (importing this never starts Blender).
 
 One BT.601 grayscale (:func:`to_grayscale`) serves the Blender readback and the
-:class:`~visualenv.wrappers.Grayscale` wrapper; the capture's table-driven fast
+:class:`~visualenv.env.wrappers.Grayscale` wrapper; the capture's table-driven fast
 path produces the same bytes from the same :data:`LUMA_601` weights.
 """
 

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import os
 from pathlib import Path
-from typing import Any
 
 import gymnasium as gym
 
@@ -13,8 +12,11 @@ from visualenv.errors import Diagnostic, SpecError, did_you_mean
 
 NAMESPACE = "visualenv"
 SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
+#: ``gymnasium.make("visualenv/<Id>", **options)`` builds what ``visualenv.make(spec, **options)`` builds,
+#: wrappers included (as ALE's ids take their preprocessing options); named as text, so this module never imports it
+ENTRY_POINT = "visualenv.env.make:make"
 #: where the bundled specs live: package data in a wheel; in a checkout, a link to the repository's specs/ folder
-BUNDLED_DIR = (Path(__file__).parent / "specs").resolve()
+BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 
 
 def spec_dirs() -> list[Path]:
@@ -69,20 +71,12 @@ def resolve(target: str | os.PathLike[str]) -> Path:
     raise SpecError([Diagnostic(str(target), None, None, "", "not a spec file, build folder or known env id" + did_you_mean(name, index).replace("names:", "ids:"))])
 
 
-def make_registered(spec: str, **options: Any) -> gym.Env:
-    """The entry point of the registered ids: ``gymnasium.make("visualenv/<Id>", **options)`` builds what
-    ``visualenv.make(spec, **options)`` builds, wrappers included (as ALE's ids take their preprocessing options)."""
-    from visualenv import make
-
-    return make(spec, **options)
-
-
 def register_bundled() -> list[str]:
     """Register every bundled spec as `visualenv/<Id>` (idempotent)."""
     ids = []
     for env_id, path in spec_index().items():
         full = f"{NAMESPACE}/{env_id}"
         if full not in gym.registry:
-            gym.register(id=full, entry_point="visualenv.registration:make_registered", kwargs={"spec": str(path)})
+            gym.register(id=full, entry_point=ENTRY_POINT, kwargs={"target": str(path)})
         ids.append(full)
     return ids

@@ -1,0 +1,102 @@
+"""The package's layers: imports point one way (down the table in README's Layout) and never form a cycle.
+
+Every import counts, function-level ones included: a lazy import is still a dependency.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+PACKAGE = Path(__file__).resolve().parents[1] / "visualenv"
+
+#: each module's layer, by its longest matching prefix; a module may import its own layer or lower ones
+LAYERS = {
+    "visualenv.errors": 0, "visualenv.files": 0, "visualenv.versions": 0,
+    "visualenv.spec": 1, "visualenv.expr": 1,
+    "visualenv.render": 2,
+    "visualenv.compiler": 3,
+    "visualenv.env": 4,
+    "visualenv.train": 5,
+    "visualenv.tools": 6,
+    "visualenv.cli": 7, "visualenv": 7,
+}
+
+
+def module_name(path: Path) -> str:
+    parts = path.relative_to(PACKAGE.parent).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def modules() -> dict[str, Path]:
+    return {module_name(p): p for p in PACKAGE.rglob("*.py") if "specs" not in p.parts}
+
+
+def imports(path: Path, known: set[str]) -> set[str]:
+    """The visualenv modules `path` imports, anywhere in its body."""
+    found: set[str] = set()
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.Import):
+            found.update(a.name for a in node.names if a.name.split(".")[0] == "visualenv")
+        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "visualenv" and node.level == 0:
+            for alias in node.names:
+                sub = f"{node.module}.{alias.name}"
+                found.add(sub if sub in known else node.module)
+    return found
+
+
+def layer(name: str) -> int:
+    best = max((prefix for prefix in LAYERS if name == prefix or name.startswith(prefix + ".")), key=len)
+    return LAYERS[best]
+
+
+def graph() -> dict[str, set[str]]:
+    known = modules()
+    return {name: imports(path, set(known)) - {name} for name, path in known.items()}
+
+
+def test_every_module_has_a_layer() -> None:
+    unplaced = [name for name in modules() if not any(name == p or name.startswith(p + ".") for p in LAYERS if p != "visualenv")
+                and name != "visualenv"]
+    assert unplaced == [], f"modules outside the layers: put them in a layer's package: {unplaced}"
+
+
+def test_imports_point_down() -> None:
+    upward = sorted(f"{a} ({layer(a)}) imports {b} ({layer(b)})" for a, targets in graph().items() for b in targets if layer(b) > layer(a))
+    assert upward == [], "\n".join(upward)
+
+
+def find_cycles(edges: dict[str, set[str]]) -> list[list[str]]:
+    """Cycles met by a depth-first walk (each one as a list of modules, first == last)."""
+    cycles: list[list[str]] = []
+    state: dict[str, int] = {}
+    stack: list[str] = []
+
+    def visit(node: str) -> None:
+        state[node] = 1
+        stack.append(node)
+        for nxt in sorted(edges.get(node, ())):
+            if state.get(nxt) == 1:
+                cycles.append(stack[stack.index(nxt):] + [nxt])
+            elif nxt not in state:
+                visit(nxt)
+        stack.pop()
+        state[node] = 2
+
+    for node in sorted(edges):
+        if node not in state:
+            visit(node)
+    return cycles
+
+
+def test_no_import_cycle() -> None:
+    cycles = find_cycles(graph())
+    assert cycles == [], "import cycles: " + "; ".join(" -> ".join(c) for c in cycles)
+
+
+def test_the_checks_see_a_cycle_and_an_upward_import() -> None:
+    """Neither check is vacuous: a planted cycle is found, and the graph holds the lazy imports."""
+    assert find_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == [["a", "b", "c", "a"]]
+    edges = graph()
+    assert "visualenv.train.rllib_setup" in edges["visualenv.train.models"]  # a function-level import
+    assert layer("visualenv.train.play") == 5 and layer("visualenv.env.make") == 4 and layer("visualenv") == 7
