@@ -22,9 +22,20 @@ def test_bench_prints_every_figure(tmp_path):
     assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["moved_floor_ms_median"] > 0 and 0 <= figures["own_overhead_share"] < 1
     assert 0 < figures["outside_ms_median"] < figures["step_ms_median"]
     parallel = figures["parallel"]
-    assert parallel["workers"] == 2 and parallel["pinned"] is False and parallel["steps_per_s"] > 0
+    assert parallel["workers"] == 2 and parallel["pinned"] is True and parallel["cores_each"] == 1 and parallel["steps_per_s"] > 0
     assert 0 < parallel["render_ms_median"] <= parallel["render_ms_p99"] and 0 < parallel["outside_share"] < 1
     assert parallel["rss_final_mb"] > 100 and parallel["rss_total_mb"] >= 2 * parallel["rss_final_mb"] - 1  # each worker holds a Blender
+
+
+def test_bench_measures_scaling_against_one_confined_worker(tmp_path):
+    out = tmp_path / "bench.json"
+    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "1,2", "--json", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "scaling: one worker confined to one core" in result.output and "vs n x one confined" in result.output
+    one, *rows = json.loads(out.read_text())[0]["scaling"]
+    assert one["workers"] == 1 and one["cores_each"] == 1 and one["threads"] == 1 and one["steps_per_s"] > 0
+    assert [r["workers"] for r in rows] == [1, 2] and all(r["vs_confined"] > 0 for r in rows)
+    assert rows[1]["cores_each"] == 1 and rows[1]["pinned"] is True  # two workers on two cores: one core each
 
 
 def test_bad_arguments_are_refused_before_anything_runs(tmp_path):
@@ -36,7 +47,10 @@ def test_bad_arguments_are_refused_before_anything_runs(tmp_path):
         assert result.exit_code == 1 and "cannot create the folder" in result.output and "Not a directory" in result.output, args
     result = CliRunner().invoke(main, ["play", "Goalie-v0", "--record", str(tmp_path / "afile" / "play.gif")])
     assert result.exit_code == 2 and "cannot create the folder" in result.output
-    for args in (["bench", "VisualCartPole-v0", "--steps", "0"], ["bench", "VisualCartPole-v0", "--workers", "-1"],
+    for workers in ("-1", "1,x", "0,2"):
+        result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--workers", workers])
+        assert result.exit_code == 2 and "expected a number of workers or a list such as 1,2,4,8" in result.output, workers
+    for args in (["bench", "VisualCartPole-v0", "--steps", "0"],
                  ["play", "Goalie-v0", "--episodes", "0"], ["train", "Goalie-v0", "--envs", "0"], ["preview", "Goalie-v0", "--steps", "0"],
                  ["build", "Goalie-v0", "--seed", "-1"], ["play", "Goalie-v0", "--seed", "-1"]):
         result = CliRunner().invoke(main, args)

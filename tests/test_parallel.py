@@ -89,17 +89,6 @@ def test_a_killed_worker_raises_promptly_instead_of_hanging():
     assert not any(p.is_alive() for p in vec.processes)
 
 
-def test_worker_cores_round_robin(monkeypatch):
-    from visualenv.env import cores
-
-    monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {2, 5}, raising=False)
-    assert cores.worker_cores(3) == [2, 5, 2]
-    assert cores.worker_cores(1) == [None]  # one worker: nothing to keep apart
-    assert cores.worker_cores(3, pin=False) == [None, None, None]
-    monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {0}, raising=False)
-    assert cores.worker_cores(2) == [None, None]  # one core: nothing to choose
-
-
 def test_default_threads_share_the_cores_this_process_may_use(monkeypatch):
     from visualenv.env import cores
 
@@ -108,20 +97,3 @@ def test_default_threads_share_the_cores_this_process_may_use(monkeypatch):
     assert cores.default_threads(2) == 4  # the 8 cores of our affinity mask, not the machine's 64
     monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: {3}, raising=False)
     assert cores.default_threads(2) == 1
-
-
-@pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs Linux and 2 cores")
-def test_pinned_workers_each_get_one_core_and_the_parent_keeps_all():
-    ours = os.sched_getaffinity(0)
-    vec = make_vec("VisualCartPole-v0", 2, pin=True)
-    try:
-        vec.reset(seed=0)
-        vec.step(np.array([0, 1]))
-        pinned = [psutil.Process(p.pid).cpu_affinity() for p in vec.processes]
-        assert [len(cores) for cores in pinned] == [1, 1] and pinned[0] != pinned[1]
-        for p in vec.processes:  # Blender's own threads too, not just the main one
-            for thread in psutil.Process(p.pid).threads():
-                assert len(os.sched_getaffinity(thread.id)) == 1
-    finally:
-        vec.close()
-    assert os.sched_getaffinity(0) == ours  # Gymnasium builds one env in the parent: it must not pin us

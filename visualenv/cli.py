@@ -1,4 +1,4 @@
-"""The `visualenv` command: validate, build, inspect, init, preview, schema, bench, train, play, eval.
+"""The `visualenv` command: validate, build, inspect, init, preview, schema, train, play, eval, export-policy, bench, info.
 
 Bad input never shows a traceback: spec problems print as
 ``file:line:column: field: message`` lines and exit with status 2.
@@ -220,6 +220,8 @@ def _parse_value(text: str) -> Any:
 @click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)")
 @click.option("--no-progress", is_flag=True)
+@click.option("--pin/--no-pin", default=True, show_default=True,
+              help="confine each training env's process (sb3) or EnvRunner (rllib, a free core of its node) to its own cores")
 @click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
               help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
 @click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
@@ -228,7 +230,7 @@ def _parse_value(text: str) -> Any:
 @_friendly
 def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
           final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
-          out_root: str, resume_dir: str | None, no_progress: bool, backend: str, env_runners: int, envs_per_runner: int,
+          out_root: str, resume_dir: str | None, no_progress: bool, pin: bool, backend: str, env_runners: int, envs_per_runner: int,
           address: str | None) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
@@ -251,7 +253,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     else:
         config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
-                             render=not state_only, hyperparams=hyper, progress=not no_progress)
+                             render=not state_only, hyperparams=hyper, progress=not no_progress, pin=pin)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
@@ -349,7 +351,7 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
         config = RLlibTrainConfig(spec=spec, steps=steps or RLlibTrainConfig.steps, env_runners=params["env_runners"],
                                   envs_per_runner=params["envs_per_runner"], frame_stack=params["frame_stack"], eval_every=params["eval_every"],
                                   eval_episodes=params["eval_episodes"], final_eval_episodes=params["final_episodes"], seed=params["seed"],
-                                  render=not params["state_only"], hyperparams=hyper, progress=progress)
+                                  render=not params["state_only"], hyperparams=hyper, progress=progress, pin=params["pin"])
     check_address(address)
     algorithm_config(config)  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
@@ -477,18 +479,30 @@ def _check_writable(path: str, option: str) -> None:
         raise click.BadParameter(f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option) from None
 
 
+def _worker_counts(value: str) -> tuple[int, ...]:
+    """--workers: one count, or a comma-separated list of counts (scaling)."""
+    try:
+        counts = tuple(int(part) for part in value.split(","))
+    except ValueError:
+        counts = ()
+    if not counts or any(c < 0 for c in counts) or (len(counts) > 1 and min(counts) < 1):
+        raise click.BadParameter(f"expected a number of workers or a list such as 1,2,4,8, got {value!r}", param_hint="--workers")
+    return counts
+
+
 @main.command()
 @click.argument("specs", nargs=-1, required=True)
 @click.option("--steps", default=500, show_default=True, type=click.IntRange(min=1), help="measured env steps (after a warm-up)")
-@click.option("--workers", default=2, show_default=True, type=click.IntRange(min=0), help="parallel envs for the parallel figure (0: skip)")
+@click.option("--workers", default="2", show_default=True, callback=lambda ctx, param, value: _worker_counts(value),
+              help="parallel envs for the parallel figure (0: skip); a list such as 1,2,4,8 measures scaling against one confined worker")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="render threads of the single env (default: all cores)")
 @click.option("--readback", type=click.Choice(READBACKS), default="auto", show_default=True,
               help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
-@click.option("--pin", is_flag=True, help="pin each parallel worker to its own core (compare with and without on your machine)")
+@click.option("--pin/--no-pin", default=True, show_default=True, help="confine each parallel worker to its own cores")
 @click.option("--soak", "soak_steps", type=click.IntRange(min=0), default=0, help="also run this many steps and report memory growth (e.g. 50000)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
-def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None, readback: str, pin: bool, soak_steps: int,
+def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads: int | None, readback: str, pin: bool, soak_steps: int,
           json_out: str | None) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
@@ -507,12 +521,25 @@ def bench(specs: tuple[str, ...], steps: int, workers: int, threads: int | None,
                f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
     results = []
     for spec in specs:
-        figures = bench_one(spec, steps, workers=workers, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin)
+        single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
+        figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling)
         for line in figures.lines():
             click.echo(line)
         results.append(as_dict(figures))
     if json_out:
         Path(json_out).write_text(json.dumps(results, indent=2) + "\n")
+
+
+@main.command()
+@click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
+@click.option("--warm-gpu", is_flag=True, help="render one Cycles GPU frame now, so the driver compiles and caches the kernels before training")
+@_friendly
+def info(as_json: bool, warm_gpu: bool) -> None:
+    """Versions, usable cores, and what Blender can render on here: Cycles devices per backend, EEVEE/Workbench's context, kernel caches."""
+    from visualenv.tools.info import format_report, gather
+
+    report = gather(warm_gpu=warm_gpu)
+    click.echo(json.dumps(report, indent=2) if as_json else format_report(report))
 
 
 @main.command("bench-rllib")

@@ -8,23 +8,25 @@ from typing import Any
 
 import gymnasium as gym
 
-from visualenv.env.cores import worker_cores
-from visualenv.env.vector import make_in_worker, with_render_threads
+from visualenv.env.cores import Share, worker_cores
+from visualenv.env.vector import make_in_worker, warn_gpu_workers, with_render_threads
 
 
-def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None, pin: bool = False,
+def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None, pin: bool = True,
                  monitor_dir: str | None = None, monitor_append: bool = False, **kwargs: Any) -> Any:
     """`n` envs in SB3's ``SubprocVecEnv`` (``DummyVecEnv`` for one), frames stacked by ``VecFrameStack``.
 
     Like SB3's ``make_vec_env``: env ``i`` is seeded ``seed + i`` and wrapped in a
     ``Monitor`` writing ``monitor_dir/i.monitor.csv`` when a folder is given
-    (appended to with ``monitor_append``, for a resumed run).
+    (appended to with ``monitor_append``, for a resumed run). Each worker is confined to its own share
+    of the cores (`pin`) and renders with that many threads unless `threads` says otherwise.
     """
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
-    kwargs = with_render_threads(kwargs, n, threads)
-    fns = [partial(_make_monitored, str(target), kwargs, core, seed + i, monitor_dir and os.path.join(monitor_dir, str(i)), monitor_append)
-           for i, core in enumerate(worker_cores(n, pin))]
+    warn_gpu_workers(target, n, kwargs)
+    fns = [partial(_make_monitored, str(target), with_render_threads(kwargs, share, n, threads), share, seed + i,
+                   monitor_dir and os.path.join(monitor_dir, str(i)), monitor_append)
+           for i, share in enumerate(worker_cores(n, pin))]
     if monitor_dir:
         os.makedirs(monitor_dir, exist_ok=True)
     vec: Any = SubprocVecEnv(fns, start_method="spawn") if n > 1 else DummyVecEnv(fns)  # type: ignore[arg-type]  # partials are env makers
@@ -34,10 +36,10 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
     return vec
 
 
-def _make_monitored(target: str, kwargs: dict[str, Any], core: int | None, seed: int, monitor_file: str | None,
+def _make_monitored(target: str, kwargs: dict[str, Any], cores: Share | None, seed: int, monitor_file: str | None,
                     append: bool = False) -> gym.Env:
     from stable_baselines3.common.monitor import Monitor
 
-    env = make_in_worker(target, kwargs, core)
+    env = make_in_worker(target, kwargs, cores)
     env.action_space.seed(seed)
     return Monitor(env, filename=monitor_file, override_existing=not append)

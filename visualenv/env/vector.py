@@ -4,15 +4,16 @@ bpy holds one Blender per process, so parallel rendering needs processes:
 :func:`make_vec` gives a Gymnasium ``AsyncVectorEnv`` (SB3's ``SubprocVecEnv``
 is in :mod:`visualenv.env.sb3_vec`). Each worker builds its env (and its renderer)
 from the spec, with ``threads`` render threads: with C cores usable by this
-process (its affinity mask, not the machine's count) and N workers, C // N
-threads each keeps the cores busy without oversubscribing them. ``pin=True``
-pins worker i to core i (see :mod:`visualenv.env.cores`).
+process (its affinity mask, not the machine's count) and N workers, each worker
+is confined to its own C/N cores before Blender starts and renders with that many
+threads (see :mod:`visualenv.env.cores`); ``pin=False`` leaves them unconfined.
 """
 
 from __future__ import annotations
 
 import multiprocessing
 import signal
+import sys
 import time
 from functools import partial
 from typing import Any, Callable
@@ -20,27 +21,27 @@ from typing import Any, Callable
 import gymnasium as gym
 from gymnasium.vector.async_vector_env import AsyncState, AsyncVectorEnv
 
-from visualenv.env.cores import default_threads, pin_to_core, worker_cores
+from visualenv.env.cores import Share, confine, render_threads, worker_cores
 from visualenv.errors import WorkerError
 
 _BROKEN = (EOFError, BrokenPipeError, ConnectionResetError)
 
 
-def env_factory(target: str, *, core: int | None = None, wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
+def env_factory(target: str, *, cores: Share | None = None, wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
                 **kwargs: Any) -> Callable[[], gym.Env]:
-    """A picklable function that makes one env (for vector env workers), pinned to `core` if given.
+    """A picklable function that makes one env (for vector env workers), confined to `cores` if given.
 
     `wrapper_class` (a class or module-level function, so that it pickles) wraps the env in its worker.
     """
-    return partial(make_in_worker, str(target), kwargs, core, wrapper_class)
+    return partial(make_in_worker, str(target), kwargs, cores, wrapper_class)
 
 
-def make_in_worker(target: str, kwargs: dict[str, Any], core: int | None = None,
+def make_in_worker(target: str, kwargs: dict[str, Any], cores: Share | None = None,
                    wrapper_class: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
-    """One env made by :func:`visualenv.make`; in a worker process, pinned to `core` and deaf to Ctrl-C."""
+    """One env made by :func:`visualenv.make`; in a worker process, confined to `cores` and deaf to Ctrl-C."""
     if multiprocessing.parent_process() is not None:  # in a worker (Gymnasium also calls this in the parent, for the spaces)
-        if core is not None:
-            pin_to_core(core)
+        if cores is not None:
+            confine(cores)
         # Ctrl-C reaches the whole process group, and the parent decides how to stop.
         signal.signal(signal.SIGINT, signal.SIG_IGN)
     from visualenv.env.make import make
@@ -92,22 +93,49 @@ class WorkerVectorEnv(AsyncVectorEnv):
                 process.join(timeout=5)
 
 
-def with_render_threads(kwargs: dict[str, Any], n: int, threads: int | None) -> dict[str, Any]:
-    """Give rendering workers a share of the cores unless told otherwise (state-only envs need none)."""
-    if kwargs.get("render") is not False:
-        kwargs.setdefault("threads", threads or default_threads(n))
-    return kwargs
+def with_render_threads(kwargs: dict[str, Any], share: Share | None, n: int, threads: int | None) -> dict[str, Any]:
+    """A worker's make() options with its render threads: its share of the cores unless told otherwise (state-only envs need none)."""
+    if kwargs.get("render") is False or "threads" in kwargs:
+        return kwargs
+    return {**kwargs, "threads": render_threads(share, n, threads)}
 
 
-def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, pin: bool = False,
+def warn_gpu_workers(target: str, n: int, kwargs: dict[str, Any]) -> None:
+    """Once per process: several per-process envs rendering on one GPU share it badly (measured on an H100: 16 processes,
+    159 env-steps/s in all, against 1,941 for 16 CPU workers)."""
+    global _warned_gpu
+    if _warned_gpu or n < 2 or kwargs.get("render") is False:
+        return
+    device = kwargs.get("device")
+    if device is None:
+        from visualenv.env.registration import resolve
+        from visualenv.spec.loader import load_spec
+
+        try:
+            device = load_spec(resolve(target)).spec.render.device
+        except Exception:  # noqa: BLE001 - a bad spec is reported by the workers, with its location
+            return
+    if device == "gpu":
+        _warned_gpu = True
+        print(f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly (16 such processes made "
+              "159 env-steps/s on an H100, 16 CPU workers 1,941): one worker per core on the CPU is faster today; "
+              "see docs/performance.md#which-device", file=sys.stderr, flush=True)
+
+
+_warned_gpu = False
+
+
+def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, pin: bool = True,
              wrapper_class: Callable[[gym.Env], gym.Env] | None = None, **kwargs: Any) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
-    `wrapper_class` wraps each env in its worker (as in SB3's ``make_vec_env``);
-    kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
+    Each worker is confined to its own share of the cores and renders with that many threads
+    (`pin`; `threads` sets the render threads instead). `wrapper_class` wraps each env in its
+    worker (as in SB3's ``make_vec_env``); kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
     """
-    kwargs = with_render_threads(kwargs, n, threads)
     if asynchronous and n > 1:
-        return WorkerVectorEnv([env_factory(target, core=core, wrapper_class=wrapper_class, **kwargs) for core in worker_cores(n, pin)],
-                               context="spawn", shared_memory=True)
+        warn_gpu_workers(target, n, kwargs)
+        return WorkerVectorEnv([env_factory(target, cores=share, wrapper_class=wrapper_class, **with_render_threads(kwargs, share, n, threads))
+                                for share in worker_cores(n, pin)], context="spawn", shared_memory=True)
+    kwargs = with_render_threads(kwargs, None, n, threads)
     return gym.vector.SyncVectorEnv([env_factory(target, wrapper_class=wrapper_class, **kwargs) for _ in range(n)])

@@ -146,6 +146,8 @@ DEFAULT_OPTIONS = RendererOptions()
 
 #: the default backend, as a ``module:attribute`` entry point (imported on first render, so state-only envs never load bpy)
 BLENDER_BACKEND = "visualenv.render.blender:BlenderRenderer"
+#: Cycles' device backends, as `visualenv info` lists them
+CYCLES_BACKENDS = ("CPU", "CUDA", "OPTIX", "HIP", "METAL", "ONEAPI")
 
 
 def load_backend(entry_point: str) -> Callable[..., Renderer]:

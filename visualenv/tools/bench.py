@@ -50,6 +50,7 @@ class Figures:
     rss_peak_mb: float = 0.0
     rss_final_mb: float = 0.0
     parallel: dict[str, Any] = field(default_factory=dict)
+    scaling: list[dict[str, Any]] = field(default_factory=list)
     soak: dict[str, Any] = field(default_factory=dict)
 
     @property
@@ -87,6 +88,13 @@ class Figures:
                 (f"    resident memory           {p['rss_peak_mb']:6.1f} MB peak, {p['rss_final_mb']:.1f} MB final per worker "
                  f"({p['rss_total_mb']:.0f} MB for all {p['workers']})"),
             ]
+        if self.scaling:
+            one = self.scaling[0]
+            out.append(f"  scaling: one worker confined to one core (1 render thread) {one['steps_per_s']:.1f} steps/s")
+            out.append("    workers   steps/s   vs n x one confined   cores each   render threads   memory per worker")
+            for row in self.scaling[1:]:
+                out.append(f"    {row['workers']:>7} {row['steps_per_s']:9.1f}   {row['vs_confined']:19.2f}   {row['cores_each']:>10}   "
+                           f"{row['threads']:>14}   {row['rss_final_mb']:>10.0f} MB")
         if self.soak:
             s = self.soak
             out.append(f"  soak: {s['steps']} steps, {s['resets']} resets: memory {s['rss_start_mb']:.1f} -> {s['rss_end_mb']:.1f} MB "
@@ -143,7 +151,8 @@ def blender_data_blocks() -> int:
 
 
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
-              workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = False) -> Figures:
+              workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = True,
+              scaling: tuple[int, ...] = ()) -> Figures:
     from visualenv.env.make import make
 
     options: dict[str, Any] = {"readback": readback}
@@ -184,7 +193,25 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     env.close()
     if workers > 1:
         figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin)
+    if scaling:
+        figures.scaling = bench_scaling(spec, scaling, steps, seed, readback=readback, pin=pin)
     return figures
+
+
+def bench_scaling(spec: str, counts: tuple[int, ...], steps: int, seed: int, *, readback: str = "auto", pin: bool = True) -> list[dict[str, Any]]:
+    """steps/s of n parallel workers for each n in `counts`, against n times one worker confined to one core.
+
+    The first row is that reference: one worker process on one core with one render thread.
+    """
+    from visualenv.env.cores import usable_cores
+
+    one = bench_parallel(spec, 1, steps, seed, 0.0, readback=readback, shares=[(usable_cores()[0],)], threads=1)
+    rows = [one]
+    for n in counts:
+        row = bench_parallel(spec, n, steps, seed, 0.0, readback=readback, pin=pin)
+        row["vs_confined"] = row["steps_per_s"] / (n * one["steps_per_s"])
+        rows.append(row)
+    return rows
 
 
 def _moved_floor(env: Any, actions: list[Any], seed: int) -> list[float]:
@@ -305,14 +332,20 @@ class StepTimes(gym.Wrapper):
 
 
 def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
-                   pin: bool = False) -> dict[str, Any]:
-    """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each)."""
-    from visualenv.env.cores import default_threads, worker_cores
-    from visualenv.env.vector import make_vec
+                   pin: bool = True, shares: list[tuple[int, ...] | None] | None = None, threads: int | None = None) -> dict[str, Any]:
+    """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each).
 
-    threads = default_threads(workers)
-    pinned = any(core is not None for core in worker_cores(workers, pin))  # pinning needs two cores to choose from
-    vec: Any = make_vec(str(spec), workers, threads=threads, readback=readback, pin=pin, wrapper_class=StepTimes)
+    Each worker gets its own cores as make_vec gives them (`pin`), or the `shares` given.
+    """
+    from visualenv.env.cores import render_threads, worker_cores
+    from visualenv.env.vector import WorkerVectorEnv, env_factory, with_render_threads
+
+    shares = shares or worker_cores(workers, pin)
+    options = {"readback": readback}
+    vec: Any = WorkerVectorEnv([env_factory(str(spec), cores=share, wrapper_class=StepTimes, **with_render_threads(options, share, workers, threads))
+                                for share in shares], context="spawn", shared_memory=True)
+    pinned = any(share is not None for share in shares)
+    threads = render_threads(shares[0], workers, threads)
     try:
         vec.reset(seed=seed)
         vec.action_space.seed(seed)
@@ -333,7 +366,7 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
     outside = [t for w in measured for t in w["outside"]]
     step_median = float(np.median(step_times))
     return {
-        "workers": workers, "threads": threads, "pinned": pinned, "steps_per_s": rate, "speedup": rate / single if single else 0.0,
+        "workers": workers, "threads": threads, "pinned": pinned, "cores_each": len(shares[0]) if shares[0] else "all", "steps_per_s": rate, "speedup": rate / single if single else 0.0,
         "step_ms_median": 1000 * step_median,
         "render_ms_median": 1000 * float(np.median(render_times)), "render_ms_p99": 1000 * float(np.percentile(render_times, 99)),
         "outside_ms_median": 1000 * float(np.median(outside)), "outside_share": float(np.median(outside)) / step_median,

@@ -54,6 +54,7 @@ class RLlibTrainConfig:
     render: bool = True
     hyperparams: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
+    pin: bool = True  # each EnvRunner claims a core of its node of its own
     algo: str = "ppo"
     backend: str = BACKEND
 
@@ -64,7 +65,7 @@ def algorithm_config(config: RLlibTrainConfig) -> Any:
 
     return ppo_config(config.spec, env_runners=config.env_runners, envs_per_runner=config.envs_per_runner,
                       frame_stack=config.frame_stack if config.render else 0, seed=config.seed, render=config.render,
-                      hyperparams=config.hyperparams)
+                      hyperparams=config.hyperparams, pin=config.pin)
 
 
 @contextmanager

@@ -52,12 +52,16 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env:
     """One env, made where RLlib calls it (in an EnvRunner process); Blender starts at its first reset.
 
     `env_config` keys: ``spec`` (a path the runner's node can read), ``frame_stack``,
-    ``render`` (False: the state vector, no Blender), ``threads`` (render threads).
+    ``render`` (False: the state vector, no Blender), ``threads`` (render threads), ``pin``
+    (confine the runner's process to a core of its node that no other runner has claimed).
     """
+    from visualenv.env.cores import claim_core
     from visualenv.env.make import make
 
     if not env_config.get("render", True):
         return make(env_config["spec"], render=False)
+    if env_config.get("pin", True) and env_config.get("threads", 1) == 1:
+        claim_core()  # before Blender starts, which sizes its thread pools to the cores it may use
     env = make(env_config["spec"], frame_stack=env_config.get("frame_stack", 4), threads=env_config.get("threads", 1))
     return ScaledImage(env)
 
@@ -160,7 +164,7 @@ def check_hyperparameters(hyperparams: dict[str, Any]) -> None:
 
 
 def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, frame_stack: int = 4, seed: int = 0,
-               render: bool = True, hyperparams: dict[str, Any] | None = None, cpus_per_runner: int = 1) -> Any:
+               render: bool = True, hyperparams: dict[str, Any] | None = None, cpus_per_runner: int = 1, pin: bool = True) -> Any:
     """A PPOConfig for `target`: `env_runners` remote EnvRunners of `envs_per_runner` envs each, restarted when they die.
 
     Every env renders with ``cpus_per_runner // envs_per_runner`` threads (at least one),
@@ -178,7 +182,7 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
         height, width, channels = space.shape or (0, 0, 0)
         space = spaces.Box(0.0, 1.0, (height, width, channels * max(1, frame_stack)), np.float32)
     threads = max(1, cpus_per_runner // envs_per_runner)
-    name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads)
+    name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads, pin=pin)
     return (
         PPOConfig()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)

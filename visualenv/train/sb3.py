@@ -57,6 +57,7 @@ class TrainConfig:
     render: bool = True  # False: state-only env and an MLP policy
     hyperparams: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
+    pin: bool = True  # each training env's process confined to its own cores
 
     def policy(self, observation_space: Any) -> str:
         """SB3's policy for the env: images through a CNN, several cameras through one CNN each, a state vector through an MLP."""
@@ -171,7 +172,7 @@ def _make_envs(config: TrainConfig, spec_path: str, run_dir: Path, resume: bool)
     from visualenv.env.sb3_vec import make_sb3_vec
 
     frame_stack = config.frame_stack if config.render else 0
-    train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
+    train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
                              monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     try:
         eval_env = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render)

@@ -6,6 +6,8 @@ Modules, one job each:
 * :mod:`.materials`: Principled BSDF materials, textures, the world, the depth material
 * :mod:`.settings`: engine, preset, device and thread configuration
 * :mod:`.readback`: rendered pixels to numpy
+* :mod:`.devices`: Cycles devices, the GPU context, kernel caches (``visualenv info``)
+* :mod:`.blendfile`, :mod:`.describe`: a user's .blend read in a child process first
 * :mod:`.renderer`: :class:`BlenderRenderer`, the :class:`~visualenv.render.base.Renderer` the env uses
 
 Importing this package imports ``bpy``.

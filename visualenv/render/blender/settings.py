@@ -22,6 +22,7 @@ levels; EEVEE maps samples to ``taa_render_samples``.
 from __future__ import annotations
 
 import logging
+import sys
 import warnings
 from dataclasses import dataclass
 from typing import Any
@@ -128,6 +129,18 @@ def detect_gpu() -> str | None:
     return found
 
 
+def _compile_notice_once(backend: str) -> None:
+    """Before the first GPU render of this process: say so when the driver must compile Cycles' kernels first (minutes)."""
+    from visualenv.render.blender.devices import compile_notice, kernel_facts
+
+    if "compile" in _warned:
+        return
+    _warned.add("compile")
+    notice = compile_notice(kernel_facts(backend))
+    if notice:
+        print(notice, file=sys.stderr, flush=True)
+
+
 def resolve_device(device: str) -> str:
     """'CPU' or 'GPU' for a spec's cpu|gpu|auto, with a one-time message on fallback."""
     if device == "cpu":
@@ -135,6 +148,7 @@ def resolve_device(device: str) -> str:
     backend = detect_gpu()
     if backend:
         log.info("Cycles renders on the GPU (%s)", backend)
+        _compile_notice_once(backend)
         return "GPU"
     if device == "gpu":
         _warn_once("gpu", "render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU")

@@ -1,0 +1,197 @@
+"""What Blender can render on here: Cycles devices per backend, the GPU context of EEVEE/Workbench, kernel caches.
+
+Run as ``python -m visualenv.render.blender.devices`` (what ``visualenv info`` does, in a child
+process, so that a driver that crashes takes only the probe with it): prints one JSON object.
+
+Also the one-line notice before a process's first Cycles GPU render when Blender must first
+compile its kernels for this GPU: bpy 5.0.1 ships CUDA binaries for some architectures only
+(``kernel_sm_XX.cubin``), and OptiX always compiles from PTX; the driver then caches the result,
+so it happens once per machine. On an H100 (sm_90) that first frame took 356 s.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import re
+import shutil
+import subprocess
+import sys
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+from visualenv.render.base import CYCLES_BACKENDS as BACKENDS
+
+NVIDIA = ("CUDA", "OPTIX")
+
+
+@dataclass(frozen=True)
+class KernelFacts:
+    """What decides whether the first GPU render compiles kernels (gathered by :func:`kernel_facts`)."""
+
+    backend: str
+    shipped_archs: tuple[str, ...]  # CUDA architectures with a binary in bpy (e.g. 'sm_75')
+    gpu_archs: tuple[str, ...]  # this machine's NVIDIA GPUs (e.g. 'sm_90'); empty if unknown
+    caches: tuple[tuple[str, bool], ...]  # (folder, whether it holds anything)
+
+
+def kernels_to_compile(facts: KernelFacts) -> str | None:
+    """Why the first render must compile kernels, or None when shipped binaries or a filled cache serve it."""
+    if facts.backend not in NVIDIA or any(filled for _, filled in facts.caches):
+        return None
+    missing = [arch for arch in facts.gpu_archs if arch not in facts.shipped_archs]
+    if facts.backend == "OPTIX":
+        return "OptiX builds its kernels from PTX" + (f" (and bpy has no CUDA binary for {', '.join(missing)})" if missing else "")
+    if missing:
+        return f"bpy ships no CUDA binary for {', '.join(missing)}: the driver compiles its PTX"
+    return None
+
+
+def compile_notice(facts: KernelFacts) -> str | None:
+    """The line printed before the first GPU render of a process that must compile kernels first."""
+    why = kernels_to_compile(facts)
+    if why is None:
+        return None
+    where = " and ".join(folder for folder, _ in facts.caches)
+    return (f"visualenv: Cycles compiles its {facts.backend} kernels for this GPU before the first frame ({why}): "
+            f"minutes, once per machine; the driver caches them in {where}. `visualenv info --warm-gpu` does it ahead of training.")
+
+
+def cycles_lib() -> Path | None:
+    """bpy's folder of Cycles kernel binaries (found without importing bpy)."""
+    import importlib.util
+
+    spec = importlib.util.find_spec("bpy")
+    if spec is None or spec.origin is None:
+        return None
+    found = sorted(Path(spec.origin).resolve().parent.glob("*/scripts/addons_core/cycles/lib"))
+    return found[0] if found else None
+
+
+def shipped_cuda_archs(lib: Path | None = None) -> tuple[str, ...]:
+    lib = lib or cycles_lib()
+    if lib is None:
+        return ()
+    return tuple(sorted(m.group(1) for p in lib.iterdir() if (m := re.match(r"kernel_(sm_\d+)\.cubin", p.name))))
+
+
+def nvidia_archs() -> tuple[str, ...]:
+    """Compute capabilities of this machine's NVIDIA GPUs as 'sm_XY' (nvidia-smi; empty without it)."""
+    if shutil.which("nvidia-smi") is None:
+        return ()
+    try:
+        out = subprocess.run(["nvidia-smi", "--query-gpu=compute_cap", "--format=csv,noheader"], capture_output=True, text=True,
+                             timeout=20, check=True).stdout
+    except (OSError, subprocess.SubprocessError):
+        return ()
+    return tuple(sorted({"sm_" + line.strip().replace(".", "") for line in out.splitlines() if line.strip()}))
+
+
+def kernel_caches() -> tuple[tuple[str, bool], ...]:
+    """The driver's kernel caches (CUDA's ComputeCache, OptiX's cache) and whether each holds anything."""
+    user = os.environ.get("USER") or ("root" if os.geteuid() == 0 else str(os.geteuid()))
+    folders = [os.environ.get("CUDA_CACHE_PATH") or str(Path.home() / ".nv" / "ComputeCache"), f"/var/tmp/OptixCache_{user}"]
+    return tuple((folder, Path(folder).is_dir() and any(Path(folder).rglob("*"))) for folder in folders)
+
+
+def kernel_facts(backend: str) -> KernelFacts:
+    return KernelFacts(backend, shipped_cuda_archs(), nvidia_archs() if backend in NVIDIA else (), kernel_caches())
+
+
+def cycles_devices() -> dict[str, list[str]]:
+    """Device names per Cycles backend that this build has (CPU included); a backend without devices maps to []."""
+    import bpy
+
+    prefs = bpy.context.preferences.addons["cycles"].preferences
+    found: dict[str, list[str]] = {}
+    for backend in BACKENDS[1:]:
+        try:
+            prefs.compute_device_type = backend
+        except TypeError:  # not compiled into this build
+            continue
+        prefs.refresh_devices()
+        found[backend] = [d.name for d in prefs.devices if d.type == backend]
+        found.setdefault("CPU", [d.name for d in prefs.devices if d.type == "CPU"])
+    prefs.compute_device_type = "NONE"
+    return {b: found[b] for b in BACKENDS if b in found}
+
+
+def gpu_context() -> dict[str, Any]:
+    """The OpenGL/EGL context EEVEE and Workbench get: a 16x16 Workbench render, then what the gpu module reports."""
+    import bpy
+    import gpu
+
+    scene = bpy.data.scenes.new("visualenv-probe")
+    scene.render.engine = "BLENDER_WORKBENCH"
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    camera = bpy.data.objects.new("probe-camera", bpy.data.cameras.new("probe-camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    bpy.ops.render.render(scene=scene.name)
+    renderer = gpu.platform.renderer_get()
+    device = gpu.platform.device_type_get()
+    return {"renderer": renderer, "vendor": gpu.platform.vendor_get(), "backend": gpu.platform.backend_type_get(),
+            "device_type": device, "software": device == "SOFTWARE" or "llvmpipe" in renderer.lower()}
+
+
+def warm_gpu() -> dict[str, Any]:
+    """Render one small Cycles frame on the GPU, so the driver compiles and caches the kernels now."""
+    from visualenv.render.blender.settings import detect_gpu
+
+    from visualenv.render.blender.log import blender_output
+
+    backend = detect_gpu()
+    if backend is None:
+        return {"warmed": False, "reason": "no Cycles GPU device"}
+    notice = compile_notice(kernel_facts(backend))
+    if notice:
+        print(notice, file=sys.stderr, flush=True)
+    with blender_output():
+        return _render_on_gpu(backend)
+
+
+def _render_on_gpu(backend: str) -> dict[str, Any]:
+    import time
+
+    import bpy
+
+    scene = bpy.data.scenes.new("visualenv-warm")
+    scene.render.engine = "CYCLES"
+    scene.cycles.device = "GPU"
+    scene.cycles.samples = 1
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    camera = bpy.data.objects.new("warm-camera", bpy.data.cameras.new("warm-camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    started = time.perf_counter()
+    bpy.ops.render.render(scene=scene.name)
+    return {"warmed": True, "backend": backend, "first_frame_s": round(time.perf_counter() - started, 2)}
+
+
+def probe(warm: bool = False) -> dict[str, Any]:
+    """Everything `visualenv info` reports about Blender; each part that fails says why instead of failing the rest."""
+    from visualenv.render.blender.log import blender_output
+
+    import bpy
+
+    report: dict[str, Any] = {"bpy": bpy.app.version_string}
+    for key, part in (("cycles", cycles_devices), ("gpu_context", gpu_context)):
+        try:
+            with blender_output():
+                report[key] = part()
+        except Exception as exc:  # noqa: BLE001 - a probe reports what went wrong; it never stops the others
+            report[key] = {"error": f"{type(exc).__name__}: {exc}"}
+    if warm:
+        try:
+            report["warm_gpu"] = warm_gpu()  # prints its notice to stderr itself, before the long first frame
+        except Exception as exc:  # noqa: BLE001
+            report["warm_gpu"] = {"error": f"{type(exc).__name__}: {exc}"}
+    gpus = [b for b, names in report.get("cycles", {}).items() if b != "CPU" and names] if isinstance(report.get("cycles"), dict) else []
+    report["kernels"] = {b: {"compile_first": kernels_to_compile(kernel_facts(b))} for b in gpus if b in NVIDIA}
+    report["kernel_caches"] = {folder: filled for folder, filled in kernel_caches()}
+    return report
+
+
+if __name__ == "__main__":
+    print(json.dumps(probe(warm="--warm-gpu" in sys.argv[1:])), flush=True)
