@@ -224,6 +224,13 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     assert played.exit_code == 0 and "episode 0: return" in played.output, played.output
     replayed = CliRunner().invoke(main, ["eval", spec, "--model", str(run / results["model"])])  # the final evaluation again
     assert replayed.exit_code == 0 and "reproduces its run's results.json" in replayed.output, replayed.output
+    exported = CliRunner().invoke(main, ["export-policy", str(run / "best_model"), str(tmp_path / "policy")])  # how results/ ships one
+    assert exported.exit_code == 0 and "float16 weights" in exported.output, exported.output
+    from visualenv.train.models import load_model
+
+    full, small = load_model(str(run / "best_model")), load_model(str(tmp_path / "policy"))
+    frames = np.random.default_rng(0).integers(0, 256, (8, *full.observation_space.shape), dtype=np.uint8)
+    assert (full.predict(frames)[0] == small.predict(frames)[0]).mean() >= 0.75  # float16 weights: near-ties may flip
 
     stopped_at = results["steps"]
     resumed = CliRunner().invoke(main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress"])

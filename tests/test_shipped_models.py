@@ -59,6 +59,7 @@ def test_shipped_agent_clearly_beats_the_random_policy(env_id):
     assert results["success_rate"] > random_success + 0.2, (results, random_success)
 
 
+@pytest.mark.timeout(900)  # the final evaluations are 100 episodes or more: VisualCartPole's are 20,000 rendered steps
 @pytest.mark.parametrize("env_id", SHIPPED)
 def test_eval_of_the_shipped_agent_reproduces_its_results_json(env_id, tmp_path):
     out = tmp_path / "eval.json"
@@ -78,6 +79,7 @@ def test_play_shows_the_shipped_agent_what_training_showed_it():
     assert result.output.count("success (caught)") >= 3, result.output
 
 
+@pytest.mark.timeout(900)
 def test_the_rllib_agent_reproduces_its_results_json(tmp_path):
     """results/Goalie-v0-rllib/best_model, trained with --backend rllib, ships only its policy: eval and play load it as they load a run's."""
     pytest.importorskip("ray.rllib", reason="the [ray] extra is not installed")

@@ -96,7 +96,7 @@ def save_rllib_policy(checkpoint: str | Path, out: str | Path, *, half: bool = T
             shutil.copy2(Path(checkpoint) / name, Path(out) / name)
     if half:
         with (target / "module_state.pkl").open("rb") as f:
-            state = pickle.load(f)  # noqa: S301 - RLlib's own checkpoint file, which RLlib unpickles the same way
+            state = pickle.load(f)  # RLlib's own checkpoint file, which RLlib unpickles the same way
         state = type(state)((k, v.astype(np.float16) if getattr(v, "dtype", None) == np.float32 else v) for k, v in state.items())
         with (target / "module_state.pkl").open("wb") as f:
             pickle.dump(state, f, protocol=pickle.HIGHEST_PROTOCOL)

@@ -24,6 +24,7 @@ from typing import Any
 from visualenv.render.base import CYCLES_BACKENDS as BACKENDS
 
 NVIDIA = ("CUDA", "OPTIX")
+GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "METAL", "ONEAPI")  # the order detect_gpu prefers them in
 
 
 @dataclass(frozen=True)
@@ -99,6 +100,39 @@ def kernel_facts(backend: str) -> KernelFacts:
     return KernelFacts(backend, shipped_cuda_archs(), nvidia_archs() if backend in NVIDIA else (), kernel_caches())
 
 
+_gpu_cache: str | None | bool = False  # False: not probed yet
+
+
+def detect_gpu() -> str | None:
+    """The first Cycles GPU backend with a usable device (all its devices enabled), or None."""
+    global _gpu_cache
+    if _gpu_cache is not False:
+        return _gpu_cache  # type: ignore[return-value]
+    found = None
+    try:
+        import bpy
+
+        prefs = bpy.context.preferences.addons["cycles"].preferences
+        for backend in GPU_BACKENDS:
+            try:
+                prefs.compute_device_type = backend
+            except TypeError:  # backend not compiled into this build
+                continue
+            prefs.refresh_devices()
+            devices = [d for d in prefs.devices if d.type == backend]
+            if devices:
+                for d in prefs.devices:
+                    d.use = d.type == backend
+                found = backend
+                break
+        if found is None:
+            prefs.compute_device_type = "NONE"
+    except Exception:  # noqa: BLE001 - no Cycles preferences: treat as no GPU
+        found = None
+    _gpu_cache = found
+    return found
+
+
 def cycles_devices() -> dict[str, list[str]]:
     """Device names per Cycles backend that this build has (CPU included); a backend without devices maps to []."""
     import bpy
@@ -137,7 +171,6 @@ def gpu_context() -> dict[str, Any]:
 
 def warm_gpu() -> dict[str, Any]:
     """Render one small Cycles frame on the GPU, so the driver compiles and caches the kernels now."""
-    from visualenv.render.blender.settings import detect_gpu
 
     from visualenv.render.blender.log import blender_output
 

@@ -29,12 +29,12 @@ from typing import Any
 
 import bpy
 
+from visualenv.render.blender.devices import compile_notice, detect_gpu, kernel_facts
 from visualenv.spec.models import RenderSettings
 
 log = logging.getLogger("visualenv.render")
 
 ENGINE_IDS = {"cycles": "CYCLES", "workbench": "BLENDER_WORKBENCH", "eevee": "BLENDER_EEVEE"}
-GPU_BACKENDS = ("OPTIX", "CUDA", "HIP", "METAL", "ONEAPI")
 _BOUNCES = ("max_bounces", "diffuse_bounces", "glossy_bounces", "transmission_bounces", "volume_bounces")
 #: passes through see-through surfaces (a colour with alpha < 1), only in scenes that have one: with
 #: any, Cycles traces shadows through every surface, which raises the raw render floor
@@ -91,7 +91,6 @@ def view_config(obs: EngineConfig, preset: str) -> EngineConfig:
 
 # -- devices -----------------------------------------------------------------------------------------
 
-_gpu_cache: str | None | bool = False  # False: not probed yet
 _warned: set[str] = set()
 
 
@@ -101,38 +100,8 @@ def _warn_once(key: str, message: str) -> None:
         warnings.warn(message, RuntimeWarning, stacklevel=3)
 
 
-def detect_gpu() -> str | None:
-    """The first Cycles GPU backend with a usable device (all its devices enabled), or None."""
-    global _gpu_cache
-    if _gpu_cache is not False:
-        return _gpu_cache  # type: ignore[return-value]
-    found = None
-    try:
-        prefs = bpy.context.preferences.addons["cycles"].preferences
-        for backend in GPU_BACKENDS:
-            try:
-                prefs.compute_device_type = backend
-            except TypeError:  # backend not compiled into this build
-                continue
-            prefs.refresh_devices()
-            devices = [d for d in prefs.devices if d.type == backend]
-            if devices:
-                for d in prefs.devices:
-                    d.use = d.type == backend
-                found = backend
-                break
-        if found is None:
-            prefs.compute_device_type = "NONE"
-    except Exception as exc:  # noqa: BLE001 - no Cycles preferences: treat as no GPU
-        log.debug("GPU probe failed: %s", exc)
-    _gpu_cache = found
-    return found
-
-
 def _compile_notice_once(backend: str) -> None:
     """Before the first GPU render of this process: say so when the driver must compile Cycles' kernels first (minutes)."""
-    from visualenv.render.blender.devices import compile_notice, kernel_facts
-
     if "compile" in _warned:
         return
     _warned.add("compile")
