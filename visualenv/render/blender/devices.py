@@ -151,18 +151,25 @@ def cycles_devices() -> dict[str, list[str]]:
     return {b: found[b] for b in BACKENDS if b in found}
 
 
+def _tiny_scene(name: str, engine: str) -> Any:
+    """A 16x16 scene with a camera and nothing else: what a probe renders."""
+    import bpy
+
+    scene = bpy.data.scenes.new(name)
+    scene.render.engine = engine
+    scene.render.resolution_x = scene.render.resolution_y = 16
+    camera = bpy.data.objects.new(name + "-camera", bpy.data.cameras.new(name + "-camera"))
+    scene.collection.objects.link(camera)
+    scene.camera = camera
+    return scene
+
+
 def gpu_context() -> dict[str, Any]:
     """The OpenGL/EGL context EEVEE and Workbench get: a 16x16 Workbench render, then what the gpu module reports."""
     import bpy
     import gpu
 
-    scene = bpy.data.scenes.new("visualenv-probe")
-    scene.render.engine = "BLENDER_WORKBENCH"
-    scene.render.resolution_x = scene.render.resolution_y = 16
-    camera = bpy.data.objects.new("probe-camera", bpy.data.cameras.new("probe-camera"))
-    scene.collection.objects.link(camera)
-    scene.camera = camera
-    bpy.ops.render.render(scene=scene.name)
+    bpy.ops.render.render(scene=_tiny_scene("visualenv-probe", "BLENDER_WORKBENCH").name)
     renderer = gpu.platform.renderer_get()
     device = gpu.platform.device_type_get()
     return {"renderer": renderer, "vendor": gpu.platform.vendor_get(), "backend": gpu.platform.backend_type_get(),
@@ -171,7 +178,6 @@ def gpu_context() -> dict[str, Any]:
 
 def warm_gpu() -> dict[str, Any]:
     """Render one small Cycles frame on the GPU, so the driver compiles and caches the kernels now."""
-
     from visualenv.render.blender.log import blender_output
 
     backend = detect_gpu()
@@ -189,14 +195,9 @@ def _render_on_gpu(backend: str) -> dict[str, Any]:
 
     import bpy
 
-    scene = bpy.data.scenes.new("visualenv-warm")
-    scene.render.engine = "CYCLES"
+    scene = _tiny_scene("visualenv-warm", "CYCLES")
     scene.cycles.device = "GPU"
     scene.cycles.samples = 1
-    scene.render.resolution_x = scene.render.resolution_y = 16
-    camera = bpy.data.objects.new("warm-camera", bpy.data.cameras.new("warm-camera"))
-    scene.collection.objects.link(camera)
-    scene.camera = camera
     started = time.perf_counter()
     bpy.ops.render.render(scene=scene.name)
     return {"warmed": True, "backend": backend, "first_frame_s": round(time.perf_counter() - started, 2)}
