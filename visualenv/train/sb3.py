@@ -9,7 +9,8 @@ A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes:
 * ``best_model.zip``  the model with the best evaluation reward
 * ``checkpoints/latest.zip`` the newest model, for ``--resume``
 * ``plots/``          the paper's figures: rewards, episode lengths, samples per second
-* ``results.json``    the best model's final evaluation (reward, length, success rate)
+* ``results.json``    the best model's final evaluation on fresh seeds (reward, length, success rate) and the
+                      periodic evaluation that selected it (see :mod:`visualenv.train.evaluation`)
 
 Stopping a run early (Ctrl-C, or ``kill`` with SIGTERM) ends training at the next
 step and still saves, evaluates and plots what was learnt so far.
