@@ -91,9 +91,9 @@ def save_rllib_policy(checkpoint: str | Path, out: str | Path, *, half: bool = T
     if not source.is_dir():
         raise VisualEnvError(f"{checkpoint} is not a checkpoint of `visualenv train --backend rllib` (no {MODULE_DIR})")
     shutil.copytree(source, target, dirs_exist_ok=True)
-    for name in ("visualenv.json",):
-        if (Path(checkpoint) / name).is_file():
-            shutil.copy2(Path(checkpoint) / name, Path(out) / name)
+    steps = Path(checkpoint) / "visualenv.json"  # the steps the checkpoint had trained
+    if steps.is_file():
+        shutil.copy2(steps, Path(out) / steps.name)
     if half:
         with (target / "module_state.pkl").open("rb") as f:
             state = pickle.load(f)  # RLlib's own checkpoint file, which RLlib unpickles the same way
