@@ -6,6 +6,7 @@ Bad input never shows a traceback: spec problems print as
 
 from __future__ import annotations
 
+import dataclasses
 import functools
 import json
 import sys
@@ -222,6 +223,8 @@ def _parse_value(text: str) -> Any:
 @click.option("--no-progress", is_flag=True)
 @click.option("--pin/--no-pin", default=True, show_default=True,
               help="confine each training env's process (sb3) or EnvRunner (rllib, a free core of its node) to its own cores")
+@click.option("--batched", type=click.IntRange(min=1), default=None,
+              help="sb3: N envs in one process and one Blender scene, one render call per step (replaces --envs)")
 @click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
               help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
 @click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
@@ -230,8 +233,8 @@ def _parse_value(text: str) -> Any:
 @_friendly
 def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
           final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
-          out_root: str, resume_dir: str | None, no_progress: bool, pin: bool, backend: str, env_runners: int, envs_per_runner: int,
-          address: str | None) -> None:
+          out_root: str, resume_dir: str | None, no_progress: bool, pin: bool, batched: int | None, backend: str, env_runners: int,
+          envs_per_runner: int, address: str | None) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
@@ -244,6 +247,8 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     ctx = click.get_current_context()
     hyper = _hyperparameters(config_file, overrides)
     if _chosen_backend(ctx, backend, resume_dir) == "rllib":
+        if batched:
+            raise click.UsageError("--batched trains with --backend sb3; RLlib runners each step their own envs (--envs-per-runner)")
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
         return
     if resume_dir:
@@ -254,6 +259,8 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
                              render=not state_only, hyperparams=hyper, progress=not no_progress, pin=pin)
+        if batched:
+            config = dataclasses.replace(config, envs=batched, batched=True)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")

@@ -25,6 +25,7 @@ from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mea
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
+from visualenv.compiler.vectorized import vectorize
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
@@ -111,6 +112,10 @@ class Program:
         built = {key: b.build(env) for key, b in self._builders.items()}
         return CompiledFunctions(built["init"], built["step"], built["bind"])
 
+    def batch_functions(self) -> "BatchFunctions":
+        """The step and bind functions of many envs at once, on numpy columns (None where one must stay per env)."""
+        return BatchFunctions(vectorize(self._builders["step"]), vectorize(self._builders["bind"]))
+
     def render_plan(self) -> RenderPlan:
         """What a renderer needs: the scene, the observation cameras, the settings and the binding targets."""
         spec = self.spec
@@ -132,6 +137,12 @@ class CompiledFunctions:
     init: Callable[[], tuple]
     step: Callable[[tuple, Any, int, int], tuple]
     bind: Callable[[tuple, int], tuple]
+
+
+@dataclass(frozen=True)
+class BatchFunctions:
+    step: Callable[[tuple, Any, Any, Any], tuple] | None
+    bind: Callable[[tuple, Any], tuple] | None
 
 
 def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None) -> Program:

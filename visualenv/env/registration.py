@@ -15,6 +15,8 @@ SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
 #: ``gymnasium.make("visualenv/<Id>", **options)`` builds what ``visualenv.make(spec, **options)`` builds,
 #: wrappers included (as ALE's ids take their preprocessing options); named as text, so this module never imports it
 ENTRY_POINT = "visualenv.env.make:make"
+#: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``: N envs in one Blender (env/batched.py)
+VECTOR_ENTRY_POINT = "visualenv.env.batched:make_batched"
 #: where the bundled specs live: package data in a wheel; in a checkout, a link to the repository's specs/ folder
 BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 
@@ -77,6 +79,6 @@ def register_bundled() -> list[str]:
     for env_id, path in spec_index().items():
         full = f"{NAMESPACE}/{env_id}"
         if full not in gym.registry:
-            gym.register(id=full, entry_point=ENTRY_POINT, kwargs={"target": str(path)})
+            gym.register(id=full, entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT, kwargs={"target": str(path)})
         ids.append(full)
     return ids

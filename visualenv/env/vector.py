@@ -126,13 +126,28 @@ _warned_gpu = False
 
 
 def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, pin: bool = True,
-             wrapper_class: Callable[[gym.Env], gym.Env] | None = None, **kwargs: Any) -> gym.vector.VectorEnv:
+             wrapper_class: Callable[[gym.Env], gym.Env] | None = None, batched: bool = False, **kwargs: Any) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
     Each worker is confined to its own share of the cores and renders with that many threads
     (`pin`; `threads` sets the render threads instead). `wrapper_class` wraps each env in its
     worker (as in SB3's ``make_vec_env``); kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
+
+    ``batched=True`` gives a :class:`~visualenv.env.batched.BatchedVectorEnv` instead: all `n` envs in
+    this process and one Blender scene, one render call per step (kwargs: render, params,
+    autoreset_mode and the renderer options; stack frames with SB3's VecFrameStack).
     """
+    if batched:
+        from visualenv.env.batched import BatchedVectorEnv
+
+        per_env = sorted(k for k in ("frame_stack", "grayscale", "resize", "render_mode") if kwargs.get(k) not in (None, False))
+        if per_env or wrapper_class is not None:
+            raise ValueError(f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
+                             "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)")
+        own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode") if k in kwargs}
+        if threads is not None:
+            kwargs["threads"] = threads
+        return BatchedVectorEnv(target, n, renderer_options=kwargs, **own)
     if asynchronous and n > 1:
         warn_gpu_workers(target, n, kwargs)
         return WorkerVectorEnv([env_factory(target, cores=share, wrapper_class=wrapper_class, **with_render_threads(kwargs, share, n, threads))

@@ -291,6 +291,18 @@ class VisualEnv(gym.Env):
         return self._steps
 
     @property
+    def fired(self) -> int:
+        """The milestones fired this episode, as bits in spec order."""
+        return self._fired
+
+    def restore(self, state: Any, steps: int, fired: int, success: bool) -> None:
+        """Put the env at a point of an episode: a batch hands one env to its lane to step it alone."""
+        self._state = tuple(float(v) for v in state)
+        self._steps, self._fired, self._success = steps, fired, success
+        self._done = False
+        self._was_reset = True
+
+    @property
     def renderer(self) -> Renderer:
         """The renderer, built on first use (in the process that uses it)."""
         if self._renderer is None:

@@ -115,6 +115,7 @@ class RendererOptions:
     samples: int | None = None
     device: str | None = None
     threads: int | None = None
+    noise: str | None = None
     readback: Readback = "auto"
 
     def __post_init__(self) -> None:

@@ -309,6 +309,9 @@ class RenderSettings(StrictModel):
     bounces: int | None = Field(None, ge=0, le=128, description="overrides the preset's light bounces")
     device: Literal["cpu", "gpu", "auto"] = Field("cpu", description="Cycles device; gpu falls back to cpu with a message")
     threads: int = Field(0, ge=0, le=256, description="render threads, 0: all cores")
+    noise: Literal["independent", "shared"] = Field(
+        "independent", description="Cycles' sampling noise: independent per pixel (Cycles' default), or shared by every pixel "
+        "(scrambling distance 0: a pixel's value does not depend on where it lies in the image; batched envs render so)")
     view: ViewSettings = Field(default_factory=ViewSettings)
 
 

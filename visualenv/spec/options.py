@@ -1,7 +1,7 @@
 """The options of :func:`visualenv.make`, checked with the spec's own models and messages.
 
 An option given in Python overrides a field of the spec (``device``,
-``threads``, ``samples``, ``engine`` override ``render``) or adds a wrapper
+``threads``, ``samples``, ``engine``, ``noise`` override ``render``) or adds a wrapper
 (``frame_stack``, ``grayscale``, ``resize``). Each is validated as strictly
 as the same value written in a spec, so ``device="tpu"`` or ``samples=0``
 fails at ``make()`` with the message the spec would give, located at
@@ -22,7 +22,7 @@ from visualenv.spec.source import SourceMap
 #: where option errors are reported (in place of file:line)
 WHERE = "visualenv.make()"
 #: the render fields an option of the same name overrides (render.base.RendererOptions holds them)
-RENDER_OVERRIDES = ("engine", "samples", "device", "threads")
+RENDER_OVERRIDES = ("engine", "samples", "device", "threads", "noise")
 
 _Pixels = Annotated[int, Field(ge=1, le=8192)]
 

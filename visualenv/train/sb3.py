@@ -59,6 +59,7 @@ class TrainConfig:
     hyperparams: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
     pin: bool = True  # each training env's process confined to its own cores
+    batched: bool = False  # the envs in one process and one Blender (BatchedVectorEnv) instead of one process each
 
     def policy(self, observation_space: Any) -> str:
         """SB3's policy for the env: images through a CNN, several cameras through one CNN each, a state vector through an MLP."""
@@ -170,11 +171,15 @@ def record_run(run_dir: Path, config: Any, spec_path: str, *, resume: bool, chan
 
 def _make_envs(config: TrainConfig, spec_path: str, run_dir: Path, resume: bool) -> tuple[Any, Any]:
     """The training envs (subprocesses, one Blender each) and the evaluation env, which renders once now to fail early."""
-    from visualenv.env.sb3_vec import make_sb3_vec
+    from visualenv.env.sb3_vec import make_sb3_batched, make_sb3_vec
 
     frame_stack = config.frame_stack if config.render else 0
-    train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
-                             monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
+    if config.batched:
+        train_env = make_sb3_batched(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
+                                     monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
+    else:
+        train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
+                                 monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     try:
         eval_env = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render)
         eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps

@@ -119,7 +119,7 @@ class BlenderRenderer(Renderer):
         self._objects = built.objects
         self._layer = user_file.render_layer(scene)
         self._free_bound_objects(built)
-        cfg.configure_scene(scene, device=self.device, threads=threads)
+        cfg.configure_scene(scene, device=self.device, threads=threads, noise=plan.settings.noise)
         cfg.quiet_emission(scene)
         self._see_through = see_through(scene) or any(t.property == "color" and t.size == 4 for t in plan.bindings)
         r = scene.render

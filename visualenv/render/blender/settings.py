@@ -129,7 +129,7 @@ def resolve_device(device: str) -> str:
 # -- writing settings to a scene ---------------------------------------------------------------------
 
 
-def configure_scene(scene: Any, *, device: str, threads: int) -> None:
+def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "independent") -> None:
     """Settings that never change between renders: colour management, output, threads, device."""
     r = scene.render
     r.image_settings.media_type = "IMAGE"  # a file saved for video or multilayer EXR output has no BMP
@@ -157,6 +157,10 @@ def configure_scene(scene: Any, *, device: str, threads: int) -> None:
     c.use_adaptive_sampling = False
     c.use_animated_seed = False
     c.seed = 0
+    if noise == "shared":  # every pixel draws the same random numbers: its value does not depend on its place in the image
+        c.sampling_pattern = "TABULATED_SOBOL"
+        c.auto_scrambling_distance = False
+        c.scrambling_distance = 0.0
     c.use_auto_tile = False
     c.sample_clamp_direct = 0.0
     c.sample_clamp_indirect = 0.0

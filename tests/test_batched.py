@@ -1,0 +1,224 @@
+"""Many envs in one Blender (BatchedVectorEnv): the same episodes as one env each, tiles equal to one env's render, clear refusals."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+import visualenv
+from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.visual_env import VisualEnv
+from visualenv.errors import SpecError
+from visualenv.spec import load_spec_text
+from visualenv.spec.loader import load_spec
+
+SPECS = Path(__file__).parents[1] / "specs"
+BUNDLED = sorted(SPECS.glob("*.yaml"))
+
+#: a spec with a continuous action, a milestone, a conditional, a random draw at reset and a division that faults
+FEATURES = """\
+id: Features-v0
+params: {k: 0.5}
+state:
+  x: {init: "uniform(-1, 1)"}
+  v: {init: 0.0}
+actions:
+  continuous: {push: {low: -1, high: 1}, brake: {low: 0, high: 1}}
+dynamics:
+  let: {drag: "v * brake if abs(v) > 0.1 else 0.0"}
+  update:
+    x: x + v
+    v: clip(v + push * k - drag, -2, 2)
+reward: "-abs(x) + (1 if 0.2 < x < 0.5 else 0)"
+outcomes:
+  halfway: {when: abs(x) > 1.5, reward: 1, end: none, success: true}
+  away: {when: abs(x) > 3, reward: -5}
+max_steps: 40
+"""
+
+
+def step_both(batch: BatchedVectorEnv, singles: list[VisualEnv], steps: int) -> int:
+    """Step a batch and one env per lane with the same actions (autoreset as Gymnasium's NEXT_STEP); returns the episodes ended."""
+    ended = 0
+    done = np.zeros(batch.num_envs, dtype=bool)
+    for _ in range(steps):
+        actions = np.array([batch.single_action_space.sample() for _ in range(batch.num_envs)])
+        obs, rewards, terminated, truncated, info = batch.step(actions)
+        for i, env in enumerate(singles):
+            if done[i]:
+                env.reset()
+                assert rewards[i] == 0 and not terminated[i] and not truncated[i]
+            else:
+                action = actions[i] if batch.program.discrete is None else int(actions[i])
+                _, reward, term, trunc, single_info = env.step(action)
+                assert (reward, term, trunc) == (rewards[i], terminated[i], truncated[i])
+                assert single_info["outcome"] == info["outcome"][i] and single_info["is_success"] == info["is_success"][i]
+            assert env.state == {k: v[i] for k, v in info["state"].items()}
+            done[i] = terminated[i] or truncated[i]
+        ended += int(done.sum())
+    return ended
+
+
+@pytest.mark.parametrize("spec", [*BUNDLED, "features"], ids=lambda s: getattr(s, "stem", s))
+def test_a_batch_runs_the_episodes_of_one_env_per_seed(spec):
+    """Env i of a batch reset with seed s has the states, rewards and ends of visualenv.make reset with seed s + i."""
+    loaded = load_spec_text(FEATURES, name="features.yaml") if spec == "features" else load_spec(spec)
+    batch = BatchedVectorEnv(loaded, 4, render=False)
+    singles = [VisualEnv(loaded, render=False) for _ in range(4)]
+    obs, info = batch.reset(seed=11)
+    for i, env in enumerate(singles):
+        single_obs, _ = env.reset(seed=11 + i)
+        assert np.array_equal(obs[i], single_obs)
+    assert batch._batch.step is not None, "the bundled specs' steps are vectorised"
+    assert step_both(batch, singles, 120) > 0
+
+
+def test_a_step_that_draws_random_numbers_steps_each_env_alone_with_the_same_result():
+    text = FEATURES.replace("x: x + v", "x: x + v + normal(0, 0.01)")
+    loaded = load_spec_text(text, name="noisy.yaml")
+    batch = BatchedVectorEnv(loaded, 3, render=False)
+    assert batch._batch.step is None
+    singles = [VisualEnv(loaded, render=False) for _ in range(3)]
+    batch.reset(seed=5)
+    for i, env in enumerate(singles):
+        env.reset(seed=5 + i)
+    step_both(batch, singles, 60)
+
+
+def test_a_fault_in_one_env_is_the_located_fault_of_that_env():
+    text = FEATURES.replace("x: x + v", "x: x + v / (x - x)").replace("max_steps: 40", "max_steps: 40\non_fault: terminate")
+    batch = BatchedVectorEnv(load_spec_text(text, name="fault.yaml"), 2, render=False)
+    batch.reset(seed=0)
+    _, rewards, terminated, _, info = batch.step(np.zeros((2, 2), dtype=np.float32))
+    assert terminated.all() and (rewards == 0).all()
+    assert "dynamics.update.x" in info["error"][0] and "division by zero" in info["error"][0]
+
+
+def test_autoreset_same_step_hands_back_the_final_observation():
+    batch = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 2, render=False, autoreset_mode="same_step")
+    batch.reset(seed=0)
+    for _ in range(200):
+        obs, _, terminated, truncated, info = batch.step(np.zeros(2, dtype=np.int64))
+        if (terminated | truncated).any():
+            i = int(np.flatnonzero(terminated | truncated)[0])
+            assert info["_final_obs"][i] and info["final_info"]["outcome"][i] is not None
+            assert info["steps"][i] == 0 and not np.array_equal(obs[i], info["final_obs"][i])
+            return
+    pytest.fail("no episode ended")
+
+
+def test_gymnasium_make_vec_uses_the_vector_entry_point():
+    vec = gym.make_vec("visualenv/VisualCartPole-v0", num_envs=3, vectorization_mode="vector_entry_point", render=False)
+    assert isinstance(vec, BatchedVectorEnv) and vec.observation_space.shape == (3, 4)
+    assert isinstance(visualenv.make_vec("VisualCartPole-v0", 2, batched=True, render=False), BatchedVectorEnv)
+
+
+@pytest.mark.parametrize("n", [0, -1, 1.5, True])
+def test_num_envs_below_one_or_not_an_integer_is_refused(n):
+    with pytest.raises(ValueError, match="num_envs must be an integer of at least 1"):
+        BatchedVectorEnv(SPECS / "visual_cartpole.yaml", n, render=False)
+
+
+def test_bad_actions_and_per_env_wrappers_are_refused():
+    batch = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 2, render=False)
+    batch.reset(seed=0)
+    with pytest.raises(ValueError, match="actions of shape"):
+        batch.step(np.zeros(3, dtype=np.int64))
+    with pytest.raises(ValueError, match="out of range"):
+        batch.step(np.array([0, 2]))
+    with pytest.raises(ValueError, match="takes no per-env wrappers"):
+        visualenv.make_vec("VisualCartPole-v0", 2, batched=True, frame_stack=4)
+    with pytest.raises(ValueError, match="autoreset_mode must be one of"):
+        BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 2, render=False, autoreset_mode="sometimes")
+
+
+# -- rendering, with real Blender --------------------------------------------------------------------------
+
+
+def agreement(a: np.ndarray, b: np.ndarray) -> float:
+    """The share of pixels within 8 levels."""
+    return float((np.abs(a.astype(int) - b.astype(int)) <= 8).mean())
+
+
+def render_both(spec, n: int, steps: int, seed: int = 3) -> list[float]:
+    """Per step and env: how far the batch's tile agrees with the env's own render (noise='shared', as a batch renders)."""
+    loaded = spec if not isinstance(spec, Path) else load_spec(spec)
+    batch = BatchedVectorEnv(loaded, n)
+    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(n)]
+    try:
+        obs, _ = batch.reset(seed=seed)
+        own = [env.reset(seed=seed + i)[0] for i, env in enumerate(singles)]
+        scores, moved = [], False
+        first = obs.copy()
+        for _ in range(steps):
+            scores += [agreement(obs[i], own[i]) for i in range(n)]
+            actions = np.array([batch.single_action_space.sample() for _ in range(n)])
+            obs, _, terminated, truncated, _ = batch.step(actions)
+            own = [env.step(actions[i] if batch.program.discrete is None else int(actions[i]))[0] for i, env in enumerate(singles)]
+            moved = moved or not np.array_equal(obs[0], first[0])
+            if (terminated | truncated).any():
+                break
+        assert moved, "the scene should change over the steps (a test that cannot fail otherwise)"
+        return scores
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
+
+
+@pytest.mark.parametrize("spec", BUNDLED, ids=lambda s: s.stem)
+def test_each_tile_is_the_envs_own_render(spec):
+    """Tiles of one render call agree with one env per process on at least 98 % of pixels within 8 levels,
+    for a fixed camera (VisualCartPole) and cameras bound to the state (Goalie, Hover2D)."""
+    scores = render_both(spec, 3, 8)
+    assert min(scores) >= 0.98, scores
+
+
+def test_a_tile_shows_its_own_env_not_its_neighbours():
+    """Two envs with different states: each tile follows its own env (swap the states and the tiles swap)."""
+    batch = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 2)
+    try:
+        obs, _ = batch.reset(seed=0, options={"state": {"x": -1.5}})
+        left = obs.copy()
+        batch.lanes[1].reset(options={"state": {"x": 1.5}})
+        batch._state[:, 1] = [batch.lanes[1].state[n] for n in batch.program.state_names]
+        obs = batch._observe()
+        assert agreement(obs[0], left[0]) == 1.0 and agreement(obs[1], left[1]) < 0.99
+        centre = [np.nonzero(obs[i][..., 0] > 100)[1].mean() for i in range(2)]
+        assert centre[1] > centre[0] + 20, centre
+    finally:
+        batch.close()
+
+
+def test_a_blend_file_scene_batches(corpus):
+    from tests.fixtures.blend_corpus import VARIANTS
+
+    variant = VARIANTS["base"]
+    text = f"""\
+id: CorpusBatch-v0
+scene: {{file: base.blend, world: {{color: [0, 0, 0], strength: 0}}}}
+state: {{x: {{init: "uniform(-1.5, 1.5)"}}}}
+actions: {{discrete: [{{u: -0.3}}, {{u: 0.3}}]}}
+dynamics: {{update: {{x: x + u}}}}
+actors:
+  {json.dumps(variant.ball)}: {{location: [x, 0, 0]}}
+observation: {{camera: {json.dumps(variant.camera)}, resolution: [48, 32], color: rgb}}
+render: {{engine: cycles, preset: fast}}
+"""
+    scores = render_both(load_spec_text(text, name="corpus.yaml", base_dir=corpus), 3, 6)
+    assert min(scores) >= 0.98, scores
+
+
+def test_engines_and_cameras_a_batch_cannot_render_are_refused(tmp_path):
+    base = (SPECS / "visual_cartpole.yaml").read_text()
+    workbench = BatchedVectorEnv(load_spec_text(base.replace("engine: cycles", "engine: workbench"), name="w.yaml"), 2)
+    with pytest.raises(ValueError, match="render.engine 'workbench' cannot render a batch"):
+        workbench.renderer
+    turning = base.replace("actors:\n", "actors:\n  Camera: {rotation: [1.5, 0, theta]}\n", 1)
+    batch = BatchedVectorEnv(load_spec_text(turning, name="turning.yaml"), 2)
+    with pytest.raises(SpecError, match="camera 'Camera' turns or zooms with the state"):
+        batch.reset(seed=0)

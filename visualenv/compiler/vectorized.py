@@ -1,0 +1,183 @@
+"""The generated step and bind functions, rewritten to run N envs at once on numpy arrays.
+
+The compiler generates scalar functions (one env, Python floats, ``if`` chains).
+A batch of envs needs the same arithmetic on columns: every state variable an
+array of N values. This module rewrites the scalar functions' syntax trees,
+statement by statement, so that the spec's expressions are never parsed twice
+and both versions compute the same thing:
+
+* a conditional expression ``a if c else b`` becomes ``where(c, a, b)``;
+  ``and``/``or``/``not`` and chained comparisons become element-wise logic;
+* an ``if`` statement (the chosen action's inputs, the outcome chain, a
+  milestone) becomes masked assignments: ``x = where(mask, new, x)``;
+* the function table is swapped for numpy's (``sin`` -> ``np.sin``, ...).
+
+Both branches of a conditional are evaluated for every env, so an expression
+the scalar code would never reach may divide by zero: numpy's warnings are off
+while a batch steps, and an env whose result is not finite is stepped again by
+the scalar function, which gives the same value or the located fault.
+
+Random draws (``uniform``...) and ``dynamics.python`` read one env's generator
+or call one env's hook: a step that uses them is not vectorised
+(:func:`vectorize` returns None and the batch steps its envs one by one).
+"""
+
+from __future__ import annotations
+
+import ast
+import copy
+import functools
+from typing import Any, Callable
+
+import numpy as np
+
+from visualenv.expr.codegen import FUNC_PREFIX, POW, FunctionBuilder
+from visualenv.expr.functions import FUNCTIONS
+
+WHERE, ALL, ANY, NOT = "_vwhere", "_vall", "_vany", "_vnot"
+
+
+def _where(mask: Any, a: Any, b: Any) -> Any:
+    """Element-wise choice that also takes vectors (tuples of columns)."""
+    if isinstance(a, tuple) or isinstance(b, tuple):
+        size = len(a) if isinstance(a, tuple) else len(b)
+        a = a if isinstance(a, tuple) else (a,) * size
+        b = b if isinstance(b, tuple) else (b,) * size
+        return tuple(np.where(mask, x, y) for x, y in zip(a, b))
+    return np.where(mask, a, b)
+
+
+def _all(*values: Any) -> Any:
+    return functools.reduce(np.logical_and, values)
+
+
+def _any(*values: Any) -> Any:
+    return functools.reduce(np.logical_or, values)
+
+
+def _reduce(op: Callable[[Any, Any], Any]) -> Callable[..., Any]:
+    def call(*args: Any) -> Any:
+        items = args[0] if len(args) == 1 and isinstance(args[0], tuple) else args
+        return np.asarray(functools.reduce(op, items), dtype=np.float64)
+    return call
+
+
+def _log(x: Any, base: Any = None) -> Any:
+    return np.log(x) if base is None else np.log(x) / np.log(base)
+
+
+def _hypot(*args: Any) -> Any:
+    return np.hypot(args[0], args[1]) if len(args) == 2 else np.sqrt(sum(np.square(a) for a in args))
+
+
+#: numpy versions of the deterministic functions of visualenv.expr.functions.FUNCTIONS
+NUMPY_FUNCTIONS: dict[str, Callable[..., Any]] = {
+    "sin": np.sin, "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan,
+    "atan2": np.arctan2, "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh, "sqrt": np.sqrt, "exp": np.exp,
+    "log": _log, "abs": np.abs, "min": _reduce(np.minimum), "max": _reduce(np.maximum), "clip": np.clip,
+    "hypot": _hypot, "floor": np.floor, "ceil": np.ceil, "round": np.round, "sign": np.sign,
+    "radians": np.radians, "degrees": np.degrees,
+}
+#: names whose presence in a generated function keeps it scalar (one env's generator or hook)
+_SCALAR_ONLY = {FUNC_PREFIX + n for n, f in FUNCTIONS.items() if f.random} | {"_python_dynamics", "_random"}
+
+
+def vector_globals() -> dict[str, Any]:
+    """The only globals a vectorised function sees: numpy's function table and the element-wise helpers."""
+    env: dict[str, Any] = {"__builtins__": {}, POW: np.float_power, WHERE: _where, ALL: _all, ANY: _any, NOT: np.logical_not}
+    env.update({FUNC_PREFIX + n: f for n, f in NUMPY_FUNCTIONS.items()})
+    return env
+
+
+def _call(func: str, args: list[ast.expr]) -> ast.Call:
+    return ast.Call(ast.Name(func, ast.Load()), args, [])
+
+
+class _Expressions(ast.NodeTransformer):
+    """Expressions to their element-wise form."""
+
+    def visit_IfExp(self, node: ast.IfExp) -> ast.AST:
+        return _call(WHERE, [self.visit(node.test), self.visit(node.body), self.visit(node.orelse)])
+
+    def visit_BoolOp(self, node: ast.BoolOp) -> ast.AST:
+        return _call(ALL if isinstance(node.op, ast.And) else ANY, [self.visit(v) for v in node.values])
+
+    def visit_UnaryOp(self, node: ast.UnaryOp) -> ast.AST:
+        operand = self.visit(node.operand)
+        if isinstance(node.op, ast.Not):
+            return _call(NOT, [operand])
+        return ast.UnaryOp(node.op, operand)
+
+    def visit_Compare(self, node: ast.Compare) -> ast.AST:
+        left = self.visit(node.left)
+        rights = [self.visit(c) for c in node.comparators]
+        pairs: list[ast.expr] = []
+        for op, right in zip(node.ops, rights):
+            pairs.append(ast.Compare(left, [op], [right]))
+            left = right
+        return pairs[0] if len(pairs) == 1 else _call(ALL, pairs)
+
+
+class _Statements:
+    """Statements under a mask: ``if`` becomes masked assignment."""
+
+    def __init__(self) -> None:
+        self.masks = 0
+
+    def rewrite(self, stmts: list[ast.stmt], mask: ast.expr | None) -> list[ast.stmt]:
+        out: list[ast.stmt] = []
+        for stmt in stmts:
+            out.extend(self.statement(stmt, mask))
+        return out
+
+    def statement(self, stmt: ast.stmt, mask: ast.expr | None) -> list[ast.stmt]:
+        expr = _Expressions().visit
+        if isinstance(stmt, ast.Pass):
+            return []
+        if isinstance(stmt, ast.Return):
+            return [ast.Return(expr(stmt.value) if stmt.value is not None else None)]
+        if isinstance(stmt, ast.Assign):
+            value = expr(stmt.value)
+            target = stmt.targets[0]
+            if mask is None or not isinstance(target, ast.Name):
+                return [ast.Assign(stmt.targets, value)]
+            return [_masked(target.id, value, mask)]
+        if isinstance(stmt, ast.AugAssign) and isinstance(stmt.target, ast.Name):
+            value = ast.BinOp(ast.Name(stmt.target.id, ast.Load()), stmt.op, expr(stmt.value))
+            if mask is None:
+                return [ast.Assign([ast.Name(stmt.target.id, ast.Store())], value)]
+            return [_masked(stmt.target.id, value, mask)]
+        if isinstance(stmt, ast.If):
+            self.masks += 1
+            taken, other = f"_mask{self.masks}", f"_else{self.masks}"
+            test = expr(stmt.test)
+            both = test if mask is None else _call(ALL, [mask, test])
+            rest = _call(NOT, [test]) if mask is None else _call(ALL, [mask, _call(NOT, [test])])
+            out: list[ast.stmt] = [ast.Assign([ast.Name(taken, ast.Store())], both)]
+            if stmt.orelse:
+                out.append(ast.Assign([ast.Name(other, ast.Store())], rest))
+            out += self.rewrite(stmt.body, ast.Name(taken, ast.Load()))
+            if stmt.orelse:
+                out += self.rewrite(stmt.orelse, ast.Name(other, ast.Load()))
+            return out
+        raise TypeError(f"cannot vectorise a {type(stmt).__name__} statement")  # the compiler generates no others
+
+
+def _masked(name: str, value: ast.expr, mask: ast.expr) -> ast.stmt:
+    return ast.Assign([ast.Name(name, ast.Store())], _call(WHERE, [mask, value, ast.Name(name, ast.Load())]))
+
+
+def vectorizable(builder: FunctionBuilder) -> bool:
+    """Whether a generated function reads nothing that belongs to one env (a random draw, the Python hook)."""
+    return not any(isinstance(n, ast.Name) and n.id in _SCALAR_ONLY for stmt in builder.body for n in ast.walk(stmt))
+
+
+def vectorize(builder: FunctionBuilder) -> Callable[..., Any] | None:
+    """The element-wise version of a generated function (same arguments, columns for numbers), or None if it must stay scalar."""
+    if not vectorizable(builder):
+        return None
+    body = _Statements().rewrite([copy.deepcopy(s) for s in builder.body], None)
+    vector = FunctionBuilder(builder.name + "_batch", list(builder.args))
+    for stmt in body:
+        vector.add(stmt)
+    return vector.build(vector_globals())

@@ -1,0 +1,301 @@
+"""N envs in one process and one Blender scene: :class:`BatchedVectorEnv`.
+
+The dynamics of all envs step at once as numpy columns (the program's
+vectorised step, :mod:`visualenv.compiler.vectorized`), and one Cycles call per
+camera renders every env's observation as a tile of one image
+(:class:`~visualenv.render.blender.batched.BatchedBlenderRenderer`).
+
+Env i of a batch reset with seed s is env ``visualenv.make`` reset with seed
+s + i: each env keeps its own random generator (a state-only
+:class:`~visualenv.env.visual_env.VisualEnv`, its "lane") for the draws of
+``reset``. A lane also steps its env alone when the vectorised step cannot:
+a spec whose step draws random numbers or calls ``dynamics.python``, or an
+env whose result is not finite (the lane then returns the same value, or
+raises the located fault, exactly as one env would).
+"""
+
+from __future__ import annotations
+
+import os
+from typing import Any, Mapping
+
+import gymnasium as gym
+import numpy as np
+from gymnasium.vector import AutoresetMode
+from gymnasium.vector.utils import batch_space
+
+from visualenv.compiler.program import Program, compile_spec
+from visualenv.env.registration import resolve
+from visualenv.env.visual_env import VisualEnv
+from visualenv.errors import SpecError
+from visualenv.render.base import RendererOptions, load_backend, observation_space
+from visualenv.spec.loader import LoadedSpec, load_spec
+
+#: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
+BATCH_BACKEND = "visualenv.render.blender.batched:BatchedBlenderRenderer"
+
+
+class BatchedVectorEnv(gym.vector.VectorEnv):
+    """`num_envs` copies of a spec's env, stepped together in this process.
+
+    Spaces are those of ``visualenv.make(spec)`` batched: observations
+    ``(N, H, W, C)`` uint8 (a Dict of those for several cameras), or
+    ``(N, n)`` float32 state vectors with ``render=False``; actions ``(N,)``
+    for discrete specs, ``(N, k)`` for continuous ones.
+
+    Rewards, ``terminated`` and ``truncated`` are per env. ``info`` holds, per
+    env (Gymnasium's vector layout, each key with its ``_key`` mask):
+    ``state`` (a dict of arrays), ``steps``, ``outcome``, ``milestones`` and
+    ``is_success``; an env ended by a fault under ``on_fault: terminate`` has its
+    message in ``error``.
+
+    Autoreset follows Gymnasium 1.x: ``autoreset_mode`` ``NEXT_STEP`` (the
+    default: the step after an episode's end resets that env, ignoring its
+    action) or ``SAME_STEP`` (the env is reset at once; the last observation of
+    the ended episode is in ``info["final_obs"]``, its info in
+    ``info["final_info"]``, as SB3's VecEnv expects).
+    """
+
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+
+    def __init__(
+        self,
+        spec: str | os.PathLike[str] | LoadedSpec | Program,
+        num_envs: int,
+        *,
+        render: bool | None = None,
+        params: dict[str, Any] | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        renderer_options: RendererOptions | Mapping[str, Any] | None = None,
+        backend: str = BATCH_BACKEND,
+    ) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
+        self._renderer: Any = None
+        modes = {m.name: m for m in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)}
+        mode = autoreset_mode.name if isinstance(autoreset_mode, AutoresetMode) else str(autoreset_mode).upper()
+        if mode not in modes:
+            raise ValueError(f"autoreset_mode must be one of {', '.join(modes)}, got {autoreset_mode!r}")
+        self.autoreset_mode = modes[mode]
+        self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
+        if isinstance(spec, Program) and not params:
+            program = spec
+        else:
+            loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec)))
+            program = compile_spec(loaded, params)
+        self.program = program
+        self.num_envs = n = int(num_envs)
+        observation = program.spec.observation
+        if render and observation is None:
+            raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
+        self.uses_camera = observation is not None and render is not False
+        self.lanes = [VisualEnv(program, render=False) for _ in range(n)]
+        self._batch = program.batch_functions()
+        self._renderer_options = RendererOptions.parse(renderer_options)
+        self._backend = backend
+        single = self.lanes[0]
+        self.single_action_space = single.action_space
+        self.action_space = batch_space(single.action_space, n)
+        self.single_observation_space = observation_space(observation) if self.uses_camera else single.observation_space  # type: ignore[arg-type]
+        self.observation_space = batch_space(self.single_observation_space, n)
+        names = program.state_names
+        self._state = np.zeros((len(names), n))
+        self._steps = np.zeros(n, dtype=np.int64)
+        self._fired = np.zeros(n, dtype=np.int64)
+        self._success = np.zeros(n, dtype=bool)
+        self._outcome: list[str | None] = [None] * n
+        self._errors: list[str | None] = [None] * n
+        self._autoreset = np.zeros(n, dtype=bool)
+        rules = program.outcomes
+        self._ends = np.array([r.end for r in rules] + ["none"], dtype=object)  # index -1: no outcome
+        self._outcome_success = np.array([r.success for r in rules] + [False])
+        milestone_bits = [1 << i for i, r in enumerate(r for r in rules if r.end == "none")]
+        self._milestones = [r.name for r in rules if r.end == "none"]
+        successful = [bit for bit, r in zip(milestone_bits, (r for r in rules if r.end == "none")) if r.success]
+        self._success_bits = sum(successful)
+        self._max_steps = program.spec.max_steps
+        self._was_reset = False
+
+    # -- Gymnasium API ------------------------------------------------------------------------------
+
+    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        """Reset every env; env i gets seed ``seed + i`` (or ``seed[i]``)."""
+        seeds = seed if isinstance(seed, (list, tuple)) else [None if seed is None else seed + i for i in range(self.num_envs)]
+        if len(seeds) != self.num_envs:
+            raise ValueError(f"reset got {len(seeds)} seeds for {self.num_envs} envs")
+        for i, s in enumerate(seeds):
+            self._reset_lane(i, seed=s, options=options)
+        self._autoreset[:] = False
+        self._was_reset = True
+        return self._observe(), self._info(np.ones(self.num_envs, dtype=bool))
+
+    def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
+        if not self._was_reset:
+            raise gym.error.ResetNeeded("call reset() before step(): the state is set by reset (Gymnasium's order)")
+        actions = self._check_actions(actions)
+        n = self.num_envs
+        rewards = np.zeros(n)
+        terminated = np.zeros(n, dtype=bool)
+        truncated = np.zeros(n, dtype=bool)
+        resetting = self._autoreset.copy()
+        stepping = ~resetting
+        if stepping.any():
+            self._advance(actions, stepping, rewards, terminated, truncated)
+        for i in np.flatnonzero(resetting):
+            self._reset_lane(int(i))
+        done = terminated | truncated
+        final: tuple[Any, dict[str, Any]] | None = None
+        if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
+            final = (self._observe(), self._info(done))
+            for i in np.flatnonzero(done):
+                self._reset_lane(int(i))
+            self._autoreset[:] = False
+        else:
+            self._autoreset = done
+        obs, info = self._observe(), self._info(np.ones(n, dtype=bool))
+        if final is not None:
+            info["final_obs"] = np.array([_select(final[0], i) if done[i] else None for i in range(n)], dtype=object)
+            info["_final_obs"] = done
+            info["final_info"] = final[1]
+            info["_final_info"] = done
+        return obs, rewards, terminated, truncated, info
+
+    def close_extras(self, **kwargs: Any) -> None:
+        if getattr(self, "_renderer", None) is not None:
+            self._renderer.close()
+            self._renderer = None
+
+    # -- the step -----------------------------------------------------------------------------------
+
+    def _advance(self, actions: np.ndarray, stepping: np.ndarray, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+        """Every stepping env's step at once, then the lanes of those the vectorised step could not do."""
+        alone = stepping.copy()
+        step = self._batch.step
+        if step is not None:
+            columns = tuple(self._state)
+            action = tuple(actions.T.astype(np.float64)) if self.program.discrete is None else actions
+            with np.errstate(all="ignore"):
+                state, reward, outcome, fired = step(columns, action, self._steps, self._fired)
+            n = self.num_envs
+            state = np.array([np.broadcast_to(v, (n,)) for v in state]) if state else self._state.copy()
+            reward = np.broadcast_to(np.asarray(reward, dtype=np.float64), (n,))
+            outcome = np.broadcast_to(np.asarray(outcome, dtype=np.int64), (n,))
+            fired = np.broadcast_to(np.asarray(fired, dtype=np.int64), (n,))
+            finite = np.isfinite(reward) & np.isfinite(state).all(axis=0)
+            ok = stepping & finite
+            alone = stepping & ~finite
+            self._state[:, ok] = state[:, ok]
+            self._steps[ok] += 1
+            self._success[ok] |= self._outcome_success[outcome[ok]] | ((fired[ok] & ~self._fired[ok] & self._success_bits) != 0)
+            self._fired[ok] = fired[ok]
+            rewards[ok] = reward[ok]
+            ends = self._ends[outcome]
+            terminated[ok] = ends[ok] == "terminate"
+            truncated[ok] = (ends[ok] == "truncate") | ((ends[ok] == "none") & (self._steps[ok] >= self._max_steps))
+            names = [r.name for r in self.program.outcomes]
+            for i in np.flatnonzero(ok):
+                o = int(outcome[i])
+                self._outcome[i] = names[o] if o >= 0 and self._ends[o] != "none" else ("max_steps" if truncated[i] else None)
+                self._errors[i] = None
+        for i in np.flatnonzero(alone):
+            self._step_lane(int(i), actions[i], rewards, terminated, truncated)
+
+    def _step_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+        """Env i stepped by its lane: the scalar step, with its checks and faults."""
+        lane = self.lanes[i]
+        lane.restore(self._state[:, i], int(self._steps[i]), int(self._fired[i]), bool(self._success[i]))
+        _, reward, term, trunc, info = lane.step(action.item() if self.program.discrete is not None else action)
+        self._state[:, i] = [info["state"][n] for n in self.program.state_names]
+        self._steps[i], self._fired[i], self._success[i] = lane.steps, lane.fired, info["is_success"]
+        rewards[i], terminated[i], truncated[i] = reward, term, trunc
+        self._outcome[i] = info["outcome"]
+        self._errors[i] = info.get("error")
+
+    def _reset_lane(self, i: int, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
+        lane = self.lanes[i]
+        lane.reset(seed=seed, options=options)
+        self._state[:, i] = [lane.state[n] for n in self.program.state_names]
+        self._steps[i] = 0
+        self._fired[i] = 0
+        self._success[i] = False
+        self._outcome[i] = None
+        self._errors[i] = None
+
+    def _check_actions(self, actions: Any) -> np.ndarray:
+        array = np.asarray(actions)
+        if array.dtype.kind not in "iuf" or array.dtype == np.bool_:
+            raise TypeError(f"actions must be numbers: the action space is {self.action_space}")
+        if array.shape != self.action_space.shape:
+            raise ValueError(f"actions of shape {array.shape} for {self.num_envs} envs: the action space is {self.action_space}")
+        if self.program.discrete is not None:
+            if array.dtype.kind == "f" and not np.all(array == np.round(array)):
+                raise TypeError(f"discrete actions must be integers, got {actions!r}")
+            array = array.astype(np.int64)
+            if ((array < 0) | (array >= self.program.discrete)).any():
+                raise ValueError(f"actions {actions!r} out of range: the action space is {self.action_space}")
+        return array
+
+    # -- observations and info ----------------------------------------------------------------------
+
+    @property
+    def renderer(self) -> Any:
+        """The batch renderer, built on first use."""
+        if self._renderer is None:
+            cls = load_backend(self._backend)
+            plan = self.program.render_plan().with_options(self._renderer_options)
+            self._renderer = cls(plan, self._renderer_options, num_envs=self.num_envs)
+        return self._renderer
+
+    def _observe(self) -> Any:
+        if not self.uses_camera:
+            return self._state[self.program.observed].T.astype(np.float32)
+        return self.renderer.render_batch(self.binding_values())
+
+    def binding_values(self) -> list[tuple]:
+        """Every env's actor binding values (program.bindings order)."""
+        bind = self._batch.bind
+        n = self.num_envs
+        if bind is not None:
+            with np.errstate(all="ignore"):
+                values = bind(tuple(self._state), self._steps)
+            table = np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values]).reshape(len(values), n)
+            bad = ~np.isfinite(table).all(axis=0)
+            rows = [tuple(table[:, i].tolist()) for i in range(n)]
+        else:
+            bad, rows = np.ones(n, dtype=bool), [()] * n
+        for i in np.flatnonzero(bad):
+            lane = self.lanes[int(i)]
+            lane.restore(self._state[:, i], int(self._steps[i]), int(self._fired[i]), bool(self._success[i]))
+            rows[i] = lane.binding_values()  # the same values, or the located fault
+        return rows
+
+    def _info(self, mask: np.ndarray) -> dict[str, Any]:
+        names = self.program.state_names
+        fired = [[m for b, m in enumerate(self._milestones) if f & (1 << b)] for f in self._fired]
+        info: dict[str, Any] = {
+            "state": {n: self._state[j].copy() for j, n in enumerate(names)}, "_state": mask.copy(),
+            "steps": self._steps.copy(), "_steps": mask.copy(),
+            "outcome": np.array(self._outcome, dtype=object), "_outcome": mask.copy(),
+            "milestones": np.array(fired + [None], dtype=object)[:-1], "_milestones": mask.copy(),
+            "is_success": self._success.copy(), "_is_success": mask.copy(),
+        }
+        errors = np.array(self._errors, dtype=object)
+        if any(e is not None for e in self._errors):
+            info["error"] = errors
+            info["_error"] = np.array([e is not None for e in self._errors]) & mask
+        return info
+
+
+def _select(obs: Any, i: int) -> Any:
+    return {k: v[i] for k, v in obs.items()} if isinstance(obs, dict) else obs[i]
+
+
+def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:
+    """The vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``.
+
+    Keyword options are those of :class:`BatchedVectorEnv` plus the renderer options of ``visualenv.make``
+    (``device``, ``threads``, ``samples``, ``readback``).
+    """
+    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode") if k in kwargs}
+    kwargs.pop("max_episode_steps", None)  # Gymnasium passes the spec's; the spec file's max_steps rules
+    return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

@@ -1,0 +1,389 @@
+"""Many envs in one Blender scene, rendered by one Cycles call per camera: :class:`BatchedBlenderRenderer`.
+
+The scene is built once, as for one env, then copied N - 1 times (linked
+duplicates: the copies share meshes and materials). Copy k hangs under an
+anchor empty placed on a grid whose spacing is larger than the cameras' clip
+distance plus the scene's size, so no camera reaches another copy. Sun lights
+and the world are directional: one of each serves every copy, so they are not
+copied.
+
+One render makes one image of ``cols x rows`` tiles, tile k being env k's
+observation. A Cycles custom camera (an OSL camera shader, :data:`TILES_OSL`)
+sits at the observation camera's pose and sends the rays of tile k from the
+camera's pose shifted to copy k, with the spec camera's lens. A camera bound to
+the state moves its copy instead: the anchor of copy k is shifted so that the
+camera lands on the shared pose, which keeps every tile exact as long as the
+camera only translates (a rotating camera would turn its copy against the
+shared sun and sky, so it is refused).
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import replace
+from typing import Any, Iterator, Sequence
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from visualenv.errors import SpecError
+from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
+from visualenv.render.blender.renderer import BlenderRenderer, _View
+from visualenv.render.blender.scene import BuiltScene, aim
+from visualenv.spec.bindables import BINDABLES
+from visualenv.spec.models import CameraObject
+
+#: properties that turn a camera (bound on it or on an ancestor) or change its lens: a batch cannot follow them
+_TURNS = ("rotation", "scale", "look_at")
+#: the largest image one render call makes; past it a batch is rendered in several calls
+MAX_IMAGE_PIXELS = 2048 * 2048
+
+TILES_OSL = r"""
+// visualenv: one tile of the image per env. Tile k (row-major from the top left) looks
+// from the camera's pose shifted by k's place on the grid of copies.
+shader visualenv_tiles(
+    int cols = 1, int count = 1, int first = 0, int ortho = 0,
+    float half_w = 0.5, float half_h = 0.5, float shift_x = 0, float shift_y = 0,
+    float ax = 0, float ay = 0, float az = 0, float bx = 0, float by = 0, float bz = 0,
+    int grid = 1,
+    output point position = 0, output vector direction = 0, output color throughput = 1)
+{
+    point r = camera_shader_raster_position();
+    int rows = (count + cols - 1) / cols;
+    float fx = r[0] * cols;
+    float fy = (1.0 - r[1]) * rows;
+    int c = clamp((int)floor(fx), 0, cols - 1);
+    int t = clamp((int)floor(fy), 0, rows - 1);
+    int k = t * cols + c;
+    if (k >= count) {
+        throughput = 0;
+    } else {
+        int env = first + k;
+        float u = (fx - c) * 2.0 - 1.0;
+        float v = 1.0 - (fy - t) * 2.0;
+        vector offset = (env % grid) * vector(ax, ay, az) + (env / grid) * vector(bx, by, bz);
+        float x = u * half_w + shift_x;
+        float y = v * half_h + shift_y;
+        if (ortho) {
+            position = point(offset[0] + x, offset[1] + y, offset[2]);
+            direction = vector(0, 0, 1);
+        } else {
+            position = point(offset[0], offset[1], offset[2]);
+            direction = normalize(vector(x, y, 1.0));
+        }
+    }
+}
+"""
+
+
+def _osl_modules_on_path() -> None:
+    """Blender's ``oslquery`` (which compiling a camera shader needs) sits in bpy's own site-packages, not on sys.path."""
+    local = bpy.utils.resource_path("LOCAL")
+    version = f"python{sys.version_info.major}.{sys.version_info.minor}"
+    for lib in ("lib", "lib64"):
+        path = f"{local}/python/{lib}/{version}/site-packages"
+        if path not in sys.path:
+            sys.path.append(path)
+
+
+def grid_shape(count: int) -> tuple[int, int]:
+    """(cols, rows) of the most square grid holding `count` tiles."""
+    cols = math.ceil(math.sqrt(count))
+    return cols, math.ceil(count / cols)
+
+
+def tile(image: np.ndarray, count: int, height: int, width: int) -> np.ndarray:
+    """(count, height, width, C): the tiles of `image` in row-major order from the top left."""
+    cols = image.shape[1] // width
+    rows = image.shape[0] // height
+    tiles = image.reshape(rows, height, cols, width, -1).swapaxes(1, 2).reshape(rows * cols, height, width, -1)
+    return tiles[:count]
+
+
+class _Copy:
+    """One env's objects: its anchor, its binding setters and what they last wrote."""
+
+    def __init__(self, anchor: Any, objects: dict[str, Any]) -> None:
+        self.anchor = anchor
+        self.objects = objects
+        self.setters: list = []
+        self.aimed: list = []
+        self.targets: dict[str, Any] = {}
+        self.last: tuple | None = None
+
+
+class BatchedBlenderRenderer(BlenderRenderer):
+    """Renders `num_envs` copies of a plan's scene in one Blender scene, one Cycles call per observation camera.
+
+    ``render_batch(values)`` takes one tuple of binding values per env and
+    returns what :meth:`BlenderRenderer.render_observation` returns for one env,
+    stacked: ``(N, H, W, C)`` uint8, or a dict of those for several cameras.
+    """
+
+    def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1) -> None:
+        if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
+            raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
+        engine = plan.settings.engine
+        if engine != "cycles":
+            raise ValueError(f"render.engine '{engine}' cannot render a batch in one call: only Cycles can (through its custom "
+                             "camera); use engine: cycles, or one process per env (visualenv.make_vec(..., batched=False))")
+        colors = {v.color for v in plan.views.values()}
+        if "depth" in colors:
+            raise ValueError("a batch cannot render depth observations yet: use one process per env (visualenv.make_vec(..., batched=False))")
+        self.num_envs = num_envs
+        _osl_modules_on_path()
+        # Cycles draws each pixel's random numbers from its place in the image, so tile k would be noisier
+        # or cleaner than env k alone; with shared noise a tile equals the env's own render (noise="shared")
+        plan = replace(plan, settings=plan.settings.model_copy(update={"noise": "shared"}))
+        super().__init__(plan, options)
+
+    # -- construction -------------------------------------------------------------------------------
+
+    def _setup(self, built: BuiltScene, threads: int) -> None:
+        super()._setup(built, threads)
+        self._refuse_turning_cameras()
+        scene = built.scene
+        self._layer.update()  # matrix_world of every object, read below
+        self._spacing = self._copy_spacing(built)
+        self._cols, _ = grid_shape(self.num_envs)
+        shared = [o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
+        copied = [o for o in scene.objects if o not in shared and not _hidden(o)]
+        self._copies = [self._make_copy(k, built, copied) for k in range(self.num_envs)]
+        for copy in self._copies:
+            self._objects, self._last = copy.objects, None
+            copy.setters = self._compile_bindings()
+            copy.aimed, copy.targets = self._aimed, self._targets
+        self._objects = built.objects
+        self._tiled_views = [self._tiled_view(view) for view in self._views]
+        self._anchors_moved = False
+
+    def _refuse_turning_cameras(self) -> None:
+        """A camera the state turns (or zooms) cannot share one pose with its copies; a bound sun cannot be shared."""
+        plan, objects = self.plan, self._objects
+        bound: dict[str, set[str]] = {}
+        for target in plan.bindings:
+            bound.setdefault(target.object, set()).add(target.property)
+        names = {obj.as_pointer(): name for name, obj in objects.items()}
+        for view in plan.views.values():
+            camera = objects[view.camera]
+            spec = plan.scene.objects.get(view.camera)
+            aimed = isinstance(spec, CameraObject) and spec.look_at is not None
+            for obj in _with_ancestors(camera):
+                props = bound.get(names.get(obj.as_pointer(), ""), set())
+                turning = (props & set(_TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if obj == camera else set())
+                if turning or obj.constraints:
+                    why = f"its {', '.join(sorted(turning))} binding" if turning else "a constraint"
+                    raise SpecError([plan.source.diagnostic(("observation",), f"camera '{view.camera}' turns or zooms with the state "
+                        f"({why} on '{names.get(obj.as_pointer(), obj.name)}'): a batch renders every env through one camera "
+                        "orientation, so only a camera that moves without turning can be batched; "
+                        "use one process per env (visualenv.make_vec(..., batched=False))")])
+        for name in bound:
+            obj = objects[name]
+            if obj.type == "LIGHT" and obj.data.type == "SUN":
+                raise SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares "
+                    "one sun among its envs; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
+
+    def _copy_spacing(self, built: BuiltScene) -> float:
+        """How far apart copies stand: farther than any camera sees, plus the scene's size."""
+        reach = max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0)
+        size = 0.0
+        for obj in built.scene.objects:
+            if obj.type == "LIGHT" and obj.data.type == "SUN":
+                continue
+            corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box] or [obj.matrix_world.translation]
+            size = max(size, *(c.length for c in corners))
+        return float(reach + 2 * size + 10.0)
+
+    def _make_copy(self, k: int, built: BuiltScene, originals: list[Any]) -> _Copy:
+        """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at k's grid place."""
+        scene = built.scene
+        collection = bpy.data.collections.new(f"{scene.name}-env{k}")
+        scene.collection.children.link(collection)
+        anchor = bpy.data.objects.new(f"{scene.name}-anchor{k}", None)
+        collection.objects.link(anchor)
+        anchor.location = self._offset(k)
+        if k == 0:
+            mapping = {o.as_pointer(): o for o in originals}
+        else:
+            mapping = {}
+            for original in originals:
+                duplicate = original.copy()
+                collection.objects.link(duplicate)
+                mapping[original.as_pointer()] = duplicate
+            for original in originals:
+                _remap_references(mapping[original.as_pointer()], mapping)
+        for original in originals:
+            obj = mapping[original.as_pointer()]
+            if original.parent is None or original.parent.as_pointer() not in mapping:
+                world = original.matrix_world.copy()
+                obj.parent = anchor
+                obj.matrix_parent_inverse = Matrix.Identity(4)
+                obj.matrix_basis = world if original.parent is None else obj.matrix_basis
+        objects = {name: mapping.get(obj.as_pointer(), obj) for name, obj in built.objects.items()}
+        return _Copy(anchor, objects)
+
+    def _offset(self, k: int) -> Vector:
+        return Vector(((k % self._cols) * self._spacing, (k // self._cols) * self._spacing, 0.0))
+
+    def _tiled_view(self, view: _View) -> tuple[_View, Any, bool]:
+        """The custom camera that renders `view` for every env, and whether its camera moves with the state."""
+        scene, source = self._scene, view.camera
+        data = bpy.data.cameras.new(f"{scene.name}-{view.key}-tiles")
+        data.type = "CUSTOM"
+        data.custom_mode = "INTERNAL"
+        data.custom_shader = _tiles_text()
+        data.clip_start, data.clip_end = source.data.clip_start, source.data.clip_end
+        camera = bpy.data.objects.new(f"{scene.name}-{view.key}-tiles", data)
+        scene.collection.objects.link(camera)
+        pose = source.matrix_world.normalized()
+        camera.matrix_world = pose
+        _compile(camera)
+        params = data.cycles_custom
+        half_w, half_h, shift_x, shift_y, ortho = _lens(source.data, view.width, view.height)
+        # world offsets of one grid column and row, in Cycles' camera space (x right, y up, z forward)
+        to_camera = Matrix.Diagonal((1.0, 1.0, -1.0)) @ pose.to_3x3().inverted()
+        a = to_camera @ Vector((self._spacing, 0.0, 0.0))
+        b = to_camera @ Vector((0.0, self._spacing, 0.0))
+        for key, value in dict(cols=self._cols, grid=self._cols, ortho=int(ortho), half_w=half_w, half_h=half_h, shift_x=shift_x,
+                               shift_y=shift_y, ax=a.x, ay=a.y, az=a.z, bx=b.x, by=b.y, bz=b.z).items():
+            params[key] = value
+        chain = {o.as_pointer() for o in _with_ancestors(source)}
+        carriers = {name for name, obj in self._objects.items() if obj.as_pointer() in chain}
+        moving = any(t.object in carriers and BINDABLES[t.property].moves for t in self.plan.bindings)
+        tiled = _View(view.key, camera, view.width, view.height, view.color, view.depth_range, view.config)
+        return tiled, pose.translation.copy(), moving
+
+    # -- rendering ----------------------------------------------------------------------------------
+
+    def render_batch(self, values: Sequence[Sequence[Any]]) -> np.ndarray | dict[str, np.ndarray]:
+        """Apply each env's binding values to its copy and render every observation camera for all envs."""
+        self._check_open()
+        if len(values) != self.num_envs:
+            raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
+        for copy, v in zip(self._copies, values):
+            self._apply_copy(copy, tuple(v))
+        images = {}
+        for (view, reference, moving), source in zip(self._tiled_views, self._views):
+            images[view.key] = self._render_tiles(view, reference, source.camera if moving else None)
+        return next(iter(images.values())) if self.plan.single else images
+
+    def _apply_copy(self, copy: _Copy, values: tuple) -> None:
+        if values == copy.last:
+            return
+        if len(values) != self._size:
+            raise ValueError(f"expected {self._size} binding values, got {len(values)}")
+        last = copy.last
+        for start, end, setter in copy.setters:
+            part = values[start:end]
+            if last is None or part != last[start:end]:
+                setter(part)
+        for obj, name in copy.aimed:
+            aim(obj, copy.targets[name])
+        copy.last = values
+
+    def _render_tiles(self, view: _View, reference: Vector, moving_camera: Any) -> np.ndarray:
+        """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS."""
+        if moving_camera is not None:
+            self._follow(moving_camera, reference)
+        elif self._anchors_moved:
+            for k, copy in enumerate(self._copies):
+                copy.anchor.location = self._offset(k)
+            self._anchors_moved = False
+        per_call = max(1, MAX_IMAGE_PIXELS // (view.width * view.height))
+        parts = []
+        params = view.camera.data.cycles_custom
+        for first in range(0, self.num_envs, per_call):
+            count = min(per_call, self.num_envs - first)
+            cols, rows = grid_shape(count)
+            params["first"], params["count"], params["cols"] = first, count, cols
+            big = _View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
+            parts.append(tile(self._render(big), count, view.height, view.width))
+        return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+    def _follow(self, camera: Any, reference: Vector) -> None:
+        """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
+        name = next(n for n, o in self._objects.items() if o == camera)
+        on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
+        if not on_anchor:
+            self._layer.update()  # the camera's place depends on its parents: evaluate them
+        for k, copy in enumerate(self._copies):
+            cam = copy.objects[name]
+            where = Vector(cam.location) if on_anchor else (copy.anchor.matrix_world.inverted() @ cam.matrix_world).translation
+            copy.anchor.location = self._offset(k) + reference - where
+        self._anchors_moved = True
+
+    def close(self) -> None:
+        self._copies = []
+        super().close()
+
+
+def _with_ancestors(obj: Any) -> Iterator[Any]:
+    while obj is not None:
+        yield obj
+        obj = obj.parent
+
+
+def _hidden(obj: Any) -> bool:
+    """An object no render shows: hidden itself, or in hidden collections only."""
+    return bool(obj.users_collection) and all(c.hide_render for c in obj.users_collection)
+
+
+def _remap_references(obj: Any, mapping: dict[int, Any]) -> None:
+    """Point a duplicate's parent, constraint targets and modifier objects at the duplicates of its own copy."""
+    def swap(value: Any) -> Any:
+        return mapping.get(value.as_pointer(), value) if value is not None else None
+
+    obj.parent = swap(obj.parent) if obj.parent is not None else None
+    for constraint in obj.constraints:
+        if hasattr(constraint, "target"):
+            constraint.target = swap(constraint.target)
+    for modifier in obj.modifiers:
+        for attribute in ("object", "offset_object", "mirror_object", "target"):
+            if hasattr(modifier, attribute) and isinstance(getattr(modifier, attribute), bpy.types.Object):
+                setattr(modifier, attribute, swap(getattr(modifier, attribute)))
+
+
+def _lens(data: Any, width: int, height: int) -> tuple[float, float, float, float, bool]:
+    """(half width, half height, shift x, shift y, orthographic) of a camera's view of a width x height image.
+
+    Perspective: tangents of the half angles (at distance 1); orthographic: half sizes.
+    Follows Blender's sensor fit: 'AUTO' fits the larger image side to the sensor width.
+    """
+    ortho = data.type == "ORTHO"
+    if data.type not in ("PERSP", "ORTHO"):
+        raise ValueError(f"a batch renders perspective and orthographic cameras, not {data.type.lower()} ones")
+    fit = data.sensor_fit
+    horizontal = fit == "HORIZONTAL" or (fit == "AUTO" and width >= height)
+    if ortho:
+        size = data.ortho_scale / 2
+    else:
+        sensor = data.sensor_height if fit == "VERTICAL" else data.sensor_width
+        size = sensor / 2 / data.lens
+    if horizontal:
+        half_w, half_h = size, size * height / width
+    else:
+        half_h, half_w = size, size * width / height
+    larger = 2 * max(half_w, half_h)
+    return half_w, half_h, data.shift_x * larger, data.shift_y * larger, ortho
+
+
+def _tiles_text() -> Any:
+    name = "visualenv_tiles.osl"
+    text = bpy.data.texts.get(name)
+    if text is None or text.as_string() != TILES_OSL:
+        text = text or bpy.data.texts.new(name)
+        text.clear()
+        text.write(TILES_OSL)
+    return text
+
+
+def _compile(camera: Any) -> None:
+    """Compile the custom camera's shader (Cycles does it in an operator on the active object)."""
+    import cycles.osl  # Blender's Cycles add-on
+
+    messages: list[str] = []
+    ok = cycles.osl.update_custom_camera_shader(camera.data, lambda kind, message: messages.append(message))
+    if not ok:
+        raise RuntimeError("Cycles could not compile the batch's custom camera shader: " + "; ".join(messages))
