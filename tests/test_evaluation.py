@@ -8,7 +8,7 @@ import pytest
 
 from hypothesis import given, strategies as st
 
-from visualenv.train.evaluation import (FRESH_SEED, MAX_TRAIN_SEED, bootstrap_mean_interval, differences, final_seed, legacy_eval_seed,
+from visualenv.train.evaluation import (FRESH_SEED, MAX_TRAIN_SEED, bootstrap_mean_interval, differences, final_seed, legacy_eval_seed, replays_prefix,
                                         recorded_evaluation, seed_purpose, selection_record, selection_seed, wilson_interval)
 
 
@@ -92,3 +92,13 @@ def test_the_selection_record_is_the_evaluation_that_picked_the_best_model(tmp_p
     record = selection_record(tmp_path, selection_seed(7))
     assert record == {"eval_seed": selection_seed(7), "evaluations": 3, "best_at_step": 20, "episodes": 2, "mean_reward": 5.0, "success_rate": 0.5}
     assert selection_record(tmp_path / "missing", 0) is None
+
+
+def test_a_shorter_evaluation_is_compared_episode_by_episode_with_the_recorded_ones():
+    recorded = {"episodes": 4, "mean_reward": 1.5, "per_episode": {"returns": [1.0, 2.0, 1.0, 2.0], "lengths": [3, 4, 3, 4],
+                                                                  "successes": [True, False, True, False]}}
+    same = {"episodes": 2, "per_episode": {"returns": [1.0, 2.0], "lengths": [3, 4], "successes": [True, False]}}
+    other = {"episodes": 2, "per_episode": {"returns": [1.0, 3.0], "lengths": [3, 4], "successes": [True, False]}}
+    assert replays_prefix(same, recorded) and differences(same, recorded) == []
+    assert differences(other, recorded) == ["episode 1: returns 3.0 (results.json: 2.0)"]
+    assert not replays_prefix(same, {"episodes": 4, "mean_reward": 1.5})  # a results.json without its episodes: no prefix to check

@@ -182,6 +182,48 @@ def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
         ray.shutdown()
 
 
+@pytest.mark.slow
+def test_a_batched_runner_steps_its_envs_in_one_blender_scene(tmp_path):
+    """--batched N with --backend rllib: each runner owns one BatchedVectorEnv of N envs (Gymnasium's vector entry point)."""
+    import ray
+
+    from visualenv.train.rllib_setup import ppo_config
+
+    ray.init(address="local", num_cpus=1, include_dashboard=False, log_to_driver=False)
+    try:
+        algo = ppo_config(tiny_goalie(tmp_path), env_runners=1, envs_per_runner=3, batched=True).build_algo()
+        try:
+            (sampled,) = algo.env_runner_group.foreach_env_runner(
+                lambda r: (sum(len(e) for e in r.sample(num_timesteps=30, random_actions=True)), type(r.env.unwrapped).__name__,
+                           r.env.observation_space.shape, r.env.unwrapped.renderer.num_envs), local_env_runner=False)
+            steps, kind, shape, rendered = sampled
+            assert steps >= 30 and kind == "BatchedVectorEnv" and shape == (3, 24, 24, 4) and rendered == 3
+        finally:
+            algo.stop()
+    finally:
+        ray.shutdown()
+
+
+def test_vector_frame_stack_restarts_the_stack_of_an_env_that_reset():
+    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.wrappers import VectorFrameStack
+
+    vec = VectorFrameStack(BatchedVectorEnv("Goalie-v0", 2), 4)
+    try:
+        obs, _ = vec.reset(seed=0)
+        assert obs.shape == (2, 100, 100, 4) and not obs[..., :3].any() and obs[..., 3].std() > 1
+        done = np.zeros(2, dtype=bool)
+        for _ in range(80):
+            obs, _, terminated, truncated, _ = vec.step(np.array([0, 1]))
+            if done.any():  # this step reset the env that ended: its older slots are zero again
+                assert not obs[done][..., :3].any()
+                return
+            done = terminated | truncated
+        pytest.fail("no episode ended")
+    finally:
+        vec.close()
+
+
 TRAIN = ["--backend", "rllib", "--env-runners", "2", "--eval-every", "64", "--eval-episodes", "1", "--final-episodes", "2",
          "--set", "train_batch_size_per_learner=64", "--set", "minibatch_size=32", "--set", "num_epochs=1", "--no-progress"]
 

@@ -224,7 +224,8 @@ def _parse_value(text: str) -> Any:
 @click.option("--pin/--no-pin", default=True, show_default=True,
               help="confine each training env's process (sb3) or EnvRunner (rllib, a free core of its node) to its own cores")
 @click.option("--batched", type=click.IntRange(min=1), default=None,
-              help="sb3: N envs in one process and one Blender scene, one render call per step (replaces --envs)")
+              help="N envs in one Blender scene, one render call per step: sb3: in this process (replaces --envs); "
+                   "rllib: in each EnvRunner (replaces --envs-per-runner)")
 @click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
               help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
 @click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
@@ -247,8 +248,6 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     ctx = click.get_current_context()
     hyper = _hyperparameters(config_file, overrides)
     if _chosen_backend(ctx, backend, resume_dir) == "rllib":
-        if batched:
-            raise click.UsageError("--batched trains with --backend sb3; RLlib runners each step their own envs (--envs-per-runner)")
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
         return
     if resume_dir:
@@ -359,6 +358,8 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
                                   envs_per_runner=params["envs_per_runner"], frame_stack=params["frame_stack"], eval_every=params["eval_every"],
                                   eval_episodes=params["eval_episodes"], final_eval_episodes=params["final_episodes"], seed=params["seed"],
                                   render=not params["state_only"], hyperparams=hyper, progress=progress, pin=params["pin"])
+        if params["batched"]:
+            config = dataclasses.replace(config, envs_per_runner=params["batched"], batched=True)
     check_address(address)
     algorithm_config(config)  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
@@ -420,7 +421,7 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
     and config.json lie beside the model, as in runs/<Id>/<time>/ and results/<Id>/),
     the episodes are those of the run's final evaluation and the figures match its results.json.
     """
-    from visualenv.train.evaluation import differences, evaluate_model, seed_purpose
+    from visualenv.train.evaluation import differences, evaluate_model, replays_prefix, seed_purpose
 
     model_path = _model_file(spec, model_path)
     if json_out:
@@ -436,10 +437,13 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
     click.echo(f"  mean length   {results['mean_length']:8.2f}  95 % CI [{l_lo:.2f}, {l_hi:.2f}] (bootstrap)")
     click.echo(f"  success rate  {100 * results['success_rate']:6.0f} %  95 % CI [{100 * s_lo:.0f} %, {100 * s_hi:.0f} %] (Wilson)")
     matches = None
-    if recorded is not None and recorded.results is not None and recorded.results.get("episodes") == results["episodes"]:
+    if recorded is not None and recorded.results is not None and (
+            recorded.results.get("episodes") == results["episodes"] or replays_prefix(results, recorded.results)):
         wrong = differences(results, recorded.results)
         matches = not wrong
-        click.echo("reproduces its run's results.json" if matches else "differs from its run's results.json: " + "; ".join(wrong))
+        what = "its run's results.json" if recorded.results["episodes"] == results["episodes"] else \
+            f"the first {results['episodes']} episodes of its run's results.json"
+        click.echo(f"reproduces {what}" if matches else f"differs from {what}: " + "; ".join(wrong[:5]))
         if recorded.note:
             click.echo(f"note: {recorded.note}")
     if json_out:
@@ -486,15 +490,31 @@ def _check_writable(path: str, option: str) -> None:
         raise click.BadParameter(f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option) from None
 
 
-def _worker_counts(value: str) -> tuple[int, ...]:
-    """--workers: one count, or a comma-separated list of counts (scaling)."""
+def _worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
+    """--workers: one count, or a comma-separated list of counts (scaling); --batched: a list of batch sizes."""
     try:
         counts = tuple(int(part) for part in value.split(","))
     except ValueError:
         counts = ()
-    if not counts or any(c < 0 for c in counts) or (len(counts) > 1 and min(counts) < 1):
-        raise click.BadParameter(f"expected a number of workers or a list such as 1,2,4,8, got {value!r}", param_hint="--workers")
+    least = 1 if option == "--batched" else 0
+    if not counts or any(c < least for c in counts) or (len(counts) > 1 and min(counts) < 1):
+        raise click.BadParameter(f"expected a number of envs or a list such as 1,2,4,8, got {value!r}", param_hint=option)
     return counts
+
+
+def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, results: list[Any]) -> None:
+    """`bench --batched`: each batch size in a fresh process, then the per-process vector env with one worker per usable core."""
+    from visualenv.tools.bench import bench_parallel
+    from visualenv.tools.bench_batched import bench_batched, lines
+
+    for spec in specs:
+        batches = bench_batched(spec, sizes, steps)
+        workers = max(2, cores)
+        per_process = bench_parallel(spec, workers, steps, 0, 0.0)
+        click.echo(f"{spec}")
+        for line in lines(batches, per_process):
+            click.echo(line)
+        results.append({"spec": spec, "batched": batches, "per_process": per_process})
 
 
 @main.command()
@@ -507,10 +527,12 @@ def _worker_counts(value: str) -> tuple[int, ...]:
               help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
 @click.option("--pin/--no-pin", default=True, show_default=True, help="confine each parallel worker to its own cores")
 @click.option("--soak", "soak_steps", type=click.IntRange(min=0), default=0, help="also run this many steps and report memory growth (e.g. 50000)")
+@click.option("--batched", "batch_sizes", default=None, callback=lambda ctx, param, value: value and _worker_counts(value, "--batched"),
+              help="batch sizes such as 1,16,64: N envs in one Blender against the per-process vector env (one worker per core)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads: int | None, readback: str, pin: bool, soak_steps: int,
-          json_out: str | None) -> None:
+          batch_sizes: tuple[int, ...] | None, json_out: str | None) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
 
@@ -526,8 +548,10 @@ def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads:
     click.echo(f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"
                f"{f' ({cores} usable by this process)' if cores != machine_cores else ''}, "
                f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
-    results = []
-    for spec in specs:
+    results: list[Any] = []
+    if batch_sizes:
+        _bench_batched(specs, batch_sizes, steps, cores, results)
+    for spec in specs if not batch_sizes else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
         figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling)
         for line in figures.lines():

@@ -142,3 +142,46 @@ def wrap_observation(env: gym.Env, *, grayscale: bool = False, resize: tuple[int
     if frame_stack and frame_stack > 1:
         env = FrameStack(env, frame_stack)
     return env
+
+
+class VectorFrameStack(gym.vector.VectorObservationWrapper):
+    """:class:`FrameStack` for a vector env whose envs reset on the step after their episode ends (Gymnasium's NEXT_STEP).
+
+    Each env's stack is its own: an env that resets (with the vector env, or on its
+    own after an episode's end) starts with zeroed older slots, as ``FrameStack`` and
+    SB3's ``VecFrameStack`` do. Box observations (N, H, W, C) -> (N, H, W, C * depth).
+    """
+
+    def __init__(self, env: gym.vector.VectorEnv, depth: int = 4):
+        super().__init__(env)
+        space = env.single_observation_space
+        if not isinstance(space, spaces.Box) or len(space.shape) != 3:
+            raise ValueError(f"VectorFrameStack stacks images (H, W, C), not {space}")
+        if depth < 1:
+            raise ValueError("depth must be at least 1")
+        self.depth = depth
+        h, w, c = space.shape
+        self.single_observation_space = spaces.Box(0, 255, (h, w, c * depth), np.uint8)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, env.num_envs)
+        self._stack = np.zeros((env.num_envs, h, w, c * depth), dtype=np.uint8)
+        self._channels = c
+        self._ended = np.zeros(env.num_envs, dtype=bool)
+
+    def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
+        obs, info = self.env.reset(**kwargs)
+        self._stack[:] = 0
+        self._stack[..., -self._channels:] = obs
+        self._ended[:] = False
+        return self._stack.copy(), info
+
+    def step(self, actions: Any) -> tuple[Any, Any, Any, Any, dict[str, Any]]:
+        obs, rewards, terminated, truncated, info = self.env.step(actions)
+        c = self._channels
+        self._stack[:, :, :, :-c] = self._stack[:, :, :, c:]
+        self._stack[self._ended, :, :, :-c] = 0  # these envs reset in this step: a new episode's first frame
+        self._stack[..., -c:] = obs
+        self._ended = np.logical_or(terminated, truncated)
+        return self._stack.copy(), rewards, terminated, truncated, info
+
+    def observations(self, observations: Any) -> Any:  # the step and reset above do the work
+        return observations

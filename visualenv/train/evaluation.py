@@ -147,6 +147,8 @@ def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
         "length_ci95": bootstrap_mean_interval(lengths),
         "success_ci95": wilson_interval(sum(successes), len(successes)),
         "ci_method": CI_METHOD,
+        # each episode in order: a shorter evaluation with the same seed plays the first of them again
+        "per_episode": {"returns": returns, "lengths": lengths, "successes": successes},
     }
 
 
@@ -284,6 +286,20 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
 
 
 def differences(results: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
-    """The figures of results.json that `results` does not reproduce exactly."""
+    """The figures of results.json that `results` does not reproduce exactly.
+
+    An evaluation of fewer episodes than results.json's (same seed) is compared episode by
+    episode with the first of results.json's ``per_episode`` records.
+    """
+    if results.get("episodes", 0) < recorded.get("episodes", 0):
+        played, kept = results.get("per_episode", {}), recorded.get("per_episode", {})
+        n = results["episodes"]
+        return [f"episode {i}: {key} {played[key][i]} (results.json: {kept[key][i]})"
+                for key in ("returns", "lengths", "successes") for i in range(n) if played[key][i] != kept[key][i]]
     return [f"{key} {results.get(key)} (results.json: {recorded[key]})" for key in RESULT_KEYS
             if key in recorded and results.get(key) != recorded[key]]
+
+
+def replays_prefix(results: dict[str, Any], recorded: dict[str, Any]) -> bool:
+    """Whether `results` (fewer episodes, the same seed) can be checked against results.json's per-episode records."""
+    return 0 < results.get("episodes", 0) < recorded.get("episodes", 0) and len(recorded.get("per_episode", {}).get("returns", [])) == recorded["episodes"]

@@ -55,6 +55,7 @@ class RLlibTrainConfig:
     hyperparams: dict[str, Any] = field(default_factory=dict)
     progress: bool = True
     pin: bool = True  # each EnvRunner claims a core of its node of its own
+    batched: bool = False  # each EnvRunner's envs in one Blender scene (BatchedVectorEnv)
     algo: str = "ppo"
     backend: str = BACKEND
 
@@ -65,7 +66,7 @@ def algorithm_config(config: RLlibTrainConfig) -> Any:
 
     return ppo_config(config.spec, env_runners=config.env_runners, envs_per_runner=config.envs_per_runner,
                       frame_stack=config.frame_stack if config.render else 0, seed=config.seed, render=config.render,
-                      hyperparams=config.hyperparams, pin=config.pin)
+                      hyperparams=config.hyperparams, pin=config.pin, batched=config.batched)
 
 
 @contextmanager

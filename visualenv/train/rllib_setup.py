@@ -48,22 +48,55 @@ class ScaledImage(gym.ObservationWrapper):
         return np.asarray(observation, dtype=np.float32) * np.float32(1 / 255)
 
 
-def make_rllib_env(env_config: dict[str, Any]) -> gym.Env:
+def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv:
     """One env, made where RLlib calls it (in an EnvRunner process); Blender starts at its first reset.
 
     `env_config` keys: ``spec`` (a path the runner's node can read), ``frame_stack``,
     ``render`` (False: the state vector, no Blender), ``threads`` (render threads), ``pin``
-    (confine the runner's process to a core of its node that no other runner has claimed).
+    (confine the runner's process to a core of its node that no other runner has claimed),
+    ``batched`` with ``num_envs`` (RLlib adds it when it calls the vector entry point): the runner's
+    envs as one BatchedVectorEnv.
     """
     from visualenv.env.cores import claim_core
     from visualenv.env.make import make
 
+    if env_config.get("batched"):
+        return _batched_rllib_env(env_config)
     if not env_config.get("render", True):
         return make(env_config["spec"], render=False)
     if env_config.get("pin", True) and env_config.get("threads", 1) == 1:
         claim_core()  # before Blender starts, which sizes its thread pools to the cores it may use
     env = make(env_config["spec"], frame_stack=env_config.get("frame_stack", 4), threads=env_config.get("threads", 1))
     return ScaledImage(env)
+
+
+def _batched_rllib_env(env_config: dict[str, Any]) -> gym.vector.VectorEnv:
+    """A runner's ``num_envs`` envs as one BatchedVectorEnv (one Blender scene), frames stacked and scaled as :class:`ScaledImage` does."""
+    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.cores import claim_core
+    from visualenv.env.wrappers import VectorFrameStack
+
+    n = int(env_config.get("num_envs", 1))
+    if not env_config.get("render", True):
+        return BatchedVectorEnv(env_config["spec"], n, render=False)
+    if env_config.get("pin", True) and env_config.get("threads", 1) == 1:
+        claim_core()
+    vec: gym.vector.VectorEnv = BatchedVectorEnv(env_config["spec"], n, renderer_options={"threads": env_config.get("threads", 1)})
+    if env_config.get("frame_stack", 4) > 1:
+        vec = VectorFrameStack(vec, env_config.get("frame_stack", 4))
+    return ScaledImages(vec)
+
+
+class ScaledImages(gym.vector.VectorObservationWrapper):
+    """:class:`ScaledImage` for a vector env: uint8 images -> float32 in [0, 1]."""
+
+    def __init__(self, env: gym.vector.VectorEnv):
+        super().__init__(env)
+        self.single_observation_space = spaces.Box(0.0, 1.0, env.single_observation_space.shape, np.float32)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, env.num_envs)
+
+    def observations(self, observations: Any) -> Any:
+        return np.asarray(observations, dtype=np.float32) * np.float32(1 / 255)
 
 
 def register(target: str, **env_config: Any) -> tuple[str, dict[str, Any]]:
@@ -164,8 +197,12 @@ def check_hyperparameters(hyperparams: dict[str, Any]) -> None:
 
 
 def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, frame_stack: int = 4, seed: int = 0,
-               render: bool = True, hyperparams: dict[str, Any] | None = None, cpus_per_runner: int = 1, pin: bool = True) -> Any:
+               render: bool = True, hyperparams: dict[str, Any] | None = None, cpus_per_runner: int = 1, pin: bool = True,
+               batched: bool = False) -> Any:
     """A PPOConfig for `target`: `env_runners` remote EnvRunners of `envs_per_runner` envs each, restarted when they die.
+
+    `batched`: each runner's envs are one BatchedVectorEnv (one Blender scene, one render call per step)
+    rather than a Gymnasium SyncVectorEnv of separate scenes.
 
     Every env renders with ``cpus_per_runner // envs_per_runner`` threads (at least one),
     so a runner uses the CPUs Ray reserves for it. Hyperparameters are ``PPOConfig.training``'s; the defaults
@@ -181,14 +218,15 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
     if render:
         height, width, channels = space.shape or (0, 0, 0)
         space = spaces.Box(0.0, 1.0, (height, width, channels * max(1, frame_stack)), np.float32)
-    threads = max(1, cpus_per_runner // envs_per_runner)
-    name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads, pin=pin)
+    threads = cpus_per_runner if batched else max(1, cpus_per_runner // envs_per_runner)
+    name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads, pin=pin, batched=batched)
     return (
         PPOConfig()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
         .environment(name, env_config=env_config)
         .env_runners(num_env_runners=env_runners, num_envs_per_env_runner=envs_per_runner, num_cpus_per_env_runner=cpus_per_runner,
-                     rollout_fragment_length="auto", sample_timeout_s=600.0)
+                     rollout_fragment_length="auto", sample_timeout_s=600.0,
+                     gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT if batched else gym.VectorizeMode.SYNC)
         .fault_tolerance(restart_failed_env_runners=True, max_num_env_runner_restarts=100)
         .rl_module(model_config=model_config(space))
         .training(**{**SB3_PPO_DEFAULTS, **hyperparams})

@@ -1,0 +1,125 @@
+"""`visualenv bench --batched 1,16,64`: N envs in one Blender against one process per env, and where a batch's step goes.
+
+Each batch size runs in a fresh process (its memory is its own) and reports,
+per step of all N envs: env-steps/s, the dynamics (the vectorised step), the
+bindings written into the N copies, Blender's render call, the part of that
+call spent updating the moved scene (the call minus the same call with nothing
+moved), the readback and cut into tiles, and resident memory per env. The
+per-process vector env (one Blender per worker, as many workers as usable
+cores) runs beside it for comparison. Figures only: nothing is asserted.
+"""
+
+from __future__ import annotations
+
+import multiprocessing
+import time
+from typing import Any
+
+import numpy as np
+
+
+def _median_ms(times: list[float]) -> float:
+    return 1000 * float(np.median(times)) if times else 0.0
+
+
+def _timed(obj: Any, name: str, into: list[float]) -> None:
+    """Wrap ``obj.name`` (an instance attribute shadowing the method) to record each call's time."""
+    method = getattr(obj, name)
+
+    def timed(*args: Any, **kwargs: Any) -> Any:
+        start = time.perf_counter()
+        try:
+            return method(*args, **kwargs)
+        finally:
+            into.append(time.perf_counter() - start)
+    setattr(obj, name, timed)
+
+
+def measure_batch(spec: str, n: int, steps: int, seed: int = 0) -> dict[str, Any]:
+    """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory)."""
+    import psutil
+
+    from visualenv.env.batched import BatchedVectorEnv
+
+    process = psutil.Process()
+    before = process.memory_info().rss
+    start = time.perf_counter()
+    env = BatchedVectorEnv(spec, n)
+    env.reset(seed=seed)
+    build_s = time.perf_counter() - start
+    rng = np.random.default_rng(seed)
+    env.action_space.seed(int(rng.integers(2**31)))
+    for _ in range(5):
+        env.step(env.action_space.sample())
+    renderer = env.renderer
+    times: dict[str, list[float]] = {"dynamics": [], "bind": [], "render": [], "readback": []}
+    _timed(env, "_advance", times["dynamics"])
+    _timed(env, "binding_values", times["bind"])
+    _timed(renderer, "raw_render", times["render"])
+    _timed(renderer, "_read_capture", times["readback"])
+    start = time.perf_counter()
+    for _ in range(steps):
+        env.step(env.action_space.sample())
+    elapsed = time.perf_counter() - start
+    still: list[float] = []
+    for _ in range(max(3, min(steps, 20))):  # the same call with nothing moved: Blender's floor for this image
+        t = time.perf_counter()
+        renderer.__class__.raw_render(renderer)
+        still.append(time.perf_counter() - t)
+    rss = process.memory_info().rss
+    env.close()
+    render = _median_ms(times["render"])
+    return {
+        "envs": n, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
+        "dynamics_ms": _median_ms(times["dynamics"]), "bind_ms": _median_ms(times["bind"]), "render_ms": render,
+        "scene_update_ms": max(0.0, render - _median_ms(still)), "readback_ms": _median_ms(times["readback"]),
+        "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n, "python_mb": before / 2**20,
+    }
+
+
+def _in_child(spec: str, n: int, steps: int, seed: int, queue: Any) -> None:
+    try:
+        queue.put(measure_batch(spec, n, steps, seed))
+    except BaseException as exc:  # noqa: BLE001 - reported by the parent, which goes on with the next size
+        queue.put({"envs": n, "error": f"{type(exc).__name__}: {exc}"})
+
+
+def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0) -> list[dict[str, Any]]:
+    """Each batch size in its own fresh process; a size that fails is reported, not raised."""
+    context = multiprocessing.get_context("spawn")
+    out = []
+    for n in sizes:
+        queue = context.Queue()
+        child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n) if n > 1 else steps, seed, queue))
+        child.start()
+        out.append(queue.get())
+        child.join()
+    return out
+
+
+def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> list[str]:
+    """The table `visualenv bench --batched` prints."""
+    rows = ["batched (one process, one render call per step):",
+            f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'render':>8} {'update':>7} {'readback':>9} "
+            f"{'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
+            "  (ms per step of all envs, medians; update: the render call minus the same call with nothing moved;"
+            " +MB/env: memory growth per env over the smallest batch)"]
+    ok = [b for b in batches if "error" not in b]
+    smallest = min(ok, key=lambda b: b["envs"]) if ok else None
+    for b in batches:
+        if "error" in b:
+            rows.append(f"  {b['envs']:>5} failed: {b['error']}")
+            continue
+        assert smallest is not None
+        growth = (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"]) if b["envs"] > smallest["envs"] else float("nan")
+        rows.append(f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
+                    f"{b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
+    if per_process:
+        workers = per_process["workers"]
+        rows.append(f"per-process vector env, {workers} workers (one Blender each): {per_process['steps_per_s']:.1f} env-steps/s, "
+                    f"{per_process['rss_total_mb'] / workers:.0f} MB per env")
+        for b in batches:
+            if "error" not in b:
+                rows.append(f"  batched {b['envs']}: {b['steps_per_s'] / per_process['steps_per_s']:.2f}x its env-steps/s, "
+                            f"{b['rss_mb'] / per_process['rss_total_mb']:.2f}x the memory of its {workers} workers")
+    return rows
