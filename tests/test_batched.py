@@ -178,6 +178,32 @@ def test_each_tile_is_the_envs_own_render(spec):
     assert min(scores) >= 0.98, scores
 
 
+def test_a_batch_past_the_image_limit_renders_in_several_calls(monkeypatch):
+    from visualenv.render.blender import batched
+
+    monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 100 * 100)  # two tiles a call: five envs take three calls
+    calls: list[int] = []
+    original = batched.BatchedBlenderRenderer.raw_render
+    monkeypatch.setattr(batched.BatchedBlenderRenderer, "raw_render", lambda self: (calls.append(1), original(self))[1])
+    scores = render_both(SPECS / "visual_cartpole.yaml", 5, 3)
+    assert min(scores) >= 0.98, scores
+    assert len(calls) >= 3 * 3  # three calls for each of the three observations
+
+
+def test_a_batch_larger_than_one_image_renders_every_tile():
+    """441 envs at 100x100 would be a 2,100 x 2,100 image, which Cycles' in-memory result returned black: two calls instead."""
+    from visualenv.render.blender.batched import MAX_IMAGE_PIXELS, envs_per_call, grid_shape
+
+    per_call = envs_per_call(441, 100, 100)
+    assert per_call < 441 and np.prod(grid_shape(per_call)) * 100 * 100 <= MAX_IMAGE_PIXELS
+    batch = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 441)
+    try:
+        obs, _ = batch.reset(seed=0)
+        assert obs.shape == (441, 100, 100, 1) and (obs.reshape(441, -1).max(axis=1) > 100).all()  # no black tile
+    finally:
+        batch.close()
+
+
 def test_a_tile_shows_its_own_env_not_its_neighbours():
     """Two envs with different states: each tile follows its own env (swap the states and the tiles swap)."""
     batch = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 2)

@@ -498,7 +498,8 @@ def _worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
         counts = ()
     least = 1 if option == "--batched" else 0
     if not counts or any(c < least for c in counts) or (len(counts) > 1 and min(counts) < 1):
-        raise click.BadParameter(f"expected a number of envs or a list such as 1,2,4,8, got {value!r}", param_hint=option)
+        what = "batch sizes" if option == "--batched" else "a number of workers"
+        raise click.BadParameter(f"expected {what} or a list such as 1,2,4,8, got {value!r}", param_hint=option)
     return counts
 
 

@@ -22,7 +22,7 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import replace
-from typing import Any, Iterator, Sequence
+from typing import Any, Sequence
 
 import bpy
 import numpy as np
@@ -30,14 +30,16 @@ from mathutils import Matrix, Vector
 
 from visualenv.errors import SpecError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
-from visualenv.render.blender.renderer import BlenderRenderer, _View
-from visualenv.render.blender.scene import BuiltScene, aim
+from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, write_bindings
+from visualenv.render.blender.scene import BuiltScene
 from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
 
 #: properties that turn a camera (bound on it or on an ancestor) or change its lens: a batch cannot follow them
 _TURNS = ("rotation", "scale", "look_at")
-#: the largest image one render call makes; past it a batch is rendered in several calls
+#: the largest image one render call makes; past it a batch is rendered in several calls. Measured: a
+#: larger image comes back black from the in-memory readback (Cycles' result then reaches Blender in
+#: tiles, after the engine's render returns), 2,000 x 2,000 and 2,080 x 800 did not; the file readback is unaffected
 MAX_IMAGE_PIXELS = 2048 * 2048
 
 TILES_OSL = r"""
@@ -94,6 +96,14 @@ def grid_shape(count: int) -> tuple[int, int]:
     return cols, math.ceil(count / cols)
 
 
+def envs_per_call(count: int, width: int, height: int) -> int:
+    """The most envs one render call takes: their grid's image must stay within MAX_IMAGE_PIXELS."""
+    n = max(1, min(count, MAX_IMAGE_PIXELS // (width * height)))
+    while n > 1 and math.prod(grid_shape(n)) * width * height > MAX_IMAGE_PIXELS:
+        n -= 1
+    return n
+
+
 def tile(image: np.ndarray, count: int, height: int, width: int) -> np.ndarray:
     """(count, height, width, C): the tiles of `image` in row-major order from the top left."""
     cols = image.shape[1] // width
@@ -134,8 +144,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
             raise ValueError("a batch cannot render depth observations yet: use one process per env (visualenv.make_vec(..., batched=False))")
         self.num_envs = num_envs
         _osl_modules_on_path()
-        # Cycles draws each pixel's random numbers from its place in the image, so tile k would be noisier
-        # or cleaner than env k alone; with shared noise a tile equals the env's own render (noise="shared")
+        # Cycles draws each pixel's random numbers from its place in the image, so tile k would carry other
+        # noise than env k alone; with shared noise a tile equals the env's own render (noise="shared")
         plan = replace(plan, settings=plan.settings.model_copy(update={"noise": "shared"}))
         super().__init__(plan, options)
 
@@ -270,18 +280,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         return next(iter(images.values())) if self.plan.single else images
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
-        if values == copy.last:
-            return
-        if len(values) != self._size:
-            raise ValueError(f"expected {self._size} binding values, got {len(values)}")
-        last = copy.last
-        for start, end, setter in copy.setters:
-            part = values[start:end]
-            if last is None or part != last[start:end]:
-                setter(part)
-        for obj, name in copy.aimed:
-            aim(obj, copy.targets[name])
-        copy.last = values
+        if values != copy.last:
+            write_bindings(values, copy.last, self._size, copy.setters, copy.aimed, copy.targets)
+            copy.last = values
 
     def _render_tiles(self, view: _View, reference: Vector, moving_camera: Any) -> np.ndarray:
         """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS."""
@@ -291,13 +292,15 @@ class BatchedBlenderRenderer(BlenderRenderer):
             for k, copy in enumerate(self._copies):
                 copy.anchor.location = self._offset(k)
             self._anchors_moved = False
-        per_call = max(1, MAX_IMAGE_PIXELS // (view.width * view.height))
+        per_call = envs_per_call(self.num_envs, view.width, view.height)
         parts = []
         params = view.camera.data.cycles_custom
         for first in range(0, self.num_envs, per_call):
             count = min(per_call, self.num_envs - first)
             cols, rows = grid_shape(count)
-            params["first"], params["count"], params["cols"] = first, count, cols
+            if (params["first"], params["count"], params["cols"]) != (first, count, cols):
+                params["first"], params["count"], params["cols"] = first, count, cols
+                view.camera.data.update_tag()  # an ID property change alone does not tell Cycles' persistent data to sync
             big = _View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
             parts.append(tile(self._render(big), count, view.height, view.width))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
@@ -317,12 +320,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def close(self) -> None:
         self._copies = []
         super().close()
-
-
-def _with_ancestors(obj: Any) -> Iterator[Any]:
-    while obj is not None:
-        yield obj
-        obj = obj.parent
 
 
 def _hidden(obj: Any) -> bool:

@@ -250,18 +250,9 @@ class BlenderRenderer(Renderer):
     def apply(self, values: Sequence[Any]) -> None:
         """Write the binding values that changed since the last call."""
         values = tuple(values)
-        last = self._last
-        if values == last:
-            return
-        if len(values) != self._size:
-            raise RenderError(f"expected {self._size} binding values, got {len(values)}")
-        for start, end, setter in self._setters:
-            part = values[start:end]
-            if last is None or part != last[start:end]:
-                setter(part)
-        for obj, name in self._aimed:
-            aim(obj, self._targets[name])
-        self._last = values
+        if values != self._last:
+            write_bindings(values, self._last, self._size, self._setters, self._aimed, self._targets)
+            self._last = values
 
     def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
         self._check_open()
@@ -367,6 +358,19 @@ class BlenderRenderer(Renderer):
         self._scene = None
         remove_ids(scene_ids)
         self._output.close()
+
+
+def write_bindings(values: tuple, last: tuple | None, size: int, setters: list[tuple[int, int, Callable[[tuple], None]]],
+                   aimed: list[tuple[Any, str]], targets: dict[str, Any]) -> None:
+    """Write the binding values that differ from `last` (all of them when it is None), then re-aim the aimed objects."""
+    if len(values) != size:
+        raise RenderError(f"expected {size} binding values, got {len(values)}")
+    for start, end, setter in setters:
+        part = values[start:end]
+        if last is None or part != last[start:end]:
+            setter(part)
+    for obj, name in aimed:
+        aim(obj, targets[name])
 
 
 def _with_ancestors(obj: Any) -> Iterator[Any]:
