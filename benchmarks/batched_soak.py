@@ -5,7 +5,6 @@
 
 import sys
 
-import numpy as np
 import psutil
 
 from visualenv.env.batched import BatchedVectorEnv
@@ -26,5 +25,5 @@ for i in range(rounds):
         print(f"{i * n:>7} env-steps  RSS {marks[-1][1]:7.1f} MB", flush=True)
 first = marks[1][1] if len(marks) > 1 else marks[0][1]
 print(f"{spec}, {n} envs, {rounds * n} env-steps: RSS {first:.1f} MB after warm-up, {marks[-1][1]:.1f} MB at the end "
-      f"({marks[-1][1] - first:+.1f} MB); {int(np.sum(env._steps))} steps into the envs' current episodes")
+      f"({marks[-1][1] - first:+.1f} MB)")
 env.close()

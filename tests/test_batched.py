@@ -248,3 +248,27 @@ def test_engines_and_cameras_a_batch_cannot_render_are_refused(tmp_path):
     batch = BatchedVectorEnv(load_spec_text(turning, name="turning.yaml"), 2)
     with pytest.raises(SpecError, match="camera 'Camera' turns or zooms with the state"):
         batch.reset(seed=0)
+
+
+def test_several_cameras_give_a_dict_of_tiles_per_camera(tmp_path):
+    """A Dict observation (grayscale 64x64 and RGB 40x40 here): one render call per camera, each key's tiles the env's own."""
+    from tests.test_train_play import multi_camera_cartpole
+
+    loaded = load_spec(multi_camera_cartpole(tmp_path, "[40, 40]"))
+    batch = BatchedVectorEnv(loaded, 3)
+    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
+    try:
+        obs, _ = batch.reset(seed=1)
+        assert {k: v.shape for k, v in obs.items()} == {"front": (3, 64, 64, 1), "side": (3, 40, 40, 3)}
+        for _ in range(3):
+            actions = np.array([0, 1, 1])
+            obs, *_ = batch.step(actions)
+        for i, env in enumerate(singles):
+            env.reset(seed=1 + i)
+            for _ in range(3):
+                own, *_ = env.step(int(actions[i]))
+            assert all(agreement(obs[k][i], own[k]) >= 0.98 for k in own), i
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
