@@ -103,11 +103,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._steps = np.zeros(n, dtype=np.int64)
         self._fired = np.zeros(n, dtype=np.int64)
         self._success = np.zeros(n, dtype=bool)
-        self._outcome: list[str | None] = [None] * n
-        self._errors: list[str | None] = [None] * n
+        self._outcome = np.full(n, None, dtype=object)  # info["outcome"] of each env's last step
+        self._errors = np.full(n, None, dtype=object)
         self._autoreset = np.zeros(n, dtype=bool)
         rules = program.outcomes
         self._ends = np.array([r.end for r in rules] + ["none"], dtype=object)  # index -1: no outcome
+        self._names = np.array([r.name for r in rules] + [None], dtype=object)
         self._outcome_success = np.array([r.success for r in rules] + [False])
         milestone_bits = [1 << i for i, r in enumerate(r for r in rules if r.end == "none")]
         self._milestones = [r.name for r in rules if r.end == "none"]
@@ -192,11 +193,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             ends = self._ends[outcome]
             terminated[ok] = ends[ok] == "terminate"
             truncated[ok] = (ends[ok] == "truncate") | ((ends[ok] == "none") & (self._steps[ok] >= self._max_steps))
-            names = [r.name for r in self.program.outcomes]
-            for i in np.flatnonzero(ok):
-                o = int(outcome[i])
-                self._outcome[i] = names[o] if o >= 0 and self._ends[o] != "none" else ("max_steps" if truncated[i] else None)
-                self._errors[i] = None
+            self._outcome[ok] = np.where((outcome[ok] < 0) & truncated[ok], "max_steps", self._names[outcome[ok]])
+            self._errors[ok] = None
         for i in np.flatnonzero(alone):
             self._step_lane(int(i), actions[i], rewards, terminated, truncated)
 
@@ -260,7 +258,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
                 values = bind(tuple(self._state), self._steps)
             table = np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values]).reshape(len(values), n)
             bad = ~np.isfinite(table).all(axis=0)
-            rows = [tuple(table[:, i].tolist()) for i in range(n)]
+            rows = list(map(tuple, table.T.tolist()))
         else:
             bad, rows = np.ones(n, dtype=bool), [()] * n
         for i in np.flatnonzero(bad):
@@ -271,19 +269,26 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def _info(self, mask: np.ndarray) -> dict[str, Any]:
         names = self.program.state_names
-        fired = [[m for b, m in enumerate(self._milestones) if f & (1 << b)] for f in self._fired]
         info: dict[str, Any] = {
             "state": {n: self._state[j].copy() for j, n in enumerate(names)}, "_state": mask.copy(),
             "steps": self._steps.copy(), "_steps": mask.copy(),
-            "outcome": np.array(self._outcome, dtype=object), "_outcome": mask.copy(),
-            "milestones": np.array(fired + [None], dtype=object)[:-1], "_milestones": mask.copy(),
+            "outcome": self._outcome.copy(), "_outcome": mask.copy(),
+            "milestones": self._fired_names(), "_milestones": mask.copy(),
             "is_success": self._success.copy(), "_is_success": mask.copy(),
         }
-        errors = np.array(self._errors, dtype=object)
-        if any(e is not None for e in self._errors):
-            info["error"] = errors
-            info["_error"] = np.array([e is not None for e in self._errors]) & mask
+        erred = self._errors != None  # noqa: E711 - element-wise
+        if erred.any():
+            info["error"] = self._errors.copy()
+            info["_error"] = erred & mask
         return info
+
+    def _fired_names(self) -> np.ndarray:
+        """Each env's fired milestones as a list of names: one list per distinct set, shared by the envs that have it."""
+        distinct, which = np.unique(self._fired, return_inverse=True)
+        lists = np.empty(len(distinct), dtype=object)
+        for j, bits in enumerate(distinct):
+            lists[j] = [m for b, m in enumerate(self._milestones) if bits & (1 << b)]
+        return lists[which]
 
 
 def _select(obs: Any, i: int) -> Any:
