@@ -273,3 +273,33 @@ def test_several_cameras_give_a_dict_of_tiles_per_camera(tmp_path):
         batch.close()
         for env in singles:
             env.close()
+
+
+def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
+    """`train --batched N`: SB3's VecEnv over a batch reset in the same step, as SB3's own VecEnvs are."""
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+    from visualenv.env.sb3_vec import make_sb3_batched
+
+    vec = make_sb3_batched(str(SPECS / "visual_cartpole.yaml"), 2, seed=0, render=False)
+    first = vec.reset()
+    assert first.shape == (2, 4)
+    for _ in range(300):
+        obs, rewards, dones, infos = vec.step(np.array([0, 0]))
+        if dones.any():
+            i = int(np.flatnonzero(dones)[0])
+            assert infos[i]["outcome"] == "fell" and "terminal_observation" in infos[i] and "episode" in infos[i]
+            assert not np.array_equal(infos[i]["terminal_observation"], obs[i])  # obs is the next episode's first
+            break
+    else:
+        pytest.fail("no episode ended")
+    vec.close()
+    out = tmp_path / "runs"
+    result = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--batched", "2", "--state-only", "--steps", "64", "--eval-every", "64",
+                                       "--eval-episodes", "1", "--final-episodes", "1", "--set", "n_steps=32", "--set", "batch_size=32",
+                                       "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    (run,) = (out / "VisualCartPole-v0").iterdir()
+    assert json.loads((run / "config.json").read_text())["config"]["batched"] is True
+    assert (run / "monitor" / "batch.monitor.csv").is_file()

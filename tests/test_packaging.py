@@ -31,3 +31,14 @@ def test_the_readme_layout_lists_every_package_and_top_level_module():
     modules = sorted(p.name for p in package.glob("*.py") if p.name != "__init__.py")
     missing = [m for m in packages if f"`{m}`" not in readme] + [m for m in modules if f"`{m}`" not in readme and f"`visualenv/{m}`" not in readme]
     assert packages and modules and not missing, f"README's Layout table misses {missing}"
+
+
+def test_import_visualenv_never_imports_stable_baselines3_or_torch():
+    """The train extra is optional: `import visualenv` (and its vector envs) must work without it, and start fast."""
+    import subprocess
+    import sys
+
+    code = ("import sys, visualenv, visualenv.env.batched, visualenv.env.sb3_vec; "
+            "assert not {'stable_baselines3', 'torch'} & set(sys.modules), 'SB3 or torch imported'")
+    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
+    assert result.returncode == 0, result.stderr

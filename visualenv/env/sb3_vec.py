@@ -54,6 +54,7 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
     from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.sb3_batch import SB3Batch
 
     own = {k: kwargs.pop(k) for k in ("render", "params") if k in kwargs}
     if threads is not None:
@@ -68,66 +69,3 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     if frame_stack and frame_stack > 1 and own.get("render") is not False:
         vec = VecFrameStack(vec, n_stack=frame_stack)
     return vec
-
-
-def _sb3_vec_env() -> type:
-    from stable_baselines3.common.vec_env import VecEnv
-
-    return VecEnv
-
-
-class SB3Batch(_sb3_vec_env()):  # type: ignore[misc]  # SB3 is imported here only, as the train extra provides it
-    """SB3's VecEnv API over a :class:`BatchedVectorEnv` reset in the same step (``terminal_observation`` in infos)."""
-
-    def __init__(self, batch: Any) -> None:
-        import numpy as np
-
-        self.batch = batch
-        self._np = np
-        self._seeds: list[int | None] = [None] * batch.num_envs
-        self._actions: Any = None
-        super().__init__(batch.num_envs, batch.single_observation_space, batch.single_action_space)
-
-    def reset(self) -> Any:
-        seeds = self._seeds if any(s is not None for s in self._seeds) else None
-        obs, _ = self.batch.reset(seed=seeds)
-        self._seeds = [None] * self.num_envs
-        return obs
-
-    def step_async(self, actions: Any) -> None:
-        self._actions = actions
-
-    def step_wait(self) -> Any:
-        obs, rewards, terminated, truncated, info = self.batch.step(self._actions)
-        dones = terminated | truncated
-        infos: list[dict[str, Any]] = [{} for _ in range(self.num_envs)]
-        for i in range(self.num_envs):
-            infos[i]["is_success"] = bool(info["is_success"][i])
-            infos[i]["outcome"] = info["outcome"][i]
-            if dones[i]:
-                final = info["final_info"]
-                infos[i]["is_success"] = bool(final["is_success"][i])
-                infos[i]["outcome"] = final["outcome"][i]
-                infos[i]["terminal_observation"] = info["final_obs"][i]
-                infos[i]["TimeLimit.truncated"] = bool(truncated[i] and not terminated[i])
-        return obs, rewards.astype(self._np.float32), dones, infos
-
-    def seed(self, seed: int | None = None) -> list[int | None]:
-        self._seeds = [None if seed is None else seed + i for i in range(self.num_envs)]
-        return self._seeds
-
-    def close(self) -> None:
-        self.batch.close()
-
-    def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        return [getattr(self.batch.lanes[i], attr_name) for i in self._get_indices(indices)]
-
-    def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
-        for i in self._get_indices(indices):
-            setattr(self.batch.lanes[i], attr_name, value)
-
-    def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
-        return [getattr(self.batch.lanes[i], method_name)(*method_args, **method_kwargs) for i in self._get_indices(indices)]
-
-    def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False for _ in self._get_indices(indices)]
