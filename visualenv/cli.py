@@ -251,7 +251,8 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
         return
     if resume_dir:
-        _refuse_fixed_on_resume(ctx, ("algo", "envs", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root"),
+        _refuse_fixed_on_resume(ctx, ("algo", "envs", "batched", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
+                                      "out_root"),
                                 "only --steps, --set and --config change on --resume")
         config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
     else:
@@ -351,7 +352,7 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
     params = ctx.params
     if resume_dir:
         _refuse_fixed_on_resume(ctx, ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root", "env_runners",
-                                      "envs_per_runner"), "only --steps, --set, --config and --address change on --resume")
+                                      "envs_per_runner", "batched"), "only --steps, --set, --config and --address change on --resume")
         config = _resumed(RLlibTrainConfig, resume_dir, steps, hyper, progress)
     else:
         config = RLlibTrainConfig(spec=spec, steps=steps or RLlibTrainConfig.steps, env_runners=params["env_runners"],
