@@ -302,4 +302,10 @@ def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
     assert result.exit_code == 0, result.output
     (run,) = (out / "VisualCartPole-v0").iterdir()
     assert json.loads((run / "config.json").read_text())["config"]["batched"] is True
-    assert (run / "monitor" / "batch.monitor.csv").is_file()
+    log = run / "monitor" / "batch.monitor.csv"
+    before = log.read_text().splitlines()
+    assert len(before) > 2  # the header lines and at least one episode
+    resumed = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--resume", str(run), "--steps", "128", "--no-progress"])
+    assert resumed.exit_code == 0, resumed.output
+    after = log.read_text().splitlines()
+    assert after[:len(before)] == before and len(after) > len(before)  # the resumed run appends its episodes

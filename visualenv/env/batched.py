@@ -296,10 +296,10 @@ def _select(obs: Any, i: int) -> Any:
 
 
 def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:
-    """The vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``.
+    """A batch from keyword options as ``visualenv.make`` takes them: :class:`BatchedVectorEnv`'s (render, params,
+    autoreset_mode) and the renderer options (``device``, ``threads``, ``samples``, ``noise``, ``readback``).
 
-    Keyword options are those of :class:`BatchedVectorEnv` plus the renderer options of ``visualenv.make``
-    (``device``, ``threads``, ``samples``, ``readback``).
+    Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``.
     """
     own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode") if k in kwargs}
     kwargs.pop("max_episode_steps", None)  # Gymnasium passes the spec's; the spec file's max_steps rules

@@ -49,23 +49,24 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
                      monitor_dir: str | None = None, monitor_append: bool = False, **kwargs: Any) -> Any:
     """`n` envs in one process and one Blender (a :class:`BatchedVectorEnv`) as an SB3 VecEnv, frames stacked by ``VecFrameStack``.
 
-    Env ``i`` is seeded ``seed + i``; ``VecMonitor`` writes ``monitor_dir/batch.monitor.csv``.
+    Env ``i`` is seeded ``seed + i``; ``VecMonitor`` writes ``monitor_dir/batch.monitor.csv``
+    (appended to with ``monitor_append``, for a resumed run).
     """
+    from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batched import make_batched
     from visualenv.env.sb3_batch import SB3Batch
 
-    own = {k: kwargs.pop(k) for k in ("render", "params") if k in kwargs}
     if threads is not None:
         kwargs["threads"] = threads
-    vec: Any = SB3Batch(BatchedVectorEnv(target, n, autoreset_mode="same_step", renderer_options=kwargs, **own))
+    vec: Any = SB3Batch(make_batched(target, n, autoreset_mode="same_step", **kwargs))
     vec.seed(seed)
+    vec = VecMonitor(vec)
     if monitor_dir:
-        os.makedirs(monitor_dir, exist_ok=True)
-    vec = VecMonitor(vec, filename=os.path.join(monitor_dir, "batch") if monitor_dir else None)
-    if monitor_append and monitor_dir:
-        pass  # VecMonitor starts a new file; the resumed run's earlier episodes stay in the folder's other files
-    if frame_stack and frame_stack > 1 and own.get("render") is not False:
+        # VecMonitor's own writer always starts the file afresh: a resumed run would lose its earlier episodes
+        vec.results_writer = ResultsWriter(os.path.join(monitor_dir, "batch"), header={"t_start": vec.t_start, "env_id": "None"},
+                                           override_existing=not monitor_append)
+    if frame_stack and frame_stack > 1 and kwargs.get("render") is not False:
         vec = VecFrameStack(vec, n_stack=frame_stack)
     return vec

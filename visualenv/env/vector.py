@@ -138,16 +138,15 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
     autoreset_mode and the renderer options; stack frames with SB3's VecFrameStack).
     """
     if batched:
-        from visualenv.env.batched import BatchedVectorEnv
+        from visualenv.env.batched import make_batched
 
         per_env = sorted(k for k in ("frame_stack", "grayscale", "resize", "render_mode") if kwargs.get(k) not in (None, False))
         if per_env or wrapper_class is not None:
             raise ValueError(f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
                              "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)")
-        own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode") if k in kwargs}
         if threads is not None:
             kwargs["threads"] = threads
-        return BatchedVectorEnv(target, n, renderer_options=kwargs, **own)
+        return make_batched(target, n, **kwargs)
     if asynchronous and n > 1:
         warn_gpu_workers(target, n, kwargs)
         return WorkerVectorEnv([env_factory(target, cores=share, wrapper_class=wrapper_class, **with_render_threads(kwargs, share, n, threads))

@@ -116,12 +116,14 @@ def _peak_rss_mb() -> float:
     return peak / (2**20 if sys.platform == "darwin" else 2**10)
 
 
-def _timed(fn: Callable[[], Any], times: list[float]) -> Callable[[], Any]:
-    def wrapper() -> Any:
+def timed(fn: Callable[..., Any], times: list[float]) -> Callable[..., Any]:
+    """`fn`, recording each call's wall time into `times`."""
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
         start = time.perf_counter()
-        result = fn()
-        times.append(time.perf_counter() - start)
-        return result
+        try:
+            return fn(*args, **kwargs)
+        finally:
+            times.append(time.perf_counter() - start)
 
     return wrapper
 
@@ -307,7 +309,7 @@ class StepTimes(gym.Wrapper):
         self._stop_timing()
         self._steps, self._renders, self._outside = [], [], []
         renderer = self.env.unwrapped.renderer  # type: ignore[attr-defined]  # a VisualEnv
-        renderer.raw_render = _timed(renderer.raw_render, self._renders)
+        renderer.raw_render = timed(renderer.raw_render, self._renders)
         self._timing = True
 
     def step(self, action: Any) -> Any:

@@ -22,24 +22,12 @@ def _median_ms(times: list[float]) -> float:
     return 1000 * float(np.median(times)) if times else 0.0
 
 
-def _timed(obj: Any, name: str, into: list[float]) -> None:
-    """Wrap ``obj.name`` (an instance attribute shadowing the method) to record each call's time."""
-    method = getattr(obj, name)
-
-    def timed(*args: Any, **kwargs: Any) -> Any:
-        start = time.perf_counter()
-        try:
-            return method(*args, **kwargs)
-        finally:
-            into.append(time.perf_counter() - start)
-    setattr(obj, name, timed)
-
-
 def measure_batch(spec: str, n: int, steps: int, seed: int = 0) -> dict[str, Any]:
     """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory)."""
     import psutil
 
     from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.tools.bench import timed
 
     process = psutil.Process()
     before = process.memory_info().rss
@@ -53,10 +41,9 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0) -> dict[str, Any
         env.step(env.action_space.sample())
     renderer = env.renderer
     times: dict[str, list[float]] = {"dynamics": [], "bind": [], "render": [], "readback": []}
-    _timed(env, "_advance", times["dynamics"])
-    _timed(env, "binding_values", times["bind"])
-    _timed(renderer, "raw_render", times["render"])
-    _timed(renderer, "_read_capture", times["readback"])
+    for obj, name, into in ((env, "_advance", "dynamics"), (env, "binding_values", "bind"), (renderer, "raw_render", "render"),
+                            (renderer, "_read_capture", "readback")):
+        setattr(obj, name, timed(getattr(obj, name), times[into]))  # an instance attribute over the method
     start = time.perf_counter()
     for _ in range(steps):
         env.step(env.action_space.sample())
