@@ -200,14 +200,19 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def _step_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i stepped by its lane: the scalar step, with its checks and faults."""
-        lane = self.lanes[i]
-        lane.restore(self._state[:, i], int(self._steps[i]), int(self._fired[i]), bool(self._success[i]))
+        lane = self._lane_at(i)
         _, reward, term, trunc, info = lane.step(action.item() if self.program.discrete is not None else action)
         self._state[:, i] = [info["state"][n] for n in self.program.state_names]
         self._steps[i], self._fired[i], self._success[i] = lane.steps, lane.fired, info["is_success"]
         rewards[i], terminated[i], truncated[i] = reward, term, trunc
         self._outcome[i] = info["outcome"]
         self._errors[i] = info.get("error")
+
+    def _lane_at(self, i: int) -> VisualEnv:
+        """Env i's lane, put where env i is in its episode."""
+        lane = self.lanes[i]
+        lane.restore(self._state[:, i], int(self._steps[i]), int(self._fired[i]), bool(self._success[i]))
+        return lane
 
     def _reset_lane(self, i: int, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         lane = self.lanes[i]
@@ -262,9 +267,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         else:
             bad, rows = np.ones(n, dtype=bool), [()] * n
         for i in np.flatnonzero(bad):
-            lane = self.lanes[int(i)]
-            lane.restore(self._state[:, i], int(self._steps[i]), int(self._fired[i]), bool(self._success[i]))
-            rows[i] = lane.binding_values()  # the same values, or the located fault
+            rows[i] = self._lane_at(int(i)).binding_values()  # the same values, or the located fault
         return rows
 
     def _info(self, mask: np.ndarray) -> dict[str, Any]:

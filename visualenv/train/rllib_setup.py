@@ -36,6 +36,10 @@ NATURE_FILTERS: list[list[Any]] = [[32, 8, 4, "valid"], [64, 4, 2, "valid"], [64
 FEATURES = 512  # NatureCNN's features: the one dense layer both heads read
 
 
+def _to_unit(observation: Any) -> np.ndarray:
+    return np.asarray(observation, dtype=np.float32) * np.float32(1 / 255)
+
+
 class ScaledImage(gym.ObservationWrapper):
     """uint8 images (H, W, C) -> float32 in [0, 1], the input RLlib's CNN encoder expects."""
 
@@ -45,7 +49,19 @@ class ScaledImage(gym.ObservationWrapper):
         self.observation_space = spaces.Box(0.0, 1.0, space.shape, np.float32)
 
     def observation(self, observation: np.ndarray) -> np.ndarray:
-        return np.asarray(observation, dtype=np.float32) * np.float32(1 / 255)
+        return _to_unit(observation)
+
+
+class ScaledImages(gym.vector.VectorObservationWrapper):
+    """:class:`ScaledImage` for a vector env."""
+
+    def __init__(self, env: gym.vector.VectorEnv):
+        super().__init__(env)
+        self.single_observation_space = spaces.Box(0.0, 1.0, env.single_observation_space.shape, np.float32)
+        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, env.num_envs)
+
+    def observations(self, observations: Any) -> Any:
+        return _to_unit(observations)
 
 
 def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv:
@@ -55,48 +71,23 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
     ``render`` (False: the state vector, no Blender), ``threads`` (render threads), ``pin``
     (confine the runner's process to a core of its node that no other runner has claimed),
     ``batched`` with ``num_envs`` (RLlib adds it when it calls the vector entry point): the runner's
-    envs as one BatchedVectorEnv.
+    envs as one BatchedVectorEnv, frames stacked by :class:`VectorFrameStack`.
     """
-    from visualenv.env.cores import claim_core
-    from visualenv.env.make import make
-
-    if env_config.get("batched"):
-        return _batched_rllib_env(env_config)
-    if not env_config.get("render", True):
-        return make(env_config["spec"], render=False)
-    if env_config.get("pin", True) and env_config.get("threads", 1) == 1:
-        claim_core()  # before Blender starts, which sizes its thread pools to the cores it may use
-    env = make(env_config["spec"], frame_stack=env_config.get("frame_stack", 4), threads=env_config.get("threads", 1))
-    return ScaledImage(env)
-
-
-def _batched_rllib_env(env_config: dict[str, Any]) -> gym.vector.VectorEnv:
-    """A runner's ``num_envs`` envs as one BatchedVectorEnv (one Blender scene), frames stacked and scaled as :class:`ScaledImage` does."""
     from visualenv.env.batched import BatchedVectorEnv
     from visualenv.env.cores import claim_core
+    from visualenv.env.make import make
     from visualenv.env.wrappers import VectorFrameStack
 
-    n = int(env_config.get("num_envs", 1))
+    spec, batched, n = env_config["spec"], env_config.get("batched", False), int(env_config.get("num_envs", 1))
     if not env_config.get("render", True):
-        return BatchedVectorEnv(env_config["spec"], n, render=False)
-    if env_config.get("pin", True) and env_config.get("threads", 1) == 1:
-        claim_core()
-    vec: gym.vector.VectorEnv = BatchedVectorEnv(env_config["spec"], n, renderer_options={"threads": env_config.get("threads", 1)})
-    if env_config.get("frame_stack", 4) > 1:
-        vec = VectorFrameStack(vec, env_config.get("frame_stack", 4))
-    return ScaledImages(vec)
-
-
-class ScaledImages(gym.vector.VectorObservationWrapper):
-    """:class:`ScaledImage` for a vector env: uint8 images -> float32 in [0, 1]."""
-
-    def __init__(self, env: gym.vector.VectorEnv):
-        super().__init__(env)
-        self.single_observation_space = spaces.Box(0.0, 1.0, env.single_observation_space.shape, np.float32)
-        self.observation_space = gym.vector.utils.batch_space(self.single_observation_space, env.num_envs)
-
-    def observations(self, observations: Any) -> Any:
-        return np.asarray(observations, dtype=np.float32) * np.float32(1 / 255)
+        return BatchedVectorEnv(spec, n, render=False) if batched else make(spec, render=False)
+    threads, frame_stack = env_config.get("threads", 1), env_config.get("frame_stack", 4)
+    if env_config.get("pin", True) and threads == 1:
+        claim_core()  # before Blender starts, which sizes its thread pools to the cores it may use
+    if not batched:
+        return ScaledImage(make(spec, frame_stack=frame_stack, threads=threads))
+    vec: gym.vector.VectorEnv = BatchedVectorEnv(spec, n, renderer_options={"threads": threads})
+    return ScaledImages(VectorFrameStack(vec, frame_stack) if frame_stack > 1 else vec)
 
 
 def register(target: str, **env_config: Any) -> tuple[str, dict[str, Any]]:
