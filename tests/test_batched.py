@@ -309,3 +309,13 @@ def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
     assert resumed.exit_code == 0, resumed.output
     after = log.read_text().splitlines()
     assert after[:len(before)] == before and len(after) > len(before)  # the resumed run appends its episodes
+
+
+def test_a_child_object_moves_with_its_own_copys_parent():
+    """The pole parented to the cart: each copy's pole hangs from that copy's cart (parents are remapped per copy)."""
+    text = (SPECS / "visual_cartpole.yaml").read_text()
+    text = text.replace("  Pole: {location: [x, 0, 0.125], rotation: [0, theta, 0]}", "  Pole: {rotation: [0, theta, 0]}")
+    text = text.replace("depth: 1.0, origin: bottom,", "depth: 1.0, origin: bottom, parent: Cart, location: [0, 0, 0.125],")
+    assert "parent: Cart" in text and "Pole: {rotation" in text
+    scores = render_both(load_spec_text(text, name="parented.yaml", base_dir=SPECS), 3, 8)
+    assert min(scores) >= 0.98, scores

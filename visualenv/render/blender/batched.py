@@ -158,9 +158,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._layer.update()  # matrix_world of every object, read below
         self._spacing = self._copy_spacing(built)
         self._cols, _ = grid_shape(self.num_envs)
-        shared = [o for o in scene.objects if o.type == "LIGHT" and o.data.type == "SUN"]
-        copied = [o for o in scene.objects if o not in shared and not _hidden(o)]
-        self._copies = [self._make_copy(k, built, copied) for k in range(self.num_envs)]
+        copied = [o for o in scene.objects if not _is_sun(o) and not _hidden(o)]  # suns are directional: one serves every copy
+        places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
+        self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
         for copy in self._copies:
             self._objects, self._last = copy.objects, None
             copy.setters = self._compile_bindings()
@@ -191,7 +191,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
                         "use one process per env (visualenv.make_vec(..., batched=False))")])
         for name in bound:
             obj = objects[name]
-            if obj.type == "LIGHT" and obj.data.type == "SUN":
+            if _is_sun(obj):
                 raise SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares "
                     "one sun among its envs; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
 
@@ -200,14 +200,17 @@ class BatchedBlenderRenderer(BlenderRenderer):
         reach = max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0)
         size = 0.0
         for obj in built.scene.objects:
-            if obj.type == "LIGHT" and obj.data.type == "SUN":
+            if _is_sun(obj):
                 continue
             corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box] or [obj.matrix_world.translation]
             size = max(size, *(c.length for c in corners))
         return float(reach + 2 * size + 10.0)
 
-    def _make_copy(self, k: int, built: BuiltScene, originals: list[Any]) -> _Copy:
-        """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at k's grid place."""
+    def _make_copy(self, k: int, built: BuiltScene, originals: list[Any], places: dict[int, Matrix]) -> _Copy:
+        """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at k's grid place.
+
+        An object whose parent is not copied with it hangs from the anchor at its own world place (`places`).
+        """
         scene = built.scene
         collection = bpy.data.collections.new(f"{scene.name}-env{k}")
         scene.collection.children.link(collection)
@@ -227,10 +230,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for original in originals:
             obj = mapping[original.as_pointer()]
             if original.parent is None or original.parent.as_pointer() not in mapping:
-                world = original.matrix_world.copy()
                 obj.parent = anchor
                 obj.matrix_parent_inverse = Matrix.Identity(4)
-                obj.matrix_basis = world if original.parent is None else obj.matrix_basis
+                obj.matrix_basis = places[original.as_pointer()]
         objects = {name: mapping.get(obj.as_pointer(), obj) for name, obj in built.objects.items()}
         return _Copy(anchor, objects)
 
@@ -320,6 +322,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def close(self) -> None:
         self._copies = []
         super().close()
+
+
+def _is_sun(obj: Any) -> bool:
+    return bool(obj.type == "LIGHT" and obj.data.type == "SUN")
 
 
 def _hidden(obj: Any) -> bool:
