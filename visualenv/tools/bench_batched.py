@@ -77,7 +77,7 @@ def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0) 
     out = []
     for n in sizes:
         queue = context.Queue()
-        child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n) if n > 1 else steps, seed, queue))
+        child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, queue))
         child.start()
         out.append(queue.get())
         child.join()
