@@ -36,6 +36,7 @@ def _refusal(**options) -> str:
     ({"threads": True}, "visualenv.make(): threads: expected an integer, got a boolean True"),
     ({"frame_stack": 2.0}, "visualenv.make(): frame_stack: expected an integer, got a number 2.0"),
     ({"render": "yes"}, "visualenv.make(): render: expected a boolean, got text 'yes'"),
+    ({"noise": "loud"}, "visualenv.make(): noise: expected one of 'independent' or 'shared', got 'loud'"),
 ])
 def test_a_bad_option_is_refused_like_the_same_value_in_a_spec(options: dict, message: str):
     with pytest.raises(SpecError) as caught:
