@@ -27,6 +27,7 @@ from __future__ import annotations
 import ast
 import copy
 import functools
+import math
 from typing import Any, Callable
 
 import numpy as np
@@ -66,8 +67,13 @@ def _log(x: Any, base: Any = None) -> Any:
     return np.log(x) if base is None else np.log(x) / np.log(base)
 
 
+#: Python's math.hypot element by element, for 2 and 3 arguments
+_MATH_HYPOT = {2: np.frompyfunc(math.hypot, 2, 1), 3: np.frompyfunc(math.hypot, 3, 1)}
+
+
 def _hypot(*args: Any) -> Any:
-    return np.hypot(args[0], args[1]) if len(args) == 2 else np.sqrt(sum(np.square(a) for a in args))
+    """math.hypot on each env: numpy's hypot (C's) differs from Python's in the last bit, and a batch must match single envs exactly."""
+    return np.asarray(_MATH_HYPOT[len(args)](*args), dtype=np.float64)
 
 
 #: numpy versions of the deterministic functions of visualenv.expr.functions.FUNCTIONS
