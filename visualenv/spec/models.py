@@ -78,15 +78,40 @@ class ObjectBase(StrictModel):
     parent: BlenderName | None = Field(None, description="name of the parent object")
 
 
+class Craters(StrictModel):
+    """Bowl-shaped craters pressed into a terrain: real geometry, so a low sun casts shadows in them.
+
+    Each crater of radius R is a parabolic bowl ``depth * 2R`` deep with a raised
+    rim ``rim * 2R`` high whose ejecta fall off as ``(R / r)**3`` outside it (the
+    usual profile of a simple crater); craters add up where they overlap. Radii
+    are drawn log-uniformly (small craters are the common ones), places uniformly,
+    from ``seed``: the same spec always builds the same ground.
+    """
+
+    count: int = Field(40, ge=1, le=2000, description="number of craters")
+    radius: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=2, max_length=2)] = Field([0.5, 5.0], description="[smallest, largest] crater radius (m)")
+    depth: float = Field(0.2, ge=0, le=1, description="bowl depth as a fraction of the diameter")
+    rim: float = Field(0.04, ge=0, le=1, description="rim height as a fraction of the diameter")
+    seed: int = Field(0, ge=0, description="seed of the crater places and sizes")
+
+    @field_validator("radius")
+    @classmethod
+    def _radius_order(cls, radius: list[float]) -> list[float]:
+        if radius[0] > radius[1]:
+            raise ValueError("[smallest, largest]: the first must not be greater")
+        return radius
+
+
 class PrimitiveObject(ObjectBase):
     """A mesh primitive built by the compiler."""
 
-    primitive: Literal["cube", "plane", "sphere", "cylinder", "cone", "torus", "disk", "ring"]
-    size: Union[Annotated[float, Field(gt=0)], Vec3] = Field(1.0, description="cube/plane edge length, or [x, y, z] dimensions")
+    primitive: Literal["cube", "plane", "sphere", "cylinder", "cone", "torus", "disk", "ring", "terrain"]
+    size: Union[Annotated[float, Field(gt=0)], Vec3] = Field(1.0, description="cube/plane/terrain edge length, or [x, y, z] dimensions")
     radius: float = Field(0.5, gt=0, description="sphere/cylinder/cone/disk/torus radius")
     depth: float = Field(1.0, gt=0, description="cylinder/cone height")
     thickness: float = Field(0.05, gt=0, description="ring/torus tube thickness")
-    segments: int = Field(32, ge=3, le=512)
+    segments: int = Field(32, ge=3, le=512, description="round primitives: segments around; terrain: grid cells along each side")
+    craters: Craters | None = Field(None, description="terrain: craters pressed into the ground")
     origin: Literal["center", "bottom"] = Field("center", description="where the object's origin sits")
     smooth: bool = False
     material: Material | None = None

@@ -22,12 +22,14 @@ from typing import Any, Callable
 
 import bmesh
 import bpy
+import numpy as np
 from mathutils import Matrix, Vector
 
 from visualenv.render.blender.blendfile import BlendReadError
 from visualenv.render.blender import blendfile
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
+from visualenv.render.terrain import crater_heights
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
 from visualenv.spec.source import SourceMap
@@ -291,6 +293,8 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:
     elif kind == "plane":
         bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=0.5, calc_uvs=True)
         bmesh.ops.scale(bm, vec=Vector((size[0], size[1], 1.0)), verts=bm.verts)
+    elif kind == "terrain":
+        _terrain(bm, spec, (size[0], size[1]))
     elif kind == "sphere":
         bmesh.ops.create_uvsphere(bm, u_segments=n, v_segments=max(3, n // 2), radius=spec.radius, calc_uvs=True)
     elif kind in ("cylinder", "cone"):
@@ -309,6 +313,19 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:
         face.smooth = spec.smooth
     bm.to_mesh(mesh)
     bm.free()
+
+
+def _terrain(bm: Any, spec: PrimitiveObject, extent: tuple[float, float]) -> None:
+    """A flat grid of `segments` cells a side, its vertices raised or sunk to the craters' relief."""
+    bmesh.ops.create_grid(bm, x_segments=spec.segments, y_segments=spec.segments, size=0.5, calc_uvs=True)
+    bmesh.ops.scale(bm, vec=Vector((extent[0], extent[1], 1.0)), verts=bm.verts)
+    if spec.craters is None:
+        return
+    verts = list(bm.verts)
+    xy = np.array([(v.co.x, v.co.y) for v in verts])
+    for vert, z in zip(verts, crater_heights(xy[:, 0], xy[:, 1], spec.craters, extent)):
+        vert.co.z = float(z)
+    bm.normal_update()
 
 
 def _torus(bm: Any, major: float, minor: float, major_segments: int, minor_segments: int) -> None:
