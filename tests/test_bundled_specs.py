@@ -199,3 +199,17 @@ def test_lunar_landing_the_camera_rides_the_lander_so_the_zone_grows_and_shifts(
     _, left_col = zone(6.0, 25.0)                         # the lander east of the zone sees it to the west
     assert left_col < high_col - 5
     env.close()
+
+
+def test_the_worked_example_in_the_docs_is_the_bundled_lunar_landing_spec():
+    """docs/spec.md quotes LunarLanding's spec: every quoted line must still be in it, so the manual cannot drift."""
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    doc = (root / "docs" / "spec.md").read_text(encoding="utf-8").split("## Worked example")[1].split("```yaml")[1].split("```")[0]
+    def code(line: str) -> str:   # without its comment, spaces collapsed
+        return " ".join(line.split(" #")[0].split())
+
+    spec = {code(line) for line in (root / "specs" / "lunar_landing.yaml").read_text(encoding="utf-8").splitlines()}
+    quoted = [code(line) for line in doc.splitlines() if code(line)]
+    assert len(quoted) > 20 and [line for line in quoted if line not in spec] == []

@@ -102,3 +102,22 @@ def test_a_shorter_evaluation_is_compared_episode_by_episode_with_the_recorded_o
     assert replays_prefix(same, recorded) and differences(same, recorded) == []
     assert differences(other, recorded) == ["episode 1: returns 3.0 (results.json: 2.0)"]
     assert not replays_prefix(same, {"episodes": 4, "mean_reward": 1.5})  # a results.json without its episodes: no prefix to check
+
+
+def test_eval_of_random_actions_is_the_seeded_baseline(tmp_path):
+    """`eval --model random` plays seeded uniform actions on the state-only env: the same seed gives the same episodes."""
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+
+    def run(seed: int) -> dict:
+        out = tmp_path / f"random-{seed}.json"
+        result = CliRunner().invoke(main, ["eval", "LunarLanding-v0", "--model", "random", "--episodes", "30", "--seed", str(seed), "-o", str(out)])
+        assert result.exit_code == 0, result.output
+        assert "uniform random actions" in result.output
+        return json.loads(out.read_text())
+
+    first, again, other = run(7), run(7), run(8)
+    assert first["per_episode"] == again["per_episode"] and first["eval_seed"] == 7
+    assert first["per_episode"] != other["per_episode"]
+    assert first["success_rate"] < 0.2 and 10 < first["mean_length"] < 40     # a random lander mostly crashes

@@ -25,6 +25,7 @@ ALGORITHMS = ("ppo", "a2c", "dqn")
 
 EXIT_INVALID = 2
 PRETRAINED = "pretrained"  # --model's name for the shipped agent
+RANDOM = "random"  # eval --model's name for uniform random actions (the baseline)
 
 
 def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -407,7 +408,8 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @main.command("eval")
 @click.argument("spec")
 @click.option("--model", "model_path", required=True,
-              help="a trained model (.zip, a policy file .pt, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/policy.pt)")
+              help="a trained model (.zip, a policy file .pt, or a checkpoint folder of --backend rllib), 'pretrained': the shipped agent "
+                   "(results/<Id>/policy.pt), or 'random': uniform random actions, the baseline")
 @click.option("--algo", type=click.Choice(ALGORITHMS), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 100]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
@@ -415,20 +417,24 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None) -> None:
-    """Evaluate a trained model on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
+    """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
 
     The intervals are a percentile bootstrap of the mean (return, length) and Wilson's
     (success rate). With the seed of the model's run (the default when its results.json
     and config.json lie beside the model, as in runs/<Id>/<time>/ and results/<Id>/),
     the episodes are those of the run's final evaluation and the figures match its results.json.
     """
-    from visualenv.train.evaluation import differences, evaluate_model, replays_prefix, seed_purpose
+    from visualenv.train.evaluation import differences, evaluate_model, evaluate_random, replays_prefix, seed_purpose
 
-    model_path = _model_file(spec, model_path)
     if json_out:
         _check_writable(json_out, "--out")
-    results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed)
-    click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}")
+    if model_path == RANDOM:
+        results, recorded = evaluate_random(spec, episodes=episodes, seed=seed), None
+        click.echo(f"uniform random actions (the baseline): {results['episodes']} episodes, the first reset with seed {results['eval_seed']}")
+    else:
+        model_path = _model_file(spec, model_path)
+        results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed)
+        click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}")
     purpose = seed_purpose(results["eval_seed"])
     if purpose in ("training", "selection"):
         click.echo(f"note: seed {results['eval_seed']} lies in the {purpose} band: a run seeded near it has seen these episodes "

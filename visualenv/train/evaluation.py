@@ -251,6 +251,33 @@ def _last_segment_start(run_dir: Path) -> int | None:
     return round(t1 - i1 * per_iteration)
 
 
+class RandomPolicy:
+    """Uniform random actions from the action space, drawn from their own seeded generator: the baseline beside a trained agent.
+
+    Its actions ignore the observation, so it is evaluated on the state-only env:
+    the same episodes (Blender draws no random numbers) without rendering them.
+    """
+
+    def __init__(self, action_space: Any, seed: int) -> None:
+        self.action_space = action_space
+        self.action_space.seed(seed)
+
+    def predict(self, observation: Any, deterministic: bool = True) -> tuple[np.ndarray, None]:
+        return np.array([self.action_space.sample()]), None
+
+
+def evaluate_random(spec: str, *, episodes: int | None = None, seed: int | None = None) -> dict[str, Any]:
+    """`visualenv eval --model random`: uniform random actions on `episodes` episodes from a reset seeded `seed` (default :data:`FRESH_SEED`)."""
+    from visualenv.env.registration import resolve
+
+    seed = FRESH_SEED if seed is None else seed
+    vec_env = make_eval_env(str(resolve(spec)), seed=seed, frame_stack=1, render=False)
+    try:
+        return final_evaluation(RandomPolicy(vec_env.action_space, seed), vec_env, episodes or FINAL_EPISODES, seed)
+    finally:
+        vec_env.close()
+
+
 def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None, episodes: int | None = None,
                    seed: int | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
