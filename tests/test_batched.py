@@ -319,3 +319,29 @@ def test_a_child_object_moves_with_its_own_copys_parent():
     assert "parent: Cart" in text and "Pole: {rotation" in text
     scores = render_both(load_spec_text(text, name="parented.yaml", base_dir=SPECS), 3, 8)
     assert min(scores) >= 0.98, scores
+
+
+@pytest.mark.parametrize("spec, depth_range", [("visual_cartpole.yaml", "[4, 9]"), ("goalie.yaml", "[1, 30]")], ids=["fixed_camera", "moving_camera"])
+def test_depth_tiles_are_the_envs_own_depth(spec, depth_range):
+    """Depth in a batch is measured along each tile's own ray: the third env sits a grid row away from the shared
+    camera pose, where the scene camera's view Z would be off by the copies' spacing (all background)."""
+    text = (SPECS / spec).read_text().replace("color: grayscale", f"color: depth\n  depth_range: {depth_range}")
+    loaded = load_spec_text(text, name=spec)
+    batch = BatchedVectorEnv(loaded, 3)
+    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
+    try:
+        obs, _ = batch.reset(seed=3)
+        for _ in range(3):
+            actions = np.array([0, 1, 1])
+            obs, *_ = batch.step(actions)
+        for i, env in enumerate(singles):
+            env.reset(seed=3 + i)
+            for _ in range(3):
+                own, *_ = env.step(int(actions[i]))
+            near = own[..., 0] < 255                      # what the env sees nearer than the far end of the range
+            assert near.mean() > 0.01 and np.ptp(own) > 60, "a depth image, not the background alone"
+            assert agreement(obs[i][near], own[near]) >= 0.98 and agreement(obs[i], own) >= 0.98, i
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()

@@ -132,6 +132,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
     stacked: ``(N, H, W, C)`` uint8, or a dict of those for several cameras.
     """
 
+    #: the Camera Data node measures depth from the custom camera's pose (copy 0's); a ray starts at its own copy's camera
+    DEPTH_ALONG_RAY = True
+
     def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
@@ -139,9 +142,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if engine != "cycles":
             raise ValueError(f"render.engine '{engine}' cannot render a batch in one call: only Cycles can (through its custom "
                              "camera); use engine: cycles, or one process per env (visualenv.make_vec(..., batched=False))")
-        colors = {v.color for v in plan.views.values()}
-        if "depth" in colors:
-            raise ValueError("a batch cannot render depth observations yet: use one process per env (visualenv.make_vec(..., batched=False))")
         self.num_envs = num_envs
         _osl_modules_on_path()
         # Cycles draws each pixel's random numbers from its place in the image, so tile k would carry other

@@ -203,21 +203,40 @@ def depth_world(name: str, track: Callable[[Any], Any]) -> Any:
     return world
 
 
-def depth_material(name: str, track: Callable[[Any], Any]) -> tuple[Any, Callable[[float, float], None]]:
-    """An emission material of clamp((z - near) / (far - near)), and a setter for near/far."""
+def depth_material(name: str, track: Callable[[Any], Any], *, along_ray: bool = False) -> tuple[Any, Callable[[float, float], None], Callable[[Any], None]]:
+    """An emission material of clamp((z - near) / (far - near)), a setter for near/far and one for the camera's forward axis.
+
+    z is the camera's view Z depth. With `along_ray` it is computed from the camera
+    ray instead, as its length times its cosine to the forward axis (given by the
+    setter, in world space): the same depth, but measured from wherever the ray
+    starts, which a batch's custom camera moves to each env's copy (the Camera
+    Data node measures from the scene camera alone).
+    """
     mat = track(bpy.data.materials.new(name))
     _ensure_nodes(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")
-    cam = nodes.new("ShaderNodeCameraData")
     remap = nodes.new("ShaderNodeMapRange")
     remap.clamp = True
     remap.inputs["To Min"].default_value = 0.0
     remap.inputs["To Max"].default_value = 1.0
     emit = nodes.new("ShaderNodeEmission")
     emit.inputs["Strength"].default_value = 1.0
-    links.new(cam.outputs["View Z Depth"], remap.inputs["Value"])
+    forward = None
+    if along_ray:
+        path, geometry = nodes.new("ShaderNodeLightPath"), nodes.new("ShaderNodeNewGeometry")
+        forward = nodes.new("ShaderNodeVectorMath")
+        forward.operation = "DOT_PRODUCT"   # incoming points back to the camera: its dot with -forward is the cosine
+        depth = nodes.new("ShaderNodeMath")
+        depth.operation = "MULTIPLY"
+        links.new(geometry.outputs["Incoming"], forward.inputs[0])
+        links.new(forward.outputs["Value"], depth.inputs[0])
+        links.new(path.outputs["Ray Length"], depth.inputs[1])
+        links.new(depth.outputs["Value"], remap.inputs["Value"])
+    else:
+        cam = nodes.new("ShaderNodeCameraData")
+        links.new(cam.outputs["View Z Depth"], remap.inputs["Value"])
     links.new(remap.outputs["Result"], emit.inputs["Color"])
     links.new(emit.outputs["Emission"], out.inputs["Surface"])
 
@@ -225,4 +244,8 @@ def depth_material(name: str, track: Callable[[Any], Any]) -> tuple[Any, Callabl
         remap.inputs["From Min"].default_value = near
         remap.inputs["From Max"].default_value = max(far, near + 1e-6)
 
-    return mat, set_range
+    def set_forward(axis: Any) -> None:
+        if forward is not None:
+            forward.inputs[1].default_value = tuple(-float(c) for c in axis)
+
+    return mat, set_range, set_forward

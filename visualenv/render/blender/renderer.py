@@ -9,6 +9,7 @@ from typing import Any, Callable, Iterator, Sequence
 
 import bpy
 import numpy as np
+from mathutils import Vector
 
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, in_file_order
 from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
@@ -57,6 +58,9 @@ class BlenderRenderer(Renderer):
     ``"memory"`` (Cycles only: the render result copied in place, see :mod:`capture`),
     ``"file"`` (a BMP in shared memory, any engine) or ``"auto"`` (memory where possible).
     """
+
+    #: depth from the camera ray's length (see :func:`depth_material`) rather than the scene camera's view Z
+    DEPTH_ALONG_RAY = False
 
     def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS) -> None:
         self.plan = plan
@@ -139,7 +143,7 @@ class BlenderRenderer(Renderer):
             self._view = _View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
         self._depth_override = None
         if any(v.color == "depth" for v in self._views):
-            mat, self._set_depth_range = depth_material(f"{scene.name}-depth", lambda d: d)
+            mat, self._set_depth_range, self._set_depth_forward = depth_material(f"{scene.name}-depth", lambda d: d, along_ray=self.DEPTH_ALONG_RAY)
             self._depth_override = (mat, depth_world(f"{scene.name}-depth-world", lambda d: d))
         # what the scene is set to now (only changes are written)
         self._camera: Any = None
@@ -147,6 +151,7 @@ class BlenderRenderer(Renderer):
         self._config: cfg.EngineConfig | None = None
         self._depth = False
         self._depth_range: tuple[float, float] | None = None
+        self._depth_forward: tuple[float, ...] | None = None
         self._set_depth_mode(False)
         self._setters = self._compile_bindings()
         self._last: tuple | None = None
@@ -292,6 +297,11 @@ class BlenderRenderer(Renderer):
         if depth and self._depth_range != view.depth_range:
             self._set_depth_range(*view.depth_range)
             self._depth_range = view.depth_range
+        if depth and self.DEPTH_ALONG_RAY:
+            forward = tuple(view.camera.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0)))
+            if forward != self._depth_forward:
+                self._set_depth_forward(forward)
+                self._depth_forward = forward
         capture = self._capture.arm(view.width, view.height) if self._capture is not None and view.config.engine == "cycles" else None
         self._active_capture = capture
         self.raw_render()
