@@ -9,7 +9,8 @@ against the default; docs/performance.md).
 A render engine, however, can read its own result while it renders. This
 module wraps Cycles' ``RenderEngine.render`` so that, when a renderer has armed
 a :class:`Capture`, the engine's Combined pass (linear, scene-referred RGBA) is
-copied with ``foreach_get`` (a small share of a step: ``benchmarks/readback_probe.py``) before Blender moves on. The wrapper
+copied with ``foreach_get`` before Blender moves on (its conversion's cost per size and thread count:
+``benchmarks/capture_conversion.py``). The wrapper
 is installed once per process and does nothing for renders nobody armed.
 
 The readers (:meth:`Capture.rgb`, :meth:`Capture.grayscale`, :meth:`Capture.raw`)
@@ -19,12 +20,17 @@ would: the sRGB transfer function and round-half-up quantisation.
 
 from __future__ import annotations
 
-from typing import Any
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable
 
 import numpy as np
 
 from visualenv.errors import RenderError
 from visualenv.render.pixels import LUMA_601
+
+#: a band of at least this many pixels per thread: below it, starting threads costs more than they save
+PIXELS_PER_THREAD = 256 * 256
 
 _armed: Capture | None = None
 _installed: bool | None = None
@@ -61,15 +67,19 @@ class Capture:
 
     The readers convert the copied pass to the observation's uint8 layout
     (top row first, C-contiguous) in scratch buffers kept between frames, so a
-    step allocates only its small result.
+    step allocates only its result. A large image (a batch's tiles) is converted
+    in bands of rows on several threads: numpy's loops release the GIL, and the
+    conversion is per pixel, so the bytes are the same as in one pass.
     """
 
-    def __init__(self) -> None:
+    def __init__(self, threads: int | None = None) -> None:
         self._buffer = np.empty(0, dtype=np.float32)  # Combined pass: RGBA rows, bottom row first
         self._scaled = np.empty(0, dtype=np.float32)  # scratch: the pass scaled and clamped
         self._levels = np.empty(0, dtype=np.uint16)  # scratch: the same as integer levels
         self._shape = (0, 0)
         self._filled = False
+        self._threads = max(1, threads if threads is not None else len(os.sched_getaffinity(0)))
+        self._pool: ThreadPoolExecutor | None = None
 
     def arm(self, width: int, height: int) -> Capture:
         size = width * height * 4
@@ -103,43 +113,66 @@ class Capture:
         if not self._filled:
             raise RenderError("Cycles finished without a Combined pass to read (was the render cancelled?)")
 
-    def _quantised(self, top: int) -> np.ndarray:
-        """(H, W, 4) levels 0..top of the pass, bottom row first: ``linear * top`` rounded half up and clamped.
+    def _quantised(self, top: int, rows: slice) -> np.ndarray:
+        """(rows, W, 4) levels 0..top of those rows of the pass (bottom row first): ``linear * top`` rounded half up and clamped.
 
         Ufuncs with ``out=`` on the contiguous pass: numpy 1.x's ``np.clip`` with
         scalar bounds, fresh arrays and a flipped (negative-stride) input each
         cost more than the arithmetic itself.
         """
-        self._check_filled()
-        scaled = self._scaled
-        np.multiply(self._buffer, np.float32(top), out=scaled)
+        width = self._shape[1]
+        band = slice(rows.start * width * 4, rows.stop * width * 4)
+        scaled = self._scaled[band]
+        np.multiply(self._buffer[band], np.float32(top), out=scaled)
         np.add(scaled, np.float32(0.5), out=scaled)
         np.minimum(scaled, np.float32(top), out=scaled)
         np.maximum(scaled, np.float32(0.0), out=scaled)
-        self._levels[...] = scaled  # truncates: with the + 0.5, rounds half up
+        levels = self._levels[band]
+        levels[...] = scaled  # truncates: with the + 0.5, rounds half up
+        return levels.reshape(rows.stop - rows.start, width, 4)
+
+    def _convert(self, channels: int, rows_to_bytes: Callable[[slice], np.ndarray]) -> np.ndarray:
+        """(H, W, channels) top row first: `rows_to_bytes` of bands of rows (bottom first), flipped into place."""
+        self._check_filled()
         height, width = self._shape
-        return self._levels.reshape(height, width, 4)
+        out = np.empty((height, width, channels), dtype=np.uint8)
+
+        def band(rows: slice) -> None:
+            out[height - rows.stop:height - rows.start] = rows_to_bytes(rows)[::-1]
+
+        bands = min(self._threads, height, max(1, height * width // PIXELS_PER_THREAD))
+        if bands == 1:
+            band(slice(0, height))
+        else:
+            if self._pool is None:
+                self._pool = ThreadPoolExecutor(self._threads, thread_name_prefix="visualenv-capture")
+            edges = np.linspace(0, height, bands + 1).astype(int)
+            list(self._pool.map(band, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
+        return out
 
     def rgb(self) -> np.ndarray:
         """(H, W, 3) sRGB bytes, as Blender's 'Standard' view transform writes them."""
-        return _top_first(np.take(_SRGB, self._quantised(65535)[:, :, :3]))
+        return self._convert(3, lambda rows: np.take(_SRGB, self._quantised(65535, rows)[:, :, :3]))
 
     def grayscale(self) -> np.ndarray:
         """(H, W, 1) BT.601 luma of the sRGB bytes: the same bytes as ``to_grayscale(rgb())``, in one pass."""
-        levels = self._quantised(65535)
-        luma = np.take(_LUMA[0], levels[:, :, 0])
-        luma += np.take(_LUMA[1], levels[:, :, 1])
-        luma += np.take(_LUMA[2], levels[:, :, 2])
-        luma *= np.float32(0.001)
-        return _top_first(luma.astype(np.uint8)[:, :, None])
+        def rows_to_bytes(rows: slice) -> np.ndarray:
+            levels = self._quantised(65535, rows)
+            luma = np.take(_LUMA[0], levels[:, :, 0])
+            luma += np.take(_LUMA[1], levels[:, :, 1])
+            luma += np.take(_LUMA[2], levels[:, :, 2])
+            luma *= np.float32(0.001)
+            return luma.astype(np.uint8)[:, :, None]
+        return self._convert(1, rows_to_bytes)
 
     def raw(self) -> np.ndarray:
         """(H, W, 1) the red channel's linear values as bytes (Blender's 'Raw' view: used for depth)."""
-        return _top_first(self._quantised(255)[:, :, :1].astype(np.uint8))
+        return self._convert(1, lambda rows: self._quantised(255, rows)[:, :, :1].astype(np.uint8))
 
-
-def _top_first(image: np.ndarray) -> np.ndarray:
-    return np.ascontiguousarray(image[::-1])
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
 
 
 def _srgb_table(size: int = 65536) -> np.ndarray:

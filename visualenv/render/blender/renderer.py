@@ -368,6 +368,8 @@ class BlenderRenderer(Renderer):
         self._scene = None
         remove_ids(scene_ids)
         self._output.close()
+        if self._capture is not None:
+            self._capture.close()
 
 
 def write_bindings(values: tuple, last: tuple | None, size: int, setters: list[tuple[int, int, Callable[[tuple], None]]],
