@@ -82,3 +82,22 @@ def test_luma_tables_are_exact_for_all_256_cubed_colours():
     shortcut = ((red[:, None, None] + green[None, :, None]) + blue[None, None, :]) * np.float32(0.001)
     r, g, b = np.ogrid[:256, :256, :256]
     assert np.array_equal(shortcut.astype(np.uint8), ((299 * r + 587 * g + 114 * b + 500) // 1000).astype(np.uint8))
+
+
+def test_a_large_image_converted_in_bands_on_threads_gives_the_same_bytes():
+    """Past 256² pixels per thread the rows are converted in bands on several threads: the result must not change,
+    in particular at the bands' edges (rows flip bottom-first to top-first)."""
+    rng = np.random.default_rng(2)
+    values = rng.uniform(-0.2, 1.4, size=(601, 523 * 4)).astype(np.float32).ravel()   # uneven bands
+    images = []
+    for threads in (1, 3):
+        c = Capture(threads=threads).arm(523, 601)
+        c._buffer[:] = values
+        c._filled = True
+        images.append((c.grayscale(), c.rgb(), c.raw()))
+        assert (c._pool is None) == (threads == 1)      # the bands did run on threads
+        c.close()
+    one, three = images
+    assert all(np.array_equal(a, b) for a, b in zip(one, three))
+    expected = srgb_bytes(values.reshape(601, 523, 4)[::-1, :, :3])
+    assert np.abs(three[1].astype(int) - expected).max() <= 1 and np.array_equal(three[0], to_grayscale(three[1]))
