@@ -144,6 +144,7 @@ def test_info_reports_versions_cores_and_blenders_devices():
     context = report["blender"]["gpu_context"]
     assert "renderer" in context and isinstance(context["software"], bool)
     assert set(report["blender"]["kernel_caches"]) and report["cores"]["usable"] == len(os.sched_getaffinity(0))
+    assert report["blender"]["batches"] == {"available": True} and "batches (N envs per Cycles call, --batched): available" in result.output
 
 
 def test_info_survives_a_probe_that_crashes_or_hangs():
@@ -152,3 +153,10 @@ def test_info_survives_a_probe_that_crashes_or_hangs():
     hung = gather(command=[sys.executable, "-c", "import time; time.sleep(60)"], timeout=2)
     assert "did not answer in 2 s" in hung["blender"]["error"]
     assert "Blender: the Blender probe" in format_report(hung)
+
+
+def test_info_says_why_batches_are_unavailable():
+    report = {"visualenv": "0", "python": "3.11", "machine": "x86_64", "cores": {"usable": 2, "machine": 2},
+              "blender": {"bpy": "5.0.1", "cycles": {}, "gpu_context": {"error": "none"},
+                          "batches": {"error": "RuntimeError: Cycles could not compile the batch's custom camera shader"}}}
+    assert "batches (N envs per Cycles call, --batched): unavailable (RuntimeError: Cycles could not compile" in format_report(report)

@@ -65,6 +65,9 @@ def format_report(report: dict[str, Any]) -> str:
     else:
         kind = "software rendering (no GPU): EEVEE takes seconds per frame" if context.get("software") else "a GPU"
         lines.append(f"  EEVEE/Workbench: {context.get('renderer')} ({context.get('backend')}), {kind}")
+    batches = blender.get("batches", {})
+    lines.append("  batches (N envs per Cycles call, --batched): " + ("available: the custom OSL camera compiles and renders"
+                 if batches.get("available") else f"unavailable ({batches.get('error', 'not probed')})"))
     for backend, facts in blender.get("kernels", {}).items():
         why = facts.get("compile_first")
         lines.append(f"  {backend} kernels: " + (f"compiled at the first GPU render ({why}); `visualenv info --warm-gpu` does it now"

@@ -372,6 +372,31 @@ def _lens(data: Any, width: int, height: int) -> tuple[float, float, float, floa
     return half_w, half_h, data.shift_x * larger, data.shift_y * larger, ortho
 
 
+def tiles_camera_check() -> dict[str, Any]:
+    """Compile the batch's custom camera on a throwaway camera and render one 16x16 frame through it (``visualenv info``).
+
+    Raises what a batch would raise when this Blender cannot (no OSL, no ``oslquery``).
+    """
+    _osl_modules_on_path()
+    data = bpy.data.cameras.new("visualenv-tiles-probe")
+    camera = bpy.data.objects.new("visualenv-tiles-probe", data)
+    scene = bpy.data.scenes.new("visualenv-tiles-probe")
+    try:
+        scene.collection.objects.link(camera)
+        scene.camera = camera
+        scene.render.engine = "CYCLES"
+        scene.render.resolution_x = scene.render.resolution_y = 16
+        scene.cycles.samples = 1
+        data.type, data.custom_mode, data.custom_shader = "CUSTOM", "INTERNAL", _tiles_text()
+        _compile(camera)
+        bpy.ops.render.render(scene=scene.name)
+        return {"available": True}
+    finally:
+        bpy.data.scenes.remove(scene)
+        bpy.data.objects.remove(camera)
+        bpy.data.cameras.remove(data)
+
+
 def _tiles_text() -> Any:
     name = "visualenv_tiles.osl"
     text = bpy.data.texts.get(name)

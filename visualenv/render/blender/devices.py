@@ -210,7 +210,9 @@ def probe(warm: bool = False) -> dict[str, Any]:
     import bpy
 
     report: dict[str, Any] = {"bpy": bpy.app.version_string}
-    for key, part in (("cycles", cycles_devices), ("gpu_context", gpu_context)):
+    from visualenv.render.blender.batched import tiles_camera_check
+
+    for key, part in (("cycles", cycles_devices), ("gpu_context", gpu_context), ("batches", tiles_camera_check)):
         try:
             with blender_output():
                 report[key] = part()
