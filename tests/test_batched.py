@@ -345,3 +345,35 @@ def test_depth_tiles_are_the_envs_own_depth(spec, depth_range):
         batch.close()
         for env in singles:
             env.close()
+
+
+def test_render_gives_each_envs_own_view():
+    """render_mode='rgb_array': a tuple of N high-resolution views, each the view of the env alone (from gymnasium.make_vec too)."""
+    text = (SPECS / "goalie.yaml").read_text().replace("render: {engine: cycles, preset: fast}",
+                                                        "render: {engine: cycles, preset: fast, view: {resolution: [120, 90], preset: fast}}")
+    loaded = load_spec_text(text, name="goalie.yaml")
+    batch = BatchedVectorEnv(loaded, 3, render_mode="rgb_array")
+    single = VisualEnv(loaded, render_mode="rgb_array", renderer_options={"noise": "shared"})
+    try:
+        batch.reset(seed=5)
+        for _ in range(4):
+            obs, *_ = batch.step(np.array([0, 1, 1]))
+        views = batch.render()
+        assert isinstance(views, tuple) and len(views) == 3 and all(v.shape == (90, 120, 3) and v.dtype == np.uint8 for v in views)
+        for i in range(3):
+            single.reset(seed=5 + i)
+            for _ in range(4):
+                single.step(int([0, 1, 1][i]))
+            assert agreement(views[i], single.render()) >= 0.98, i
+        assert agreement(views[0], views[1]) < 0.98          # the goalies stand in different places
+        after, *_ = batch.step(np.array([1, 1, 1]))           # observations after a view are still the env's own (the single env is env 2)
+        own, *_ = single.step(1)
+        assert agreement(after[2], own) >= 0.98
+    finally:
+        batch.close()
+        single.close()
+    with pytest.raises(ValueError, match="render_mode must be one of"):
+        BatchedVectorEnv(loaded, 2, render_mode="human")
+    vec = gym.make_vec("visualenv/Goalie-v0", 2, vectorization_mode="vector_entry_point", render_mode="rgb_array")
+    assert vec.render_mode == "rgb_array" and "rgb_array" in vec.metadata["render_modes"]   # (its 400x400 'quality' views take seconds)
+    vec.close()

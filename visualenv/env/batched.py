@@ -56,7 +56,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     ``info["final_info"]``, as SB3's VecEnv expects).
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": []}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 30}
 
     def __init__(
         self,
@@ -66,11 +66,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         render: bool | None = None,
         params: dict[str, Any] | None = None,
         autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        render_mode: str | None = None,
         renderer_options: RendererOptions | Mapping[str, Any] | None = None,
         backend: str = BATCH_BACKEND,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
         self._renderer: Any = None
         modes = {m.name: m for m in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)}
         mode = autoreset_mode.name if isinstance(autoreset_mode, AutoresetMode) else str(autoreset_mode).upper()
@@ -160,6 +164,20 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             info["final_info"] = final[1]
             info["_final_info"] = done
         return obs, rewards, terminated, truncated, info
+
+    def render(self) -> tuple[np.ndarray, ...] | None:  # type: ignore[override]
+        """Each env's high-resolution RGB view (render_mode="rgb_array"), as Gymnasium's vector envs return them: a tuple.
+
+        One Cycles call renders every env's view as a tile (several past the image limit).
+        A view uses other render settings than the observations, so the step after it
+        re-synchronises the scene: for recording now and then, not every step.
+        """
+        if self.render_mode is None:
+            gym.logger.warn("render() called without render_mode; make the batch with render_mode='rgb_array'")
+            return None
+        if not self.uses_camera:
+            raise gym.error.Error("a state-only batch (render=False) has no Blender scene to render a view of")
+        return tuple(self.renderer.render_view_batch(self.binding_values()))
 
     def close_extras(self, **kwargs: Any) -> None:
         if getattr(self, "_renderer", None) is not None:
@@ -300,10 +318,10 @@ def _select(obs: Any, i: int) -> Any:
 
 def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:
     """A batch from keyword options as ``visualenv.make`` takes them: :class:`BatchedVectorEnv`'s (render, params,
-    autoreset_mode) and the renderer options (``device``, ``threads``, ``samples``, ``noise``, ``readback``).
+    autoreset_mode, render_mode) and the renderer options (``device``, ``threads``, ``samples``, ``noise``, ``readback``).
 
     Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``.
     """
-    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode") if k in kwargs}
+    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode") if k in kwargs}
     kwargs.pop("max_episode_steps", None)  # Gymnasium passes the spec's; the spec file's max_steps rules
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

@@ -135,12 +135,12 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
 
     ``batched=True`` gives a :class:`~visualenv.env.batched.BatchedVectorEnv` instead: all `n` envs in
     this process and one Blender scene, one render call per step (kwargs: render, params,
-    autoreset_mode and the renderer options; stack frames with SB3's VecFrameStack).
+    autoreset_mode, render_mode and the renderer options; stack frames with SB3's VecFrameStack).
     """
     if batched:
         from visualenv.env.batched import make_batched
 
-        per_env = sorted(k for k in ("frame_stack", "grayscale", "resize", "render_mode") if kwargs.get(k) not in (None, False))
+        per_env = sorted(k for k in ("frame_stack", "grayscale", "resize") if kwargs.get(k) not in (None, False))
         if per_env or wrapper_class is not None:
             raise ValueError(f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
                              "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)")

@@ -28,7 +28,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.errors import SpecError
+from visualenv.errors import RenderError, SpecError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, write_bindings
 from visualenv.render.blender.scene import BuiltScene
@@ -167,33 +167,41 @@ class BatchedBlenderRenderer(BlenderRenderer):
             copy.aimed, copy.targets = self._aimed, self._targets
         self._objects = built.objects
         self._tiled_views = [self._tiled_view(view) for view in self._views]
+        self._tiled_view_camera: tuple[_View, Any, bool] | None = None  # the view camera's, built at the first view
         self._anchors_moved = False
 
     def _refuse_turning_cameras(self) -> None:
         """A camera the state turns (or zooms) cannot share one pose with its copies; a bound sun cannot be shared."""
+        plan = self.plan
+        for view in plan.views.values():
+            why = self._turning(view.camera)
+            if why:
+                raise SpecError([plan.source.diagnostic(("observation",), f"camera '{view.camera}' turns or zooms with the state "
+                    f"({why}): a batch renders every env through one camera orientation, so only a camera that moves without "
+                    "turning can be batched; use one process per env (visualenv.make_vec(..., batched=False))")])
+        for name in dict.fromkeys(target.object for target in plan.bindings):
+            obj = self._objects[name]
+            if _is_sun(obj):
+                raise SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares "
+                    "one sun among its envs; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
+
+    def _turning(self, camera_name: str) -> str | None:
+        """What turns or zooms this camera with the state ("its rotation binding on 'Rig'"), or None if nothing does."""
         plan, objects = self.plan, self._objects
         bound: dict[str, set[str]] = {}
         for target in plan.bindings:
             bound.setdefault(target.object, set()).add(target.property)
         names = {obj.as_pointer(): name for name, obj in objects.items()}
-        for view in plan.views.values():
-            camera = objects[view.camera]
-            spec = plan.scene.objects.get(view.camera)
-            aimed = isinstance(spec, CameraObject) and spec.look_at is not None
-            for obj in _with_ancestors(camera):
-                props = bound.get(names.get(obj.as_pointer(), ""), set())
-                turning = (props & set(_TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if obj == camera else set())
-                if turning or obj.constraints:
-                    why = f"its {', '.join(sorted(turning))} binding" if turning else "a constraint"
-                    raise SpecError([plan.source.diagnostic(("observation",), f"camera '{view.camera}' turns or zooms with the state "
-                        f"({why} on '{names.get(obj.as_pointer(), obj.name)}'): a batch renders every env through one camera "
-                        "orientation, so only a camera that moves without turning can be batched; "
-                        "use one process per env (visualenv.make_vec(..., batched=False))")])
-        for name in bound:
-            obj = objects[name]
-            if _is_sun(obj):
-                raise SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares "
-                    "one sun among its envs; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
+        camera = objects[camera_name]
+        spec = plan.scene.objects.get(camera_name)
+        aimed = isinstance(spec, CameraObject) and spec.look_at is not None
+        for obj in _with_ancestors(camera):
+            props = bound.get(names.get(obj.as_pointer(), ""), set())
+            turning = (props & set(_TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if obj == camera else set())
+            if turning or obj.constraints:
+                what = f"its {', '.join(sorted(turning))} binding" if turning else "a constraint"
+                return f"{what} on '{names.get(obj.as_pointer(), obj.name)}'"
+        return None
 
     def _copy_spacing(self, built: BuiltScene) -> float:
         """How far apart copies stand: farther than any camera sees, plus the scene's size."""
@@ -280,6 +288,29 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for (view, reference, moving), source in zip(self._tiled_views, self._views):
             images[view.key] = self._render_tiles(view, reference, source.camera if moving else None)
         return next(iter(images.values())) if self.plan.single else images
+
+    def render_view_batch(self, values: Sequence[Sequence[Any]]) -> np.ndarray:
+        """Every env's high-resolution RGB view, ``(N, H, W, 3)``: the view camera's tiles, in as few calls as fit.
+
+        The view's render settings differ from the observations', so the next observation
+        render re-synchronises the whole scene with Cycles: a view costs far more than a step.
+        """
+        self._check_open()
+        if self._view is None:
+            raise RenderError("the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')")
+        if self._tiled_view_camera is None:
+            camera_name = self.plan.view_camera
+            why = self._turning(camera_name) if camera_name is not None else None
+            if why:
+                raise RenderError(f"the view camera '{camera_name}' turns or zooms with the state ({why}): a batch renders "
+                                  "every env through one camera orientation; record a view with one env (visualenv.make)")
+            self._tiled_view_camera = self._tiled_view(self._view)
+        if len(values) != self.num_envs:
+            raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
+        for copy, v in zip(self._copies, values):
+            self._apply_copy(copy, tuple(v))
+        view, reference, moving = self._tiled_view_camera
+        return self._render_tiles(view, reference, self._view.camera if moving else None)
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
