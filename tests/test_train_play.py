@@ -298,3 +298,31 @@ def test_sigterm_stops_training_and_still_evaluates(tmp_path):
     results = json.loads((run / "results.json").read_text())
     assert results["stopped_early"] is True and results["episodes"] == 2 and results["steps"] < 100000
     assert (run / "plots" / "rewards.png").is_file()
+
+
+def test_an_image_replay_buffer_that_cannot_fit_is_refused_before_any_env_starts(tmp_path):
+    """SB3's default buffer (a million samples) of 4 stacked 100x100 frames, twice (obs and next obs), is 75 GiB."""
+    from visualenv.env.registration import resolve
+    from visualenv.spec import load_spec
+    from visualenv.train.sb3 import TrainConfig, replay_buffer_bytes
+
+    result = CliRunner().invoke(main, ["train", "LunarLanding-v0", "--algo", "sac", "--steps", "64", "--out", str(tmp_path / "runs")])
+    assert result.exit_code != 0 and "SAC's replay buffer would take 74.5 GiB" in result.output and "optimize_memory_usage" in result.output
+    assert not (tmp_path / "runs").exists()
+    loaded = load_spec(resolve("LunarLanding-v0"))
+    sac = TrainConfig("LunarLanding-v0", algo="sac")
+    assert replay_buffer_bytes(sac, {"buffer_size": 50_000, "optimize_memory_usage": True}, loaded) == 50_000 * 4 * 100 * 100
+    assert replay_buffer_bytes(TrainConfig("LunarLanding-v0", algo="sac", render=False), {"buffer_size": 1000}, loaded) == 1000 * 6 * 4 * 2
+    assert replay_buffer_bytes(TrainConfig("LunarLanding-v0", algo="ppo"), {}, loaded) is None       # on-policy: no buffer
+
+
+def test_sac_trains_a_continuous_action_env(tmp_path):
+    result = CliRunner().invoke(main, ["train", "LunarLanding-v0", "--algo", "sac", "--state-only", "--steps", "200", "--envs", "1",
+                                       "--eval-every", "100", "--eval-episodes", "2", "--final-episodes", "2", "--set", "learning_starts=100",
+                                       "--set", "train_freq=4", "--set", "buffer_size=1000", "--out", str(tmp_path), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    run = next((tmp_path / "LunarLanding-v0").iterdir())
+    assert json.loads((run / "config.json").read_text())["config"]["algo"] == "sac"
+    assert json.loads((run / "results.json").read_text())["episodes"] == 2
+    evaluated = CliRunner().invoke(main, ["eval", "LunarLanding-v0", "--model", str(run / "best_model.zip"), "--episodes", "2"])
+    assert evaluated.exit_code == 0 and "reproduces" in evaluated.output, evaluated.output

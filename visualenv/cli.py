@@ -21,7 +21,7 @@ from visualenv.errors import ConfigError, SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
 #: the SB3 algorithms `train` and `play` take (training.algorithm_class maps them to classes)
-ALGORITHMS = ("ppo", "a2c", "dqn")
+ALGORITHMS = ("ppo", "a2c", "dqn", "sac")
 
 EXIT_INVALID = 2
 PRETRAINED = "pretrained"  # --model's name for the shipped agent

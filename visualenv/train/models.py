@@ -27,10 +27,10 @@ RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"
 
 
 def algorithm_class(name: str) -> Any:
-    """The SB3 algorithm `train` and `play` name (``ppo``, ``a2c``, ``dqn``)."""
+    """The SB3 algorithm `train` and `play` name (``ppo``, ``a2c``, ``dqn``, ``sac``)."""
     import stable_baselines3 as sb3
 
-    classes = {"ppo": sb3.PPO, "a2c": sb3.A2C, "dqn": sb3.DQN}
+    classes = {"ppo": sb3.PPO, "a2c": sb3.A2C, "dqn": sb3.DQN, "sac": sb3.SAC}
     if name not in classes:
         raise ValueError(f"unknown algorithm '{name}': expected one of {', '.join(classes)}")
     return classes[name]

@@ -267,9 +267,54 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     from visualenv.spec import load_spec
 
     kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})
+    loaded = load_spec(resolve(config.spec))
     if config.render:
-        check_cnn_input(load_spec(resolve(config.spec)), config.hyperparams)
+        check_cnn_input(loaded, config.hyperparams)
+    check_replay_buffer(config, {**kwargs, **changed}, loaded)
     return kwargs, changed
+
+
+#: the share of the available memory a replay buffer may take (the envs, the model and the evaluation need the rest)
+REPLAY_MEMORY_SHARE = 0.7
+
+
+def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> int | None:
+    """What an off-policy algorithm's replay buffer will hold at most, in bytes; None for an on-policy algorithm.
+
+    SB3 stores each observation and the next one (``optimize_memory_usage`` keeps
+    one: consecutive samples share it), as uint8 images (frames stacked) or float32 states.
+    """
+    import inspect
+
+    from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
+
+    algo = algorithm_class(config.algo)
+    if not issubclass(algo, OffPolicyAlgorithm):
+        return None
+    defaults = inspect.signature(algo.__init__).parameters
+    size = int(kwargs.get("buffer_size", defaults["buffer_size"].default))
+    optimized = bool(kwargs.get("optimize_memory_usage", defaults["optimize_memory_usage"].default))
+    observation = loaded.spec.observation
+    if config.render and observation is not None:
+        channels = {"rgb": 3, "grayscale": 1, "depth": 1}
+        per_sample = sum(w * h * channels[v.color] * max(1, config.frame_stack) for v in observation.views().values() for w, h in [v.resolution])
+    else:
+        per_sample = 4 * sum(1 for var in loaded.spec.state.values() if var.observe)
+    return size * per_sample * (1 if optimized else 2)
+
+
+def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> None:
+    """A replay buffer of image stacks that cannot fit in memory is refused before any env starts (SB3 would only warn, then fail hours later)."""
+    import psutil
+
+    need = replay_buffer_bytes(config, kwargs, loaded)
+    if need is None:
+        return
+    free = psutil.virtual_memory().available
+    if need > REPLAY_MEMORY_SHARE * free:
+        raise ConfigError(f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
+                          f"are available: set a smaller buffer_size (--set buffer_size=...), and optimize_memory_usage=true "
+                          "(one copy of each observation; SB3 then needs replay_buffer_kwargs: {handle_timeout_termination: false})")
 
 
 def _keep_earlier_logs(logs: Path) -> None:
