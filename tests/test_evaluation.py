@@ -121,3 +121,24 @@ def test_eval_of_random_actions_is_the_seeded_baseline(tmp_path):
     assert first["per_episode"] == again["per_episode"] and first["eval_seed"] == 7
     assert first["per_episode"] != other["per_episode"]
     assert first["success_rate"] < 0.2 and 10 < first["mean_length"] < 40     # a random lander mostly crashes
+
+
+def test_a_policy_acts_on_one_torch_thread_beside_blender_and_torch_is_restored():
+    """Torch's idle threads spin on the cores Cycles renders on: evaluation runs the policy on one, then sets torch back."""
+    torch = pytest.importorskip("torch")
+    from visualenv.train.evaluation import evaluate, make_eval_env
+
+    seen = []
+
+    class Recorder:
+        def predict(self, obs, deterministic=True):
+            seen.append(torch.get_num_threads())
+            return np.zeros((1, 2), np.float32), None
+
+    torch.set_num_threads(2)
+    env = make_eval_env("LunarLanding-v0", seed=0, frame_stack=1, render=False)
+    try:
+        evaluate(Recorder(), env, 2)
+    finally:
+        env.close()
+    assert seen and set(seen) == {1} and torch.get_num_threads() == 2

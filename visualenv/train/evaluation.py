@@ -29,7 +29,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.env.wrappers import FrameStack, subspaces
-from visualenv.train.models import load_model, stacked_like
+from visualenv.train.models import load_model, one_torch_thread, stacked_like
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
 MAX_TRAIN_SEED = 2**31 - 1  # `train --seed`: with up to 2**31 envs, training seeds stay in band 0
@@ -127,16 +127,17 @@ def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
     successes: list[bool] = []
     obs = vec_env.reset()
     ret, length = 0.0, 0
-    while len(returns) < episodes:
-        action, _ = model.predict(obs, deterministic=True)
-        obs, reward, done, infos = vec_env.step(action)
-        ret += float(reward[0])
-        length += 1
-        if done[0]:
-            returns.append(ret)
-            lengths.append(length)
-            successes.append(bool(infos[0].get("is_success", False)))
-            ret, length = 0.0, 0
+    with one_torch_thread():
+        while len(returns) < episodes:
+            action, _ = model.predict(obs, deterministic=True)
+            obs, reward, done, infos = vec_env.step(action)
+            ret += float(reward[0])
+            length += 1
+            if done[0]:
+                returns.append(ret)
+                lengths.append(length)
+                successes.append(bool(infos[0].get("is_success", False)))
+                ret, length = 0.0, 0
     return {
         "episodes": episodes,
         "mean_reward": float(np.mean(returns)),

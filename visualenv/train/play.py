@@ -12,7 +12,7 @@ from visualenv.files import make_dir
 from visualenv.render.images import side_by_side
 from visualenv.errors import VisualEnvError
 from visualenv.env.wrappers import FrameStack
-from visualenv.train.models import load_model, stacked_like
+from visualenv.train.models import load_model, one_torch_thread, stacked_like
 
 VIDEO_FORMATS = (".gif", ".webp", ".mp4")
 WEBP_QUALITY = 70  # lossy animated WebP: a few hundred kB where a GIF of path-traced frames takes megabytes
@@ -64,7 +64,8 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     env.action_space.seed(seed)
     frames: list[np.ndarray] | None = [] if record else None
     try:
-        results = [_play_episode(env, model, seed + episode, frames, max_frames) for episode in range(episodes)]
+        with one_torch_thread():
+            results = [_play_episode(env, model, seed + episode, frames, max_frames) for episode in range(episodes)]
     finally:
         env.close()
     if record and frames:
