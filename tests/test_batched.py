@@ -255,20 +255,27 @@ def test_several_cameras_give_a_dict_of_tiles_per_camera(tmp_path):
     """A Dict observation (grayscale 64x64 and RGB 40x40 here): one render call per camera, each key's tiles the env's own."""
     from tests.test_train_play import multi_camera_cartpole
 
-    loaded = load_spec(multi_camera_cartpole(tmp_path, "[40, 40]"))
-    batch = BatchedVectorEnv(loaded, 3)
-    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
+    obs, owns = after_steps(load_spec(multi_camera_cartpole(tmp_path, "[40, 40]")), seed=1, actions=[0, 1, 1])
+    assert {k: v.shape for k, v in obs.items()} == {"front": (3, 64, 64, 1), "side": (3, 40, 40, 3)}
+    for i, own in enumerate(owns):
+        assert all(agreement(obs[k][i], own[k]) >= 0.98 for k in own), i
+
+
+def after_steps(loaded, *, seed: int, actions: list[int], steps: int = 3) -> tuple:
+    """A batch's observations and each env's own render after `steps` steps of the same actions (env i seeded seed + i)."""
+    batch = BatchedVectorEnv(loaded, len(actions))
+    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in actions]
     try:
-        obs, _ = batch.reset(seed=1)
-        assert {k: v.shape for k, v in obs.items()} == {"front": (3, 64, 64, 1), "side": (3, 40, 40, 3)}
-        for _ in range(3):
-            actions = np.array([0, 1, 1])
-            obs, *_ = batch.step(actions)
+        batch.reset(seed=seed)
+        for _ in range(steps):
+            obs, *_ = batch.step(np.array(actions))
+        owns = []
         for i, env in enumerate(singles):
-            env.reset(seed=1 + i)
-            for _ in range(3):
-                own, *_ = env.step(int(actions[i]))
-            assert all(agreement(obs[k][i], own[k]) >= 0.98 for k in own), i
+            env.reset(seed=seed + i)
+            for _ in range(steps):
+                own, *_ = env.step(actions[i])
+            owns.append(own)
+        return obs, owns
     finally:
         batch.close()
         for env in singles:
@@ -326,25 +333,11 @@ def test_depth_tiles_are_the_envs_own_depth(spec, depth_range):
     """Depth in a batch is measured along each tile's own ray: the third env sits a grid row away from the shared
     camera pose, where the scene camera's view Z would be off by the copies' spacing (all background)."""
     text = (SPECS / spec).read_text().replace("color: grayscale", f"color: depth\n  depth_range: {depth_range}")
-    loaded = load_spec_text(text, name=spec)
-    batch = BatchedVectorEnv(loaded, 3)
-    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
-    try:
-        obs, _ = batch.reset(seed=3)
-        for _ in range(3):
-            actions = np.array([0, 1, 1])
-            obs, *_ = batch.step(actions)
-        for i, env in enumerate(singles):
-            env.reset(seed=3 + i)
-            for _ in range(3):
-                own, *_ = env.step(int(actions[i]))
-            near = own[..., 0] < 255                      # what the env sees nearer than the far end of the range
-            assert near.mean() > 0.01 and np.ptp(own) > 60, "a depth image, not the background alone"
-            assert agreement(obs[i][near], own[near]) >= 0.98 and agreement(obs[i], own) >= 0.98, i
-    finally:
-        batch.close()
-        for env in singles:
-            env.close()
+    obs, owns = after_steps(load_spec_text(text, name=spec), seed=3, actions=[0, 1, 1])
+    for i, own in enumerate(owns):
+        near = own[..., 0] < 255                      # what the env sees nearer than the far end of the range
+        assert near.mean() > 0.01 and np.ptp(own) > 60, "a depth image, not the background alone"
+        assert agreement(obs[i][near], own[near]) >= 0.98 and agreement(obs[i], own) >= 0.98, i
 
 
 def test_render_gives_each_envs_own_view():

@@ -128,7 +128,7 @@ def lander_autopilot(s):
     side = float(np.clip(1.5 * (0.4 * (s["tx"] - s["x"]) - 1.2 * s["vx"]), -1, 1))
     want_vz = -max(0.6, min(3.0, 0.3 * s["z"]))
     mass = 1.0 + 0.5 * s["fuel"]
-    throttle = float(np.clip((1.62 + 2.0 * (want_vz - s["vz"])) * mass / 3.6, 0, 1))
+    throttle = float(np.clip((1.62 + 2.0 * (want_vz - s["vz"])) * mass / 5.4, 0, 1))
     return np.array([2 * throttle - 1, side], np.float32)
 
 
@@ -137,14 +137,16 @@ def test_lunar_landing_a_soft_landing_in_the_zone_is_a_success_worth_10(seed):
     info, total, terminated, _ = run("LunarLanding-v0", lander_autopilot, seed)
     s = info["state"]
     assert terminated and info["outcome"] == "landed" and info["is_success"]
-    assert s["z"] <= 0 and abs(s["x"] - s["tx"]) <= 3 and abs(s["vz"]) <= 1.5 and 0 < s["fuel"] < 1
+    assert s["z"] <= 0 and abs(s["x"] - s["tx"]) <= 3 and abs(s["vz"]) <= 2 and 0 < s["fuel"] < 1
     assert total > 10   # the landing bonus plus the shaping earned on the way down
 
 
-def test_lunar_landing_doing_nothing_crashes():
-    info, total, terminated, _ = run("LunarLanding-v0", lambda s: np.zeros(2, np.float32), seed=0)
+def test_lunar_landing_with_the_engine_off_crashes_and_at_half_throttle_climbs_away():
+    info, total, terminated, _ = run("LunarLanding-v0", lambda s: np.array([-1.0, 0.0], np.float32), seed=0)
     assert terminated and info["outcome"] == "crashed" and not info["is_success"]
-    assert info["state"]["vz"] < -1.5
+    assert info["state"]["vz"] < -2
+    info, total, terminated, _ = run("LunarLanding-v0", lambda s: np.zeros(2, np.float32), seed=0)
+    assert terminated and info["outcome"] == "out_of_bounds" and info["state"]["z"] > 40
 
 
 def test_lunar_landing_a_soft_touchdown_outside_the_zone_is_a_miss():
@@ -154,7 +156,7 @@ def test_lunar_landing_a_soft_touchdown_outside_the_zone_is_a_miss():
 
 def test_lunar_landing_hovering_burns_the_fuel_and_drifting_leaves_the_area():
     def hover(s):   # brake to a stop and stay there
-        throttle = np.clip((1.62 - 2.0 * s["vz"]) * (1.0 + 0.5 * s["fuel"]) / 3.6, 0, 1)
+        throttle = np.clip((1.62 - 2.0 * s["vz"]) * (1.0 + 0.5 * s["fuel"]) / 5.4, 0, 1)
         return np.array([2 * throttle - 1, np.clip(-2.0 * s["vx"], -1, 1)], np.float32)
     info, total, terminated, _ = run("LunarLanding-v0", hover, seed=0)
     assert terminated and info["outcome"] == "out_of_fuel" and info["state"]["fuel"] == 0 and info["state"]["z"] > 20
@@ -167,12 +169,12 @@ def test_lunar_landing_thrust_is_divided_by_a_mass_that_falls_as_fuel_burns():
     env.reset(seed=0, options={"state": {"x": 0.0, "z": 20.0, "vx": 0.0, "vz": 0.0, "fuel": 1.0, "tx": 0.0}})
     _, _, _, _, info = env.step(np.array([1.0, 1.0], np.float32))      # full main and side thrust for 0.5 s
     full = info["state"]
-    assert full["vz"] == pytest.approx(0.5 * (3.6 / 1.5 - 1.62))
+    assert full["vz"] == pytest.approx(0.5 * (5.4 / 1.5 - 1.62))
     assert full["vx"] == pytest.approx(0.5 * 1.0 / 1.5)
     assert full["fuel"] == pytest.approx(1 - 0.025 - 0.01)
     env.reset(seed=0, options={"state": {"x": 0.0, "z": 20.0, "vx": 0.0, "vz": 0.0, "fuel": 0.2, "tx": 0.0}})
     _, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
-    assert info["state"]["vz"] == pytest.approx(0.5 * (3.6 / 1.1 - 1.62))   # lighter: the same thrust pushes harder
+    assert info["state"]["vz"] == pytest.approx(0.5 * (5.4 / 1.1 - 1.62))   # lighter: the same thrust pushes harder
 
 
 def test_lunar_landing_starts_and_zones_are_random_within_their_ranges():

@@ -1,7 +1,7 @@
 """What Blender can render on here: Cycles devices per backend, the GPU context of EEVEE/Workbench, kernel caches.
 
-Run as ``python -m visualenv.render.blender.devices`` (what ``visualenv info`` does, in a child
-process, so that a driver that crashes takes only the probe with it): prints one JSON object.
+:mod:`visualenv.render.blender.probe` runs these in a child process for ``visualenv info``
+(a driver that crashes takes only the probe with it).
 
 Also the one-line notice before a process's first Cycles GPU render when Blender must first
 compile its kernels for this GPU: bpy 5.0.1 ships CUDA binaries for some architectures only
@@ -11,7 +11,6 @@ so it happens once per machine. On an H100 (sm_90) that first frame took 356 s.
 
 from __future__ import annotations
 
-import json
 import os
 import re
 import shutil
@@ -201,33 +200,3 @@ def _render_on_gpu(backend: str) -> dict[str, Any]:
     started = time.perf_counter()
     bpy.ops.render.render(scene=scene.name)
     return {"warmed": True, "backend": backend, "first_frame_s": round(time.perf_counter() - started, 2)}
-
-
-def probe(warm: bool = False) -> dict[str, Any]:
-    """Everything `visualenv info` reports about Blender; each part that fails says why instead of failing the rest."""
-    from visualenv.render.blender.log import blender_output
-
-    import bpy
-
-    report: dict[str, Any] = {"bpy": bpy.app.version_string}
-    from visualenv.render.blender.batched import tiles_camera_check
-
-    for key, part in (("cycles", cycles_devices), ("gpu_context", gpu_context), ("batches", tiles_camera_check)):
-        try:
-            with blender_output():
-                report[key] = part()
-        except Exception as exc:  # noqa: BLE001 - a probe reports what went wrong; it never stops the others
-            report[key] = {"error": f"{type(exc).__name__}: {exc}"}
-    if warm:
-        try:
-            report["warm_gpu"] = warm_gpu()  # prints its notice to stderr itself, before the long first frame
-        except Exception as exc:  # noqa: BLE001
-            report["warm_gpu"] = {"error": f"{type(exc).__name__}: {exc}"}
-    gpus = [b for b, names in report.get("cycles", {}).items() if b != "CPU" and names] if isinstance(report.get("cycles"), dict) else []
-    report["kernels"] = {b: {"compile_first": kernels_to_compile(kernel_facts(b))} for b in gpus if b in NVIDIA}
-    report["kernel_caches"] = {folder: filled for folder, filled in kernel_caches()}
-    return report
-
-
-if __name__ == "__main__":
-    print(json.dumps(probe(warm="--warm-gpu" in sys.argv[1:])), flush=True)
