@@ -298,7 +298,7 @@ class BlenderRenderer(Renderer):
             self._set_depth_range(*view.depth_range)
             self._depth_range = view.depth_range
         if depth and self.DEPTH_ALONG_RAY:
-            forward = tuple(view.camera.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0)))
+            forward = tuple((view.camera.matrix_world.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized())
             if forward != self._depth_forward:
                 self._set_depth_forward(forward)
                 self._depth_forward = forward
