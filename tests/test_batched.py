@@ -370,3 +370,40 @@ def test_render_gives_each_envs_own_view():
     vec = gym.make_vec("visualenv/Goalie-v0", 2, vectorization_mode="vector_entry_point", render_mode="rgb_array")
     assert vec.render_mode == "rgb_array" and "rgb_array" in vec.metadata["render_modes"]   # (its 400x400 'quality' views take seconds)
     vec.close()
+
+
+def test_same_step_autoreset_renders_only_the_reset_envs_again():
+    """SAME_STEP: an ended env's final frame and its next episode's first frame are the frames a NEXT_STEP batch
+    shows one step apart, and the step renders the other envs' tiles once (a second call holds the reset envs only)."""
+    same = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3, autoreset_mode="same_step")
+    nxt = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3)
+    pixels: list[int] = []
+    render = same.renderer._render
+    same.renderer._render = lambda view: (pixels.append(view.width * view.height), render(view))[1]  # counts, Blender renders
+    try:
+        same.reset(seed=4)
+        nxt.reset(seed=4)
+        actions = np.array([0, 0, 1])   # the two envs pushed left fall first
+        for _ in range(60):
+            pixels.clear()
+            obs, _, terminated, truncated, info = same.step(actions)
+            expected, *_ = nxt.step(actions)
+            done = terminated | truncated
+            if done.any():
+                break
+            assert all(agreement(obs[i], expected[i]) == 1.0 for i in range(3))
+        else:
+            pytest.fail("no episode ended")
+        assert 0 < done.sum() < 3
+        ended = np.flatnonzero(done)
+        for i in ended:
+            assert agreement(info["final_obs"][i], expected[i]) >= 0.98
+        for i in np.flatnonzero(~done):
+            assert agreement(obs[i], expected[i]) >= 0.98
+        assert pixels[0] == 4 * 100 * 100 and sum(pixels[1:]) == len(ended) * 100 * 100, pixels  # a 2 x 2 grid, then the reset tiles
+        first, *_ = nxt.step(actions)   # NEXT_STEP resets the ended envs now, with the same draws
+        for i in ended:
+            assert agreement(obs[i], first[i]) >= 0.98 and agreement(obs[i], info["final_obs"][i]) < 0.998  # the pole stands again
+    finally:
+        same.close()
+        nxt.close()

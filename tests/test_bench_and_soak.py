@@ -40,11 +40,13 @@ def test_bench_measures_scaling_against_one_confined_worker(tmp_path):
 
 def test_bench_compares_batches_with_the_per_process_vector_env(tmp_path):
     out = tmp_path / "bench.json"
-    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "20", "--batched", "1,3", "--json", str(out)])
+    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "20", "--batched", "1,3", "--autoreset", "same_step",
+                                       "--json", str(out)])
     assert result.exit_code == 0, result.output
-    assert "batched (one process, one render call per step)" in result.output and "per-process vector env, 2 workers" in result.output
+    assert "batched (one process, autoreset same_step)" in result.output and "per-process vector env, 2 workers" in result.output
     (record,) = json.loads(out.read_text())
     assert [b["envs"] for b in record["batched"]] == [1, 3]
+    assert all(b["autoreset"] == "same_step" and b["calls_per_step"] >= 1 for b in record["batched"]), record
     assert all(b["steps_per_s"] > 0 and b["render_ms"] > 0 and b["rss_mb"] > 0 for b in record["batched"]), record
     assert record["per_process"]["workers"] == 2 and record["per_process"]["steps_per_s"] > 0
     bad = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--batched", "0,4"])

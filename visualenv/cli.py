@@ -510,13 +510,13 @@ def _worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
     return counts
 
 
-def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, results: list[Any]) -> None:
+def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, autoreset: str, results: list[Any]) -> None:
     """`bench --batched`: each batch size in a fresh process, then the per-process vector env with one worker per usable core."""
     from visualenv.tools.bench import bench_parallel
     from visualenv.tools.bench_batched import bench_batched, lines
 
     for spec in specs:
-        batches = bench_batched(spec, sizes, steps)
+        batches = bench_batched(spec, sizes, steps, autoreset=autoreset)
         workers = max(2, cores)
         per_process = bench_parallel(spec, workers, steps, 0, 0.0)
         click.echo(f"{spec}")
@@ -537,10 +537,12 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
 @click.option("--soak", "soak_steps", type=click.IntRange(min=0), default=0, help="also run this many steps and report memory growth (e.g. 50000)")
 @click.option("--batched", "batch_sizes", default=None, callback=lambda ctx, param, value: value and _worker_counts(value, "--batched"),
               help="batch sizes such as 1,16,64: N envs in one Blender against the per-process vector env (one worker per core)")
+@click.option("--autoreset", type=click.Choice(["next_step", "same_step"]), default="next_step", show_default=True,
+              help="with --batched: when an ended env is reset (same_step: as SB3's VecEnvs and train --batched do)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads: int | None, readback: str, pin: bool, soak_steps: int,
-          batch_sizes: tuple[int, ...] | None, json_out: str | None) -> None:
+          batch_sizes: tuple[int, ...] | None, autoreset: str, json_out: str | None) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
 
@@ -558,7 +560,7 @@ def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads:
                f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
     results: list[Any] = []
     if batch_sizes:
-        _bench_batched(specs, batch_sizes, steps, cores, results)
+        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results)
     for spec in specs if not batch_sizes else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
         figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling)

@@ -152,12 +152,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         final: tuple[Any, dict[str, Any]] | None = None
         if self.autoreset_mode == AutoresetMode.SAME_STEP and done.any():
             final = (self._observe(), self._info(done))
-            for i in np.flatnonzero(done):
+            ended = np.flatnonzero(done)
+            for i in ended:
                 self._reset_lane(int(i))
             self._autoreset[:] = False
+            obs = _with_rows(final[0], ended, self._observe(ended))  # only the reset envs are rendered again
         else:
             self._autoreset = done
-        obs, info = self._observe(), self._info(np.ones(n, dtype=bool))
+            obs = self._observe()
+        info = self._info(np.ones(n, dtype=bool))
         if final is not None:
             info["final_obs"] = np.array([_select(final[0], i) if done[i] else None for i in range(n)], dtype=object)
             info["_final_obs"] = done
@@ -267,10 +270,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._renderer = cls(plan, self._renderer_options, num_envs=self.num_envs)
         return self._renderer
 
-    def _observe(self) -> Any:
+    def _observe(self, envs: np.ndarray | None = None) -> Any:
+        """Every env's observation, or those of `envs` (ascending indices) only."""
         if not self.uses_camera:
-            return self._state[self.program.observed].T.astype(np.float32)
-        return self.renderer.render_batch(self.binding_values())
+            observed = self._state[self.program.observed].T.astype(np.float32)
+            return observed if envs is None else observed[envs]
+        return self.renderer.render_batch(self.binding_values(), envs)
 
     def binding_values(self) -> list[tuple]:
         """Every env's actor binding values (program.bindings order)."""
@@ -314,6 +319,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
 def _select(obs: Any, i: int) -> Any:
     return {k: v[i] for k, v in obs.items()} if isinstance(obs, dict) else obs[i]
+
+
+def _with_rows(obs: Any, rows: np.ndarray, new: Any) -> Any:
+    """A copy of the batch observation `obs` with its `rows` replaced by `new` (arrays or dicts of them)."""
+    if isinstance(obs, dict):
+        return {k: _with_rows(v, rows, new[k]) for k, v in obs.items()}
+    out = obs.copy()
+    out[rows] = new
+    return out
 
 
 def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:

@@ -4,7 +4,9 @@ Each batch size runs in a fresh process (its memory is its own) and reports,
 per step of all N envs: env-steps/s, the dynamics (the vectorised step), the
 bindings written into the N copies, Blender's render call, the part of that
 call spent updating the moved scene (the call minus the same call with nothing
-moved), the readback and cut into tiles, and resident memory per env. The
+moved), the readback and cut into tiles, render calls per step (more than one
+where an image is split, or where ``--autoreset same_step`` renders the envs it
+reset again), and resident memory per env. The
 per-process vector env (one Blender per worker, as many workers as usable
 cores) runs beside it for comparison. Figures only: nothing is asserted.
 """
@@ -22,7 +24,7 @@ def _median_ms(times: list[float]) -> float:
     return 1000 * float(np.median(times)) if times else 0.0
 
 
-def measure_batch(spec: str, n: int, steps: int, seed: int = 0) -> dict[str, Any]:
+def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str = "next_step") -> dict[str, Any]:
     """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory)."""
     import psutil
 
@@ -32,7 +34,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0) -> dict[str, Any
     process = psutil.Process()
     before = process.memory_info().rss
     start = time.perf_counter()
-    env = BatchedVectorEnv(spec, n)
+    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset)
     env.reset(seed=seed)
     build_s = time.perf_counter() - start
     rng = np.random.default_rng(seed)
@@ -60,24 +62,25 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0) -> dict[str, Any
         "envs": n, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
         "dynamics_ms": _median_ms(times["dynamics"]), "bind_ms": _median_ms(times["bind"]), "render_ms": render,
         "scene_update_ms": max(0.0, render - _median_ms(still)), "readback_ms": _median_ms(times["readback"]),
+        "calls_per_step": len(times["render"]) / steps, "autoreset": autoreset,
         "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n, "python_mb": before / 2**20,
     }
 
 
-def _in_child(spec: str, n: int, steps: int, seed: int, queue: Any) -> None:
+def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, queue: Any) -> None:
     try:
-        queue.put(measure_batch(spec, n, steps, seed))
+        queue.put(measure_batch(spec, n, steps, seed, autoreset))
     except BaseException as exc:  # noqa: BLE001 - reported by the parent, which goes on with the next size
         queue.put({"envs": n, "error": f"{type(exc).__name__}: {exc}"})
 
 
-def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0) -> list[dict[str, Any]]:
+def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, autoreset: str = "next_step") -> list[dict[str, Any]]:
     """Each batch size in its own fresh process; a size that fails is reported, not raised."""
     context = multiprocessing.get_context("spawn")
     out = []
     for n in sizes:
         queue = context.Queue()
-        child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, queue))
+        child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, queue))
         child.start()
         out.append(queue.get())
         child.join()
@@ -86,11 +89,12 @@ def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0) 
 
 def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> list[str]:
     """The table `visualenv bench --batched` prints."""
-    rows = ["batched (one process, one render call per step):",
+    mode = batches[0].get("autoreset", "next_step") if batches else "next_step"
+    rows = [f"batched (one process, autoreset {mode}):",
             f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'render':>8} {'update':>7} {'readback':>9} "
-            f"{'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
-            "  (ms per step of all envs, medians; update: the render call minus the same call with nothing moved;"
-            " +MB/env: memory growth per env over the smallest batch)"]
+            f"{'calls':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
+            "  (ms per step of all envs, medians; render and readback: per call; update: the render call minus the same call with"
+            " nothing moved; calls: render calls per step; +MB/env: memory growth per env over the smallest batch)"]
     ok = [b for b in batches if "error" not in b]
     smallest = min(ok, key=lambda b: b["envs"]) if ok else None
     for b in batches:
@@ -100,7 +104,7 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
         assert smallest is not None
         growth = (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"]) if b["envs"] > smallest["envs"] else float("nan")
         rows.append(f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
-                    f"{b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
+                    f"{b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
     if per_process:
         workers = per_process["workers"]
         rows.append(f"per-process vector env, {workers} workers (one Blender each): {per_process['steps_per_s']:.1f} env-steps/s, "

@@ -277,16 +277,23 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     # -- rendering ----------------------------------------------------------------------------------
 
-    def render_batch(self, values: Sequence[Sequence[Any]]) -> np.ndarray | dict[str, np.ndarray]:
-        """Apply each env's binding values to its copy and render every observation camera for all envs."""
+    def render_batch(self, values: Sequence[Sequence[Any]], envs: Sequence[int] | None = None) -> np.ndarray | dict[str, np.ndarray]:
+        """Apply each env's binding values to its copy and render every observation camera for all envs.
+
+        With `envs` (ascending indices) only those envs' tiles are rendered, ``(len(envs), H, W, C)``:
+        the envs an autoreset just reset, without paying for every other tile again.
+        """
         self._check_open()
         if len(values) != self.num_envs:
             raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
-        for copy, v in zip(self._copies, values):
-            self._apply_copy(copy, tuple(v))
+        chosen = range(self.num_envs) if envs is None else [int(i) for i in envs]
+        if not chosen or any(b <= a for a, b in zip(chosen, chosen[1:])) or not 0 <= chosen[0] <= chosen[-1] < self.num_envs:
+            raise ValueError(f"envs must be ascending indices below {self.num_envs}, got {list(chosen)}")
+        for i in chosen:
+            self._apply_copy(self._copies[i], tuple(values[i]))
         images = {}
         for (view, reference, moving), source in zip(self._tiled_views, self._views):
-            images[view.key] = self._render_tiles(view, reference, source.camera if moving else None)
+            images[view.key] = self._render_tiles(view, reference, source.camera if moving else None, chosen)
         return next(iter(images.values())) if self.plan.single else images
 
     def render_view_batch(self, values: Sequence[Sequence[Any]]) -> np.ndarray:
@@ -310,15 +317,16 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for copy, v in zip(self._copies, values):
             self._apply_copy(copy, tuple(v))
         view, reference, moving = self._tiled_view_camera
-        return self._render_tiles(view, reference, self._view.camera if moving else None)
+        return self._render_tiles(view, reference, self._view.camera if moving else None, range(self.num_envs))
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
             write_bindings(values, copy.last, self._size, copy.setters, copy.aimed, copy.targets)
             copy.last = values
 
-    def _render_tiles(self, view: _View, reference: Vector, moving_camera: Any) -> np.ndarray:
-        """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS."""
+    def _render_tiles(self, view: _View, reference: Vector, moving_camera: Any, envs: Sequence[int]) -> np.ndarray:
+        """The tiles of `envs` (ascending) through one camera: one render call per run of consecutive envs,
+        split where an image would pass MAX_IMAGE_PIXELS (the tiles camera renders a range of envs)."""
         if moving_camera is not None:
             self._follow(moving_camera, reference)
         elif self._anchors_moved:
@@ -328,8 +336,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         per_call = envs_per_call(self.num_envs, view.width, view.height)
         parts = []
         params = view.camera.data.cycles_custom
-        for first in range(0, self.num_envs, per_call):
-            count = min(per_call, self.num_envs - first)
+        for first, count in _calls(envs, per_call):
             cols, rows = grid_shape(count)
             if (params["first"], params["count"], params["cols"]) != (first, count, cols):
                 params["first"], params["count"], params["cols"] = first, count, cols
@@ -353,6 +360,17 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def close(self) -> None:
         self._copies = []
         super().close()
+
+
+def _calls(envs: Sequence[int], per_call: int) -> list[tuple[int, int]]:
+    """(first, count) of each render call for ascending `envs`: runs of consecutive envs, at most `per_call` each."""
+    calls: list[tuple[int, int]] = []
+    for i in envs:
+        if calls and calls[-1][0] + calls[-1][1] == i and calls[-1][1] < per_call:
+            calls[-1] = (calls[-1][0], calls[-1][1] + 1)
+        else:
+            calls.append((i, 1))
+    return calls
 
 
 def _is_sun(obj: Any) -> bool:
