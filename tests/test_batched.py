@@ -372,9 +372,14 @@ def test_render_gives_each_envs_own_view():
     vec.close()
 
 
-def test_same_step_autoreset_renders_only_the_reset_envs_again():
+@pytest.mark.parametrize("overhead", [0, 16], ids=["alone", "all_again"])
+def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, overhead):
     """SAME_STEP: an ended env's final frame and its next episode's first frame are the frames a NEXT_STEP batch
-    shows one step apart, and the step renders the other envs' tiles once (a second call holds the reset envs only)."""
+    shows one step apart. The reset envs are rendered alone (one env-sized call each) where that costs less than
+    every tile again (ALONE_OVERHEAD_TILES, 0 here to see it with 3 envs), else the grid is rendered again."""
+    from visualenv.render.blender import batched
+
+    monkeypatch.setattr(batched, "ALONE_OVERHEAD_TILES", overhead)
     same = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3, autoreset_mode="same_step")
     nxt = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3)
     pixels: list[int] = []
@@ -400,7 +405,8 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again():
             assert agreement(info["final_obs"][i], expected[i]) >= 0.98
         for i in np.flatnonzero(~done):
             assert agreement(obs[i], expected[i]) >= 0.98
-        assert pixels[0] == 4 * 100 * 100 and sum(pixels[1:]) == len(ended) * 100 * 100, pixels  # a 2 x 2 grid, then the reset tiles
+        again = [100 * 100] * len(ended) if overhead == 0 else [4 * 100 * 100]   # each reset tile alone, or the grid again
+        assert pixels == [4 * 100 * 100] + again, pixels                           # after the 2 x 2 grid of the step
         first, *_ = nxt.step(actions)   # NEXT_STEP resets the ended envs now, with the same draws
         for i in ended:
             assert agreement(obs[i], first[i]) >= 0.98 and agreement(obs[i], info["final_obs"][i]) < 0.998  # the pole stands again

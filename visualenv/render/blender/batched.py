@@ -41,6 +41,9 @@ _TURNS = ("rotation", "scale", "look_at")
 #: larger image comes back black from the in-memory readback (Cycles' result then reaches Blender in
 #: tiles, after the engine's render returns), 2,000 x 2,000 and 2,080 x 800 did not; the file readback is unaffected
 MAX_IMAGE_PIXELS = 2048 * 2048
+#: what rendering a few envs alone costs beyond their own tiles, in tiles: switching the scene's camera to the
+#: one-tile camera and back makes Cycles re-synchronise, measured 37 ms against 2.5 ms a tile (2-core CPU, N = 16)
+ALONE_OVERHEAD_TILES = 16
 
 TILES_OSL = r"""
 // visualenv: one tile of the image per env. Tile k (row-major from the top left) looks
@@ -168,6 +171,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._objects = built.objects
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         self._tiled_view_camera: tuple[_View, Any, bool] | None = None  # the view camera's, built at the first view
+        self._alone: dict[int, _View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
         self._anchors_moved = False
 
     def _refuse_turning_cameras(self) -> None:
@@ -280,20 +284,29 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def render_batch(self, values: Sequence[Sequence[Any]], envs: Sequence[int] | None = None) -> np.ndarray | dict[str, np.ndarray]:
         """Apply each env's binding values to its copy and render every observation camera for all envs.
 
-        With `envs` (ascending indices) only those envs' tiles are rendered, ``(len(envs), H, W, C)``:
-        the envs an autoreset just reset, without paying for every other tile again.
+        With `envs` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``:
+        the envs an autoreset just reset. They are rendered alone where that costs fewer
+        tiles' time than all N (:data:`ALONE_OVERHEAD_TILES`), so a large batch does not
+        pay for every other tile again.
         """
         self._check_open()
         if len(values) != self.num_envs:
             raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
-        chosen = range(self.num_envs) if envs is None else [int(i) for i in envs]
-        if not chosen or any(b <= a for a, b in zip(chosen, chosen[1:])) or not 0 <= chosen[0] <= chosen[-1] < self.num_envs:
-            raise ValueError(f"envs must be ascending indices below {self.num_envs}, got {list(chosen)}")
-        for i in chosen:
+        chosen = None if envs is None else [int(i) for i in envs]
+        if chosen is not None and (not chosen or any(b <= a for a, b in zip(chosen, chosen[1:]))
+                                   or not 0 <= chosen[0] <= chosen[-1] < self.num_envs):
+            raise ValueError(f"envs must be ascending indices below {self.num_envs}, got {chosen}")
+        for i in range(self.num_envs) if chosen is None else chosen:
             self._apply_copy(self._copies[i], tuple(values[i]))
+        alone = chosen is not None and len(chosen) + ALONE_OVERHEAD_TILES < self.num_envs  # else every tile is cheaper
         images = {}
-        for (view, reference, moving), source in zip(self._tiled_views, self._views):
-            images[view.key] = self._render_tiles(view, reference, source.camera if moving else None, chosen)
+        for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
+            self._place_copies(reference, source.camera if moving else None)
+            if alone:
+                images[view.key] = self._render_alone(j, chosen)  # type: ignore[arg-type]
+            else:
+                tiles = self._render_tiles(view)
+                images[view.key] = tiles if chosen is None else tiles[chosen]
         return next(iter(images.values())) if self.plan.single else images
 
     def render_view_batch(self, values: Sequence[Sequence[Any]]) -> np.ndarray:
@@ -317,26 +330,30 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for copy, v in zip(self._copies, values):
             self._apply_copy(copy, tuple(v))
         view, reference, moving = self._tiled_view_camera
-        return self._render_tiles(view, reference, self._view.camera if moving else None, range(self.num_envs))
+        self._place_copies(reference, self._view.camera if moving else None)
+        return self._render_tiles(view)
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
             write_bindings(values, copy.last, self._size, copy.setters, copy.aimed, copy.targets)
             copy.last = values
 
-    def _render_tiles(self, view: _View, reference: Vector, moving_camera: Any, envs: Sequence[int]) -> np.ndarray:
-        """The tiles of `envs` (ascending) through one camera: one render call per run of consecutive envs,
-        split where an image would pass MAX_IMAGE_PIXELS (the tiles camera renders a range of envs)."""
+    def _place_copies(self, reference: Vector, moving_camera: Any) -> None:
+        """Copies where the custom camera expects them: shifted to follow a moving camera, else on their grid places."""
         if moving_camera is not None:
             self._follow(moving_camera, reference)
         elif self._anchors_moved:
             for k, copy in enumerate(self._copies):
                 copy.anchor.location = self._offset(k)
             self._anchors_moved = False
+
+    def _render_tiles(self, view: _View) -> np.ndarray:
+        """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS."""
         per_call = envs_per_call(self.num_envs, view.width, view.height)
         parts = []
         params = view.camera.data.cycles_custom
-        for first, count in _calls(envs, per_call):
+        for first in range(0, self.num_envs, per_call):
+            count = min(per_call, self.num_envs - first)
             cols, rows = grid_shape(count)
             if (params["first"], params["count"], params["cols"]) != (first, count, cols):
                 params["first"], params["count"], params["cols"] = first, count, cols
@@ -344,6 +361,28 @@ class BatchedBlenderRenderer(BlenderRenderer):
             big = _View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
             parts.append(tile(self._render(big), count, view.height, view.width))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+    def _render_alone(self, j: int, envs: Sequence[int]) -> np.ndarray:
+        """The tiles of `envs` through observation camera j, one env-sized render each.
+
+        A second custom camera, fixed at one tile of env 0, is moved onto each env's
+        place: moving it is a transform update, while changing the tiles camera's
+        parameters (which envs it shows) recompiles its shader, measured 55 ms.
+        """
+        view, _, _ = self._tiled_views[j]
+        if j not in self._alone:
+            alone, _, _ = self._tiled_view(self._views[j])
+            params = alone.camera.data.cycles_custom
+            params["first"], params["count"], params["cols"], params["grid"] = 0, 1, 1, 1
+            alone.camera.data.update_tag()
+            self._alone[j] = alone
+        alone = self._alone[j]
+        pose = view.camera.matrix_world.copy()
+        images = []
+        for i in envs:
+            alone.camera.matrix_world = Matrix.Translation(self._offset(i)) @ pose
+            images.append(tile(self._render(alone), 1, view.height, view.width))
+        return np.concatenate(images)
 
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
@@ -360,17 +399,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def close(self) -> None:
         self._copies = []
         super().close()
-
-
-def _calls(envs: Sequence[int], per_call: int) -> list[tuple[int, int]]:
-    """(first, count) of each render call for ascending `envs`: runs of consecutive envs, at most `per_call` each."""
-    calls: list[tuple[int, int]] = []
-    for i in envs:
-        if calls and calls[-1][0] + calls[-1][1] == i and calls[-1][1] < per_call:
-            calls[-1] = (calls[-1][0], calls[-1][1] + 1)
-        else:
-            calls.append((i, 1))
-    return calls
 
 
 def _is_sun(obj: Any) -> bool:
