@@ -53,7 +53,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     default: the step after an episode's end resets that env, ignoring its
     action) or ``SAME_STEP`` (the env is reset at once; the last observation of
     the ended episode is in ``info["final_obs"]``, its info in
-    ``info["final_info"]``, as SB3's VecEnv expects).
+    ``info["final_info"]``, as SB3's VecEnv expects; only the reset envs are
+    rendered a second time).
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 30}
