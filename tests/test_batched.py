@@ -413,3 +413,30 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, over
     finally:
         same.close()
         nxt.close()
+
+
+def test_reset_envs_rendered_alone_follow_a_moving_camera(monkeypatch):
+    """Goalie's camera moves with the state: an env rendered alone after SAME_STEP's reset is still its own view."""
+    from visualenv.render.blender import batched
+
+    monkeypatch.setattr(batched, "ALONE_OVERHEAD_TILES", 0)
+    same = BatchedVectorEnv(SPECS / "goalie.yaml", 3, autoreset_mode="same_step")
+    nxt = BatchedVectorEnv(SPECS / "goalie.yaml", 3)
+    try:
+        same.reset(seed=4)
+        nxt.reset(seed=4)
+        actions = np.array([0, 1, 0])
+        for _ in range(60):
+            obs, _, terminated, truncated, info = same.step(actions)
+            expected, *_ = nxt.step(actions)
+            if (terminated | truncated).any():
+                break
+        else:
+            pytest.fail("no episode ended")
+        first, *_ = nxt.step(actions)
+        for i in np.flatnonzero(terminated | truncated):
+            assert agreement(info["final_obs"][i], expected[i]) >= 0.98
+            assert agreement(obs[i], first[i]) >= 0.98 and agreement(obs[i], info["final_obs"][i]) < 0.95
+    finally:
+        same.close()
+        nxt.close()
