@@ -29,6 +29,7 @@ from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError
 from visualenv.render.base import RendererOptions, load_backend, observation_space
+from visualenv.render.sensor import sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
@@ -103,6 +104,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self.action_space = batch_space(single.action_space, n)
         self.single_observation_space = observation_space(observation) if self.uses_camera else single.observation_space  # type: ignore[arg-type]
         self.observation_space = batch_space(self.single_observation_space, n)
+        views = observation.views() if observation is not None and self.uses_camera else {}
+        space = self.single_observation_space
+        shapes = {key: sub.shape for key, sub in space.spaces.items()} if isinstance(space, gym.spaces.Dict) else {key: space.shape for key in views}
+        self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
         names = program.state_names
         self._state = np.zeros((len(names), n))
         self._steps = np.zeros(n, dtype=np.int64)
@@ -276,7 +281,25 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if not self.uses_camera:
             observed = self._state[self.program.observed].T.astype(np.float32)
             return observed if envs is None else observed[envs]
-        return self.renderer.render_batch(self.binding_values(), envs)
+        obs = self.renderer.render_batch(self.binding_values(), envs)
+        if self._sensors:
+            obs = self._through_sensors(obs, envs)
+        return obs
+
+    def _through_sensors(self, obs: Any, envs: np.ndarray | None) -> Any:
+        """Each env's frames through the sensor models, drawn from its lane's generator (as env i alone would draw them)."""
+        rows = range(self.num_envs) if envs is None else [int(i) for i in envs]
+        if isinstance(obs, dict):
+            out = {key: value.copy() for key, value in obs.items()}
+            for row, i in enumerate(rows):
+                noisy = self.lanes[i].apply_sensors({key: value[row] for key, value in obs.items()}, self._sensors)
+                for key in out:
+                    out[key][row] = noisy[key]
+            return out
+        out = obs.copy()
+        for row, i in enumerate(rows):
+            out[row] = self.lanes[i].apply_sensors(obs[row], self._sensors)
+        return out
 
     def binding_values(self) -> list[tuple]:
         """Every env's actor binding values (program.bindings order)."""

@@ -16,6 +16,7 @@ from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.faults import FaultDiagnosis
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
+from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 #: the keys reset(options=...) understands
@@ -106,8 +107,16 @@ class VisualEnv(gym.Env):
         else:
             lows, highs = zip(*program.continuous)
             self.action_space = spaces.Box(np.array(lows, np.float32), np.array(highs, np.float32), dtype=np.float32)
+        views = s.observation.views() if s.observation is not None else {}
+        #: a generator for sensor noise, seeded at reset from the env's seed (lanes of a batch keep one too)
+        self._has_sensor = any(view.sensor is not None for view in views.values())
+        self._sensor_rng: np.random.Generator | None = None
+        self._sensors: dict[str, SensorModel] = {}
         if self.uses_camera:
             self.observation_space = observation_space(s.observation)  # type: ignore[arg-type]
+            shapes = {key: space.shape for key, space in self.observation_space.spaces.items()} if isinstance(self.observation_space, spaces.Dict) \
+                else {next(iter(views)): self.observation_space.shape}
+            self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
         else:
             n = len(program.observed)
             big = np.finfo(np.float32).max  # finite bounds: check_env warns about infinite ones
@@ -123,6 +132,8 @@ class VisualEnv(gym.Env):
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
         self._random.generator = self.np_random
+        if self._has_sensor and (seed is not None or self._sensor_rng is None):
+            self._sensor_rng = sensor_generator(self.np_random)
         try:
             state = self._fns.init()
         except (ArithmeticError, ValueError) as exc:
@@ -309,6 +320,18 @@ class VisualEnv(gym.Env):
             self._renderer = create_renderer(self.program.render_plan(), self._backend, self._renderer_options)
         return self._renderer
 
+    def apply_sensors(self, obs: Any, sensors: Mapping[str, SensorModel] | None = None) -> Any:
+        """The observation (an array, or a dict by camera key) through each camera's sensor model, drawing from this env's sensor generator.
+
+        A batch passes its own ``sensors`` (its lanes render nothing) and each env's frame to that env's lane.
+        """
+        sensors = self._sensors if sensors is None else sensors
+        rng = self._sensor_rng
+        assert rng is not None, "reset() seeds the sensor generator"
+        if isinstance(obs, dict):
+            return {key: sensors[key](frame, rng) if key in sensors else frame for key, frame in obs.items()}
+        return next(iter(sensors.values()))(obs, rng)
+
     def binding_values(self) -> tuple:
         """The current values of every actor binding, in program.bindings order."""
         return self._bind()
@@ -317,7 +340,8 @@ class VisualEnv(gym.Env):
 
     def _observe(self) -> Any:
         if self.uses_camera:
-            self._last_obs = self.renderer.render_observation(self._bind())
+            obs = self.renderer.render_observation(self._bind())
+            self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs
         state = self._state
         return np.array([state[i] for i in self._observed], dtype=np.float32)

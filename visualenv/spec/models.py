@@ -268,13 +268,45 @@ Actor = create_model(
 )
 
 
+class Sensor(StrictModel):
+    """A camera sensor's imperfections, applied in numpy to each observation after readback.
+
+    With v a pixel as a fraction of full scale (its byte / 255): ``v *= 1 - vignetting * r**2``
+    (r: distance from the centre, 1 at the corners), then photon noise of std
+    ``shot_noise * sqrt(v)`` and read noise of std ``read_noise``, then ``v *= gain``,
+    clipped to 0..1, ``v **= gamma``, rounded to a byte. Noise is drawn from the env's
+    seeded generator: the same seed gives the same frames.
+    """
+
+    read_noise: float = Field(0.0, ge=0, le=1, description="std of Gaussian noise, as a fraction of full scale")
+    shot_noise: float = Field(0.0, ge=0, le=1, description="photon noise: std shot_noise * sqrt(v) at intensity v (fraction of full scale)")
+    gain: float = Field(1.0, gt=0, le=100, description="exposure: intensities multiplied by this")
+    gamma: float = Field(1.0, gt=0, le=10, description="response curve v ** gamma (below 1 brightens the shadows)")
+    vignetting: float = Field(0.0, ge=0, le=1, description="darkening at the corners: the fraction of light lost there (falls off as r squared)")
+
+
+def _sensor_on_light(color: str, sensor: "Sensor | None") -> None:
+    if sensor is not None and color not in ("rgb", "grayscale"):
+        raise ValueError(f"a sensor model acts on light: it needs color 'rgb' or 'grayscale', not '{color}'")
+
+
+#: what an observation camera gives: light (rgb, grayscale), distance (depth) or object ids (segmentation)
+ColorMode = Literal["rgb", "grayscale", "depth"]
+
+
 class CameraView(StrictModel):
     camera: BlenderName = Field(description="a camera in the scene")
     resolution: Resolution = Field([100, 100], description="[width, height]")
-    color: Literal["rgb", "grayscale", "depth"] = "grayscale"
+    color: ColorMode = "grayscale"
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = Field(
         [0.0, 20.0], description="depth observations: distances mapped to 0..255"
     )
+    sensor: Sensor | None = Field(None, description="camera imperfections (noise, gain, gamma, vignetting) on this camera's frames")
+
+    @model_validator(mode="after")
+    def _sensor_needs_light(self) -> "CameraView":
+        _sensor_on_light(self.color, self.sensor)
+        return self
 
     @field_validator("resolution")
     @classmethod
@@ -289,8 +321,9 @@ class Observation(StrictModel):
 
     camera: BlenderName | None = Field(None, description="the single observation camera")
     resolution: Resolution = Field([100, 100], description="[width, height]")
-    color: Literal["rgb", "grayscale", "depth"] = "grayscale"
+    color: ColorMode = "grayscale"
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = [0.0, 20.0]
+    sensor: Sensor | None = Field(None, description="camera imperfections (noise, gain, gamma, vignetting) on the single camera's frames")
     cameras: Annotated[dict[Name, CameraView], Field(min_length=1)] | None = Field(None, description="several cameras: a Dict observation keyed by these names")
 
     @field_validator("resolution")
@@ -302,6 +335,9 @@ class Observation(StrictModel):
     def _one_or_many(self) -> "Observation":
         if (self.camera is None) == (self.cameras is None):
             raise ValueError("give either 'camera' (one camera) or 'cameras' (several)")
+        if self.cameras is not None and self.sensor is not None:
+            raise ValueError("with several 'cameras', give each camera its own 'sensor'")
+        _sensor_on_light(self.color, self.sensor)
         return self
 
     def views(self) -> dict[str, CameraView]:
@@ -309,7 +345,7 @@ class Observation(StrictModel):
         if self.cameras is not None:
             return dict(self.cameras)
         assert self.camera is not None
-        return {self.camera: CameraView(camera=self.camera, resolution=self.resolution, color=self.color, depth_range=self.depth_range)}
+        return {self.camera: CameraView(camera=self.camera, resolution=self.resolution, color=self.color, depth_range=self.depth_range, sensor=self.sensor)}
 
 
 class ViewSettings(StrictModel):
