@@ -112,9 +112,17 @@ class PrimitiveObject(ObjectBase):
     thickness: float = Field(0.05, gt=0, description="ring/torus tube thickness")
     segments: int = Field(32, ge=3, le=512, description="round primitives: segments around; terrain: grid cells along each side")
     craters: Craters | None = Field(None, description="terrain: craters pressed into the ground")
+    heightmap: str | None = Field(None, description="terrain: elevation data, relative to the spec: a grayscale PNG (8 or 16 bit), TIFF or .npy; "
+                                  "size [x, y, z] spans it, the lowest value at 0 and the highest at z")
     origin: Literal["center", "bottom"] = Field("center", description="where the object's origin sits")
     smooth: bool = False
     material: Material | None = None
+
+    @model_validator(mode="after")
+    def _heightmap_needs_a_height(self) -> "PrimitiveObject":
+        if self.heightmap is not None and self.primitive == "terrain" and not isinstance(self.size, list):
+            raise ValueError("a terrain with a heightmap needs size: [x, y, z] (z: the height of the map's highest value)")
+        return self
 
 
 class MeshObject(ObjectBase):

@@ -15,9 +15,9 @@ PRIMITIVE_FIELDS = {
     "sphere": {"radius", "segments"}, "disk": {"radius", "segments"},
     "cylinder": {"radius", "depth", "segments"}, "cone": {"radius", "depth", "segments"},
     "torus": {"radius", "thickness", "segments"}, "ring": {"radius", "thickness", "segments"},
-    "terrain": {"size", "segments", "craters"},
+    "terrain": {"size", "segments", "craters", "heightmap"},
 }
-_SHAPE_FIELDS = {"size", "radius", "depth", "thickness", "segments", "craters"}
+_SHAPE_FIELDS = {"size", "radius", "depth", "thickness", "segments", "craters", "heightmap"}
 
 
 def unused_fields(spec: Spec) -> list[tuple[tuple, str]]:

@@ -29,7 +29,7 @@ from visualenv.render.blender.blendfile import BlendReadError
 from visualenv.render.blender import blendfile
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
-from visualenv.render.terrain import crater_heights
+from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
 from visualenv.spec.source import SourceMap
@@ -216,8 +216,14 @@ def _resolve_blender_path(blender_path: str, blend: Path) -> Path:
 def _build_object(name: str, spec: Any, built: BuiltScene, *, base_dir: Path, source: SourceMap) -> Any:
     path = ("scene", "objects", name)
     if isinstance(spec, PrimitiveObject):
+        heights = None
+        if spec.primitive == "terrain" and spec.heightmap is not None:
+            try:
+                heights = read_heightmap((base_dir / spec.heightmap).resolve())
+            except HeightmapError as exc:
+                raise SpecError([source.diagnostic(path + ("heightmap",), str(exc))]) from None
         mesh = bpy.data.meshes.new(name)
-        _primitive_mesh(mesh, spec)
+        _primitive_mesh(mesh, spec, heights)
         obj = bpy.data.objects.new(name, mesh)
         mat = make_material(name, spec.material or Material(), base_dir=base_dir, source=source, path=path + ("material",), track=_keep)
         mesh.materials.append(mat)
@@ -282,7 +288,7 @@ def _parent_frame(obj: Any) -> Matrix:
     return _parent_frame(parent) @ parent.matrix_basis @ obj.matrix_parent_inverse
 
 
-def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:
+def _primitive_mesh(mesh: Any, spec: PrimitiveObject, heights: np.ndarray | None = None) -> None:
     bm = bmesh.new()
     bm.loops.layers.uv.new("UVMap")
     kind, n = spec.primitive, spec.segments
@@ -294,7 +300,7 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:
         bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=0.5, calc_uvs=True)
         bmesh.ops.scale(bm, vec=Vector((size[0], size[1], 1.0)), verts=bm.verts)
     elif kind == "terrain":
-        _terrain(bm, spec, (size[0], size[1]))
+        _terrain(bm, spec, (size[0], size[1], size[2]), heights)
     elif kind == "sphere":
         bmesh.ops.create_uvsphere(bm, u_segments=n, v_segments=max(3, n // 2), radius=spec.radius, calc_uvs=True)
     elif kind in ("cylinder", "cone"):
@@ -315,16 +321,22 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject) -> None:
     bm.free()
 
 
-def _terrain(bm: Any, spec: PrimitiveObject, extent: tuple[float, float]) -> None:
-    """A flat grid of `segments` cells a side, its vertices raised or sunk to the craters' relief."""
+def _terrain(bm: Any, spec: PrimitiveObject, size: tuple[float, float, float], heights: np.ndarray | None) -> None:
+    """A flat grid of `segments` cells a side, its vertices raised to the heightmap's relief (if any) and sunk by the craters."""
     bmesh.ops.create_grid(bm, x_segments=spec.segments, y_segments=spec.segments, size=0.5, calc_uvs=True)
+    extent = (size[0], size[1])
     bmesh.ops.scale(bm, vec=Vector((extent[0], extent[1], 1.0)), verts=bm.verts)
-    if spec.craters is None:
+    if spec.craters is None and heights is None:
         return
     verts = list(bm.verts)
     xy = np.array([(v.co.x, v.co.y) for v in verts])
-    for vert, z in zip(verts, crater_heights(xy[:, 0], xy[:, 1], spec.craters, extent)):
-        vert.co.z = float(z)
+    z = np.zeros(len(verts))
+    if heights is not None:
+        z += heightmap_heights(xy[:, 0], xy[:, 1], heights, size)
+    if spec.craters is not None:
+        z += crater_heights(xy[:, 0], xy[:, 1], spec.craters, extent)
+    for vert, height in zip(verts, z):
+        vert.co.z = float(height)
     bm.normal_update()
 
 
