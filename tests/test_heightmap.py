@@ -126,3 +126,12 @@ def test_a_heightmap_needs_a_height_and_only_a_terrain_takes_one():
         load_spec_text(base + "{primitive: cube, heightmap: m.png}\n", name="d.yaml")
     toml = 'id = "D-v0"\n[state.x]\ninit = 0\n[actions]\ndiscrete = [{}]\n[scene.objects.G]\nprimitive = "terrain"\nheightmap = "m.png"\nsize = [20, 20, 4]\n'
     assert load_spec_text(toml, name="d.toml").spec.scene.objects["G"].heightmap == "m.png"
+
+
+def test_tiffs_of_floats_and_16_bit_integers_read_as_the_same_relief(tmp_path):
+    relief = np.random.default_rng(0).random((9, 7))
+    Image.fromarray(relief.astype(np.float32)).save(tmp_path / "f.tif")
+    Image.fromarray(np.round(relief * 65535).astype(np.uint16)).save(tmp_path / "i.tif")
+    want = (relief - relief.min()) / (relief.max() - relief.min())
+    for name in ("f.tif", "i.tif"):
+        assert np.abs(read_heightmap(tmp_path / name) - want).max() < 1e-4, name
