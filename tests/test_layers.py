@@ -13,7 +13,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "visualenv"
 #: each module's layer, by its longest matching prefix; a module may import its own layer or lower ones
 LAYERS = {
     "visualenv.errors": 0, "visualenv.files": 0, "visualenv.versions": 0,
-    "visualenv.spec": 1, "visualenv.expr": 1,
+    "visualenv.spec": 1, "visualenv.expr": 1, "visualenv.physics": 1,
     "visualenv.render": 2,
     "visualenv.compiler": 3,
     "visualenv.env": 4,
@@ -100,3 +100,15 @@ def test_the_checks_see_a_cycle_and_an_upward_import() -> None:
     edges = graph()
     assert "visualenv.train.rllib_setup" in edges["visualenv.train.models"]  # a function-level import
     assert layer("visualenv.train.play") == 5 and layer("visualenv.env.make") == 4 and layer("visualenv") == 7
+
+
+def test_physics_layer_never_imports_bpy_or_upper_layers() -> None:
+    """The physics layer (MuJoCo) sits beside expr: no Blender, no compiler, env or render; it imports only errors and itself."""
+    for name, path in modules().items():
+        if name.startswith("visualenv.physics"):
+            tree = ast.parse(path.read_text(encoding="utf-8"))
+            imported = {a.name for n in ast.walk(tree) if isinstance(n, ast.Import) for a in n.names}
+            imported |= {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.module}
+            assert not any(m.split(".")[0] == "bpy" for m in imported), (name, imported)
+            ours = {m for m in imported if m.split(".")[0] == "visualenv"}
+            assert all(m == "visualenv.errors" or m.startswith("visualenv.physics") for m in ours), (name, ours)

@@ -26,6 +26,7 @@ from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.compiler.vectorized import vectorize
+from visualenv.compiler import physics as phys
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
@@ -97,6 +98,7 @@ class Program:
     outcomes: list[OutcomeRule]
     bindings: list[BindingTarget]
     line_maps: dict[str, LineMap] = field(default_factory=dict)  # per generated function: its lines' spec sites
+    physics: "phys.PhysicsPlan | None" = None  # the MuJoCo model and what the generated code reads from it (docs/physics.md)
     _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
     _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
 
@@ -104,16 +106,22 @@ class Program:
     def spec(self) -> Spec:
         return self.loaded.spec
 
-    def functions(self, random: RandomSource) -> "CompiledFunctions":
-        """Fresh callables bound to `random` (one set per env)."""
+    def functions(self, random: RandomSource, simulation: Any = None) -> "CompiledFunctions":
+        """Fresh callables bound to `random` (one set per env), and to the env's `simulation` for a physics spec."""
         env = function_globals(bind_random(random))
         env["_python_dynamics"] = self._python_dynamics
         env["_random"] = random
+        if self.physics is not None:
+            if simulation is None:
+                raise ValueError("a physics spec's functions need the env's simulation (Program.physics.simulation())")
+            self.physics.bind(env, simulation)
         built = {key: b.build(env) for key, b in self._builders.items()}
-        return CompiledFunctions(built["init"], built["step"], built["bind"])
+        return CompiledFunctions(built["init"], built["step"], built["bind"], built.get("observe"))
 
     def batch_functions(self) -> "BatchFunctions":
         """The step and bind functions of many envs at once, on numpy columns (None where one must stay per env)."""
+        if self.physics is not None:  # each env steps its own MjData
+            return BatchFunctions(None, None)
         return BatchFunctions(vectorize(self._builders["step"]), vectorize(self._builders["bind"]))
 
     def render_plan(self) -> RenderPlan:
@@ -137,6 +145,7 @@ class CompiledFunctions:
     init: Callable[[], tuple]
     step: Callable[[tuple, Any, int, int], tuple]
     bind: Callable[[tuple, int], tuple]
+    observe: Callable[[tuple, int], tuple] | None = None  # a physics spec's state-only observation
 
 
 @dataclass(frozen=True)
@@ -157,6 +166,9 @@ class _Compiler:
         self.smap = loaded.source
         self.overrides = overrides
         self.problems: list[Diagnostic] = []
+        self.used: set[str] = set()  # every name a checked expression read, so far
+        self.plan: phys.PhysicsPlan | None = None
+        self.pnames: dict[str, Type] = {}  # the physics model's names (empty without physics)
 
     # -- reporting ------------------------------------------------------------------------------
 
@@ -165,7 +177,9 @@ class _Compiler:
 
     def expr(self, path: tuple, text: Any, names: Mapping[str, Type], *, expect: Type | None = None, random: bool = True) -> Checked | None:
         try:
-            return check(text, names, constants=self.params, allow_random=random, expect=expect)
+            checked = check(text, names, constants=self.params, allow_random=random, expect=expect)
+            self.used |= checked.names
+            return checked
         except ExpressionError as exc:
             self.error(path, self.explain_order(path, exc.message), column=exc.offset)
             return None
@@ -190,12 +204,15 @@ class _Compiler:
 
     def run(self) -> Program:
         spec = self.spec
+        self.load_physics()
         self.check_names()
         self.params = self.resolve_params()
         state_names = list(spec.state)
         input_names, discrete, continuous = self.resolve_actions()
         builders = {"init": self.build_init(state_names), "step": self.build_step(state_names, input_names, discrete)}
         builders["bind"], bindings = self.build_bindings(state_names)
+        if self.plan is not None:
+            builders["observe"] = self.build_observe(state_names)
         outcomes = [OutcomeRule(n, o.end, o.success) for n, o in spec.outcomes.items()]
         python_dynamics = self.resolve_python_dynamics()
         if self.problems:
@@ -203,8 +220,116 @@ class _Compiler:
         observed = [i for i, n in enumerate(state_names) if spec.state[n].observe]
         return Program(
             self.loaded, self.params, state_names, observed, input_names, discrete, continuous, outcomes, bindings,
-            line_maps={k: b.line_map() for k, b in builders.items()}, _builders=builders, _python_dynamics=python_dynamics,
+            line_maps={k: b.line_map() for k, b in builders.items()}, physics=self.plan, _builders=builders, _python_dynamics=python_dynamics,
         )
+
+    # -- physics ---------------------------------------------------------------------------------
+
+    def load_physics(self) -> None:
+        """The MJCF model, its names in scope, its contacts and keyframe resolved; a problem is located at its field."""
+        section = self.spec.physics
+        if section is None:
+            return
+        try:
+            model = phys.load(section, self.loaded.base_dir)
+        except phys.PhysicsError as exc:
+            self.error(("physics", "model"), str(exc))
+            raise SpecError(in_file_order(self.problems)) from None
+        geoms = {n: i for i, n in enumerate(model.names.ident["geom"])}
+        contacts: dict[str, tuple[int, int]] = {}
+        for key, pair in section.contacts.items():
+            unknown = [(i, g) for i, g in enumerate(pair) if g not in geoms]
+            for i, g in unknown:
+                self.error(("physics", "contacts", key, i), f"no geom '{g}' in the model" + did_you_mean(g, geoms).replace("names:", "geoms:"))
+            if not unknown:
+                contacts[key] = (geoms[pair[0]], geoms[pair[1]])
+        keyframe = None
+        if section.reset.keyframe is not None:
+            keys = {n: i for i, n in enumerate(model.names.ident["key"])}
+            keyframe = keys.get(section.reset.keyframe)
+            if keyframe is None:
+                self.error(("physics", "reset", "keyframe"), f"no keyframe '{section.reset.keyframe}' in the model"
+                           + did_you_mean(section.reset.keyframe, keys).replace("names:", "keyframes:"))
+        if "dt" in self.spec.model_fields_set:
+            self.error(("dt",), "with physics, dt is the model's timestep times physics.frame_skip: leave 'dt' out", key=True)
+        self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts)
+        self.pnames = phys.scope(model, section.contacts)
+
+    def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: set[str] = frozenset()) -> None:  # type: ignore[assignment]
+        """Insert, at statement `at` of `fb`, the read of the physics names in `used` (a statement without a site of its own)."""
+        if self.plan is None:
+            return
+        names = sorted(n for n in used if n in self.pnames and n not in exclude)
+        self.plan.reads[key] = names
+        if names:
+            stmt = phys.read_statement(key, names)
+            fb.add(stmt)
+            fb.body.insert(at, fb.body.pop())
+
+    def build_reset(self, fb: FunctionBuilder) -> None:
+        """The physics reset's values, in order (draws included), written to the model: before the state's init."""
+        assert self.plan is not None and self.spec.physics is not None
+        scope: dict[str, Type] = dict(self.pnames)
+        start, before = len(fb.body), set(self.used)
+        self.used = set()
+        writable = {n for n in self.pnames if n.startswith(("qpos_", "qvel_")) and self.plan.model.names.values[n][0] in ("qpos", "qvel")}
+        targets: list[str] = []
+        for key, value in self.spec.physics.reset.values.items():
+            path = ("physics", "reset", "values", key)
+            parts = [p.strip() for p in key.split(",")]
+            bad = [p for p in parts if not p.isidentifier()]
+            if bad:
+                self.error(path, f"'{bad[0]}' is not a name: a key is a qpos_/qvel_ name, several separated by commas, or a new name", key=True)
+                continue
+            if len(parts) > 1 or parts[0].startswith(("qpos_", "qvel_")):
+                unknown = [p for p in parts if p not in writable]
+                if unknown:
+                    self.error(path, f"no joint value '{unknown[0]}' to set" + did_you_mean(unknown[0], sorted(writable)), key=True)
+                    continue
+            checked = self.expr(path, value, scope, expect=NUM if len(parts) == 1 else vec(len(parts)))
+            if checked is None:
+                continue
+            site = Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names)))
+            if len(parts) == 1:
+                fb.assign(local(parts[0]), lower(checked.tree), site)
+            else:
+                fb.assign("_reset_vec", lower(checked.tree), site)
+                for i, p in enumerate(parts):
+                    fb.assign(local(p), ast.Subscript(name("_reset_vec"), const(i), ast.Load()))
+            for p in parts:
+                scope[p] = NUM
+                if p in writable and p not in targets:
+                    targets.append(p)
+        self.plan.reset_targets = targets
+        self.physics_reads(fb, "reset", start, self.used | set(targets))
+        fb.add(phys.call_statement(phys.WRITE_RESET, targets), Site("physics.reset", "the reset values, written to the model"))
+        self.used |= before
+
+    def build_observe(self, state_names: list[str]) -> FunctionBuilder:
+        """observe(state, steps): the state-only observation of a physics spec (physics.observe, or every qpos and qvel, then the observed state)."""
+        assert self.plan is not None and self.spec.physics is not None
+        fb = FunctionBuilder("observe", ["_state", "_steps"])
+        fb.unpack([local(n) for n in state_names], "_state")
+        fb.assign(local("steps"), name("_steps"))
+        scope: dict[str, Type] = {**self.pnames, **{n: NUM for n in state_names}, "steps": NUM}
+        entries = self.spec.physics.observe
+        if entries is None:
+            model = self.plan.model
+            entries = [*model.qpos_names(), *model.qvel_names(), *(n for n in state_names if self.spec.state[n].observe)]
+        start, before = len(fb.body), set(self.used)
+        self.used = set()
+        values: list[ast.expr] = []
+        for i, entry in enumerate(entries):
+            path = ("physics", "observe", i) if self.spec.physics.observe is not None else ("physics",)
+            checked = self.expr(path, entry, scope, expect=NUM)
+            if checked:
+                fb.assign(f"_o{i}", lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                values.append(name(f"_o{i}"))
+        self.physics_reads(fb, "observe", start, self.used, set(state_names))
+        self.plan.observe_size = len(values)
+        self.used |= before
+        fb.returns(tuple_of(values))
+        return fb
 
     def check_names(self) -> None:
         """User names must not shadow built-ins or each other."""
@@ -214,15 +339,15 @@ class _Compiler:
             ("params", list(spec.params)), ("state", list(spec.state)),
             ("dynamics.let", list(spec.dynamics.let)),
         ]
-        if spec.actions.discrete:
+        if spec.actions is not None and spec.actions.discrete:
             groups.append(("actions.discrete", list(dict.fromkeys(k for a in spec.actions.discrete for k in a))))
-        elif spec.actions.continuous:
+        elif spec.actions is not None and spec.actions.continuous:
             groups.append(("actions.continuous", list(spec.actions.continuous)))
         for group, names in groups:
             for n in names:
                 path: tuple = tuple(group.split(".")) + (n,)
                 if group == "actions.discrete":
-                    index = next(i for i, a in enumerate(spec.actions.discrete or []) if n in a)
+                    index = next(i for i, a in enumerate((spec.actions.discrete if spec.actions else None) or []) if n in a)
                     path = ("actions", "discrete", index, n)
                 if n in _RESERVED:
                     self.error(path, f"'{n}' is a reserved name (a built-in, function or keyword): choose another", key=True)
@@ -230,6 +355,11 @@ class _Compiler:
                     self.error(path, f"'{n}' is already defined in {seen[n]}", key=True)
                 else:
                     seen[n] = group
+        for group, names in groups:
+            for n in names:
+                if n in self.pnames and not (group.startswith("actions") and n.startswith("ctrl_")):
+                    path = ("actions", "discrete") if group == "actions.discrete" else tuple(group.split(".")) + (n,)
+                    self.error(path, f"'{n}' is a name of the physics model: choose another", key=True)
         if "max_steps" in spec.outcomes:
             self.error(("outcomes", "max_steps"), "'max_steps' is what info['outcome'] says when an episode reaches max_steps: choose another name", key=True)
         for n in spec.dynamics.update:
@@ -242,7 +372,7 @@ class _Compiler:
             if key not in self.spec.params:
                 raise SpecError([Diagnostic(OPTIONS_WHERE, None, None, f"params.{key}", f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))])
         raw = {**self.spec.params, **self.overrides}
-        builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.spec.dt)}
+        builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.plan.dt if self.plan is not None else self.spec.dt)}
         self.params = {}
         for key, value in raw.items():
             if isinstance(value, bool):
@@ -270,11 +400,25 @@ class _Compiler:
 
     def resolve_actions(self) -> tuple[list[str], int | None, list[tuple[float, float]]]:
         actions = self.spec.actions
+        if actions is None:  # a physics spec's default: one Box dimension per actuator, in its ctrlrange (Gymnasium's action space)
+            assert self.plan is not None
+            model = self.plan.model
+            names = [f"ctrl_{a}" for a in model.actuator_names()]
+            self.plan.controls = names
+            return names, None, [model.ctrl_range(i) for i in range(len(names))]
+        if self.plan is not None:
+            self.plan.controls = [n for n in self.input_names_of(actions) if n.startswith("ctrl_") and n in self.pnames]
         if actions.discrete is not None:
             names = list(dict.fromkeys(k for a in actions.discrete for k in a))
             return names, len(actions.discrete), []
         assert actions.continuous is not None
         return list(actions.continuous), None, [(c.low, c.high) for c in actions.continuous.values()]
+
+    @staticmethod
+    def input_names_of(actions: Any) -> list[str]:
+        if actions.discrete is not None:
+            return list(dict.fromkeys(k for a in actions.discrete for k in a))
+        return list(actions.continuous or {})
 
     def resolve_python_dynamics(self) -> Callable[..., Any] | None:
         target = self.spec.dynamics.python
@@ -300,12 +444,19 @@ class _Compiler:
         """init(): each state variable in order; an init may read earlier ones."""
         fb = FunctionBuilder("init", [])
         scope: dict[str, Type] = {}
+        if self.plan is not None:  # the model's reset first: the state's init may read the model's values
+            self.build_reset(fb)
+            scope.update(self.pnames)
+        start, before = len(fb.body), set(self.used)
+        self.used = set()
         for n in state_names:
             path = ("state", n, "init")
             checked = self.expr(path, self.spec.state[n].init, scope, expect=NUM)
             if checked:
                 fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
             scope[n] = NUM
+        self.physics_reads(fb, "init", start, self.used, set(state_names))
+        self.used |= before
         fb.returns(tuple_of([name(local(n)) for n in state_names]))
         return fb
 
@@ -314,7 +465,7 @@ class _Compiler:
         fb = FunctionBuilder("step", ["_state", "_action", "_steps", "_fired"])
         fb.unpack([local(n) for n in state_names], "_state")
         fb.assign(local("steps"), name("_steps"))
-        scope: dict[str, Type] = {n: NUM for n in state_names}
+        scope: dict[str, Type] = {**self.pnames, **{n: NUM for n in state_names}}
         scope["steps"] = NUM
         if discrete is not None:
             self.step_discrete_inputs(fb, scope, input_names, discrete)
@@ -322,16 +473,29 @@ class _Compiler:
             self.step_continuous_inputs(fb, input_names)
         for n in input_names:
             scope[n] = NUM
+        start, before = len(fb.body), set(self.used)
+        self.used = set()
         self.step_let(fb, scope)
         if self.spec.dynamics.python:
             self.python_call(fb, state_names, input_names)
         else:
-            self.step_update(fb, scope)
+            self.step_update(fb, scope, commit=self.plan is None)
+        if self.plan is not None:  # the model's values before the step, for let and update; then the step; then the values after it
+            self.physics_reads(fb, "before", start, self.used, set(state_names) | set(input_names))
+            fb.add(phys.call_statement(phys.ADVANCE, self.plan.controls), Site("physics", f"{self.spec.physics.model if self.spec.physics else ''}: the MuJoCo step"))
+            self.commit_update(fb)
+            after_at = len(fb.body)
+        self.used |= before
         fb.assign(local("steps"), ast.BinOp(name("_steps"), ast.Add(), const(1)))
+        before_reward = set(self.used)
+        self.used = set()
         # reward and outcomes read the new state
         checked = self.expr(("reward",), self.spec.reward, scope, expect=NUM)
         fb.assign("_reward", lower(checked.tree) if checked else const(0.0), Site("reward", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()))
         self.step_outcomes(fb, scope)
+        if self.plan is not None:
+            self.physics_reads(fb, "after", after_at, self.used, set(state_names) | set(input_names) | set(self.spec.dynamics.let))
+        self.used |= before_reward
         fb.returns(tuple_of([tuple_of([name(local(n)) for n in state_names]), name("_reward"), name("_outcome"), name("_fired")]))
         return fb
 
@@ -343,7 +507,7 @@ class _Compiler:
         chain: ast.stmt | None = None
         for index in reversed(range(discrete)):
             sub = FunctionBuilder("_", [])
-            for n, value in (self.spec.actions.discrete or [])[index].items():
+            for n, value in ((self.spec.actions.discrete if self.spec.actions else None) or [])[index].items():
                 path = ("actions", "discrete", index, n)
                 checked = self.expr(path, value, {**scope, "action": NUM}, expect=NUM)
                 if checked:
@@ -358,7 +522,8 @@ class _Compiler:
     def step_continuous_inputs(self, fb: FunctionBuilder, input_names: list[str]) -> None:
         """The action's values, clipped to each input's bounds."""
         fb.unpack([local("_in_" + n) for n in input_names], "_action")
-        for n, (lo, hi) in zip(input_names, [(c.low, c.high) for c in (self.spec.actions.continuous or {}).values()]):
+        _, _, ranges = self.resolve_actions()
+        for n, (lo, hi) in zip(input_names, ranges):
             clipped = ast.Call(name("_f_clip"), [name(local("_in_" + n)), const(float(lo)), const(float(hi))], [])
             fb.assign(local(n), clipped)
 
@@ -371,8 +536,8 @@ class _Compiler:
                 fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
             scope[n] = NUM
 
-    def step_update(self, fb: FunctionBuilder, scope: dict[str, Type]) -> None:
-        """The simultaneous update: every right-hand side reads the old state, then all are assigned."""
+    def step_update(self, fb: FunctionBuilder, scope: dict[str, Type], commit: bool = True) -> None:
+        """The simultaneous update: every right-hand side reads the old state, then all are assigned (``commit``; else by commit_update)."""
         spec = self.spec
         new_names = []
         for n, value in spec.dynamics.update.items():
@@ -383,7 +548,13 @@ class _Compiler:
             if checked:
                 fb.assign("_new_" + n, lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
                 new_names.append(n)
-        for n in new_names:
+        self.updated = new_names
+        if commit:
+            self.commit_update(fb)
+
+    def commit_update(self, fb: FunctionBuilder) -> None:
+        """The new state values become the state (after the physics step, in a physics spec)."""
+        for n in getattr(self, "updated", []):
             fb.assign(local(n), name("_new_" + n))
 
     def step_outcomes(self, fb: FunctionBuilder, scope: dict[str, Type]) -> None:

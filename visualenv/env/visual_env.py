@@ -45,7 +45,8 @@ class VisualEnv(gym.Env):
 
     ## Episode end
     Terminated or truncated by the first ending outcome whose ``when`` holds
-    after the update (in spec order); truncated after ``max_steps`` steps.
+    after the update (in spec order); truncated after ``max_steps`` steps
+    (or ``max_episode_steps``, Gymnasium's TimeLimit, when given).
     ``info`` has ``state`` (all variables), ``outcome`` (the name of the outcome
     that ended the episode, ``"max_steps"``, or None), ``milestones`` and
     ``is_success``.
@@ -73,6 +74,7 @@ class VisualEnv(gym.Env):
         params: dict[str, Any] | None = None,
         renderer_options: RendererOptions | Mapping[str, Any] | None = None,
         backend: str = BLENDER_BACKEND,
+        max_episode_steps: int | None = None,
     ) -> None:
         super().__init__()
         if isinstance(spec, Program) and not params:
@@ -80,9 +82,16 @@ class VisualEnv(gym.Env):
         else:
             loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
             program = compile_spec(loaded, params)
-        self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options, "backend": backend}
+        self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options, "backend": backend,
+                           "max_episode_steps": max_episode_steps}
         self.program = program
         s = program.spec
+        #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
+        self.max_episode_steps: int = s.max_steps if max_episode_steps is None else int(max_episode_steps)
+        if s.observation is None and not s.render.view.camera:  # no camera to render a view with: no render mode (check_env reads it)
+            self.metadata = {**self.metadata, "render_modes": []}
+            if render_mode is not None:
+                raise ValueError(f"render_mode={render_mode!r} needs a camera: the spec has no 'observation' and no 'render.view.camera'")
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         if render and s.observation is None:
@@ -94,7 +103,11 @@ class VisualEnv(gym.Env):
         self._renderer: Renderer | None = None
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
-        self._fns = program.functions(self._random)
+        #: a physics spec's own MuJoCo simulation; ``model`` and ``data`` are its MjModel and MjData, as in Gymnasium's MujocoEnv
+        self._sim = program.physics.simulation() if program.physics is not None else None
+        self.model: Any = self._sim.model if self._sim is not None else None
+        self.data: Any = self._sim.data if self._sim is not None else None
+        self._fns = program.functions(self._random, self._sim)
         self._faults = FaultDiagnosis(program)
         self._state: tuple[float, ...] = tuple(0.0 for _ in program.state_names)
         self._steps = 0
@@ -117,6 +130,8 @@ class VisualEnv(gym.Env):
             shapes = {key: space.shape for key, space in self.observation_space.spaces.items()} if isinstance(self.observation_space, spaces.Dict) \
                 else {next(iter(views)): self.observation_space.shape}
             self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
+        elif program.physics is not None:  # Gymnasium's MuJoCo envs observe float64 vectors, unbounded
+            self.observation_space = spaces.Box(-np.inf, np.inf, (program.physics.observe_size,), np.float64)
         else:
             n = len(program.observed)
             big = np.finfo(np.float32).max  # finite bounds: check_env warns about infinite ones
@@ -134,6 +149,8 @@ class VisualEnv(gym.Env):
         self._random.generator = self.np_random
         if self._has_sensor and (seed is not None or self._sensor_rng is None):
             self._sensor_rng = sensor_generator(self.np_random)
+        if self._sim is not None:
+            self._sim.reset(self.program.physics.keyframe)  # type: ignore[union-attr]
         try:
             state = self._fns.init()
         except (ArithmeticError, ValueError) as exc:
@@ -227,7 +244,7 @@ class VisualEnv(gym.Env):
         """(terminated, truncated, info["outcome"]): the ending outcome that held, else max_steps, else the episode goes on."""
         if outcome >= 0:
             return self._endings[outcome]
-        if self._steps >= self.program.spec.max_steps:
+        if self._steps >= self.max_episode_steps:
             return _OUT_OF_STEPS
         return _GOES_ON
 
@@ -332,6 +349,16 @@ class VisualEnv(gym.Env):
             return {key: sensors[key](frame, rng) if key in sensors else frame for key, frame in obs.items()}
         return next(iter(sensors.values()))(obs, rng)
 
+    @property
+    def segmentation_ids(self) -> dict[str, int]:
+        """Id of each label (or unlabelled object name) in segmentation observations; 0 is the background. Builds the renderer.
+
+        Empty when no observation camera has ``color: segmentation``.
+        """
+        if not self.uses_camera:
+            return {}
+        return dict(getattr(self.renderer, "segmentation_ids", {}))
+
     def binding_values(self) -> tuple:
         """The current values of every actor binding, in program.bindings order."""
         return self._bind()
@@ -343,6 +370,8 @@ class VisualEnv(gym.Env):
             obs = self.renderer.render_observation(self._bind())
             self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs
+        if self._fns.observe is not None:
+            return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
         state = self._state
         return np.array([state[i] for i in self._observed], dtype=np.float32)
 
@@ -368,7 +397,10 @@ class VisualEnv(gym.Env):
         return {"state": self.state, "steps": self._steps, "outcome": outcome, "milestones": fired, "is_success": self._success}
 
     def _values(self, state: tuple, action: Any) -> dict[str, Any]:
+        """What a step's expressions read, for a fault's message: the state, each continuous input as given (before clipping), the action."""
         values: dict[str, Any] = dict(zip(self.program.state_names, state))
+        if self.program.discrete is None:
+            values.update(zip(self.program.input_names, action))
         values["action"] = action
         return values
 

@@ -12,7 +12,9 @@ import math
 from dataclasses import dataclass
 from typing import Any, Callable
 
-from visualenv.expr.types import NUM, Type
+import numpy as np
+
+from visualenv.expr.types import NUM, Type, vec
 
 
 def _sign(x: float) -> float:
@@ -95,6 +97,8 @@ FUNCTIONS: dict[str, Function] = {
         _f("normal", None, 2, "normal(mean, std): a Gaussian random number", random=True),
         _f("randint", None, 2, "randint(low, high): a random integer in [low, high], both included", random=True),
         _f("choice", None, (1, None), "choice(a, b, ...) or choice([a, b, ...]): one of the values at random", random=True),
+        _f("uniform_disk", None, 1, "uniform_disk(r): a point [x, y] uniform in the disk of radius r (pairs drawn in the square "
+           "until one falls inside, as Gymnasium's Reacher draws its goal)", returns=vec(2), random=True),
     ]
 }
 
@@ -120,6 +124,12 @@ class RandomSource:
     def randint(self, low: float, high: float) -> float:
         return float(self.generator.integers(int(low), int(high), endpoint=True))
 
+    def uniform_disk(self, radius: float) -> tuple[float, float]:
+        while True:  # the draws of Gymnasium's Reacher-v5 goal, exactly: uniform(-r, r, size=2) until its norm is below r
+            point = self.generator.uniform(low=-radius, high=radius, size=2)
+            if radius <= 0 or float(np.linalg.norm(point)) < radius:
+                return float(point[0]), float(point[1])
+
     def choice(self, *values: Any) -> float:
         options = values[0] if len(values) == 1 and isinstance(values[0], tuple) else values
         return float(options[int(self.generator.integers(len(options)))])
@@ -127,4 +137,4 @@ class RandomSource:
 
 def bind_random(source: RandomSource) -> dict[str, Callable[..., Any]]:
     """The implementations of the random functions, drawing from `source`."""
-    return {"uniform": source.uniform, "normal": source.normal, "randint": source.randint, "choice": source.choice}
+    return {"uniform": source.uniform, "normal": source.normal, "randint": source.randint, "choice": source.choice, "uniform_disk": source.uniform_disk}

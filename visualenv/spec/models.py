@@ -11,7 +11,8 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Optional, Union
 
-from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, create_model, field_validator, model_validator
+from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationInfo, create_model, field_validator, model_validator
+from pydantic_core import PydanticCustomError
 
 from visualenv.spec.bindables import BINDABLES
 
@@ -112,6 +113,7 @@ class PrimitiveObject(ObjectBase):
     thickness: float = Field(0.05, gt=0, description="ring/torus tube thickness")
     segments: int = Field(32, ge=3, le=512, description="round primitives: segments around; terrain: grid cells along each side")
     craters: Craters | None = Field(None, description="terrain: craters pressed into the ground")
+    label: Name | None = Field(None, description="segmentation: objects that share a label share an id (default: the object's own name)")
     heightmap: str | None = Field(None, description="terrain: elevation data, relative to the spec: a grayscale PNG (8 or 16 bit), TIFF or .npy; "
                                   "size [x, y, z] spans it, the lowest value at 0 and the highest at z")
     origin: Literal["center", "bottom"] = Field("center", description="where the object's origin sits")
@@ -130,6 +132,7 @@ class MeshObject(ObjectBase):
 
     mesh: str = Field(description="mesh file, relative to the spec")
     material: Material | None = None
+    label: Name | None = Field(None, description="segmentation: objects that share a label share an id (default: the object's own name)")
 
 
 class LightObject(ObjectBase):
@@ -263,6 +266,32 @@ class Outcome(StrictModel):
     success: bool = Field(False, description="the episode counts as a success (info['is_success'])")
 
 
+# -- physics ----------------------------------------------------------------------------------------
+
+
+class PhysicsReset(StrictModel):
+    """How each episode starts: MuJoCo's reset (or a keyframe), then values written in order (random draws allowed)."""
+
+    keyframe: str | None = Field(None, description="start from this named keyframe of the model instead of its qpos0")
+    values: dict[str, Expr] = Field(default_factory=dict, description=(
+        "evaluated in order after the reset: a key 'qpos_<joint>' or 'qvel_<joint>' sets that value, 'qpos_a, qpos_b' sets "
+        "several from a vector, any other name is a temporary later entries can read; an entry reads the model's reset values "
+        "by the same names (e.g. qpos_hinge: qpos_hinge + uniform(-0.01, 0.01)); draws happen in this order"))
+
+
+class Physics(StrictModel):
+    """MuJoCo physics: the MJCF model the env steps between the action and the reward (docs/physics.md)."""
+
+    engine: Literal["mujoco"] = Field("mujoco", description="the physics engine")
+    model: str = Field(description="the MJCF file, relative to the spec, or package:<package>/<path> for a file an installed package ships")
+    frame_skip: int = Field(1, ge=1, le=100_000, description="physics steps per env step; dt in expressions is timestep * frame_skip")
+    reset: PhysicsReset = Field(default_factory=PhysicsReset)
+    contacts: dict[Name, Annotated[list[str], Field(min_length=2, max_length=2)]] = Field(
+        default_factory=dict, description="name: [geom, geom]: a condition, true while the two geoms touch")
+    observe: Annotated[list[Expr], Field(min_length=1)] | None = Field(
+        None, description="the state-only observation (float64), one number per entry; default: every qpos, then every qvel, then the observed state")
+
+
 # -- actors, observation, rendering --------------------------------------------------------------
 
 
@@ -299,7 +328,7 @@ def _sensor_on_light(color: str, sensor: "Sensor | None") -> None:
 
 
 #: what an observation camera gives: light (rgb, grayscale), distance (depth) or object ids (segmentation)
-ColorMode = Literal["rgb", "grayscale", "depth"]
+ColorMode = Literal["rgb", "grayscale", "depth", "segmentation"]
 
 
 class CameraView(StrictModel):
@@ -398,8 +427,10 @@ class Spec(StrictModel):
     params: dict[Name, Union[bool, int, float, str]] = Field(
         default_factory=dict, description="named constants; a value may be an expression over earlier params"
     )
-    state: Annotated[dict[Name, StateVar], Field(min_length=1)] = Field(description="state variables, in observation order")
-    actions: Actions
+    physics: Physics | None = Field(None, description="MuJoCo physics stepped between the action and the reward")
+    # both default to None only to tell "not given" apart: _state_given and _actions_given turn it into {} or an error
+    state: dict[Name, StateVar] = Field(None, validate_default=True, description="state variables, in observation order (at least one without physics)")  # type: ignore[assignment]
+    actions: Actions | None = Field(None, validate_default=True, description="required without physics; with it, default: one Box dimension per actuator (its ctrlrange)")
     dynamics: Dynamics = Field(default_factory=Dynamics)
     actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")  # type: ignore[valid-type]  # Actor is made from BINDABLES
     observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
@@ -411,6 +442,26 @@ class Spec(StrictModel):
     on_fault: Literal["raise", "terminate"] = Field(
         "raise", description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']"
     )
+
+    @field_validator("state", mode="before")
+    @classmethod
+    def _state_given(cls, value: Any, info: ValidationInfo) -> Any:
+        """State is required and not empty, except beside physics (whose state is the model's)."""
+        if info.data.get("physics") is not None:
+            return {} if value is None else value
+        if value is None:
+            raise PydanticCustomError("missing", "Field required")
+        if isinstance(value, dict) and not value:
+            raise PydanticCustomError("too_short", "at least 1 entry", {"field_type": "Dictionary", "min_length": 1, "actual_length": 0})
+        return value
+
+    @field_validator("actions", mode="before")
+    @classmethod
+    def _actions_given(cls, value: Any, info: ValidationInfo) -> Any:
+        """Actions are required, except beside physics (default: one Box dimension per actuator)."""
+        if value is None and info.data.get("physics") is None:
+            raise PydanticCustomError("missing", "Field required")
+        return value
 
     def camera_uses(self) -> list[tuple[tuple, str]]:
         """Every camera the spec names, with the path of the field that names it (for errors located in the file)."""

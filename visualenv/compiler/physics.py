@@ -1,0 +1,86 @@
+"""The compiler's part for a spec's ``physics:`` section: the model's names in scope, and the calls into the simulation.
+
+The generated step of a physics spec reads, in order: the action's inputs; the
+model's values before the step (for ``dynamics.let`` and ``update``, which read
+the old state); the simulation's ``frame_skip`` steps with the inputs named
+``ctrl_<actuator>`` as controls; the model's values after the step (for the
+reward, the outcomes and the observation, which read the new state). Each read
+is one call that gathers only the names the expressions use
+(:meth:`~visualenv.physics.simulation.Simulation.reader`), made once per env.
+"""
+
+from __future__ import annotations
+
+import ast
+from dataclasses import dataclass, field
+from typing import Any
+
+from visualenv.expr import BOOL, NUM, Type
+from visualenv.expr.codegen import local, name, tuple_of
+from visualenv.physics.model import PhysicsError, PhysicsModel, load_model, resolve_model_path
+from visualenv.spec.models import Physics
+
+#: the generated functions' globals that call into one env's simulation (bound by Program.functions)
+READ_PREFIX = "_phys_read_"
+ADVANCE = "_phys_advance"
+WRITE_RESET = "_phys_write_reset"
+
+
+@dataclass
+class PhysicsPlan:
+    """What an env needs to run a physics spec: the model, and which names each generated read gathers."""
+
+    model: PhysicsModel
+    frame_skip: int
+    keyframe: int | None
+    contacts: dict[str, tuple[int, int]]
+    controls: list[str] = field(default_factory=list)  # inputs that drive actuators (ctrl_<actuator>), in input order
+    reset_targets: list[str] = field(default_factory=list)  # qpos/qvel names the reset writes, in order
+    reads: dict[str, list[str]] = field(default_factory=dict)  # read name -> physics names it gathers
+    observe_size: int = 0  # values in the state-only observation
+
+    @property
+    def dt(self) -> float:
+        return self.model.timestep * self.frame_skip
+
+    def simulation(self) -> Any:
+        """A fresh Simulation (its own MjModel copy and MjData) for one env."""
+        from visualenv.physics.simulation import Simulation
+
+        return Simulation(self.model, self.frame_skip, self.contacts)
+
+    def bind(self, env: dict[str, Any], sim: Any) -> None:
+        """Put one env's reads, stepper and reset writer into a generated function's globals."""
+        for key, names in self.reads.items():
+            env[READ_PREFIX + key] = sim.reader(names)
+        env[ADVANCE] = sim.stepper(self.controls)
+        env[WRITE_RESET] = sim.writer(self.reset_targets)
+
+
+def load(section: Physics, base_dir: Any) -> PhysicsModel:
+    """The section's MJCF, compiled; PhysicsError says why not (missing mujoco, file, include, bad XML)."""
+    return load_model(resolve_model_path(section.model, base_dir))
+
+
+def scope(model: PhysicsModel, contacts: dict[str, Any]) -> dict[str, Type]:
+    """Every name the model adds to expressions: numbers, and the declared contacts (conditions)."""
+    names: dict[str, Type] = {n: NUM for n in model.names.values}
+    names.update({n: BOOL for n in contacts})
+    return names
+
+
+def read_statement(key: str, names: list[str]) -> ast.stmt:
+    """``(_v_a, _v_b, ...) = _phys_read_<key>()``: the named values as the generated code's locals."""
+    call = ast.Call(name(READ_PREFIX + key), [], [])
+    if len(names) == 1:
+        return ast.Assign([ast.Name(local(names[0]), ast.Store())], ast.Subscript(call, ast.Constant(0), ast.Load()))
+    target = ast.Tuple([ast.Name(local(n), ast.Store()) for n in names], ast.Store())
+    return ast.Assign([target], call)
+
+
+def call_statement(function: str, values: list[str]) -> ast.stmt:
+    """``_phys_<function>((_v_a, _v_b, ...))``."""
+    return ast.Expr(ast.Call(name(function), [tuple_of([name(local(v)) for v in values])], []))
+
+
+__all__ = ["ADVANCE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "load", "read_statement", "call_statement", "scope"]

@@ -1,0 +1,200 @@
+"""An MJCF model loaded once, with every quantity an expression may read named.
+
+Names (identifiers; characters a name cannot hold become ``_``; unnamed elements
+are called ``<kind><index>``, e.g. ``actuator0``):
+
+* ``qpos_<joint>`` and ``qvel_<joint>`` for hinge and slide joints; free joints
+  by component, ``qpos_<j>_x/_y/_z/_qw/_qx/_qy/_qz`` and
+  ``qvel_<j>_x/_y/_z/_wx/_wy/_wz``; ball joints ``qpos_<j>_qw..._qz`` and
+  ``qvel_<j>_wx/_wy/_wz``;
+* ``body_<b>_x/_y/_z`` (world position) and ``body_<b>_qw/_qx/_qy/_qz`` (world orientation);
+* ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
+* ``ctrl_<actuator>``; ``sim_time``.
+
+Each name maps to (array, flat index) once, here; a reader gathers many names
+with one numpy indexing per array (:mod:`visualenv.physics.simulation`).
+"""
+
+from __future__ import annotations
+
+import importlib
+import importlib.util
+import re
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from visualenv.errors import VisualEnvError
+
+INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
+#: the prefix of a model path inside an installed Python package: ``package:<importable.package>/<path inside it>``
+PACKAGE_PREFIX = "package:"
+#: arrays a name can point into (attributes of MjData; ``time`` is a scalar)
+ARRAYS = ("qpos", "qvel", "xpos", "xquat", "site_xpos", "sensordata", "ctrl", "time")
+_FREE_QPOS = ("x", "y", "z", "qw", "qx", "qy", "qz")
+_FREE_QVEL = ("x", "y", "z", "wx", "wy", "wz")
+_BALL_QPOS = ("qw", "qx", "qy", "qz")
+_BALL_QVEL = ("wx", "wy", "wz")
+
+
+class PhysicsError(VisualEnvError):
+    """A model that cannot be found, loaded or used (the message says which and why)."""
+
+
+def mujoco_module() -> Any:
+    """The mujoco package, imported on first use; a clear error saying how to install it when it is missing."""
+    try:
+        return importlib.import_module("mujoco")
+    except ImportError:
+        raise PhysicsError(INSTALL_HINT) from None
+
+
+def resolve_model_path(text: str, base_dir: Path) -> Path:
+    """The MJCF file a spec names: relative to the spec, absolute, or ``package:pkg.name/path/in/it.xml``.
+
+    The package form reads a file that an installed package ships (Gymnasium's
+    MuJoCo assets: ``package:gymnasium.envs.mujoco/assets/half_cheetah.xml``),
+    found where Python imports the package from, whatever the install path.
+    """
+    if text.startswith(PACKAGE_PREFIX):
+        rest = text[len(PACKAGE_PREFIX):]
+        package, _, inner = rest.partition("/")
+        if not package or not inner:
+            raise PhysicsError(f"'{text}': expected package:<package>/<path inside it>, e.g. package:gymnasium.envs.mujoco/assets/hopper.xml")
+        try:
+            found = importlib.util.find_spec(package)
+        except (ImportError, ValueError):
+            found = None
+        if found is None or not found.submodule_search_locations:
+            raise PhysicsError(f"'{text}': no installed package '{package}'")
+        return Path(list(found.submodule_search_locations)[0]) / inner
+    path = Path(text).expanduser()
+    return path if path.is_absolute() else base_dir / path
+
+
+def identifier(text: str) -> str:
+    """A MuJoCo name as an expression identifier: other characters become '_', a leading digit gets '_'."""
+    out = re.sub(r"\W", "_", text, flags=re.ASCII)
+    return "_" + out if out[:1].isdigit() else out
+
+
+@dataclass(frozen=True)
+class NameTables:
+    """Every readable name -> (array, flat index), plus the element names by kind (MuJoCo's spelling -> id)."""
+
+    values: dict[str, tuple[str, int]]
+    joints: dict[str, int]
+    bodies: dict[str, int]
+    geoms: dict[str, int]
+    sites: dict[str, int]
+    actuators: dict[str, int]
+    keyframes: dict[str, int]
+    #: an element's name as written in expressions (identifier form), by kind and id
+    ident: dict[str, list[str]] = field(default_factory=dict)
+
+
+@dataclass
+class PhysicsModel:
+    """An MJCF file compiled by MuJoCo, its names tabled once."""
+
+    path: Path
+    model: Any  # mujoco.MjModel
+    names: NameTables
+
+    @property
+    def timestep(self) -> float:
+        return float(self.model.opt.timestep)
+
+    def actuator_names(self) -> list[str]:
+        """Each actuator's identifier, in actuator order (one Box dimension each by default)."""
+        return list(self.names.ident["actuator"])
+
+    def ctrl_range(self, actuator: int) -> tuple[float, float]:
+        """An actuator's ctrlrange where it is limited (as Gymnasium's action space), else unbounded."""
+        m = self.model
+        limited = bool(m.actuator_ctrllimited[actuator]) if hasattr(m, "actuator_ctrllimited") else True
+        lo, hi = (float(v) for v in m.actuator_ctrlrange[actuator])
+        return (lo, hi) if limited and lo < hi else (float("-inf"), float("inf"))
+
+    def qpos_names(self) -> list[str]:
+        """Every qpos name in qpos order."""
+        return sorted((n for n, (a, _) in self.names.values.items() if a == "qpos"), key=lambda n: self.names.values[n][1])
+
+    def qvel_names(self) -> list[str]:
+        """Every qvel name in qvel order."""
+        return sorted((n for n, (a, _) in self.names.values.items() if a == "qvel"), key=lambda n: self.names.values[n][1])
+
+    def listing(self) -> dict[str, list[str]]:
+        """The names by kind, for ``visualenv inspect`` and the starter spec."""
+        groups: dict[str, list[str]] = {"joint positions": self.qpos_names(), "joint velocities": self.qvel_names()}
+        for title, array in (("bodies", "xpos"), ("body orientations", "xquat"), ("sites", "site_xpos"), ("sensors", "sensordata"), ("actuator controls", "ctrl")):
+            groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
+        groups["geoms (for contacts)"] = list(self.names.ident["geom"])
+        groups["keyframes"] = list(self.names.ident["key"])
+        groups["time"] = ["sim_time"]
+        return {k: v for k, v in groups.items() if v}
+
+
+def load_model(path: Path) -> PhysicsModel:
+    """Compile the MJCF at `path` (MuJoCo resolves its includes, meshes and textures); PhysicsError says what is wrong, with MuJoCo's line."""
+    mujoco = mujoco_module()
+    if not path.is_file():
+        raise PhysicsError(f"no MJCF file {path}")
+    try:
+        model = mujoco.MjModel.from_xml_path(str(path))
+    except ValueError as exc:
+        message = " ".join(str(exc).split())
+        raise PhysicsError(f"MuJoCo cannot load {path}: {message}") from None
+    return PhysicsModel(path, model, name_tables(model))
+
+
+def _element_names(model: Any, kind: str, count: int) -> tuple[list[str], dict[str, int]]:
+    mujoco = mujoco_module()
+    obj = getattr(mujoco.mjtObj, "mjOBJ_" + kind.upper())
+    idents: list[str] = []
+    by_name: dict[str, int] = {}
+    for i in range(count):
+        raw = mujoco.mj_id2name(model, obj, i) or ""
+        if raw:
+            by_name[raw] = i
+        idents.append(identifier(raw) if raw else f"{kind}{i}")
+    return idents, by_name
+
+
+def name_tables(model: Any) -> NameTables:
+    """Every readable name of `model`, computed once."""
+    mujoco = mujoco_module()
+    values: dict[str, tuple[str, int]] = {}
+    kinds = {"joint": model.njnt, "body": model.nbody, "geom": model.ngeom, "site": model.nsite, "sensor": model.nsensor,
+             "actuator": model.nu, "key": model.nkey, "camera": model.ncam, "light": model.nlight}
+    ident: dict[str, list[str]] = {}
+    by_name: dict[str, dict[str, int]] = {}
+    for kind, count in kinds.items():
+        ident[kind], by_name[kind] = _element_names(model, kind, count)
+    free, ball = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
+    for j, name in enumerate(ident["joint"]):
+        qadr, vadr, jtype = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j]), int(model.jnt_type[j])
+        if jtype in (free, ball):
+            qparts, vparts = (_FREE_QPOS, _FREE_QVEL) if jtype == free else (_BALL_QPOS, _BALL_QVEL)
+            values.update({f"qpos_{name}_{p}": ("qpos", qadr + i) for i, p in enumerate(qparts)})
+            values.update({f"qvel_{name}_{p}": ("qvel", vadr + i) for i, p in enumerate(vparts)})
+        else:
+            values[f"qpos_{name}"] = ("qpos", qadr)
+            values[f"qvel_{name}"] = ("qvel", vadr)
+    for b, name in enumerate(ident["body"]):
+        if b == 0:
+            continue  # the world body never moves
+        values.update({f"body_{name}_{p}": ("xpos", 3 * b + i) for i, p in enumerate("xyz")})
+        values.update({f"body_{name}_{p}": ("xquat", 4 * b + i) for i, p in enumerate(("qw", "qx", "qy", "qz"))})
+    for s, name in enumerate(ident["site"]):
+        values.update({f"site_{name}_{p}": ("site_xpos", 3 * s + i) for i, p in enumerate("xyz")})
+    for s, name in enumerate(ident["sensor"]):
+        adr, dim = int(model.sensor_adr[s]), int(model.sensor_dim[s])
+        if dim == 1:
+            values[f"sensor_{name}"] = ("sensordata", adr)
+        else:
+            values.update({f"sensor_{name}_{i}": ("sensordata", adr + i) for i in range(dim)})
+    for a, name in enumerate(ident["actuator"]):
+        values[f"ctrl_{name}"] = ("ctrl", a)
+    values["sim_time"] = ("time", 0)
+    return NameTables(values, by_name["joint"], by_name["body"], by_name["geom"], by_name["site"], by_name["actuator"], by_name["key"], ident)

@@ -1,0 +1,142 @@
+"""One MjData stepped for one env: reset, controls, frame_skip steps, and readers of named values.
+
+Stepping follows Gymnasium's MujocoEnv exactly (``ctrl[:] = action``,
+``mj_step(nstep=frame_skip)``, then ``mj_rnePostConstraint``; a reset is
+``mj_resetData``, the new qpos and qvel, then ``mj_forward``), so a spec that
+writes Gymnasium's reward and reset draws reproduces its env to the last bit.
+Named values are gathered by readers made once per list of names: one numpy
+indexing per array, never a Python lookup per name on the hot path.
+"""
+
+from __future__ import annotations
+
+import copy
+import math
+from typing import Callable, Sequence
+
+import numpy as np
+
+from visualenv.physics.model import PhysicsModel, mujoco_module
+
+
+class PhysicsFault(ValueError):
+    """The simulation blew up (a non-finite state, or MuJoCo's own warning); the env reports it located, with the step."""
+
+
+#: MuJoCo warnings that mean the simulation is no longer trustworthy (MuJoCo resets the state on a bad qacc and goes on)
+_FATAL_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
+
+
+class Simulation:
+    """An env's MjModel (its own copy, so randomising one env's model leaves the others alone) and MjData."""
+
+    def __init__(self, physics: PhysicsModel, frame_skip: int, contacts: dict[str, tuple[int, int]] | None = None) -> None:
+        self.mujoco = mujoco_module()
+        self.physics = physics
+        self.model = copy.copy(physics.model)
+        self.data = self.mujoco.MjData(self.model)
+        self.frame_skip = frame_skip
+        self.contacts = dict(contacts or {})
+        warnings = self.mujoco.mjtWarning
+        self._fatal = np.array([int(getattr(warnings, w)) for w in _FATAL_WARNINGS])
+        self._warnings = self.data.warning.number  # a live view of MuJoCo's warning counters
+
+    # -- reset and step -----------------------------------------------------------------------------
+
+    def reset(self, keyframe: int | None = None) -> None:
+        """``mj_resetData``, or the keyframe's state; the spec's reset values are written after (:meth:`set_state`)."""
+        if keyframe is None:
+            self.mujoco.mj_resetData(self.model, self.data)
+        else:
+            self.mujoco.mj_resetDataKeyframe(self.model, self.data, keyframe)
+
+    def writer(self, names: Sequence[str]) -> Callable[[Sequence[float]], None]:
+        """set_state(values): write qpos/qvel `names` (in order), then ``mj_forward``, as Gymnasium's set_state does."""
+        table = self.physics.names.values
+        qpos_at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == "qpos"]
+        qvel_at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == "qvel"]
+        qpos_src, qpos_dst = (np.array([p for p, _ in qpos_at], int), np.array([q for _, q in qpos_at], int))
+        qvel_src, qvel_dst = (np.array([p for p, _ in qvel_at], int), np.array([q for _, q in qvel_at], int))
+        data, model, forward = self.data, self.model, self.mujoco.mj_forward
+
+        def set_state(values: Sequence[float]) -> None:
+            given = np.asarray(values, dtype=np.float64)
+            if not np.isfinite(given).all():
+                bad = [f"{n}={v!r}" for n, v in zip(names, given) if not math.isfinite(v)]
+                raise PhysicsFault(f"a reset value is not finite: {', '.join(bad)}")
+            data.qpos[qpos_dst] = given[qpos_src]
+            data.qvel[qvel_dst] = given[qvel_src]
+            forward(model, data)
+
+        return set_state
+
+    def stepper(self, controls: Sequence[str]) -> Callable[[Sequence[float]], None]:
+        """advance(values): actuator controls for `controls` (``ctrl_<actuator>`` names; others 0), then frame_skip steps."""
+        table = self.physics.names.values
+        where = np.array([table[n][1] for n in controls], int)
+        ctrl = np.zeros(self.model.nu)
+        data, model, step, post, n = self.data, self.model, self.mujoco.mj_step, self.mujoco.mj_rnePostConstraint, self.frame_skip
+        warnings, fatal = self._warnings, self._fatal
+
+        def advance(values: Sequence[float]) -> None:
+            ctrl[where] = values
+            data.ctrl[:] = ctrl
+            before = int(warnings[fatal].sum())
+            step(model, data, nstep=n)
+            post(model, data)
+            if warnings[fatal].sum() != before or not math.isfinite(data.qacc.sum() + data.qpos.sum() + data.qvel.sum()):
+                raise PhysicsFault(self.blown_up())
+
+        return advance
+
+    def blown_up(self) -> str:
+        """What went wrong, in MuJoCo's words and numbers: the warnings raised and the non-finite values."""
+        parts = []
+        for w in _FATAL_WARNINGS:
+            index = int(getattr(self.mujoco.mjtWarning, w))
+            info = self.data.warning[index]
+            if info.number:
+                dof = self.physics.qvel_names()
+                where = f" at {dof[info.lastinfo]}" if w in ("mjWARN_BADQACC", "mjWARN_BADQVEL") and 0 <= info.lastinfo < len(dof) else ""
+                parts.append(f"MuJoCo warning {w[7:]}{where}")
+        for array in ("qpos", "qvel", "qacc"):
+            values = getattr(self.data, array)
+            bad = np.flatnonzero(~np.isfinite(values))
+            if bad.size:
+                names = self.physics.qpos_names() if array == "qpos" else self.physics.qvel_names()
+                parts.append(f"{array} not finite: " + ", ".join(f"{names[i]}={values[i]!r}" for i in bad[:6]))
+        state = ", ".join(f"{n}={v:.6g}" for n, v in zip(self.physics.qpos_names(), self.data.qpos[:8]))
+        return (f"the MuJoCo simulation blew up at sim_time={self.data.time:.6g} ({'; '.join(parts) or 'unstable'}); "
+                f"qpos: {state}; lower the timestep or the controls, or check the model")
+
+    # -- reading named values -----------------------------------------------------------------------
+
+    def reader(self, names: Sequence[str]) -> Callable[[], tuple]:
+        """read(): the current values of `names` (value names and declared contacts), as a tuple of floats (contacts: bools)."""
+        table = self.physics.names.values
+        plan: list[tuple[str, np.ndarray, np.ndarray]] = []
+        for array in {table[n][0] for n in names if n in table}:
+            at = [(i, table[n][1]) for i, n in enumerate(names) if n in table and table[n][0] == array]
+            plan.append((array, np.array([p for p, _ in at], int), np.array([q for _, q in at], int)))
+        touches = [(i, self.contacts[n]) for i, n in enumerate(names) if n in self.contacts]
+        data, size = self.data, len(names)
+        views = {a: (np.atleast_1d(getattr(data, a)).reshape(-1) if a != "time" else None) for a, _, _ in plan}
+        out = np.zeros(size)
+
+        def read() -> tuple:
+            for array, dst, src in plan:
+                view = views[array]
+                out[dst] = data.time if view is None else view[src]
+            values = out.tolist()
+            if touches:
+                ncon = data.ncon
+                g1, g2 = data.contact.geom1[:ncon], data.contact.geom2[:ncon]
+                for i, (a, b) in touches:
+                    values[i] = bool(ncon) and bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
+            return tuple(values)
+
+        return read
+
+    def body_poses(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every body's world position (nbody x 3) and orientation quaternion w, x, y, z (nbody x 4): live views, no copy."""
+        return self.data.xpos, self.data.xquat
