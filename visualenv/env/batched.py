@@ -276,6 +276,13 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._renderer = cls(plan, self._renderer_options, num_envs=self.num_envs)
         return self._renderer
 
+    @property
+    def segmentation_ids(self) -> dict[str, int]:
+        """Id of each label (or unlabelled object name) in segmentation observations, the same in every env; builds the renderer."""
+        if not self.uses_camera:
+            return {}
+        return dict(getattr(self.renderer, "segmentation_ids", {}))
+
     def _observe(self, envs: np.ndarray | None = None) -> Any:
         """Every env's observation, or those of `envs` (ascending indices) only."""
         if not self.uses_camera:

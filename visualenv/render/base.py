@@ -22,7 +22,7 @@ from visualenv.spec.options import RENDER_OVERRIDES, check_make_options
 from visualenv.spec.models import CameraView, Observation, RenderSettings, Scene
 from visualenv.spec.source import SourceMap
 
-CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1}
+CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1, "segmentation": 1}
 
 
 def view_space(view: CameraView) -> spaces.Box:

@@ -20,6 +20,7 @@ from visualenv.render.blender.materials import color_writer, depth_material, dep
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
+from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, Material
 
@@ -32,7 +33,7 @@ class _View:
     camera: Any  # bpy Object
     width: int
     height: int
-    color: str  # rgb | grayscale | depth
+    color: str  # rgb | grayscale | depth | segmentation
     depth_range: tuple[float, float]
     config: cfg.EngineConfig
 
@@ -133,26 +134,35 @@ class BlenderRenderer(Renderer):
         r.filepath = self._output.path
         self._views = [
             _View(key, built.objects[v.camera], v.resolution[0], v.resolution[1], v.color, (float(v.depth_range[0]), float(v.depth_range[1])),
-                  cfg.depth_config(self.obs_config) if v.color == "depth" else self.obs_config)
+                  cfg.depth_config(self.obs_config) if v.color == "depth" else SEGMENTATION_CONFIG if v.color == "segmentation" else self.obs_config)
             for key, v in plan.views.items()
         ]
+        #: configs of observation renders: they keep Cycles' persistent data (a view's config renders afresh)
+        self._observation_configs = {self.obs_config, *(v.config for v in self._views)}
         view_camera = plan.view_camera
         self._view = None
         if view_camera is not None:
             w, h = plan.settings.view.resolution
             self._view = _View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
-        self._depth_override = None
+        self._overrides: dict[str, tuple[Any, Any]] = {}  # material and world override by render mode
         if any(v.color == "depth" for v in self._views):
             mat, self._set_depth_range, self._set_depth_forward = depth_material(f"{scene.name}-depth", lambda d: d, along_ray=self.DEPTH_ALONG_RAY)
-            self._depth_override = (mat, depth_world(f"{scene.name}-depth-world", lambda d: d))
+            self._overrides["depth"] = (mat, depth_world(f"{scene.name}-depth-world", lambda d: d))
+        #: segmentation id of each label or unlabelled object name (empty without a segmentation camera)
+        self.segmentation_ids: dict[str, int] = {}
+        self._lights = HiddenLights(scene)
+        if any(v.color == "segmentation" for v in self._views):
+            self.segmentation_ids = assign_ids(built, plan)
+            self._overrides["segmentation"] = (segmentation_material(f"{scene.name}-segmentation", lambda d: d),
+                                               segmentation_world(f"{scene.name}-segmentation-world", lambda d: d))
         # what the scene is set to now (only changes are written)
         self._camera: Any = None
         self._resolution: tuple[int, int] | None = None
         self._config: cfg.EngineConfig | None = None
-        self._depth = False
+        self._mode = ""
         self._depth_range: tuple[float, float] | None = None
         self._depth_forward: tuple[float, ...] | None = None
-        self._set_depth_mode(False)
+        self._set_mode("color")
         self._setters = self._compile_bindings()
         self._last: tuple | None = None
 
@@ -289,11 +299,12 @@ class BlenderRenderer(Renderer):
             # Cycles' persistent data remembers a little of other sample counts: the first
             # observation after a view render would differ from the same one before it. So
             # only observation renders keep the session; any other config renders afresh.
-            scene.render.use_persistent_data = view.config == self.obs_config
+            scene.render.use_persistent_data = view.config in self._observation_configs
             self._config = view.config
         depth = view.color == "depth"
-        if depth != self._depth:
-            self._set_depth_mode(depth)
+        mode = view.color if view.color in self._overrides else "color"
+        if mode != self._mode:
+            self._set_mode(mode)
         if depth and self._depth_range != view.depth_range:
             self._set_depth_range(*view.depth_range)
             self._depth_range = view.depth_range
@@ -308,13 +319,13 @@ class BlenderRenderer(Renderer):
         return self._read_capture(view, capture) if capture is not None else self._read_file(view)
 
     def _read_capture(self, view: _View, capture: Capture) -> np.ndarray:
-        if view.color == "depth":
+        if view.color in ("depth", "segmentation"):
             return capture.raw()
         return capture.rgb() if view.color == "rgb" else capture.grayscale()
 
     def _read_file(self, view: _View) -> np.ndarray:
         rgb = read_bmp(self._output.path)
-        if view.color == "depth":
+        if view.color in ("depth", "segmentation"):
             return first_channel(rgb)
         return rgb if view.color == "rgb" else to_grayscale(rgb)
 
@@ -327,13 +338,18 @@ class BlenderRenderer(Renderer):
             with quiet_stdout():  # Blender prints "Saved: <file>" for every written frame
                 bpy.ops.render.render(write_still=True, scene=self._scene_name)
 
-    def _set_depth_mode(self, depth: bool) -> None:
+    def _set_mode(self, mode: str) -> None:
+        """'color', or 'depth' / 'segmentation': their material and world overrides, values written raw (lights hidden from the camera for ids)."""
         layer = self._layer
-        override = self._depth_override
-        layer.material_override = override[0] if depth and override else None
-        layer.world_override = override[1] if depth and override else None
-        cfg.set_color_management(self._scene, depth=depth)
-        self._depth = depth
+        override = self._overrides.get(mode)
+        layer.material_override = override[0] if override else None
+        layer.world_override = override[1] if override else None
+        cfg.set_color_management(self._scene, depth=override is not None)
+        if mode == "segmentation":
+            self._lights.hide()
+        elif self._mode == "segmentation":
+            self._lights.show()
+        self._mode = mode
 
     # -- access and lifecycle -----------------------------------------------------------------------
 
@@ -358,7 +374,8 @@ class BlenderRenderer(Renderer):
         self._closed = True
         self._setters = []
         self._objects = {}
-        self._camera = self._view = self._depth_override = None
+        self._camera = self._view = None
+        self._overrides = {}
         self._views = []
         scene_ids, self._ids = self._ids, []
         with contextlib.suppress(ReferenceError, AttributeError):
