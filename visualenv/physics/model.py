@@ -20,6 +20,7 @@ from __future__ import annotations
 import importlib
 import importlib.util
 import re
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -42,11 +43,23 @@ class PhysicsError(VisualEnvError):
 
 
 def mujoco_module() -> Any:
-    """The mujoco package, imported on first use; a clear error saying how to install it when it is missing."""
+    """The mujoco package, imported on first use; a clear error saying how to install it when it is missing.
+
+    MuJoCo's own warnings (a deprecated attribute, an unstable step) become Python
+    warnings, instead of lines printed and appended to MUJOCO_LOG.TXT in the current
+    folder; the env reports an unstable step itself, as a located fault.
+    """
     try:
-        return importlib.import_module("mujoco")
+        mujoco = importlib.import_module("mujoco")
     except ImportError:
         raise PhysicsError(INSTALL_HINT) from None
+    if mujoco.get_mju_user_warning() is None:
+        mujoco.set_mju_user_warning(_warn)
+    return mujoco
+
+
+def _warn(message: str) -> None:
+    warnings.warn(f"MuJoCo: {message}", RuntimeWarning, stacklevel=2)
 
 
 def resolve_model_path(text: str, base_dir: Path) -> Path:
