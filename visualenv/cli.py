@@ -107,7 +107,7 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
     for line in result.summary:
         click.echo("  " + line)
     if not quiet and result.ascii_preview:
-        click.echo("observation (reset, seed %d):" % seed)
+        click.echo(f"observation (reset, seed {seed}{'; ' + result.ascii_note if result.ascii_note else ''}):")
         click.echo(result.ascii_preview)
 
 
@@ -169,7 +169,7 @@ def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
     """Save a few frames (observation beside the high-res view) of a random episode."""
     from visualenv.tools.build import preview_frames
 
-    paths = preview_frames(spec, out_dir, steps=steps, seed=seed)
+    paths = preview_frames(spec, out_dir, steps=steps, seed=seed, progress=True)
     click.echo(f"wrote {len(paths)} frames to {out_dir}/")
 
 

@@ -46,7 +46,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     Rewards, ``terminated`` and ``truncated`` are per env. ``info`` holds, per
     env (Gymnasium's vector layout, each key with its ``_key`` mask):
-    ``state`` (a dict of arrays), ``steps``, ``outcome``, ``milestones`` and
+    ``state`` (a dict of arrays, each variable with its ``_name`` mask, as Sync/AsyncVectorEnv
+    nest a dict), ``steps``, ``outcome``, ``milestones`` and
     ``is_success``; an env ended by a fault under ``on_fault: terminate`` has its
     message in ``error``.
 
@@ -71,6 +72,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         render_mode: str | None = None,
         renderer_options: RendererOptions | Mapping[str, Any] | None = None,
         backend: str = BATCH_BACKEND,
+        max_episode_steps: int | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
@@ -95,7 +97,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if render and observation is None:
             raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
         self.uses_camera = observation is not None and render is not False
-        self.lanes = [VisualEnv(program, render=False) for _ in range(n)]
+        if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer))
+                                              or max_episode_steps < 1):
+            raise ValueError(f"max_episode_steps must be an integer of at least 1, got {max_episode_steps!r}")
+        #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
+        self.max_episode_steps = program.spec.max_steps if max_episode_steps is None else int(max_episode_steps)
+        self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps) for _ in range(n)]
         self._batch = program.batch_functions()
         self._renderer_options = RendererOptions.parse(renderer_options)
         self._backend = backend
@@ -124,7 +131,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._milestones = [r.name for r in rules if r.end == "none"]
         successful = [bit for bit, r in zip(milestone_bits, (r for r in rules if r.end == "none")) if r.success]
         self._success_bits = sum(successful)
-        self._max_steps = program.spec.max_steps
+        self._max_steps = self.max_episode_steps
         self._was_reset = False
 
     # -- Gymnasium API ------------------------------------------------------------------------------
@@ -325,9 +332,11 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return rows
 
     def _info(self, mask: np.ndarray) -> dict[str, Any]:
-        names = self.program.state_names
+        state: dict[str, Any] = {}
+        for j, name in enumerate(self.program.state_names):
+            state[name], state[f"_{name}"] = self._state[j].copy(), mask.copy()
         info: dict[str, Any] = {
-            "state": {n: self._state[j].copy() for j, n in enumerate(names)}, "_state": mask.copy(),
+            "state": state, "_state": mask.copy(),
             "steps": self._steps.copy(), "_steps": mask.copy(),
             "outcome": self._outcome.copy(), "_outcome": mask.copy(),
             "milestones": self._fired_names(), "_milestones": mask.copy(),
@@ -363,10 +372,10 @@ def _with_rows(obs: Any, rows: np.ndarray, new: Any) -> Any:
 
 def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:
     """A batch from keyword options as ``visualenv.make`` takes them: :class:`BatchedVectorEnv`'s (render, params,
-    autoreset_mode, render_mode) and the renderer options (``device``, ``threads``, ``samples``, ``noise``, ``readback``).
+    autoreset_mode, render_mode, max_episode_steps) and the renderer options (``device``, ``threads``, ``samples``, ``noise``, ``readback``).
 
-    Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``.
+    Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``,
+    which passes the id's ``max_episode_steps`` (the spec's max_steps, or the one given to make_vec).
     """
-    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode") if k in kwargs}
-    kwargs.pop("max_episode_steps", None)  # Gymnasium passes the spec's; the spec file's max_steps rules
+    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps") if k in kwargs}
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

@@ -84,7 +84,17 @@ class FaultDiagnosis:
         else:
             relevant = values
         shown = ", ".join(f"{k}={v!r}" for k, v in relevant.items())
-        return StepError(f"{where}{message} (step {steps}; values: {shown})")
+        return StepError(f"{where}{message} (step {steps}; values: {shown}){self._action_note(values)}")
+
+    def _action_note(self, values: dict[str, Any]) -> str:
+        """A continuous action that is not finite is the likely cause (a policy that diverged): named, input by input."""
+        action = values.get("action")
+        if self.program.discrete is not None or not isinstance(action, tuple):
+            return ""
+        bad = [f"{n}={v!r}" for n, v in zip(self.program.input_names, action) if not math.isfinite(v)]
+        if not bad:
+            return ""
+        return f"; caused by the action, which is not finite: {', '.join(bad)} (action={list(action)!r})"
 
     def _binding_site(self, index: int) -> Site | None:
         """The site of the actor binding that yields value ``index`` of bind()."""

@@ -3,11 +3,13 @@
 from __future__ import annotations
 
 import os
+import sys
 from typing import Any
 
 import gymnasium as gym
+from gymnasium.envs.registration import EnvSpec
 
-from visualenv.env.registration import resolve
+from visualenv.env.registration import ENTRY_POINT, NAMESPACE, VECTOR_ENTRY_POINT, resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.env.wrappers import wrap_observation
 from visualenv.render.base import RendererOptions
@@ -24,6 +26,7 @@ def make(
     frame_stack: int | None = None,
     grayscale: bool = False,
     resize: tuple[int, int] | None = None,
+    max_episode_steps: int | None = None,
     **renderer_options: Any,
 ) -> gym.Env:
     """Make an env from a spec path, a build folder (``build/<Id>``) or an id.
@@ -35,12 +38,43 @@ def make(
         render_mode: ``"rgb_array"`` to make ``env.render()`` return the high-resolution view.
         params: overrides of the spec's ``params``.
         frame_stack, grayscale, resize: image wrappers (see :mod:`visualenv.env.wrappers`).
+        max_episode_steps: truncate episodes after this many steps instead of the spec's ``max_steps``
+            (``info["outcome"]`` says ``"max_steps"``); ``gymnasium.make(id, max_episode_steps=N)`` sets it too.
         renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
 
     Every option is checked as the same value in a spec would be (``device="tpu"``,
     ``samples=0`` or ``resize="64"`` raise :class:`SpecError` naming the option).
+    The env's ``spec`` is a Gymnasium ``EnvSpec`` that makes the same env again
+    (``env.spec.make(render_mode=...)``, as ``check_env`` does).
     """
-    check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize)
+    if max_episode_steps is None:
+        max_episode_steps = _gymnasium_time_limit()
+    check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize,
+                       max_episode_steps=max_episode_steps)
     options = RendererOptions.parse(renderer_options)
-    env: gym.Env = VisualEnv(load_spec(resolve(target)), render=render, render_mode=render_mode, params=params, renderer_options=options)
-    return wrap_observation(env, grayscale=grayscale, resize=resize, frame_stack=frame_stack)
+    path = resolve(target)
+    unwrapped = VisualEnv(load_spec(path), render=render, render_mode=render_mode, params=params, renderer_options=options,
+                          max_episode_steps=max_episode_steps)
+    given = {"render": render, "render_mode": render_mode, "params": params, "frame_stack": frame_stack, "grayscale": grayscale or None,
+             "resize": resize, **renderer_options}
+    unwrapped.spec = EnvSpec(
+        id=f"{NAMESPACE}/{unwrapped.program.spec.id}", entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT,
+        max_episode_steps=unwrapped.max_episode_steps, kwargs={"target": str(path.resolve()), **{k: v for k, v in given.items() if v is not None}},
+    )
+    return wrap_observation(unwrapped, grayscale=grayscale, resize=resize, frame_stack=frame_stack)
+
+
+def _gymnasium_time_limit() -> int | None:
+    """The ``max_episode_steps`` of the TimeLimit wrapper that ``gymnasium.make``, when it is the caller, puts around the env.
+
+    Gymnasium truncates in that wrapper, outside the env, where ``info["outcome"]`` cannot be set, and passes
+    ``max_episode_steps`` to no entry point; the env truncates at the same step itself and says ``"max_steps"``.
+    Read from gymnasium.make's own frame; any other caller (or another Gymnasium's make) gives None.
+    """
+    frame = sys._getframe(2)  # _gymnasium_time_limit <- make <- its caller
+    if frame.f_code is not gym.envs.registration.make.__code__:
+        return None
+    steps = frame.f_locals.get("max_episode_steps")
+    if steps is None:
+        steps = getattr(frame.f_locals.get("env_spec"), "max_episode_steps", None)
+    return steps if isinstance(steps, int) and not isinstance(steps, bool) and steps > 0 else None

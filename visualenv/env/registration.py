@@ -1,14 +1,23 @@
-"""Find specs by path, build folder or id; register the bundled ones with Gymnasium."""
+"""Find specs by path, build folder or id; register specs with Gymnasium as ``visualenv/<Id>``.
+
+Ids come from three places, in this order: the bundled specs, every spec file
+in the folders of ``$VISUALENV_SPECS_PATH`` (read when visualenv is imported),
+and the files or folders given to :func:`register`. Two files with the same id
+are an error naming both, never one of them silently winning.
+"""
 
 from __future__ import annotations
 
 import json
 import os
+import re
 from pathlib import Path
 
 import gymnasium as gym
 
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
+from visualenv.spec.loader import load_spec
+from visualenv.spec.models import Spec
 
 NAMESPACE = "visualenv"
 SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
@@ -19,35 +28,92 @@ ENTRY_POINT = "visualenv.env.make:make"
 VECTOR_ENTRY_POINT = "visualenv.env.batched:make_batched"
 #: where the bundled specs live: package data in a wheel; in a checkout, a link to the repository's specs/ folder
 BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
+#: the environment variable naming folders of the user's own specs (os.pathsep separated)
+SPECS_PATH_VARIABLE = "VISUALENV_SPECS_PATH"
+#: ids given to register() in this process, with their files
+_REGISTERED: dict[str, Path] = {}
+_TOP_LEVEL = re.compile(r"^(id|max_steps)\s*[:=]\s*(.*?)\s*$")
 
 
 def spec_dirs() -> list[Path]:
     """Bundled specs, then folders listed in $VISUALENV_SPECS_PATH (os.pathsep separated)."""
-    extra = [Path(p) for p in os.environ.get("VISUALENV_SPECS_PATH", "").split(os.pathsep) if p]
+    extra = [Path(p) for p in os.environ.get(SPECS_PATH_VARIABLE, "").split(os.pathsep) if p]
     return [BUNDLED_DIR, *extra]
 
 
+def spec_files(folder: Path) -> list[Path]:
+    """The spec files directly in `folder` (.yaml, .yml, .toml), by name."""
+    return sorted(p for p in folder.iterdir() if p.suffix in SPEC_SUFFIXES and p.is_file())
+
+
 def spec_index() -> dict[str, Path]:
-    """Every known spec by its id (read from the files' `id:` line, without full validation)."""
+    """Every known spec by its id (read from the files' top-level `id` line, without full validation); the first file of an id."""
+    return _scan()[0]
+
+
+def _scan() -> tuple[dict[str, Path], dict[str, list[Path]]]:
+    """(the first file of each id, the files of each id defined more than once)."""
     index: dict[str, Path] = {}
-    for folder in spec_dirs():
-        if not folder.is_dir():
+    clashes: dict[str, list[Path]] = {}
+    files = [path for folder in spec_dirs() if folder.is_dir() for path in spec_files(folder)]
+    for path in [*files, *_REGISTERED.values()]:
+        env_id = read_header(path)[0]
+        if not env_id:
             continue
-        for path in sorted(folder.iterdir()):
-            if path.suffix in SPEC_SUFFIXES:
-                env_id = _read_id(path)
-                if env_id:
-                    index.setdefault(env_id, path)
-    return index
+        first = index.setdefault(env_id, path)
+        if _same(first, path):
+            continue
+        known = clashes.setdefault(env_id, [first])
+        if not any(_same(p, path) for p in known):
+            known.append(path)
+    return index, clashes
 
 
-def _read_id(path: Path) -> str | None:
-    for line in path.read_text(encoding="utf-8").splitlines():
-        stripped = line.strip()
-        if stripped.startswith("id:") or stripped.startswith("id ="):
-            value = stripped.split(":", 1)[1] if stripped.startswith("id:") else stripped.split("=", 1)[1]
-            return value.split("#", 1)[0].strip().strip("\"'") or None
-    return None
+def _same(a: Path, b: Path) -> bool:
+    return a.resolve() == b.resolve()
+
+
+def read_header(path: Path) -> tuple[str | None, int | None]:
+    """The top-level ``id`` and ``max_steps`` of a spec file, read line by line (fast: every spec is read on import).
+
+    Only lines that start in column 0 count, and in TOML only those before the first table.
+    """
+    env_id: str | None = None
+    max_steps: int | None = None
+    try:
+        text = path.read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return None, None
+    for line in text.splitlines():
+        if path.suffix == ".toml" and line.startswith("["):
+            break
+        m = _TOP_LEVEL.match(line)
+        if not m:
+            continue
+        value = m.group(2).split("#", 1)[0].strip().strip("\"'")
+        if m.group(1) == "id" and env_id is None:
+            env_id = value or None
+        elif m.group(1) == "max_steps" and max_steps is None and value.isdigit():
+            max_steps = int(value)
+    return env_id, max_steps
+
+
+def _duplicate_id(env_id: str, files: list[Path]) -> SpecError:
+    """Two or more files defining one id: named, each at its `id` line."""
+    first, *others = files
+    problems = []
+    for path in others:
+        line = next((i for i, text in enumerate(_lines(path), start=1) if _TOP_LEVEL.match(text) and text.startswith("id")), None)
+        problems.append(Diagnostic(str(path), line, 1 if line else None, "id",
+                                   f"the id '{env_id}' is also defined by {first}: give one of the two specs another id (e.g. a new -vN)"))
+    return SpecError(problems)
+
+
+def _lines(path: Path) -> list[str]:
+    try:
+        return path.read_text(encoding="utf-8", errors="replace").splitlines()
+    except OSError:
+        return []
 
 
 def resolve(target: str | os.PathLike[str]) -> Path:
@@ -67,18 +133,84 @@ def resolve(target: str | os.PathLike[str]) -> Path:
     name = str(target)
     if name.startswith(NAMESPACE + "/"):
         name = name[len(NAMESPACE) + 1:]
-    index = spec_index()
+    index, clashes = _scan()
+    if name in clashes:
+        raise _duplicate_id(name, clashes[name])
     if name in index:
         return index[name]
-    raise SpecError([Diagnostic(str(target), None, None, "", "not a spec file, build folder or known env id" + did_you_mean(name, index).replace("names:", "ids:"))])
+    raise SpecError([Diagnostic(str(target), None, None, "", "not a spec file, build folder or known env id" + did_you_mean(name, index).replace("names:", "ids:")
+                                + f"; your own specs: visualenv.register(path) or the folders in ${SPECS_PATH_VARIABLE}")])
+
+
+def _register_id(env_id: str, target: str, max_steps: int | None) -> str:
+    """``visualenv/<env_id>`` in Gymnasium's registry (replaced quietly when it names the same thing)."""
+    full = f"{NAMESPACE}/{env_id}"
+    kwargs = {"target": target}
+    old = gym.registry.get(full)
+    if old is not None and old.kwargs == kwargs and old.max_episode_steps == max_steps:
+        return full
+    gym.registry.pop(full, None)
+    gym.register(id=full, entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT, kwargs=kwargs, max_episode_steps=max_steps)
+    return full
 
 
 def register_bundled() -> list[str]:
-    """Register every bundled spec as `visualenv/<Id>` (idempotent)."""
+    """Register every bundled spec and every spec in $VISUALENV_SPECS_PATH as `visualenv/<Id>` (idempotent).
+
+    An id defined by two files is registered by its id alone, so that making it raises the error naming both.
+    """
+    index, clashes = _scan()
+    default_steps = Spec.model_fields["max_steps"].default
     ids = []
-    for env_id, path in spec_index().items():
-        full = f"{NAMESPACE}/{env_id}"
-        if full not in gym.registry:
-            gym.register(id=full, entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT, kwargs={"target": str(path)})
-        ids.append(full)
+    for env_id, path in index.items():
+        if env_id in clashes:
+            ids.append(_register_id(env_id, env_id, None))
+            continue
+        max_steps = read_header(path)[1]
+        ids.append(_register_id(env_id, str(path), max_steps if max_steps is not None else default_steps))
+    return ids
+
+
+def register(target: str | os.PathLike[str]) -> list[str]:
+    """Register a spec file, or every spec file in a folder, as ``visualenv/<Id>``; returns the registered ids.
+
+    >>> visualenv.register("my_specs/")           # doctest: +SKIP
+    ['visualenv/Docking2D-v0']
+    >>> env = gymnasium.make("visualenv/Docking2D-v0")   # doctest: +SKIP
+
+    Each spec is validated first (a :class:`SpecError` lists its problems, every file's at once), and
+    its ``max_steps`` becomes the id's ``max_episode_steps``. An id is then known to ``visualenv.make``
+    and the CLI as well. Registering a file again is harmless; a second file with an id that is
+    already known (bundled, in $VISUALENV_SPECS_PATH, or registered before) is a SpecError naming both files.
+    """
+    path = Path(target)
+    if path.is_dir():
+        files = spec_files(path)
+        if not files:
+            raise SpecError([Diagnostic(str(path), None, None, "", f"no spec files ({', '.join(SPEC_SUFFIXES)}) in this folder")])
+    else:
+        files = [path]
+    problems: list[Diagnostic] = []
+    specs: dict[str, tuple[Path, int]] = {}
+    for file in files:
+        try:
+            spec = load_spec(file).spec
+        except SpecError as exc:
+            problems += exc.diagnostics
+            continue
+        if spec.id in specs:
+            problems += _duplicate_id(spec.id, [specs[spec.id][0], file]).diagnostics
+            continue
+        specs[spec.id] = (file, spec.max_steps)
+    index = {**spec_index(), **_REGISTERED}
+    for env_id, (file, _) in specs.items():
+        known = _REGISTERED.get(env_id) or index.get(env_id)
+        if known is not None and not _same(known, file):
+            problems += _duplicate_id(env_id, [known, file]).diagnostics
+    if problems:
+        raise SpecError(problems)
+    ids = []
+    for env_id, (file, max_steps) in specs.items():
+        _REGISTERED[env_id] = file.resolve()
+        ids.append(_register_id(env_id, str(file.resolve()), max_steps))
     return ids

@@ -69,6 +69,9 @@ def camera_problem(name: str, object_types: Mapping[str, str]) -> str | None:
     """Why the object `name` cannot be a camera of the scene whose objects have `object_types`; None if it can."""
     cameras = [n for n, t in object_types.items() if t == "CAMERA"]
     object_type = object_types.get(name)
+    if object_type is None and not cameras:
+        return (f"no camera '{name}' in the scene: the scene has no camera (objects: {', '.join(object_types) or 'none'}); "
+                f"add one under scene.objects, e.g. {name}: {{camera: perspective, location: [0, -8, 4], look_at: [0, 0, 0]}}")
     if object_type is None:
         return (f"no camera '{name}' in the scene" + did_you_mean(name, cameras).replace("names:", "cameras:")
                 + f"; objects: {', '.join(object_types) or 'none'}")

@@ -15,6 +15,7 @@ from pathlib import Path
 from typing import Any
 
 from pydantic import BaseModel, ValidationError
+from pydantic.fields import FieldInfo
 
 from visualenv.errors import Diagnostic, SpecError, did_you_mean, in_file_order
 from visualenv.spec.models import Spec
@@ -28,6 +29,11 @@ _PATTERNS = {
     r"^[A-Za-z_][A-Za-z0-9_]*$": "a name made of letters, digits and '_', not starting with a digit",
     r"^[^\x00-\x1f\x7f]+$": "a Blender name (any text without control characters, e.g. 'Cube.001')",
     r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$": "'module:function', e.g. 'mypackage.dynamics:step'",
+}
+#: names other tools (Blender's Python API first) give the fields of a spec, for "did you mean" where spelling is no guide
+_SYNONYMS = {
+    "energy": "strength", "power": "strength", "intensity": "strength", "colour": "color", "position": "location", "pos": "location",
+    "focal_length": "lens", "target": "look_at", "hidden": "visible", "hide": "visible", "rotation_euler": "rotation", "steps": "max_steps",
 }
 _TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "text", list: "a list", dict: "a mapping", type(None): "nothing"}
 
@@ -140,10 +146,7 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
         what = _PATTERNS.get(pattern, f"text matching {pattern}")
         return f"expected {what}, got {err.get('input')!r}"
     if err["type"] in ("too_short", "too_long"):
-        ctx = err.get("ctx", {})
-        bound = ctx.get("min_length") if err["type"] == "too_short" else ctx.get("max_length")
-        items = ("entr" + ("y" if bound == 1 else "ies")) if ctx.get("field_type") == "Dictionary" else ("value" + ("" if bound == 1 else "s"))
-        return f"expected {'at least' if err['type'] == 'too_short' else 'at most'} {bound} {items}, got {ctx.get('actual_length')}"
+        return _length_message(err, path)
     if err["type"] == "literal_error":
         return _literal_message(err, value)
     if err["type"].endswith("_type") or err["type"] in ("int_from_float", "bool_parsing", "float_parsing", "int_parsing"):
@@ -155,14 +158,88 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
     return msg
 
 
+def _length_message(err: dict, path: tuple) -> str:
+    """A list or mapping of the wrong size, with both bounds when the field has them: "exactly 3 values", "3 or 4 values"."""
+    ctx = err.get("ctx", {})
+    bound = ctx.get("min_length") if err["type"] == "too_short" else ctx.get("max_length")
+    side = 0 if err["type"] == "too_short" else 1
+    bounds = [b for b in _length_bounds(path) if b[side] == bound and None not in b]
+    low, high = bounds[0] if len(bounds) == 1 else (None, None)
+    if low is not None and high is not None:
+        count = f"exactly {low}" if low == high else (f"{low} or {high}" if high == low + 1 else f"{low} to {high}")
+        bound = high
+    else:
+        count = f"{'at least' if side == 0 else 'at most'} {bound}"
+    items = ("entr" + ("y" if bound == 1 else "ies")) if ctx.get("field_type") == "Dictionary" else ("value" + ("" if bound == 1 else "s"))
+    return f"expected {count} {items}, got {ctx.get('actual_length')}"
+
+
+def _length_bounds(path: tuple) -> set[tuple[int | None, int | None]]:
+    """(min_length, max_length) of each list type the models allow at `path` (every union branch is followed)."""
+    current: list[tuple[Any, tuple]] = [(Spec, ())]
+    for part in path:
+        following: list[tuple[Any, tuple]] = []
+        for annotation, meta in current:
+            for base, _ in _branches(annotation, meta):
+                origin, args = typing.get_origin(base), typing.get_args(base)
+                if isinstance(base, type) and issubclass(base, BaseModel):
+                    field = base.model_fields.get(str(part))
+                    if field is not None:
+                        following.append((field.annotation, tuple(field.metadata)))
+                elif origin is dict and isinstance(part, str) and len(args) == 2:
+                    following.append((args[1], ()))
+                elif origin is list and isinstance(part, int) and args:
+                    following.append((args[0], ()))
+        current = following
+    bounds = set()
+    for annotation, meta in current:
+        for base, constraints in _branches(annotation, meta):
+            if typing.get_origin(base) in (list, dict):
+                low = next((c.min_length for c in constraints if getattr(c, "min_length", None) is not None), None)
+                high = next((c.max_length for c in constraints if getattr(c, "max_length", None) is not None), None)
+                bounds.add((low, high))
+    return bounds
+
+
+def _branches(annotation: Any, meta: tuple = ()) -> list[tuple[Any, tuple]]:
+    """Each alternative type of `annotation` (through Annotated, Optional and unions) with the constraints written on it."""
+    origin = typing.get_origin(annotation)
+    if origin is typing.Annotated:
+        base, *extra = typing.get_args(annotation)
+        more: list[Any] = []
+        for item in extra:
+            more += item.metadata if isinstance(item, FieldInfo) else [item]
+        return _branches(base, (*meta, *more))
+    if origin in (typing.Union, types.UnionType):
+        return [b for arg in typing.get_args(annotation) for b in _branches(arg, meta)]
+    return [(annotation, meta)]
+
+
 def _unknown_key_message(path: tuple, data: Any) -> str:
     """An unknown key, with the keys allowed there; a key that is half an expression means YAML split it at a comma."""
     key = str(path[-1])
-    if key.count("(") != key.count(")") or key.count("[") != key.count("]"):
-        return (f"unknown key '{key}': an expression with a comma inside {{...}} was split by YAML; "
-                "quote it, e.g. {init: \"uniform(-1, 1)\"}")
+    if split_at_comma(key):
+        return (f"unknown key '{key}': {COMMA_HINT}")
     allowed = _fields_at(path[:-1], data)
+    synonym = _SYNONYMS.get(key.lower())
+    if synonym in allowed:
+        return f"unknown key '{key}' (did you mean '{synonym}'? expected one of: {', '.join(allowed)})"
     return f"unknown key '{path[-1]}'" + (did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else "")
+
+
+#: what an expression cut in two at a comma of a YAML flow mapping ``{...}`` needs
+COMMA_HINT = "an expression with a comma inside {...} was split by YAML; quote it, e.g. {init: \"uniform(-1, 1)\"}"
+
+
+def split_at_comma(text: str) -> bool:
+    """Whether `text` looks like a piece of an expression that YAML split at a comma: its brackets do not pair up."""
+    depth = 0
+    for char in text:
+        depth += char in "(["
+        depth -= char in ")]"
+        if depth < 0:
+            return True
+    return depth != 0
 
 
 def _literal_message(err: dict, value: Any) -> str:

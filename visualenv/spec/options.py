@@ -36,6 +36,8 @@ class MakeOptions(StrictModel):
     frame_stack: Optional[Annotated[int, Field(ge=1, le=64)]] = Field(None, description="stack this many frames")
     grayscale: bool = False
     resize: Optional[tuple[_Pixels, _Pixels]] = Field(None, description="(width, height) of the observation")
+    max_episode_steps: Optional[Annotated[int, Field(ge=1, le=100_000_000)]] = Field(
+        None, description="Gymnasium's name: episodes are truncated after this many steps, in place of the spec's max_steps")
 
 
 def check_make_options(**options: Any) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import shutil
+import sys
 import tempfile
 import time
 from dataclasses import dataclass, field
@@ -19,6 +20,7 @@ from pathlib import Path
 from typing import Any
 
 from PIL import Image
+from tqdm import tqdm
 
 from visualenv.files import make_dir
 from visualenv.render.images import ascii_art, side_by_side
@@ -33,6 +35,8 @@ class BuildResult:
     seconds: float
     summary: list[str] = field(default_factory=list)
     ascii_preview: str = ""
+    #: what the text sketch shows, e.g. "RGB shown as grayscale text" (the colours are in preview.png)
+    ascii_note: str = ""
 
 
 def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0, device: str | None = None) -> BuildResult:
@@ -78,7 +82,18 @@ def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0,
         "files:       env.json, scene.blend, preview.png",
     ]
     first = obs if not isinstance(obs, dict) else next(iter(obs.values()))
-    return BuildResult(loaded.spec.id, final, time.perf_counter() - start, summary, ascii_art(first))
+    return BuildResult(loaded.spec.id, final, time.perf_counter() - start, summary, ascii_art(first), _sketch_note(obs))
+
+
+def _sketch_note(obs: Any) -> str:
+    """What the terminal sketch of `obs` leaves out: the colours of an RGB image, the other cameras."""
+    first = obs if not isinstance(obs, dict) else next(iter(obs.values()))
+    notes = []
+    if isinstance(obs, dict) and len(obs) > 1:
+        notes.append(f"camera '{next(iter(obs))}' of {len(obs)}")
+    if first.shape[2] >= 3:
+        notes.append("RGB shown as grayscale text; the colours are in preview.png")
+    return "; ".join(notes)
 
 
 def _swap_in(tmp: Path, final: Path) -> None:
@@ -92,8 +107,9 @@ def _swap_in(tmp: Path, final: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0) -> list[Path]:
-    """Frames of a random-action episode (observation beside the view), as PNGs."""
+def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0, progress: bool = False) -> list[Path]:
+    """Frames of a random-action episode (observation beside the view), as PNGs; `progress` shows a bar on stderr
+    (each frame is two renders, the high-resolution view a slow one)."""
     from visualenv.env import VisualEnv
     from visualenv.spec.loader import load_spec
 
@@ -101,6 +117,7 @@ def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, se
     out = make_dir(Path(out_dir))
     env = VisualEnv(loaded, render_mode="rgb_array")
     paths = []
+    bar = tqdm(total=steps + 1, desc="preview", unit="frame", disable=not progress, file=sys.stderr)
     try:
         obs, _ = env.reset(seed=seed)
         env.action_space.seed(seed)
@@ -108,11 +125,13 @@ def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, se
             path = out / f"frame_{i:04d}.png"
             Image.fromarray(side_by_side(obs, env.render())).save(path)  # type: ignore[arg-type]
             paths.append(path)
+            bar.update()
             if i == steps:
                 break
             obs, _, terminated, truncated, _ = env.step(env.action_space.sample())
             if terminated or truncated:
                 obs, _ = env.reset()
     finally:
+        bar.close()
         env.close()
     return paths
