@@ -123,8 +123,9 @@ def test_eval_of_random_actions_is_the_seeded_baseline(tmp_path):
     assert first["success_rate"] < 0.2 and 10 < first["mean_length"] < 40     # a random lander mostly crashes
 
 
-def test_a_policy_acts_on_one_torch_thread_beside_blender_and_torch_is_restored():
-    """Torch's idle threads spin on the cores Cycles renders on: evaluation runs the policy on one, then sets torch back."""
+def test_a_policy_acts_on_one_torch_thread_without_onednn_and_torch_is_restored():
+    """Torch's idle threads spin on the cores Cycles renders on, and oneDNN's kernels follow the CPU: evaluation runs
+    the policy on one thread with oneDNN off, records that MKL was pinned, then sets torch back."""
     torch = pytest.importorskip("torch")
     from visualenv.train.evaluation import evaluate, make_eval_env
 
@@ -132,13 +133,80 @@ def test_a_policy_acts_on_one_torch_thread_beside_blender_and_torch_is_restored(
 
     class Recorder:
         def predict(self, obs, deterministic=True):
-            seen.append(torch.get_num_threads())
+            seen.append((torch.get_num_threads(), torch.backends.mkldnn.enabled))
             return np.zeros((1, 2), np.float32), None
 
     torch.set_num_threads(2)
     env = make_eval_env("LunarLanding-v0", seed=0, frame_stack=1, render=False)
     try:
-        evaluate(Recorder(), env, 2)
+        results = evaluate(Recorder(), env, 2)
     finally:
         env.close()
-    assert seen and set(seen) == {1} and torch.get_num_threads() == 2
+    assert seen and set(seen) == {(1, False)} and torch.get_num_threads() == 2 and torch.backends.mkldnn.enabled
+    assert results["machine"]["cpu_isa"] and results["machine"]["torch"] == torch.__version__
+    assert isinstance(results["machine"]["pinned"], bool)
+
+
+PINNED_FORWARD = """
+import numpy as np, torch
+from stable_baselines3.common.torch_layers import NatureCNN
+from gymnasium import spaces
+from visualenv.train.reproducible import pin_mkl, pinned_inference
+pin_mkl()  # as eval and play do before they load a model, whose construction calls MKL (orthogonal init)
+net = torch.nn.Sequential(NatureCNN(spaces.Box(0, 255, (4, 100, 100), 'uint8'), 512), torch.nn.Linear(512, 2))
+rng = np.random.default_rng(0)  # weights as a policy file brings them: torch's own init draws by the CPU's vector code
+with torch.no_grad():
+    for p in net.parameters():
+        p.copy_(torch.from_numpy(rng.normal(0, 0.05, tuple(p.shape))))
+x = torch.from_numpy(rng.random((1, 4, 100, 100), dtype=np.float32))
+with pinned_inference() as pinned, torch.no_grad():
+    print(pinned, [v.hex() for v in net(x).double().flatten().tolist()])
+"""
+
+
+@pytest.mark.parametrize("dispatch", [{"ONEDNN_MAX_CPU_ISA": "SSE41"}, {"ATEN_CPU_CAPABILITY": "default"}, {"ONEDNN_MAX_CPU_ISA": "AVX2"}])
+def test_pinned_inference_gives_the_same_bits_whatever_kernels_the_cpu_offers(dispatch):
+    """The vector code oneDNN and ATen pick (AVX-512, AVX2, SSE) must not reach a pinned policy's actions: the same
+    CNN forward pass, run with each dispatch forced, gives the same bits as with none forced."""
+    pytest.importorskip("stable_baselines3")
+    import os
+    import subprocess
+    import sys
+
+    def forward(extra: dict) -> str:
+        env = {k: v for k, v in os.environ.items() if k not in ("ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY", "MKL_CBWR")}
+        run = subprocess.run([sys.executable, "-c", PINNED_FORWARD], env={**env, **extra}, capture_output=True, text=True, timeout=120)
+        assert run.returncode == 0, run.stderr
+        return run.stdout.strip()
+
+    plain = forward({})
+    assert plain.startswith("True ")  # MKL was pinned: nothing had called it yet
+    assert forward(dispatch) == plain
+
+
+def test_a_replay_on_another_machine_is_compared_within_the_stated_tolerance():
+    """Elsewhere, the renderer's kernels may move an episode's last digits: outcomes must still match exactly,
+    lengths within LENGTH_TOLERANCE steps and returns within RETURN_TOLERANCE."""
+    from visualenv.train.evaluation import LENGTH_TOLERANCE, RETURN_TOLERANCE
+
+    recorded = {"episodes": 3, "mean_reward": 12.0, "per_episode": {"returns": [14.3436, 9.0, 12.66], "lengths": [34, 41, 50],
+                                                                    "successes": [True, False, True]}}
+    drift = {"episodes": 2, "per_episode": {"returns": [14.2855, 9.0], "lengths": [34 + LENGTH_TOLERANCE, 41], "successes": [True, False]}}
+    assert differences(drift, recorded, tolerant=True) == []
+    assert len(differences(drift, recorded)) == 2  # exact: both differences are reported
+    assert differences(dict(recorded, episodes=3), recorded, tolerant=True) == []
+    assert 15.0 > 14.3436 * (1 + RETURN_TOLERANCE)
+    far = {"episodes": 2, "per_episode": {"returns": [15.0, 9.0], "lengths": [34, 41 + LENGTH_TOLERANCE + 1],
+                                           "successes": [True, True]}}
+    assert differences(far, recorded, tolerant=True) == ["episode 0: returns 15.0 (results.json: 14.3436)",
+                                                         "episode 1: lengths 44 (results.json: 41)", "episode 1: successes True (results.json: False)"]
+
+
+def test_machines_that_differ_in_what_decides_the_last_digits_are_named():
+    from visualenv.train.reproducible import machine_record, unlike
+
+    here = machine_record(True)
+    assert unlike(here, here) == []
+    assert unlike(dict(here, cpu_isa="AVX512"), here) == [f"cpu_isa AVX512 there, {here['cpu_isa']} here"]
+    assert unlike(dict(here, cpu="another name"), here) == []  # the model name alone decides nothing
+    assert unlike(None, dict(here, cpu_isa="AVX2")) == ["pinned False there, True here"]  # records before machines were kept

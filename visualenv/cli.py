@@ -415,16 +415,21 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 12884901888, a seed no run trains, selects or reports on]")
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@click.option("--write-results", is_flag=True,
+              help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made")
 @_friendly
-def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None) -> None:
+def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None,
+                 write_results: bool) -> None:
     """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
 
     The intervals are a percentile bootstrap of the mean (return, length) and Wilson's
     (success rate). With the seed of the model's run (the default when its results.json
     and config.json lie beside the model, as in runs/<Id>/<time>/ and results/<Id>/),
-    the episodes are those of the run's final evaluation and the figures match its results.json.
+    the episodes are those of the run's final evaluation and the figures match its results.json:
+    bit for bit on a machine like the one that wrote it, else within a stated tolerance (docs/testing.md).
     """
-    from visualenv.train.evaluation import differences, evaluate_model, evaluate_random, replays_prefix, seed_purpose
+    from visualenv.train.evaluation import TOLERANCE_TEXT, differences, evaluate_model, evaluate_random, replays_prefix, seed_purpose
+    from visualenv.train.reproducible import unlike
 
     if json_out:
         _check_writable(json_out, "--out")
@@ -443,20 +448,41 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
     click.echo(f"  mean return   {results['mean_reward']:8.2f}  95 % CI [{r_lo:.2f}, {r_hi:.2f}] (bootstrap), std {results['std_reward']:.2f}")
     click.echo(f"  mean length   {results['mean_length']:8.2f}  95 % CI [{l_lo:.2f}, {l_hi:.2f}] (bootstrap)")
     click.echo(f"  success rate  {100 * results['success_rate']:6.0f} %  95 % CI [{100 * s_lo:.0f} %, {100 * s_hi:.0f} %] (Wilson)")
-    matches = None
+    matches, comparison = None, None
     if recorded is not None and recorded.results is not None and (
             recorded.results.get("episodes") == results["episodes"] or replays_prefix(results, recorded.results)):
-        wrong = differences(results, recorded.results)
+        other_machine = unlike(recorded.results.get("machine"), results["machine"])
+        comparison = "tolerance" if other_machine else "exact"
+        if other_machine:
+            click.echo(f"note: this machine is unlike the one that wrote results.json ({'; '.join(other_machine)}): "
+                       f"episodes are compared within a tolerance ({TOLERANCE_TEXT}), not bit for bit")
+        wrong = differences(results, recorded.results, tolerant=bool(other_machine))
         matches = not wrong
         what = "its run's results.json" if recorded.results["episodes"] == results["episodes"] else \
             f"the first {results['episodes']} episodes of its run's results.json"
-        click.echo(f"reproduces {what}" if matches else f"differs from {what}: " + "; ".join(wrong[:5]))
+        click.echo((f"reproduces {what}" + (" within that tolerance" if other_machine else "")) if matches
+                   else f"differs from {what}: " + "; ".join(wrong[:5]))
         if recorded.note:
             click.echo(f"note: {recorded.note}")
+    if write_results:
+        click.echo(f"wrote {_write_results(results, model_path, spec)}")
     if json_out:
-        record = {"spec": spec, "model": model_path, **results, "matches_results_json": matches}
+        record = {"spec": spec, "model": model_path, **results, "matches_results_json": matches, "comparison": comparison}
         Path(json_out).write_text(json.dumps(record, indent=2) + "\n")
         click.echo(f"wrote {json_out}")
+
+
+def _write_results(results: dict, model_path: str, spec: str) -> Path:
+    """`eval --write-results`: the evaluation becomes results.json beside the model; what the run recorded besides the
+    figures (selection, steps, wall time) is kept, and `evaluated` says which file and command made them."""
+    if model_path == RANDOM:
+        raise click.BadParameter("random actions have no results.json of their own", param_hint="--write-results")
+    path = Path(model_path).parent / "results.json"
+    kept = json.loads(path.read_text()) if path.is_file() else {}
+    kept.pop("reevaluated", None)
+    command = f"visualenv eval {spec} --model {model_path} --seed {results['eval_seed']} --episodes {results['episodes']}"
+    path.write_text(json.dumps({**kept, **results, "evaluated": {"file": Path(model_path).name, "command": command}}, indent=2) + "\n")
+    return path
 
 
 @main.command("export-policy")

@@ -14,11 +14,9 @@ format of SB3's own ``BasePolicy.save``, so SB3 loads it directly::
 
 from __future__ import annotations
 
-import sys
-from contextlib import contextmanager
 from importlib import import_module
 from pathlib import Path
-from typing import Any, Iterator
+from typing import Any
 
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.errors import VisualEnvError
@@ -36,29 +34,6 @@ def algorithm_class(name: str) -> Any:
     if name not in classes:
         raise ValueError(f"unknown algorithm '{name}': expected one of {', '.join(classes)}")
     return classes[name]
-
-
-@contextmanager
-def one_torch_thread() -> Iterator[None]:
-    """Torch on one thread while a policy acts beside Blender in this process, then as it was.
-
-    A policy's forward pass on one observation gains nothing from more threads, and
-    when other work holds the cores (another run, a Ray cluster's processes) each of
-    torch's parallel regions waits for a thread that is not running: measured on 2
-    cores beside a training run, VisualCartPole's pretrained agent took 139 ms a step
-    with torch on 2 threads against 10 ms on one (idle: 7.0 against 6.8 ms). Torch is
-    left alone if nothing imported it (random actions).
-    """
-    torch = sys.modules.get("torch")
-    if torch is None:
-        yield
-        return
-    before = torch.get_num_threads()
-    torch.set_num_threads(1)
-    try:
-        yield
-    finally:
-        torch.set_num_threads(before)
 
 
 def load_model(model_path: str, algo: str = "ppo") -> Any:

@@ -12,7 +12,8 @@ from visualenv.files import make_dir
 from visualenv.render.images import side_by_side
 from visualenv.errors import VisualEnvError
 from visualenv.env.wrappers import FrameStack
-from visualenv.train.models import load_model, one_torch_thread, stacked_like
+from visualenv.train.models import load_model, stacked_like
+from visualenv.train.reproducible import pin_mkl, pinned_inference
 
 VIDEO_FORMATS = (".gif", ".webp", ".mp4")
 WEBP_QUALITY = 70  # lossy animated WebP: a few hundred kB where a GIF of path-traced frames takes megabytes
@@ -59,12 +60,13 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation."""
     if record:
         check_recording(record)
+    pin_mkl()  # before the model is built (its initialisation calls MKL): the actions eval's episodes had
     model = load_model(model_path, algo) if model_path else None
     env = _play_env(spec, model, model_path, view_preset, view_size)
     env.action_space.seed(seed)
     frames: list[np.ndarray] | None = [] if record else None
     try:
-        with one_torch_thread():
+        with pinned_inference():
             results = [_play_episode(env, model, seed + episode, frames, max_frames) for episode in range(episodes)]
     finally:
         env.close()

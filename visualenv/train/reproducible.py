@@ -1,0 +1,137 @@
+"""Policy inference that gives the same actions on any x86-64 CPU, and a record of the machine an evaluation ran on.
+
+A policy's float arithmetic follows the CPU's vector instructions: oneDNN (torch's
+convolutions) and MKL (its matrix products) pick AVX-512, AVX2 or SSE code at run
+time, and each sums in its own order. Discrete agents hide the last-digit
+differences behind argmax; continuous ones act on them, and over an episode they
+grow (LunarLanding's first episode returned 14.3436 under AVX2, 14.3419 under
+AVX-512). So evaluations and play run the policy with oneDNN off (torch's own
+convolution, whose products go through MKL) and MKL in its *conditional numerical
+reproducibility* mode ``COMPATIBLE``, which runs the same code on every CPU.
+Measured on the development machine: the same returns, to the last bit, under
+``ONEDNN_MAX_CPU_ISA=SSE41`` and ``ATEN_CPU_CAPABILITY=default``.
+
+MKL takes its mode once, before its first call in a process: a process that
+already trained (a run's own final evaluation) cannot be pinned afterwards, and
+its record says so. ``visualenv eval`` runs in a fresh process and always is.
+
+What pinning cannot reach is the renderer: Cycles and Embree pick their kernels
+by CPU too. :func:`machine_record` notes what an evaluation ran on, and
+:func:`unlike` says how another machine differs, so a replay elsewhere is
+compared with a tolerance (:mod:`visualenv.train.evaluation`) instead of bit for bit.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import platform
+import sys
+from contextlib import contextmanager
+from pathlib import Path
+from typing import Any, Iterator
+
+from visualenv.versions import versions
+
+MKL_CBWR_BRANCH = 1  # mkl_cbwr_get's argument: the code branch in force
+MKL_CBWR_COMPATIBLE = 3  # the branch that runs the same code on every CPU
+#: the keys of a machine record that must agree for a replay to be exact
+LIKENESS_KEYS = ("cpu_isa", "torch", "blender", "numpy", "pinned")
+
+
+def _mkl_service() -> Any:
+    """MKL's service functions inside torch's CPU library (linked in statically), or None where they are not there."""
+    try:
+        import torch
+
+        lib = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"))
+        lib.mkl_serv_cbwr_get.restype = lib.mkl_serv_cbwr_set.restype = ctypes.c_int
+        return lib
+    except (ImportError, OSError, AttributeError):
+        return None
+
+
+def pin_mkl() -> bool:
+    """Put MKL in its COMPATIBLE mode if it has not run yet in this process; whether it is in that mode now.
+
+    Call it before a model is built: SB3's orthogonal initialisation already calls MKL.
+
+    ``mkl_cbwr_set`` (MKL's service call, as ``MKL_CBWR=COMPATIBLE`` in the environment
+    would do at start) rather than the variable: set here it would reach every process
+    started later, training included, where the mode costs speed for nothing.
+    """
+    lib = _mkl_service()
+    if lib is None:
+        return False
+    if lib.mkl_serv_cbwr_get(MKL_CBWR_BRANCH) == MKL_CBWR_COMPATIBLE:
+        return True
+    return bool(lib.mkl_serv_cbwr_set(MKL_CBWR_COMPATIBLE) == 0)
+
+
+@contextmanager
+def pinned_inference() -> Iterator[bool]:
+    """Torch on one thread, oneDNN off and MKL pinned while a policy acts; yields whether MKL could be pinned.
+
+    One thread: a forward pass on one observation gains nothing from more, and beside
+    Blender or another run each parallel region waits for a busy core (VisualCartPole's
+    agent took 139 ms a step on 2 threads beside a training run, 10 ms on one). Torch is
+    left alone if nothing imported it (random actions).
+    """
+    torch = sys.modules.get("torch")
+    if torch is None:
+        yield False
+        return
+    threads, onednn = torch.get_num_threads(), torch.backends.mkldnn.enabled
+    torch.set_num_threads(1)
+    torch.backends.mkldnn.enabled = False
+    try:
+        yield pin_mkl()
+    finally:
+        torch.set_num_threads(threads)
+        torch.backends.mkldnn.enabled = onednn
+
+
+def machine_record(pinned: bool) -> dict[str, Any]:
+    """What a replay of an evaluation needs to know about the machine that ran it."""
+    record: dict[str, Any] = {"cpu_isa": cpu_isa(), "cpu": _cpu_name(), "machine": platform.machine(), "pinned": pinned}
+    torch = sys.modules.get("torch")
+    record["torch"] = torch.__version__ if torch is not None else None
+    known = versions()
+    record["blender"], record["numpy"] = known.get("blender"), known["numpy"]
+    return record
+
+
+def cpu_isa() -> str:
+    """The widest vector instruction set this CPU offers of those the renderer's and numpy's kernels choose between."""
+    flags = set()
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("flags"):
+                flags = set(line.split(":", 1)[1].split())
+                break
+    except OSError:
+        pass
+    for isa, flag in (("AVX512", "avx512f"), ("AVX2", "avx2"), ("SSE4.2", "sse4_2")):
+        if flag in flags:
+            return isa
+    return platform.machine() or "unknown"
+
+
+def _cpu_name() -> str:
+    try:
+        for line in Path("/proc/cpuinfo").read_text().splitlines():
+            if line.startswith("model name"):
+                return line.split(":", 1)[1].strip()
+    except OSError:
+        pass
+    return platform.processor() or "unknown"
+
+
+def unlike(recorded: dict[str, Any] | None, here: dict[str, Any]) -> list[str]:
+    """How this machine differs from the recorded one in what decides an evaluation's last digits ([] if alike).
+
+    A record without a machine (results written before records kept one) was made on the
+    development machine with AVX2, unpinned.
+    """
+    recorded = recorded or {"cpu_isa": "AVX2", "pinned": False}
+    return [f"{key} {recorded.get(key)} there, {here.get(key)} here" for key in LIKENESS_KEYS
+            if key in recorded and recorded.get(key) != here.get(key)]
