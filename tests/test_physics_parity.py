@@ -17,7 +17,7 @@ gym = pytest.importorskip("gymnasium")
 
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 
-SPECS = Path(__file__).resolve().parents[1] / "specs"
+SPECS = Path(__file__).resolve().parents[1] / "specs" / "mujoco"
 PORTS = [("inverted_pendulum.yaml", "InvertedPendulum-v5"), ("half_cheetah.yaml", "HalfCheetah-v5"), ("reacher.yaml", "Reacher-v5")]
 
 

@@ -18,6 +18,7 @@ from typing import Any
 from visualenv.expr import BOOL, NUM, Type
 from visualenv.expr.codegen import local, name, tuple_of
 from visualenv.physics.model import PhysicsError, PhysicsModel, load_model, resolve_model_path
+from visualenv.physics.scene import PhysicsScene, physics_scene
 from visualenv.spec.models import Physics
 
 #: the generated functions' globals that call into one env's simulation (bound by Program.functions)
@@ -38,6 +39,7 @@ class PhysicsPlan:
     reset_targets: list[str] = field(default_factory=list)  # qpos/qvel names the reset writes, in order
     reads: dict[str, list[str]] = field(default_factory=dict)  # read name -> physics names it gathers
     observe_size: int = 0  # values in the state-only observation
+    scene: PhysicsScene | None = None  # what a renderer draws (made when the spec renders)
 
     @property
     def dt(self) -> float:
@@ -83,4 +85,4 @@ def call_statement(function: str, values: list[str]) -> ast.stmt:
     return ast.Expr(ast.Call(name(function), [tuple_of([name(local(v)) for v in values])], []))
 
 
-__all__ = ["ADVANCE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "load", "read_statement", "call_statement", "scope"]
+__all__ = ["ADVANCE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "load", "physics_scene", "read_statement", "call_statement", "scope"]

@@ -30,7 +30,7 @@ from visualenv.compiler import physics as phys
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
-from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem
+from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, WORLD_PROPERTIES, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Spec
 
 #: names every expression may read besides the spec's own (not all in every context)
@@ -137,6 +137,7 @@ class Program:
             base_dir=self.loaded.base_dir,
             source=self.loaded.source,
             cameras=tuple(spec.camera_uses()),
+            physics=self.physics.scene if self.physics is not None else None,
         )
 
 
@@ -253,6 +254,11 @@ class _Compiler:
         if "dt" in self.spec.model_fields_set:
             self.error(("dt",), "with physics, dt is the model's timestep times physics.frame_skip: leave 'dt' out", key=True)
         self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts)
+        if self.spec.observation is not None or self.spec.render.view.camera:  # drawn: every geom must be drawable
+            try:
+                self.plan.scene = phys.physics_scene(model)
+            except phys.PhysicsError as exc:
+                self.error(("physics", "model"), str(exc))
         self.pnames = phys.scope(model, section.contacts)
 
     def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: set[str] = frozenset()) -> None:  # type: ignore[assignment]
@@ -621,6 +627,8 @@ class _Compiler:
     def bound_object_known(self, obj_name: str) -> bool:
         """A bound object must be declared, unless a .blend may hold it (the renderer checks those)."""
         declared = self.spec.scene.objects
+        if obj_name == WORLD_ACTOR and obj_name not in declared:
+            return True  # the world: the spec's, the file's, or the default one
         if self.spec.scene.file is None and obj_name not in declared:
             self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, declared).replace("names:", "objects:"), key=True)
             return False
@@ -632,10 +640,17 @@ class _Compiler:
         _, obj_name, prop = path
         obj = self.spec.scene.objects.get(obj_name)
         problem = type_problem(prop, obj_name, object_type(obj)) if obj is not None else None
+        world = obj is None and obj_name == WORLD_ACTOR
+        if world and prop not in WORLD_PROPERTIES:
+            problem = f"the World actor binds the world's {', '.join(map(repr, WORLD_PROPERTIES))}, not '{prop}'"
         if problem:
             self.error(path, problem, key=True)
             return
-        checked_values = self.binding_values(path, prop, raw, scope)
+        if world and prop == "rotation" and not isinstance(raw, list) and not str(raw).strip().startswith("["):
+            checked = self.expr(path, raw, scope, expect=NUM)  # one angle: about the vertical axis
+            checked_values = [const(0.0), const(0.0), lower(checked.tree)] if checked else None
+        else:
+            checked_values = self.binding_values(path, prop, raw, scope)
         if checked_values is None:
             return
         text = "[" + ", ".join(map(str, raw)) + "]" if isinstance(raw, list) else str(raw)
@@ -657,6 +672,8 @@ class _Compiler:
         if spec.observation is None or spec.scene.file is not None:
             return
         types = {n: object_type(o) for n, o in spec.scene.objects.items()}
+        if self.plan is not None and self.plan.scene is not None:  # the model's cameras, by their MuJoCo names
+            types.update({c.name: "CAMERA" for c in self.plan.scene.cameras})
         for path, camera in spec.camera_uses():
             problem = camera_problem(camera, types)
             if problem:

@@ -38,7 +38,7 @@ _TOP_LEVEL = re.compile(r"^(id|max_steps)\s*[:=]\s*(.*?)\s*$")
 def spec_dirs() -> list[Path]:
     """Bundled specs, then folders listed in $VISUALENV_SPECS_PATH (os.pathsep separated)."""
     extra = [Path(p) for p in os.environ.get(SPECS_PATH_VARIABLE, "").split(os.pathsep) if p]
-    return [BUNDLED_DIR, *extra]
+    return [BUNDLED_DIR, BUNDLED_DIR / "mujoco", *extra]  # mujoco/: physics specs (Gymnasium's MuJoCo envs), apart until batches step them
 
 
 def spec_files(folder: Path) -> list[Path]:

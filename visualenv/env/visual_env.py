@@ -196,6 +196,7 @@ class VisualEnv(gym.Env):
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
             return None
+        self._pose()
         return self.renderer.render_view(self._bind())
 
     def close(self) -> None:
@@ -365,8 +366,15 @@ class VisualEnv(gym.Env):
 
     # -- internals --------------------------------------------------------------------------------
 
+    def _pose(self) -> None:
+        """A physics spec's bodies and cameras take MuJoCo's poses before a render."""
+        if self._sim is not None:
+            data = self._sim.data
+            self.renderer.set_physics_poses(data.xpos, data.xquat, data.cam_xpos, data.cam_xmat)
+
     def _observe(self) -> Any:
         if self.uses_camera:
+            self._pose()
             obs = self.renderer.render_observation(self._bind())
             self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs

@@ -59,6 +59,7 @@ class RenderPlan:
     base_dir: Path
     source: SourceMap
     cameras: tuple[tuple[tuple, str], ...] = ()  # every camera the spec names, with its field's path (Spec.camera_uses)
+    physics: Any = None  # a physics spec's drawable model (visualenv.physics.scene.PhysicsScene), posed by set_physics_poses
 
     def with_options(self, options: "RendererOptions") -> "RenderPlan":
         """This plan with the options' overrides written into its render settings (RendererOptions checked them when it was made)."""
@@ -93,6 +94,9 @@ class Renderer(ABC):
     @abstractmethod
     def close(self) -> None:
         """Free everything this renderer created (idempotent)."""
+
+    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray) -> None:  # noqa: B027 - optional
+        """A physics spec's poses for the next render: MjData's body and camera arrays (a backend without physics ignores them)."""
 
 
 Readback = Literal["auto", "memory", "file"]

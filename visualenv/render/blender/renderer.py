@@ -16,12 +16,13 @@ from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file
-from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through
+from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, world_writer
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
+from visualenv.render.blender.mjcf import build_physics_objects
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
-from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem
+from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, Material
 
 _instances = itertools.count()
@@ -83,6 +84,9 @@ class BlenderRenderer(Renderer):
         tracker = DataTracker()
         try:
             built = build_scene(plan.scene, base_dir=plan.base_dir, source=plan.source, prefix=f"visualenv{next(_instances)}")
+            self._poses = None if plan.physics is None else build_physics_objects(
+                plan.physics, built, base_dir=plan.base_dir, source=plan.source,
+                add_light=not plan.physics.lights and not any(o.type == "LIGHT" for o in built.objects.values()))
             self._check_names(built)
             self._setup(built, settings.threads)
         except BaseException:
@@ -101,6 +105,11 @@ class BlenderRenderer(Renderer):
         problems: list[Diagnostic] = []
         missing: set[str] = set()
         for target in plan.bindings:
+            if is_world(target.object, types):
+                why = world_writer(built.scene.world, target.property)
+                if isinstance(why, str):
+                    problems.append(plan.source.diagnostic(("actors", target.object, target.property), why, key=True))
+                continue
             if target.object not in types:
                 if target.object not in missing:
                     missing.add(target.object)
@@ -173,7 +182,8 @@ class BlenderRenderer(Renderer):
         plan = self.plan
         bound: dict[str, set[str]] = {}
         for target in plan.bindings:
-            bound.setdefault(target.object, set()).add(target.property)
+            if not is_world(target.object, built.objects):
+                bound.setdefault(target.object, set()).add(target.property)
         for name, properties in bound.items():
             user_file.free_bound_channels(built.objects[name], properties)
         cameras = [built.objects[v.camera] for v in plan.views.values()]
@@ -190,13 +200,19 @@ class BlenderRenderer(Renderer):
         setters = []
         start = 0
         for target in plan.bindings:
+            if is_world(target.object, objects):
+                setter = world_writer(self._scene.world, target.property)
+                assert not isinstance(setter, str), setter  # _check_names said why
+                setters.append((start, start + target.size, setter))
+                start += target.size
+                continue
             obj = objects[target.object]
             setters.append((start, start + target.size, self._setter(target.object, obj, target.property, targets)))
             start += target.size
         self._size = start
         # aimed objects to re-aim after the setters ran: those that move, or whose parents move, or whose target does
         aimed = set(targets) | {t.object for t in plan.bindings if t.property == "look_at"}
-        moved = {objects[t.object].as_pointer() for t in plan.bindings if BINDABLES[t.property].moves}
+        moved = {objects[t.object].as_pointer() for t in plan.bindings if BINDABLES[t.property].moves and not is_world(t.object, objects)}
         self._aimed = [(objects[name], name) for name in sorted(aimed) if any(o.as_pointer() in moved for o in _with_ancestors(objects[name]))]
         self._targets = targets
         return setters
@@ -268,6 +284,11 @@ class BlenderRenderer(Renderer):
         if values != self._last:
             write_bindings(values, self._last, self._size, self._setters, self._aimed, self._targets)
             self._last = values
+
+    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray) -> None:
+        """Every moving body's and the model's cameras' poses from MuJoCo's arrays (:mod:`mjcf`)."""
+        if self._poses is not None:
+            self._poses.write(xpos, xquat, cam_xpos, cam_xmat)
 
     def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
         self._check_open()
@@ -400,6 +421,11 @@ def write_bindings(values: tuple, last: tuple | None, size: int, setters: list[t
             setter(part)
     for obj, name in aimed:
         aim(obj, targets[name])
+
+
+def is_world(name: str, objects: Any) -> bool:
+    """Whether an actor of this name binds the world: it is called World and no object is."""
+    return name == WORLD_ACTOR and name not in objects
 
 
 def _with_ancestors(obj: Any) -> Iterator[Any]:

@@ -1,0 +1,141 @@
+"""An MJCF model drawn by Blender: geoms become objects that take MuJoCo's poses; hidden groups stay hidden; model cameras follow.
+
+Real renders at tiny sizes, asserted on pixels: the pendulum's pole (cyan in
+Gymnasium's XML) stands above the cart, and leans right when the hinge turns;
+a geom in group 3 (hidden by MuJoCo's viewer) never shows; HalfCheetah's
+``track`` camera keeps the running cheetah in view.
+"""
+
+from __future__ import annotations
+
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+import visualenv  # noqa: E402
+from visualenv.env.visual_env import VisualEnv  # noqa: E402
+from visualenv.errors import SpecError  # noqa: E402
+
+POLE = """\
+id: Pole-v0
+params: {angle: 0.0}
+physics:
+  model: package:gymnasium.envs.mujoco/assets/inverted_pendulum.xml
+  reset: {values: {qpos_hinge: angle}}
+scene:
+  world: {color: [0.02, 0.02, 0.02]}
+  objects:
+    Camera: {camera: perspective, location: [0, -3, 0.3], look_at: [0, 0, 0.3], lens: 35}
+observation: {camera: Camera, resolution: [48, 48], color: rgb}
+reward: 1.0
+"""
+
+
+def cyan(image: np.ndarray) -> np.ndarray:
+    """Where the pole is: green and blue well above red (its rgba is 0 0.7 0.7)."""
+    r, g, b = (image[..., i].astype(int) for i in range(3))
+    return (g > r + 40) & (b > r + 40)
+
+
+def pole_pixels(tmp_path: Path, angle: float) -> np.ndarray:
+    path = tmp_path / "pole.yaml"
+    path.write_text(POLE, encoding="utf-8")
+    env = visualenv.make(path, params={"angle": angle})
+    try:
+        obs, _ = env.reset(seed=0)
+        assert env.unwrapped.data.qpos[1] == angle
+        return cyan(obs)
+    finally:
+        env.close()
+
+
+def test_the_pole_stands_then_leans_where_the_hinge_turns_it(tmp_path: Path) -> None:
+    upright, leaning = pole_pixels(tmp_path, 0.0), pole_pixels(tmp_path, 1.0)
+    assert upright.sum() >= 8 and leaning.sum() >= 8, (upright.sum(), leaning.sum())
+    rows_u, cols_u = np.nonzero(upright)
+    rows_l, cols_l = np.nonzero(leaning)
+    # upright: a column about the image's centre, reaching higher than the leaning pole does
+    assert abs(cols_u.mean() - 23.5) < 3, cols_u.mean()
+    assert cols_l.mean() > cols_u.mean() + 4, (cols_u.mean(), cols_l.mean())  # a positive hinge angle turns +z to +x: right
+    assert rows_u.min() < rows_l.min() - 2, (rows_u.min(), rows_l.min())
+
+
+HIDDEN = """\
+<mujoco>
+  <worldbody>
+    <light directional="true" pos="0 0 3" dir="0 0 -1"/>
+    <body name="ball" pos="-0.3 0 0">
+      <freejoint/>
+      <geom name="visible" type="sphere" size="0.2" rgba="0 1 0 1"/>
+    </body>
+    <geom name="hidden" type="box" size="0.2 0.2 0.2" pos="0.3 0 0" rgba="1 0 0 1" group="3"/>
+    <geom name="shown" type="ellipsoid" size="0.1 0.1 0.2" pos="0.3 0 0.5" rgba="0 0 1 1" group="2"/>
+    <camera name="front" pos="0 -2 0.2" xyaxes="1 0 0 0 0 1"/>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_hidden_groups_stay_hidden_and_the_models_camera_sees(tmp_path: Path) -> None:
+    (tmp_path / "m.xml").write_text(HIDDEN, encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text(textwrap.dedent("""\
+        id: Hidden-v0
+        physics: {model: m.xml, frame_skip: 5}
+        scene: {world: {color: [0, 0, 0]}}
+        observation: {camera: front, resolution: [32, 32], color: rgb}
+        actions: {discrete: [{}]}
+        reward: 0
+        """), encoding="utf-8")
+    env = VisualEnv(spec)
+    try:
+        obs, _ = env.reset(seed=0)
+        img = obs.astype(int)
+        r, g, b = img[..., 0], img[..., 1], img[..., 2]
+        assert ((g > 60) & (g > r + 40) & (g > b + 40)).sum() > 5  # the sphere (group 0)
+        assert ((b > 60) & (b > r + 40) & (b > g + 40)).sum() > 2  # the ellipsoid (group 2)
+        assert ((r > 60) & (r > g + 40) & (r > b + 40)).sum() == 0  # the box of group 3: hidden
+        left = (g > r + 40)[:, :16].sum()
+        assert left > (g > r + 40)[:, 16:].sum()  # the sphere is left of centre, where the body put it
+        for _ in range(30):  # the free body falls: its pixels move down
+            obs, *_ = env.step(0)
+        rows = np.nonzero((obs[..., 1].astype(int) > obs[..., 0].astype(int) + 40))[0]
+        assert rows.size == 0 or rows.mean() > np.nonzero(g > r + 40)[0].mean() + 2
+    finally:
+        env.close()
+
+
+def test_a_height_field_is_a_located_error(tmp_path: Path) -> None:
+    (tmp_path / "h.xml").write_text(textwrap.dedent("""\
+        <mujoco>
+          <asset><hfield name="ground" nrow="4" ncol="4" size="1 1 0.1 0.1"/></asset>
+          <worldbody><geom name="terrain" type="hfield" hfield="ground"/><camera name="c" pos="0 -2 1"/></worldbody>
+        </mujoco>
+        """), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: H-v0\nphysics: {model: h.xml}\nobservation: {camera: c}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    with pytest.raises(SpecError, match=r"s.yaml:2.*physics.model: geom 'terrain' is a height field \(hfield\), which visualenv cannot draw yet"):
+        VisualEnv(spec)
+
+
+def brown(image: np.ndarray) -> int:
+    pixels = image.astype(int)
+    return int((pixels[..., 0] > pixels[..., 2] + 15).sum())
+
+
+def test_half_cheetahs_track_camera_follows_it() -> None:
+    env = visualenv.make("visualenv/VisualHalfCheetah-v0", samples=1)
+    try:
+        first, _ = env.reset(seed=0)
+        env.unwrapped.data.qpos[0] += 5.0  # five metres on: a camera fixed in the world would see no cheetah (tested: 0 pixels)
+        obs, *_ = env.step(np.zeros(6))
+        assert env.unwrapped.data.qpos[0] > 4.5
+        before, after = brown(first), brown(obs)  # the cheetah's material (rgba .7 .5 .3) against the grey sky and light floor
+        assert before > 50 and abs(after - before) < 0.3 * before, (before, after)
+        assert np.abs(obs.astype(int) - first.astype(int)).mean() < 5
+    finally:
+        env.close()

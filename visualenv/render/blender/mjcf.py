@@ -1,0 +1,137 @@
+"""An MJCF model's geoms, lights and cameras as Blender objects, posed from MuJoCo's arrays every step.
+
+Each body that has geoms (or a camera) becomes an empty; its geoms are meshes
+parented to it at their fixed offsets, so a step writes one location and one
+quaternion per moving body (rows of ``xpos`` and ``xquat``) and nothing per geom.
+Cameras take ``cam_xpos`` and ``cam_xmat`` as MuJoCo computes them, so fixed,
+``track`` and ``trackcom`` cameras move as in MuJoCo. Geoms keep their MuJoCo
+names (objects a spec can refer to); bodies are ``body:<name>``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+from typing import Any
+
+import bmesh
+import bpy
+import numpy as np
+from mathutils import Matrix, Quaternion, Vector
+
+from visualenv.physics.scene import GeomShape, PhysicsScene
+from visualenv.render.blender.materials import make_material
+from visualenv.spec.models import Material
+
+#: round shapes' segments: enough for smooth silhouettes at observation sizes
+SEGMENTS = 24
+
+
+@dataclass
+class PoseWriter:
+    """Writes MuJoCo's poses into the objects: the moving bodies' empties and the model's cameras."""
+
+    bodies: list[tuple[int, Any]]  # (body index, empty) of the moving bodies
+    cameras: list[Any]  # camera objects by MuJoCo camera index
+
+    def write(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray) -> None:
+        if self.bodies:
+            rows = [i for i, _ in self.bodies]
+            positions, quats = xpos[rows].tolist(), xquat[rows].tolist()
+            for (_, empty), p, q in zip(self.bodies, positions, quats):
+                empty.location = p
+                empty.rotation_quaternion = q
+        for i, cam in enumerate(self.cameras):
+            cam.location = cam_xpos[i].tolist()
+            cam.rotation_quaternion = Matrix(cam_xmat[i].reshape(3, 3).tolist()).to_quaternion()
+
+
+def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool) -> PoseWriter:
+    """Every drawable geom, light and camera of the model in `built`'s collection (names added to built.objects)."""
+    collection = built.collection
+    empties: dict[int, Any] = {}
+
+    def empty_of(body: int) -> Any:
+        if body not in empties:
+            obj = bpy.data.objects.new(f"body:{scene_data.body_names[body]}", None)
+            collection.objects.link(obj)
+            obj.rotation_mode = "QUATERNION"
+            obj.location = scene_data.body_pos[body].tolist()
+            obj.rotation_quaternion = scene_data.body_quat[body].tolist()
+            empties[body] = obj
+        return empties[body]
+
+    for geom in scene_data.geoms:
+        obj = _geom_object(geom, base_dir=base_dir, source=source)
+        collection.objects.link(obj)
+        obj.parent = empty_of(geom.body)
+        built.objects.setdefault(geom.name, obj)
+    for light in scene_data.lights:
+        data = bpy.data.lights.new(light.name, "SUN" if light.directional else "SPOT")
+        data.color = light.diffuse
+        data.energy = 3.0 * max(light.diffuse) if light.directional else 300.0 * max(light.diffuse)
+        if not light.directional:
+            data.spot_size = min(math.radians(2 * light.cutoff), math.pi)
+        obj = bpy.data.objects.new(light.name, data)
+        collection.objects.link(obj)
+        obj.location = light.pos
+        obj.rotation_mode = "QUATERNION"
+        obj.rotation_quaternion = Vector(light.direction).to_track_quat("-Z", "Y")
+        built.objects.setdefault(light.name, obj)
+    if add_light:  # MuJoCo's viewer lights a model without lights by a headlight; a sun from above and in front stands in
+        sun = bpy.data.objects.new("mujoco-headlight", bpy.data.lights.new("mujoco-headlight", "SUN"))
+        sun.data.energy = 3.0
+        sun.rotation_euler = (0.6, 0.0, 0.3)
+        collection.objects.link(sun)
+    cameras = []
+    for cam_info in scene_data.cameras:
+        cam = bpy.data.cameras.new(cam_info.name)
+        cam.sensor_fit = "VERTICAL"
+        cam.angle_y = math.radians(cam_info.fovy)
+        cam.clip_start, cam.clip_end = 0.01, 100.0
+        obj = bpy.data.objects.new(cam_info.name, cam)
+        obj.rotation_mode = "QUATERNION"
+        collection.objects.link(obj)
+        built.objects.setdefault(cam_info.name, obj)
+        cameras.append(obj)
+    moving = [(int(b), empties[int(b)]) for b in scene_data.moving if int(b) in empties]
+    return PoseWriter(moving, cameras)
+
+
+def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any) -> Any:
+    mesh = bpy.data.meshes.new(geom.name)
+    bm = bmesh.new()
+    size = geom.size
+    if geom.kind == "plane":
+        bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=1.0)
+        bmesh.ops.scale(bm, vec=Vector((size[0], size[1], 1.0)), verts=bm.verts)
+    elif geom.kind == "box":
+        bmesh.ops.create_cube(bm, size=2.0)
+        bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)
+    elif geom.kind in ("sphere", "ellipsoid"):
+        bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=1.0 if geom.kind == "ellipsoid" else size[0])
+        if geom.kind == "ellipsoid":
+            bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)
+    elif geom.kind in ("cylinder", "capsule"):
+        bmesh.ops.create_cone(bm, cap_ends=True, segments=SEGMENTS, radius1=size[0], radius2=size[0], depth=2 * size[1])
+        if geom.kind == "capsule":  # a cylinder and two spheres: the overlap does not show
+            for z in (-size[1], size[1]):
+                bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=size[0], matrix=Matrix.Translation((0, 0, z)))
+    elif geom.kind == "mesh" and geom.vertices is not None and geom.faces is not None:
+        verts = [bm.verts.new(v) for v in geom.vertices.tolist()]
+        for face in geom.faces.tolist():
+            try:
+                bm.faces.new([verts[i] for i in face])
+            except ValueError:  # a duplicate face: MuJoCo keeps it, Blender cannot
+                pass
+    for face in bm.faces:
+        face.smooth = geom.kind in ("sphere", "ellipsoid", "capsule", "cylinder")
+    bm.to_mesh(mesh)
+    bm.free()
+    obj = bpy.data.objects.new(geom.name, mesh)
+    material = Material(color=list(geom.rgba), roughness=0.6)
+    mesh.materials.append(make_material(f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d))
+    obj.rotation_mode = "QUATERNION"
+    obj.location = geom.pos
+    obj.rotation_quaternion = Quaternion(geom.quat)
+    return obj
