@@ -21,6 +21,7 @@ from visualenv.errors import Diagnostic, SpecError, did_you_mean, in_file_order
 from visualenv.spec.models import Spec
 from visualenv.spec.source import BASE60, SourceMap, format_path, load_document, load_toml_text, load_yaml_text
 from visualenv.spec.unused import unused_fields
+from visualenv.spec.yaml_pitfalls import COMMA_HINT, split_at_comma
 
 _OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
 #: what the patterns of the models mean, in words
@@ -91,7 +92,7 @@ def _diagnostics(exc: ValidationError, data: Any, smap: SourceMap) -> list[Diagn
         grouped.setdefault(path, []).append(err)
     out: list[Diagnostic] = []
     for path, errs in grouped.items():
-        message = _message(path, errs, data)
+        message = _message(path, errs, data) + _misplaced_hint(path, errs, data)
         out.append(smap.diagnostic(path, message, key=errs[0]["type"] == "extra_forbidden"))
     out[:] = in_file_order(out)
     return out
@@ -158,6 +159,23 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
     return msg
 
 
+def _misplaced_hint(path: tuple, errs: list[dict], data: Any) -> str:
+    """A key written at the wrong indentation: an unknown key that a parent takes, or a wrongly typed entry that each entry takes."""
+    if not path or not isinstance(path[-1], str) or errs[0]["type"] == "missing":
+        return ""
+    key = path[-1]
+    if errs[0]["type"] == "extra_forbidden":
+        for depth in range(len(path) - 2, -1, -1):
+            if key in _fields_at(path[:depth], data):
+                where = f"'{format_path(path[:depth])}'" if depth else "the top level"
+                return f" ('{key}' belongs to {where}: is it indented too far?)"
+        return ""
+    if len(path) >= 2 and not isinstance(_value_at(path, data), dict) and key in _fields_at(path, data) and not _fields_at(path[:-1], data):
+        parent = format_path(path[:-1])
+        return f" ('{key}' is a field of each entry of '{parent}': is it indented too little, beside the entries instead of inside one?)"
+    return ""
+
+
 def _length_message(err: dict, path: tuple) -> str:
     """A list or mapping of the wrong size, with both bounds when the field has them: "exactly 3 values", "3 or 4 values"."""
     ctx = err.get("ctx", {})
@@ -219,27 +237,12 @@ def _unknown_key_message(path: tuple, data: Any) -> str:
     """An unknown key, with the keys allowed there; a key that is half an expression means YAML split it at a comma."""
     key = str(path[-1])
     if split_at_comma(key):
-        return (f"unknown key '{key}': {COMMA_HINT}")
+        return f"unknown key '{key}': {COMMA_HINT['{']}"
     allowed = _fields_at(path[:-1], data)
     synonym = _SYNONYMS.get(key.lower())
     if synonym in allowed:
         return f"unknown key '{key}' (did you mean '{synonym}'? expected one of: {', '.join(allowed)})"
     return f"unknown key '{path[-1]}'" + (did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else "")
-
-
-#: what an expression cut in two at a comma of a YAML flow mapping ``{...}`` needs
-COMMA_HINT = "an expression with a comma inside {...} was split by YAML; quote it, e.g. {init: \"uniform(-1, 1)\"}"
-
-
-def split_at_comma(text: str) -> bool:
-    """Whether `text` looks like a piece of an expression that YAML split at a comma: its brackets do not pair up."""
-    depth = 0
-    for char in text:
-        depth += char in "(["
-        depth -= char in ")]"
-        if depth < 0:
-            return True
-    return depth != 0
 
 
 def _literal_message(err: dict, value: Any) -> str:
@@ -264,6 +267,8 @@ def _strict_hint(expected: str, value: Any) -> str:
         except ValueError:
             return ""
         return " (write the number without quotes)"
+    if isinstance(value, float) and expected == "an integer" and value.is_integer() and abs(value) < 1e16:
+        return f" (an integer is written with digits only, without a decimal point or exponent: {int(value)})"
     if isinstance(value, str) and expected == "a boolean" and value.strip().lower() in ("true", "false", "yes", "no", "on", "off"):
         return " (write true or false without quotes)"
     if isinstance(value, bool) and expected in ("an integer", "a number"):

@@ -4,8 +4,9 @@ Pydantic validates plain data, so positions must be kept aside: a
 :class:`SourceMap` maps each path (a tuple of keys and list indexes) to the
 line and column where its value starts, and to where the key itself is
 written. Syntax errors become :class:`~visualenv.errors.SpecError` with the
-parser's own position. Duplicate keys, which YAML parsers silently overwrite,
-are reported.
+parser's own position, explained (:mod:`visualenv.spec.yaml_pitfalls`). Duplicate keys, which YAML
+parsers silently overwrite, are reported, and so are YAML 1.1's boolean words (``yes``, ``off``);
+numbers with an exponent (``4e2``) are read as numbers, as YAML 1.2 reads them.
 """
 
 from __future__ import annotations
@@ -19,6 +20,7 @@ from typing import Any, NoReturn
 import yaml
 
 from visualenv.errors import Diagnostic, SpecError
+from visualenv.spec.yaml_pitfalls import COMMA_HINT, EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, split_at_comma
 
 #: where a value sits in the spec: keys and list indexes from the top
 SpecPath = tuple[str | int, ...]
@@ -40,6 +42,8 @@ class SourceMap:
     file: str
     values: dict[SpecPath, Position] = field(default_factory=dict)
     keys: dict[SpecPath, Position] = field(default_factory=dict)
+    #: YAML flow collections (``{...}`` or ``[...]``, by their bracket) that a comma split in the middle of an expression
+    split: dict[SpecPath, str] = field(default_factory=dict)
 
     def locate(self, path: SpecPath, *, key: bool = False) -> Position | None:
         """The position of `path`, or of its closest ancestor that has one."""
@@ -58,7 +62,16 @@ class SourceMap:
         column = pos.column if pos else None
         if pos and column_offset is not None and pos.text_offset is not None and tuple(path) in self.values:
             column = pos.column + pos.text_offset + column_offset
-        return Diagnostic(self.file, line, column, format_path(path), message)
+        return Diagnostic(self.file, line, column, format_path(path), self._with_comma_hint(tuple(path), message))
+
+    def _with_comma_hint(self, path: SpecPath, message: str) -> str:
+        """Every problem inside a flow collection that YAML split at a comma says so: it is the likely cause."""
+        for i in range(len(path), -1, -1):
+            bracket = self.split.get(path[:i])
+            if bracket is not None:
+                hint = COMMA_HINT[bracket]
+                return message if hint in message else f"{message} ({hint})"
+        return message
 
 
 def format_path(path: SpecPath) -> str:
@@ -109,6 +122,8 @@ class _PositionLoader(yaml.SafeLoader):
     def resolve(self, kind: type, value: Any, implicit: Any) -> str:
         if kind is yaml.ScalarNode and implicit[0] and BASE60.match(value):
             return "tag:yaml.org,2002:str"
+        if kind is yaml.ScalarNode and implicit[0] and EXPONENT_NUMBER.match(value):
+            return "tag:yaml.org,2002:float"  # YAML 1.2: 4e2 is 400.0 (YAML 1.1 reads it as text)
         return super().resolve(kind, value, implicit)
 
 
@@ -166,14 +181,8 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         char = f"U+{exc.character:04X}" if isinstance(exc.character, int) else repr(exc.character)
         raise SpecError([Diagnostic(name, line, column, "", f"YAML does not allow the control character {char} in a file")]) from None
     except yaml.MarkedYAMLError as exc:
-        mark = exc.problem_mark or exc.context_mark
-        if exc.context_mark and exc.problem and "end of stream" in exc.problem:
-            mark = exc.context_mark  # an unclosed quote or bracket: point at where it opened
-        problem = exc.problem or exc.context or "invalid YAML"
-        msg = f"YAML syntax error: {problem}"
-        if exc.context and exc.problem:
-            msg += f" ({exc.context})"
-        raise SpecError([Diagnostic(name, mark.line + 1 if mark else None, mark.column + 1 if mark else None, "", msg)]) from None
+        at_line, at_column, message = explain_syntax_error(exc, text)
+        raise SpecError([Diagnostic(name, at_line, at_column, "", message)]) from None
     except yaml.YAMLError as exc:
         raise SpecError([Diagnostic(name, None, None, "", f"YAML error: {exc}")]) from None
     except RecursionError:  # pragma: no cover - _check_structure limits the nesting first
@@ -206,6 +215,8 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
     if node.tag not in _PLAIN_TAGS:  # e.g. !!python/object/apply: never constructed, reported
         problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"YAML tags such as '{node.tag.replace('tag:yaml.org,2002:', '!!')}' are not allowed"))
         return None
+    if isinstance(node, yaml.CollectionNode) and node.flow_style and _split(node):
+        smap.split[path] = "{" if isinstance(node, yaml.MappingNode) else "["
     if isinstance(node, yaml.MappingNode):
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
@@ -220,6 +231,8 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
             if key == "<<":
                 problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "YAML merge keys ('<<') are not supported"))
                 continue
+            if isinstance(key, float) and EXPONENT_NUMBER.match(key_node.value):
+                key = key_node.value  # a key is a name: kept as written
             if not isinstance(key, (str, int, float, bool)):
                 key = str(key)
             key = str(key) if not isinstance(key, str) else key
@@ -233,11 +246,20 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_convert(item, path + (i,), smap, problems, count) for i, item in enumerate(node.value)]
+    if node.style is None and node.value.lower() in YAML11_BOOLEANS and node.tag == "tag:yaml.org,2002:bool":
+        problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), boolean_word(node.value)))
+        return None
     try:
         return _scalar(node)
     except ValueError as exc:  # e.g. an integer with more digits than Python converts
         problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"cannot read this value: {_short(exc)}"))
         return None
+
+
+def _split(node: yaml.CollectionNode) -> bool:
+    """Whether a plain key or value of a flow collection is a piece of an expression cut at a comma."""
+    items = [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode) else list(node.value)
+    return any(isinstance(n, yaml.ScalarNode) and n.style is None and split_at_comma(n.value) for n in items)
 
 
 def _yaml_word(value: Any) -> str:
