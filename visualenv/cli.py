@@ -118,11 +118,17 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
 def inspect(blend: str, as_json: bool) -> None:
     """What BLEND holds for a spec: scenes, cameras, lights, meshes, materials, animation, and what the spec overrides.
 
+    Given an MJCF model (.xml), the names its expressions can read: joints, bodies, sites, sensors, actuators, geoms.
+
     The file is read in a child process: a file that crashes Blender is reported, not fatal.
     """
     from visualenv.render.blender import blendfile
+    from visualenv.tools.mjcf_starter import is_mjcf, mjcf_report
     from visualenv.tools.starter import format_report
 
+    if is_mjcf(Path(blend)):  # an MJCF model: the names expressions can read (docs/physics.md)
+        click.echo(mjcf_report(Path(blend)))
+        return
     info = blendfile.describe(_blend_path(blend))
     click.echo(json.dumps(info, indent=1, ensure_ascii=False) if as_json else format_report(info))
 
@@ -133,15 +139,20 @@ def inspect(blend: str, as_json: bool) -> None:
 @click.option("--force", is_flag=True, help="replace an existing spec file")
 @_friendly
 def init(blend: str, out_path: str | None, force: bool) -> None:
-    """Write a starter spec over BLEND that builds as it is: the file's scene, its first camera, placeholder state, actions and dynamics."""
+    """Write a starter spec over BLEND that builds as it is: the file's scene, its first camera, placeholder state, actions and dynamics.
+
+    Given an MJCF model (.xml): MuJoCo physics, actions from its actuators, a camera that frames it, its names as comments.
+    """
     from visualenv.render.blender import blendfile
+    from visualenv.tools.mjcf_starter import is_mjcf, mjcf_starter_spec
     from visualenv.tools.starter import starter_spec
 
-    path = _blend_path(blend)
+    mjcf = is_mjcf(Path(blend))
+    path = Path(blend) if mjcf else _blend_path(blend)
     out = Path(out_path) if out_path else Path(path.stem + ".yaml")
     if out.exists() and not force:
         raise VisualEnvError(f"{out} exists: choose another name with -o, or replace it with --force")
-    text = starter_spec(blendfile.describe(path), path, out)
+    text = mjcf_starter_spec(path, out) if mjcf else starter_spec(blendfile.describe(path), path, out)
     try:
         out.parent.mkdir(parents=True, exist_ok=True)
         out.write_text(text, encoding="utf-8")
