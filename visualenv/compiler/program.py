@@ -646,6 +646,7 @@ class _Compiler:
         if problem:
             self.error(path, problem, key=True)
             return
+        checked_values: list[ast.expr] | tuple[ast.expr, int] | None
         if world and prop == "rotation" and not isinstance(raw, list) and not str(raw).strip().startswith("["):
             checked = self.expr(path, raw, scope, expect=NUM)  # one angle: about the vertical axis
             checked_values = [const(0.0), const(0.0), lower(checked.tree)] if checked else None

@@ -43,10 +43,16 @@ BINDABLES: dict[str, Bindable] = {b.name: b for b in (
     Bindable("visible", "condition", "a condition: hidden from every camera while false (an empty: everything under it)"),
     Bindable("color", "color", "material base colour (objects; on a textured material a tint that multiplies the texture) or light colour (lights)",
              types=("MESH", "LIGHT", "EMPTY"), binds="a material or light colour"),
-    Bindable("strength", "number", "light strength", types=("LIGHT",), binds="a light's power"),
+    Bindable("strength", "number", "light strength (on the World actor: the sky's strength)", types=("LIGHT",), binds="a light's power"),
     Bindable("look_at", "vector", "aim the object (a camera) at this point", moves=True),
     Bindable("lens", "number", "camera focal length (mm)", types=("CAMERA",), binds="a camera's focal length"),
 )}
+
+
+#: the actor name that binds the scene's world (unless an object has that name): its sky's strength, rotation and tint
+WORLD_ACTOR = "World"
+#: what a World actor may bind; rotation is a number (about the vertical axis) or three Euler angles
+WORLD_PROPERTIES = ("strength", "rotation", "color")
 
 
 def a_type(object_type: str) -> str:

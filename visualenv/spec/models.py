@@ -192,8 +192,22 @@ SceneObject = Annotated[
 
 
 class World(StrictModel):
-    color: Color = Field([0.05, 0.05, 0.05], description="background colour")
+    """The background: a colour, or an environment image that lights the scene and shows behind it.
+
+    Bind ``strength``, ``rotation`` or ``color`` (a tint of the image) through an actor named ``World``.
+    """
+
+    color: Color | None = Field(None, description="background colour (default dark grey); with an image, a tint that multiplies it (default white)")
     strength: float = Field(1.0, ge=0)
+    image: str | None = Field(None, description="an environment map (equirectangular: .hdr, .exr, .png, .jpg, any image Blender reads), "
+                              "relative to the spec: it lights the scene and shows behind it")
+    rotation: Union[float, Vec3] = Field(0.0, description="turns the image: radians about the vertical axis, or Euler XYZ [x, y, z]")
+
+    def tint(self) -> list[float]:
+        """The colour as given, else dark grey (a plain background) or white (an image shown as it is)."""
+        if self.color is not None:
+            return list(self.color)
+        return [1.0, 1.0, 1.0] if self.image is not None else [0.05, 0.05, 0.05]
 
 
 class Scene(StrictModel):

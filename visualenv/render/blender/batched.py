@@ -30,7 +30,7 @@ from mathutils import Matrix, Vector
 
 from visualenv.errors import RenderError, SpecError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
-from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, write_bindings
+from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
 from visualenv.render.blender.scene import BuiltScene
 from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
@@ -184,6 +184,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
                     f"({why}): a batch renders every env through one camera orientation, so only a camera that moves without "
                     "turning can be batched; use one process per env (visualenv.make_vec(..., batched=False))")])
         for name in dict.fromkeys(target.object for target in plan.bindings):
+            if is_world(name, self._objects):
+                raise SpecError([plan.source.diagnostic(("actors", name), "the world (its sky's strength, rotation or tint) is bound to "
+                    "the state: a batch's envs share one world; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
             obj = self._objects[name]
             if _is_sun(obj):
                 raise SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares "

@@ -197,7 +197,7 @@ class BlenderRenderer(Renderer):
         for name, spec in plan.scene.objects.items():
             if isinstance(spec, CameraObject) and spec.look_at is not None:
                 targets[name] = tuple(spec.look_at)
-        setters = []
+        setters: list[tuple[int, int, Callable[[tuple], None]]] = []
         start = 0
         for target in plan.bindings:
             if is_world(target.object, objects):

@@ -139,7 +139,7 @@ def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str)
         if isinstance(obj_spec, CameraObject) and obj_spec.look_at is not None:
             aim(built.objects[name], obj_spec.look_at)  # after parenting: the target is a world point
     if spec.world is not None or scene.world is None:
-        scene.world = make_world(f"{prefix}-world", spec.world or DEFAULT_WORLD, _keep)
+        scene.world = make_world(f"{prefix}-world", spec.world or DEFAULT_WORLD, _keep, base_dir=base_dir, source=source)
     return built
 
 
