@@ -221,3 +221,23 @@ def test_core_imports_without_mujoco_and_a_physics_spec_says_how_to_install_it(t
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120)
     assert out.returncode == 0, out.stderr
     assert "physics.model" in out.stdout and "pip install 'visualenv[mujoco]'" in out.stdout, out.stdout
+
+
+def test_a_state_only_batch_steps_each_envs_own_simulation() -> None:
+    """Env i of a batch seeded s equals one env seeded s + i (each lane steps its own MjData); a rendered batch is refused, located."""
+    from visualenv.env.batched import BatchedVectorEnv
+
+    spec = Path(__file__).resolve().parents[1] / "specs" / "mujoco" / "half_cheetah.yaml"
+    batch = BatchedVectorEnv(spec, 3, render=False)
+    singles = [VisualEnv(spec, render=False) for _ in range(3)]
+    obs, _ = batch.reset(seed=4)
+    for i, env in enumerate(singles):
+        assert np.array_equal(obs[i], env.reset(seed=4 + i)[0])
+    actions = np.random.default_rng(0).uniform(-1, 1, (20, 3, 6))
+    for step in actions:
+        obs, rewards, *_ = batch.step(step)
+        for i, env in enumerate(singles):
+            single_obs, single_reward, *_ = env.step(step[i])
+            assert np.array_equal(obs[i], single_obs) and rewards[i] == single_reward
+    with pytest.raises(SpecError, match="a batch cannot render a physics spec yet"):
+        BatchedVectorEnv(spec, 2)

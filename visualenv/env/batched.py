@@ -97,6 +97,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if render and observation is None:
             raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
         self.uses_camera = observation is not None and render is not False
+        if self.uses_camera and program.physics is not None:  # one scene of many copies: the copies' MuJoCo poses are not written yet
+            raise SpecError([program.loaded.source.diagnostic(("physics",), "a batch cannot render a physics spec yet: make it with render=False "
+                                                              "(each env steps its own MuJoCo data), or render one env per process (vectorization_mode='async')")])
         if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer))
                                               or max_episode_steps < 1):
             raise ValueError(f"max_episode_steps must be an integer of at least 1, got {max_episode_steps!r}")
@@ -175,7 +178,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             obs = self._observe()
         info = self._info(np.ones(n, dtype=bool))
         if final is not None:
-            info["final_obs"] = np.array([_select(final[0], i) if done[i] else None for i in range(n)], dtype=object)
+            info["final_obs"] = np.empty(n, dtype=object)  # one object per env, even when every env ended (np.array would stack them)
+            for i in np.flatnonzero(done):
+                info["final_obs"][i] = _select(final[0], int(i))
             info["_final_obs"] = done
             info["final_info"] = final[1]
             info["_final_info"] = done
@@ -292,6 +297,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def _observe(self, envs: np.ndarray | None = None) -> Any:
         """Every env's observation, or those of `envs` (ascending indices) only."""
+        if not self.uses_camera and self.program.physics is not None:  # each lane observes its own MuJoCo data (float64, Gymnasium's)
+            rows = range(self.num_envs) if envs is None else [int(i) for i in envs]
+            return np.stack([self.lanes[i].physics_observation() for i in rows])
         if not self.uses_camera:
             observed = self._state[self.program.observed].T.astype(np.float32)
             return observed if envs is None else observed[envs]

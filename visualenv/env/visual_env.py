@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import warnings
 from pathlib import Path
 from typing import Any, Mapping, SupportsFloat
 
@@ -115,6 +116,7 @@ class VisualEnv(gym.Env):
         self._done = False
         self._success = False
         self._was_reset = False  # step() before the first reset() raises, as Gymnasium's OrderEnforcing does
+        self._not_carried: str | None = None  # why an unpickled copy could not go on with its episode
         if program.discrete is not None:
             self.action_space = spaces.Discrete(program.discrete)
         else:
@@ -172,12 +174,13 @@ class VisualEnv(gym.Env):
         self._done = False
         self._success = False
         self._was_reset = True
+        self._not_carried = None
         return self._observe(), self._info(None)
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """The action, the generated step (checked, not yet committed), the commit, the episode's end, the observation."""
         if not self._was_reset:
-            raise ResetNeeded("call reset() before step(): the state is set by reset (Gymnasium's order)")
+            raise ResetNeeded(f"call reset() before step(): {self._not_carried or 'the state is set by reset'} (Gymnasium's order)")
         a = self._action(action)
         try:
             state, reward, outcome, fired = self._advance(a)
@@ -366,6 +369,11 @@ class VisualEnv(gym.Env):
 
     # -- internals --------------------------------------------------------------------------------
 
+    def physics_observation(self) -> np.ndarray:
+        """A physics spec's state-only observation of the current state (a batch asks each lane for its own)."""
+        assert self._fns.observe is not None, "not a physics spec"
+        return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
+
     def _pose(self) -> None:
         """A physics spec's bodies and cameras take MuJoCo's poses before a render."""
         if self._sim is not None:
@@ -379,7 +387,7 @@ class VisualEnv(gym.Env):
             self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs
         if self._fns.observe is not None:
-            return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
+            return self.physics_observation()
         state = self._state
         return np.array([state[i] for i in self._observed], dtype=np.float32)
 
@@ -412,10 +420,70 @@ class VisualEnv(gym.Env):
         values["action"] = action
         return values
 
-    # -- pickling: rebuild from the spec in the receiving process -------------------------------------
+    # -- pickling: rebuild from the spec in the receiving process, then carry the episode over -----------
 
     def __getstate__(self) -> dict[str, Any]:
-        return {"loaded": self.program.loaded, "args": self._init_args}
+        """The spec and options, the Gymnasium spec, and the episode in progress.
+
+        The episode is the state, step count, milestones and success, every random generator (the env's, the sensor
+        noise's, the action space's) and a physics spec's MuJoCo state (``mjSTATE_INTEGRATION``: what ``mj_step``
+        needs to go on bit for bit). The renderer is not pickled: the copy builds its own on first render and poses
+        the scene from the carried state. A ``dynamics.python`` hook is imported again by name: state it keeps in
+        its own module is that module's in the receiving process.
+        """
+        episode = {
+            "state": self._state, "steps": self._steps, "fired": self._fired, "done": self._done, "success": self._success,
+            "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
+            "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs,
+            "physics": self._physics_state(),
+        }
+        return {"loaded": self.program.loaded, "args": self._init_args, "spec": self.spec, "episode": episode if self._was_reset else None}
 
     def __setstate__(self, data: dict[str, Any]) -> None:
         self.__init__(data["loaded"], **data["args"])  # type: ignore[misc]
+        self.spec = data.get("spec")
+        episode = data.get("episode")
+        if episode is None:
+            return  # pickled before its first reset: so is the copy
+        try:
+            self._carry_over(episode)
+        except Exception as exc:  # noqa: BLE001 - whatever went wrong, the copy must not step a half-restored episode
+            self._was_reset = False
+            self._not_carried = f"the episode it was pickled in could not be carried over ({type(exc).__name__}: {exc})"
+            warnings.warn(f"visualenv: {self.program.spec.id}: {self._not_carried}; call reset() to start a new one", RuntimeWarning, stacklevel=2)
+
+    def _carry_over(self, episode: dict[str, Any]) -> None:
+        """The episode of the pickled env, put in place (see :meth:`__getstate__`)."""
+        self._set_physics_state(episode["physics"])
+        self._state = tuple(episode["state"])
+        self._steps, self._fired, self._done, self._success = episode["steps"], episode["fired"], episode["done"], episode["success"]
+        self._np_random, self._np_random_seed = episode["np_random"], episode["np_random_seed"]
+        self._random.generator = self._np_random
+        self._sensor_rng = episode["sensor_rng"]
+        if episode["action_space_rng"] is not None:
+            self.action_space._np_random = episode["action_space_rng"]
+        self._last_obs = episode["last_obs"]
+        self._was_reset = True
+
+    def _physics_state(self) -> np.ndarray | None:
+        """MuJoCo's full integration state of a physics spec (None without physics)."""
+        if self._sim is None:
+            return None
+        mujoco, model = self._sim.mujoco, self._sim.model
+        signature = mujoco.mjtState.mjSTATE_INTEGRATION
+        state = np.empty(mujoco.mj_stateSize(model, signature))
+        mujoco.mj_getState(model, self._sim.data, state, signature)
+        return state
+
+    def _set_physics_state(self, state: np.ndarray | None) -> None:
+        """Put MuJoCo's integration state back, then ``mj_forward`` (the poses a render reads)."""
+        if (state is None) != (self._sim is None):
+            raise ValueError("the pickled env and its copy disagree on physics")
+        if self._sim is None or state is None:
+            return
+        mujoco, model = self._sim.mujoco, self._sim.model
+        signature = mujoco.mjtState.mjSTATE_INTEGRATION
+        if state.shape != (mujoco.mj_stateSize(model, signature),):
+            raise ValueError(f"MuJoCo's state has {state.size} values, this MuJoCo ({mujoco.__version__}) expects {mujoco.mj_stateSize(model, signature)}")
+        mujoco.mj_setState(model, self._sim.data, state, signature)
+        mujoco.mj_forward(model, self._sim.data)
