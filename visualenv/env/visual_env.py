@@ -58,6 +58,12 @@ class VisualEnv(gym.Env):
     spec line and the values; with ``on_fault: terminate`` the episode ends
     instead and ``info["error"]`` holds the message.
 
+    ## Pickling
+    A pickled env goes on with its episode: the copy's next steps are the original's
+    (state, step count, random generators, MuJoCo's state; the scene is posed from
+    the state). Where the episode cannot be carried over, the unpickled copy warns
+    and asks for ``reset()``.
+
     ## Renderer backend
     ``backend`` names the renderer class as ``module:attribute`` (default:
     Blender), loaded on first render; a test can plug in a fake renderer to
