@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test bench schema clean
+.PHONY: setup demo test test-variants bench schema clean
 
 setup: $(STAMP)
 
@@ -24,6 +24,12 @@ test: setup  ## lint (ruff), type-check (mypy), then run the test suite
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
 	$(PY) -m pytest
+
+test-variants: setup  ## the suite on one core and under other CPU dispatch (docs/testing.md)
+	taskset -c 0 $(PY) -m pytest -q
+	ONEDNN_MAX_CPU_ISA=AVX2 $(PY) -m pytest -q
+	if grep -qw avx512f /proc/cpuinfo; then ONEDNN_MAX_CPU_ISA=AVX512_CORE $(PY) -m pytest -q; else echo "no AVX-512 here: that variant skipped"; fi
+	MKL_CBWR=COMPATIBLE $(PY) -m pytest -q
 
 bench: setup
 	$(VENV)/bin/visualenv bench specs/visual_cartpole.yaml

@@ -1,12 +1,24 @@
-"""The benchmark prints every figure; a short soak keeps Blender data and memory flat."""
+"""The benchmark prints every figure; a short soak keeps Blender data and memory flat.
+
+Expected core shares come from this process's usable cores (``worker_cores``), so the
+tests hold on 1, 2, 4, 8 or 16 cores (docs/testing.md: run them under ``taskset``).
+"""
 
 import json
 
 from click.testing import CliRunner
 
 import visualenv
-from visualenv.tools.bench import StepTimes, soak
 from visualenv.cli import main
+from visualenv.env.cores import worker_cores
+from visualenv.tools.bench import StepTimes, soak
+
+
+def expected_share(workers: int) -> tuple[bool, object]:
+    """(pinned, cores_each) that `bench --workers N` reports on this machine: each worker's own cores where there are
+    two or more to share, else none confined ('all')."""
+    shares = worker_cores(workers)
+    return shares[0] is not None, len(shares[0]) if shares[0] else "all"
 
 
 def test_bench_prints_every_figure(tmp_path):
@@ -22,9 +34,12 @@ def test_bench_prints_every_figure(tmp_path):
     assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["moved_floor_ms_median"] > 0 and 0 <= figures["own_overhead_share"] < 1
     assert 0 < figures["outside_ms_median"] < figures["step_ms_median"]
     parallel = figures["parallel"]
-    assert parallel["workers"] == 2 and parallel["pinned"] is True and parallel["cores_each"] == 1 and parallel["steps_per_s"] > 0
-    assert 0 < parallel["render_ms_median"] <= parallel["render_ms_p99"] and 0 < parallel["outside_share"] < 1
-    assert parallel["rss_final_mb"] > 100 and parallel["rss_total_mb"] >= 2 * parallel["rss_final_mb"] - 1  # each worker holds a Blender
+    pinned, cores_each = expected_share(2)
+    assert parallel["workers"] == 2 and parallel["pinned"] is pinned and parallel["cores_each"] == cores_each and parallel["steps_per_s"] > 0
+    assert 0 < parallel["render_ms_median"] and 0 < parallel["outside_share"] < 1
+    # each worker holds a Blender of its own (one bpy process alone is about 300 MB), and the total is theirs
+    each = parallel["rss_each_mb"]
+    assert len(each) == 2 and min(each) > 100 and parallel["rss_total_mb"] == sum(each) and parallel["rss_final_mb"] == max(each)
 
 
 def test_bench_measures_scaling_against_one_confined_worker(tmp_path):
@@ -33,9 +48,11 @@ def test_bench_measures_scaling_against_one_confined_worker(tmp_path):
     assert result.exit_code == 0, result.output
     assert "scaling: one worker confined to one core" in result.output and "vs n x one confined" in result.output
     one, *rows = json.loads(out.read_text())[0]["scaling"]
-    assert one["workers"] == 1 and one["cores_each"] == 1 and one["threads"] == 1 and one["steps_per_s"] > 0
+    assert one["workers"] == 1 and one["cores_each"] == 1 and one["threads"] == 1 and one["pinned"] is True and one["steps_per_s"] > 0
     assert [r["workers"] for r in rows] == [1, 2] and all(r["vs_confined"] > 0 for r in rows)
-    assert rows[1]["cores_each"] == 1 and rows[1]["pinned"] is True  # two workers on two cores: one core each
+    pinned, cores_each = expected_share(2)  # two workers: half the cores each (one on two cores), none confined on one core
+    assert rows[1]["cores_each"] == cores_each and rows[1]["pinned"] is pinned
+    assert rows[0]["pinned"] is False and rows[0]["cores_each"] == "all"  # one worker of the scaling rows is never confined
 
 
 def test_bench_compares_batches_with_the_per_process_vector_env(tmp_path):
@@ -82,8 +99,8 @@ def test_step_times_pairs_each_step_with_its_render_calls():
             env.step(0)
         timings = env.timings()
         assert len(timings["step"]) == len(timings["render"]) == len(timings["outside"]) == 5  # one observation render per step
-        for step, render, outside in zip(timings["step"], timings["render"], timings["outside"]):
-            assert 0 < outside < step and abs(step - render - outside) < 1e-9
+        # each step's own render call was timed inside it: a step outlasts its render (actions, dynamics, readback)
+        assert all(0 < render < step for step, render in zip(timings["step"], timings["render"]))
         assert "raw_render" not in vars(renderer)  # timing stopped: the renderer's own method again
         env.step(0)
         assert len(timings["step"]) == 5

@@ -53,10 +53,22 @@ def test_preview_writes_frames_of_a_random_episode(tmp_path):
     assert any(np.abs(images[0] - im).mean() > 0.1 for im in images[1:])  # the camera moved
 
 
-def test_gpu_request_falls_back_to_cpu_with_a_message(tmp_path):
-    result = CliRunner().invoke(main, ["build", "Goalie-v0", "--out", str(tmp_path), "--device", "gpu", "--quiet"])
+def test_gpu_request_falls_back_to_cpu_with_a_message(tmp_path, monkeypatch):
+    from visualenv.render.blender import settings
+
+    if settings.detect_gpu():
+        pytest.skip("Blender finds a GPU here: nothing to fall back from")
+    monkeypatch.setattr(settings, "_warned", set())  # said once per process: say it again here
+    with pytest.warns(RuntimeWarning, match="render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU"):
+        result = CliRunner().invoke(main, ["build", "Goalie-v0", "--out", str(tmp_path), "--device", "gpu", "--quiet"])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "Goalie-v0" / "preview.png").exists()
+    env = visualenv.make("Goalie-v0", device="gpu")
+    try:
+        env.reset(seed=0)
+        assert env.unwrapped.renderer.scene.cycles.device == "CPU"
+    finally:
+        env.close()
 
 
 def box_colour(obs: np.ndarray) -> np.ndarray:

@@ -185,6 +185,7 @@ def test_lunar_landing_starts_and_zones_are_random_within_their_ranges():
     assert starts[:, 5].std() > 3 and starts[:, 0].std() > 3
 
 
+@pytest.mark.blender
 def test_lunar_landing_the_camera_rides_the_lander_so_the_zone_grows_and_shifts():
     pytest.importorskip("bpy")
     env = visualenv.make("LunarLanding-v0")

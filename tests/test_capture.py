@@ -4,8 +4,10 @@ import numpy as np
 import pytest
 
 from visualenv.errors import RenderError
-from visualenv.render.blender.capture import Capture
 from visualenv.render.pixels import to_grayscale
+
+pytest.importorskip("bpy")  # the capture lives in the Blender backend, which imports bpy
+from visualenv.render.blender.capture import Capture  # noqa: E402
 
 
 def srgb_bytes(linear: np.ndarray) -> np.ndarray:

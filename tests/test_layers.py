@@ -1,4 +1,4 @@
-"""The package's layers: imports point one way (down the table in README's Layout) and never form a cycle.
+"""The package's layers: imports point one way (down the Layout table of docs/architecture.md) and never form a cycle.
 
 Every import counts, function-level ones included: a lazy import is still a dependency.
 """

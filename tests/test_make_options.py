@@ -59,6 +59,26 @@ def test_good_options_are_accepted():
     assert env.unwrapped.program.params["masscart"] == 2.0
 
 
+@pytest.mark.blender
+@pytest.mark.parametrize("options, engine, samples, threads", [
+    ({"device": "cpu", "threads": 1, "samples": 2, "engine": "cycles"}, "CYCLES", 2, 1),
+    ({"threads": 2, "samples": 3}, "CYCLES", 3, 2),
+    ({"engine": "workbench"}, "BLENDER_WORKBENCH", None, None),
+])
+def test_render_options_reach_blenders_scene(options, engine, samples, threads):
+    """device, threads, samples and engine replace the spec's values in the scene Blender renders."""
+    env = visualenv.make(ENV, **options)
+    try:
+        env.reset(seed=0)
+        scene = env.unwrapped.renderer.scene
+        assert scene.render.engine == engine
+        if engine == "CYCLES":
+            assert scene.cycles.device == "CPU" and scene.cycles.samples == samples
+            assert scene.render.threads_mode == "FIXED" and scene.render.threads == threads
+    finally:
+        env.close()
+
+
 @pytest.mark.parametrize("value, message", [
     ("abc", "unknown name 'abc'"),
     ("1 / 0", "division by zero"),

@@ -1,9 +1,13 @@
-"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id; README lists every package."""
+"""The wheel carries the bundled specs, so an installed (not editable) visualenv finds them by id; the docs list every
+package; README and the repository stay within the house's limits."""
 
+import shutil
 import subprocess
 import sys
 import zipfile
 from pathlib import Path
+
+import pytest
 
 ROOT = Path(__file__).resolve().parent.parent
 
@@ -24,13 +28,27 @@ def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
     assert out == str((tmp_path / "site" / "visualenv" / "specs" / "goalie.yaml").resolve())
 
 
-def test_the_readme_layout_lists_every_package_and_top_level_module():
-    readme = (ROOT / "README.md").read_text(encoding="utf-8").split("## Layout")[1]
+def test_the_layout_lists_every_package_and_top_level_module():
+    readme = (ROOT / "docs" / "architecture.md").read_text(encoding="utf-8").split("## Layout")[1]
     package = ROOT / "visualenv"
     packages = sorted(f"visualenv/{p.parent.relative_to(package)}/" for p in package.glob("*/__init__.py"))
     modules = sorted(p.name for p in package.glob("*.py") if p.name != "__init__.py")
     missing = [m for m in packages if f"`{m}`" not in readme] + [m for m in modules if f"`{m}`" not in readme and f"`visualenv/{m}`" not in readme]
-    assert packages and modules and not missing, f"README's Layout table misses {missing}"
+    assert packages and modules and not missing, f"docs/architecture.md's Layout table misses {missing}"
+
+
+#: the house's limits: README is a manual a user reads through, and every clone carries every committed agent
+README_MAX_CHARS = 16_000
+TRACKED_MAX_BYTES = 45_000_000
+
+
+def test_readme_and_the_repository_stay_within_the_houses_limits():
+    assert len((ROOT / "README.md").read_text(encoding="utf-8")) <= README_MAX_CHARS
+    if not shutil.which("git") or not (ROOT / ".git").exists():
+        pytest.skip("not a git checkout: the tracked files are unknown")
+    tracked = subprocess.run(["git", "ls-files", "-z"], cwd=ROOT, capture_output=True, check=True).stdout.split(b"\0")
+    size = sum((ROOT / name.decode()).stat().st_size for name in tracked if name and (ROOT / name.decode()).is_file())
+    assert size <= TRACKED_MAX_BYTES, f"tracked files hold {size / 1e6:.1f} MB, over {TRACKED_MAX_BYTES / 1e6:.0f} MB"
 
 
 def test_import_visualenv_never_imports_stable_baselines3_or_torch():

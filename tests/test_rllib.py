@@ -1,6 +1,7 @@
 """The Ray RLlib backend: env registration, frame stacking in the runners, train --backend rllib, play, stop and resume.
 
-Runs where the [ray] extra is installed (``make setup`` installs it); the import test runs everywhere.
+Runs where the [ray] extra is installed (``make setup`` installs it); that importing visualenv never imports
+Ray is tested in test_layers.py, which runs everywhere.
 """
 
 import json
@@ -19,12 +20,6 @@ from visualenv.cli import main
 from visualenv.train.evaluation import final_seed, selection_seed
 
 REPO = Path(__file__).resolve().parents[1]
-
-
-def test_import_visualenv_never_imports_ray():
-    code = "import sys, visualenv, visualenv.cli, visualenv.train.sb3, visualenv.train.play; assert 'ray' not in sys.modules, 'ray imported'"
-    result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
-    assert result.returncode == 0, result.stderr
 
 
 ray = pytest.importorskip("ray.rllib", reason="the [ray] extra is not installed")
@@ -171,11 +166,17 @@ def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
         algo = ppo_config(tiny_goalie(tmp_path), env_runners=1, envs_per_runner=2).build_algo()
         try:
             assert algo.env_runner.env is None  # the driver's own EnvRunner: a model copy, no env, so no Blender
-            (sampled,) = algo.env_runner_group.foreach_env_runner(
-                lambda r: (sum(len(e) for e in r.sample(num_timesteps=8, random_actions=True)), "bpy" in sys.modules,
-                           r.env.observation_space.shape), local_env_runner=False)
-            steps, blender, shape = sampled
-            assert steps >= 8 and blender and shape == (2, 24, 24, 4)  # two envs of four stacked frames, rendered in the runner
+            def sample_and_look(runner):
+                episodes = runner.sample(num_timesteps=8, random_actions=True)
+                frames = np.concatenate([np.asarray(e.get_observations()) for e in episodes])
+                return sum(len(e) for e in episodes), "bpy" in sys.modules, runner.env.observation_space.shape, frames
+
+            (sampled,) = algo.env_runner_group.foreach_env_runner(sample_and_look, local_env_runner=False)
+            steps, blender, shape, frames = sampled
+            assert steps >= 8 and blender and shape == (2, 24, 24, 4)  # two envs of four stacked frames, made in the runner
+            newest = frames[..., -1]  # the runner's observations are Blender's images: a lit scene, and the ball moves
+            assert frames.dtype == np.uint8 and int(newest.max()) - int(newest.min()) > 40
+            assert not np.array_equal(newest[0], newest[-1])
         finally:
             algo.stop()
     finally:

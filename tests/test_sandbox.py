@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import builtins
 import json
-import time
 import types
 from pathlib import Path
 
@@ -141,12 +140,11 @@ def _assert_no_trace(marker: Path) -> None:
     assert SENTINEL not in globals(), "an attempt set a global"
 
 
+@pytest.mark.timeout(20)  # a bound, not a figure: an attempt that makes the checker hang (a huge power, deep nesting) fails here
 @pytest.mark.parametrize("attempt, fragment", ATTEMPTS, ids=[a[:40] for a, _ in ATTEMPTS])
 def test_check_rejects_attempt(attempt: str, fragment: str, marker: Path):
-    start = time.perf_counter()
     with pytest.raises(ExpressionError) as err:
         check(_text(attempt, marker), NAMES)
-    assert time.perf_counter() - start < 2.0, "rejection must be quick"
     assert fragment in err.value.message
     _assert_no_trace(marker)
 

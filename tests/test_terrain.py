@@ -49,6 +49,7 @@ render: {{engine: cycles, preset: fast}}
 """
 
 
+@pytest.mark.blender
 @pytest.mark.parametrize("sun_y", [-1.22, 1.22], ids=["sun_from_west", "sun_from_east"])
 def test_a_low_sun_leaves_the_near_wall_of_a_crater_in_shadow(tmp_path: Path, sun_y: float):
     pytest.importorskip("bpy")

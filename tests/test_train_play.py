@@ -1,6 +1,8 @@
 """Smoke runs of `visualenv train` and `visualenv play` with real rendering (tiny budgets)."""
 
 import json
+import re
+import shutil
 
 import imageio.v3 as iio
 import numpy as np
@@ -121,7 +123,8 @@ def test_algorithm_kwargs_makes_schedules_callable():
     assert kwargs["clip_range"] == 0.2 and kwargs["n_steps"] == 64
 
 
-def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir):
+def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir, tmp_path):
+    run_dir = shutil.copytree(run_dir, tmp_path / "run")  # a copy: the shared run stays as trained, whatever order the tests run in
     before = np.load(run_dir / "evaluations.npz")["timesteps"].tolist()
     rows_before = len((run_dir / "logs" / "progress.csv").read_text().splitlines())
     refused = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(run_dir), "--envs", "3"])
@@ -150,9 +153,12 @@ def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     result = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "--episodes", "1", "--record", str(gif),
                                        "--view", "fast", "--view-size", "200"])
     assert result.exit_code == 0, result.output
-    assert "episode 0: return" in result.output and "success" in result.output
+    episode = re.search(r"episode 0: return (-?\d+\.\d\d), length (\d+), (success|no success) \((\w+)\)", result.output)
+    assert episode, result.output
+    assert (episode[3], episode[4]) in (("success", "caught"), ("no success", "scored"), ("no success", "left_goal")), result.output
+    length = int(episode[2])
     frames = iio.imread(gif)
-    assert frames.ndim == 4 and frames.shape[0] >= 10  # one frame per step
+    assert frames.ndim == 4 and frames.shape[0] in (length, length + 1) and length >= 10  # one frame per step
     assert frames.shape[1] == 200 and frames.shape[2] == 200 + 4 + 200  # the 100 px observation scaled 2x, a gap, the 200 px view
     # the view beside the observation: the frames change as the ball rolls
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
@@ -262,7 +268,8 @@ def test_state_only_training_runs_without_warnings(tmp_path):
                                            "--eval-episodes", "2", "--final-episodes", "2", "--set", "n_steps=64", "--set", "batch_size=64",
                                            "--out", str(tmp_path), "--no-progress"])
     assert result.exit_code == 0, result.output
-    assert "success" in result.output
+    summary = re.search(r"best model over 2 episodes: reward (-?\d+\.\d\d) \+- \d+\.\d\d, length (\d+\.\d), success (\d+) %", result.output)
+    assert summary and -10 <= float(summary[1]) <= 10 and int(summary[3]) in (0, 50, 100), result.output
     assert not [w for w in caught if "not of the same type" in str(w.message)]
     run = next((tmp_path / "Goalie-v0").iterdir())
     assert json.loads((run / "config.json").read_text())["config"]["render"] is False

@@ -373,7 +373,7 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
         "render_ms_median": 1000 * float(np.median(render_times)), "render_ms_p99": 1000 * float(np.percentile(render_times, 99)),
         "outside_ms_median": 1000 * float(np.median(outside)), "outside_share": float(np.median(outside)) / step_median,
         "rss_peak_mb": max(w["rss_peak_mb"] for w in measured), "rss_final_mb": max(w["rss_mb"] for w in measured),
-        "rss_total_mb": sum(w["rss_mb"] for w in measured),
+        "rss_total_mb": sum(w["rss_mb"] for w in measured), "rss_each_mb": [w["rss_mb"] for w in measured],
     }
 
 
