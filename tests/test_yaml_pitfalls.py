@@ -118,3 +118,8 @@ def test_the_docs_table_lists_exactly_these_pitfalls():
     rows = [line.split("|")[1].strip() for line in section.splitlines() if line.startswith("| ") and not line.startswith(("| pitfall", "| ---"))]
     assert rows == [p.name for p in PITFALLS]
     assert re.search(r"\[YAML pitfalls\]\(#yaml-pitfalls\)", text)
+
+
+def test_a_bracket_left_out_is_not_blamed_on_a_comma():
+    messages = _messages("id: T-v0\nstate:\n  x: {init: uniform(-1 1}\n" + ACTIONS)
+    assert len(messages) == 1 and "'(' was never closed" in messages[0] and "comma" not in messages[0], messages

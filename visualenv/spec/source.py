@@ -20,7 +20,7 @@ from typing import Any, NoReturn
 import yaml
 
 from visualenv.errors import Diagnostic, SpecError
-from visualenv.spec.yaml_pitfalls import COMMA_HINT, EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, split_at_comma
+from visualenv.spec.yaml_pitfalls import COMMA_HINT, EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, opens_and_closes
 
 #: where a value sits in the spec: keys and list indexes from the top
 SpecPath = tuple[str | int, ...]
@@ -257,9 +257,11 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
 
 
 def _split(node: yaml.CollectionNode) -> bool:
-    """Whether a plain key or value of a flow collection is a piece of an expression cut at a comma."""
+    """Whether a flow collection's plain keys and values hold both halves of an expression cut at a comma
+    (one leaves a bracket open, one closes a bracket it did not open; a bracket merely left out is not a comma's doing)."""
     items = [n for pair in node.value for n in pair] if isinstance(node, yaml.MappingNode) else list(node.value)
-    return any(isinstance(n, yaml.ScalarNode) and n.style is None and split_at_comma(n.value) for n in items)
+    halves = [opens_and_closes(n.value) for n in items if isinstance(n, yaml.ScalarNode) and n.style is None]
+    return any(opens for opens, _ in halves) and any(closes for _, closes in halves)
 
 
 def _yaml_word(value: Any) -> str:

@@ -39,6 +39,16 @@ def split_at_comma(text: str) -> bool:
     return depth != 0
 
 
+def opens_and_closes(text: str) -> tuple[bool, bool]:
+    """(leaves a bracket open, closes one it did not open): the two halves of an expression cut at a comma."""
+    depth = lowest = 0
+    for char in text:
+        depth += char in "(["
+        depth -= char in ")]"
+        lowest = min(lowest, depth)
+    return depth > lowest, lowest < 0
+
+
 def boolean_word(value: str) -> str:
     """Why a plain ``yes``/``no``/``on``/``off`` value is refused, and what to write."""
     meaning = str(YAML11_BOOLEANS[value.lower()]).lower()
