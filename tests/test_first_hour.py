@@ -123,6 +123,17 @@ def test_the_specs_path_variable_registers_and_resolves_and_names_duplicates(tmp
             make()
 
 
+def test_the_header_reader_finds_the_top_level_id_and_max_steps_in_yaml_and_toml(tmp_path):
+    yaml_spec = tmp_path / "a.yaml"
+    yaml_spec.write_text('# a comment\nid: "Mine-v3"   # the id\nstate:\n  id: {init: 0}\nmax_steps: 250\n')
+    toml_spec = tmp_path / "b.toml"
+    toml_spec.write_text('id = "Toml-v0"\nmax_steps = 30\n[state.x]\ninit = 0\n[physics]\nmax_steps = 5\n')
+    assert registration.read_header(yaml_spec) == ("Mine-v3", 250)
+    assert registration.read_header(toml_spec) == ("Toml-v0", 30)
+    (tmp_path / "c.yaml").write_bytes(b"id: Bytes-v0\n\xff\xfe\n")  # not UTF-8: still read, never a crash on import
+    assert registration.read_header(tmp_path / "c.yaml") == ("Bytes-v0", None)
+
+
 def test_an_unknown_id_says_how_to_register_one():
     with pytest.raises(SpecError, match=r"not a spec file, build folder or known env id .*visualenv.register\(path\).*VISUALENV_SPECS_PATH"):
         visualenv.resolve("Docking2D-v0")

@@ -51,6 +51,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     ``is_success``; an env ended by a fault under ``on_fault: terminate`` has its
     message in ``error``.
 
+    Episodes are truncated after the spec's ``max_steps``, or ``max_episode_steps`` when given
+    (``gymnasium.make_vec`` passes the id's), with ``info["outcome"] == "max_steps"``.
+
     Autoreset follows Gymnasium 1.x: ``autoreset_mode`` ``NEXT_STEP`` (the
     default: the step after an episode's end resets that env, ignoring its
     action) or ``SAME_STEP`` (the env is reset at once; the last observation of
