@@ -238,6 +238,8 @@ def _parse_value(text: str) -> Any:
 @click.option("--batched", type=click.IntRange(min=1), default=None,
               help="N envs in one Blender scene, one render call per step: sb3: in this process (replaces --envs); "
                    "rllib: in each EnvRunner (replaces --envs-per-runner)")
+@click.option("--workers", "batch_workers", type=click.IntRange(min=1), default=None,
+              help="sb3, with --batched N: K processes, each a batch of about N/K envs on its own share of the cores")
 @click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
               help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
 @click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
@@ -247,7 +249,7 @@ def _parse_value(text: str) -> Any:
 def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
           final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
           out_root: str, resume_dir: str | None, no_progress: bool, pin: bool, batched: int | None, backend: str, env_runners: int,
-          envs_per_runner: int, address: str | None) -> None:
+          envs_per_runner: int, address: str | None, batch_workers: int | None = None) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
@@ -263,7 +265,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
         return
     if resume_dir:
-        _refuse_fixed_on_resume(ctx, ("algo", "envs", "batched", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
+        _refuse_fixed_on_resume(ctx, ("algo", "envs", "batched", "batch_workers", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
                                       "out_root"),
                                 "only --steps, --set and --config change on --resume")
         config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
@@ -271,8 +273,13 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
         config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
                              render=not state_only, hyperparams=hyper, progress=not no_progress, pin=pin)
+        if batch_workers is not None and not batched:
+            raise click.BadParameter("splits a batch among processes: give --batched N as well", param_hint="--workers")
+        if batch_workers is not None and batched is not None and batch_workers > batched:
+            raise click.BadParameter(f"{batch_workers} workers for a batch of {batched} envs: each worker holds at least one env",
+                                     param_hint="--workers")
         if batched:
-            config = dataclasses.replace(config, envs=batched, batched=True)
+            config = dataclasses.replace(config, envs=batched, batched=True, workers=batch_workers)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
@@ -303,7 +310,7 @@ def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dic
 
 def _given(ctx: click.Context, names: Sequence[str]) -> list[str]:
     """The options among `names` given on the command line, as the user spelt them."""
-    flags = {"out_root": "--out"}
+    flags = {"out_root": "--out", "batch_workers": "--workers"}
     return [flags.get(n, f"--{n.replace('_', '-')}") for n in names if ctx.get_parameter_source(n) is ParameterSource.COMMANDLINE]
 
 
@@ -313,7 +320,7 @@ def _chosen_backend(ctx: click.Context, backend: str, resume_dir: str | None) ->
     if resume_dir and _given(ctx, ["backend"]) and backend != saved_backend:
         raise click.UsageError(f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend")
     if saved_backend == "rllib" or backend == "rllib":
-        sb3_only = _given(ctx, ["algo", "envs"])
+        sb3_only = _given(ctx, ["algo", "envs", "batch_workers"])
         if sb3_only:
             raise click.UsageError(f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)")
         return "rllib"
@@ -547,13 +554,19 @@ def _worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
     return counts
 
 
-def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, autoreset: str, results: list[Any]) -> None:
-    """`bench --batched`: each batch size in a fresh process, then the per-process vector env with one worker per usable core."""
+def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, autoreset: str, results: list[Any],
+                   split: tuple[int, ...] | None = None) -> None:
+    """`bench --batched`: each batch size in a fresh process (or in K workers each, `split`), then the per-process
+    vector env with one worker per usable core."""
     from visualenv.tools.bench import bench_parallel
     from visualenv.tools.bench_batched import bench_batched, lines
 
+    for k in split or ():
+        if not 1 <= k <= min(sizes):
+            raise click.BadParameter(f"with --batched, each count of workers must be from 1 to the smallest batch size ({min(sizes)}): "
+                                     f"each worker holds a batch of at least one env, got {k}", param_hint="--workers")
     for spec in specs:
-        batches = bench_batched(spec, sizes, steps, autoreset=autoreset)
+        batches = bench_batched(spec, sizes, steps, autoreset=autoreset, workers=split or (None,))
         workers = max(2, cores)
         per_process = bench_parallel(spec, workers, steps, 0, 0.0)
         click.echo(f"{spec}")
@@ -566,7 +579,8 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
 @click.argument("specs", nargs=-1, required=True)
 @click.option("--steps", default=500, show_default=True, type=click.IntRange(min=1), help="measured env steps (after a warm-up)")
 @click.option("--workers", default="2", show_default=True, callback=lambda ctx, param, value: _worker_counts(value),
-              help="parallel envs for the parallel figure (0: skip); a list such as 1,2,4,8 measures scaling against one confined worker")
+              help="parallel envs for the parallel figure (0: skip); a list such as 1,2,4,8 measures scaling against one confined worker; "
+                   "with --batched: K worker processes sharing each batch size (a list such as 1,2 measures each)")
 @click.option("--threads", type=click.IntRange(min=1), default=None, help="render threads of the single env (default: all cores)")
 @click.option("--readback", type=click.Choice(READBACKS), default="auto", show_default=True,
               help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
@@ -597,7 +611,8 @@ def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads:
                f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
     results: list[Any] = []
     if batch_sizes:
-        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results)
+        split = workers if click.get_current_context().get_parameter_source("workers") is ParameterSource.COMMANDLINE else None
+        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split)
     for spec in specs if not batch_sizes else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
         figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling)

@@ -1,4 +1,4 @@
-"""SB3's VecEnv API over a :class:`~visualenv.env.batched.BatchedVectorEnv` (imports Stable-Baselines3: the train extra)."""
+"""SB3's VecEnv API over a :class:`~visualenv.env.batched.BatchedVectorEnv`, or several (MultiBatchVectorEnv) (imports Stable-Baselines3: the train extra)."""
 
 from __future__ import annotations
 
@@ -49,13 +49,21 @@ class SB3Batch(VecEnv):
         self.batch.close()
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
+        if not hasattr(self.batch, "lanes"):  # batches in worker processes (MultiBatchVectorEnv): their lanes answer there
+            values = self.batch.get_attr(attr_name)
+            return [values[i] for i in self._get_indices(indices)]
         return [getattr(self.batch.lanes[i], attr_name) for i in self._get_indices(indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
+        if not hasattr(self.batch, "lanes"):
+            raise NotImplementedError("set_attr on batches in worker processes: set it in the spec's params instead")
         for i in self._get_indices(indices):
             setattr(self.batch.lanes[i], attr_name, value)
 
     def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
+        if not hasattr(self.batch, "lanes"):
+            values = self.batch.call(method_name, *method_args, **method_kwargs)
+            return [values[i] for i in self._get_indices(indices)]
         return [getattr(self.batch.lanes[i], method_name)(*method_args, **method_kwargs) for i in self._get_indices(indices)]
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:

@@ -46,11 +46,13 @@ def _make_monitored(target: str, kwargs: dict[str, Any], cores: Share | None, se
 
 
 def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None,
-                     monitor_dir: str | None = None, monitor_append: bool = False, **kwargs: Any) -> Any:
+                     monitor_dir: str | None = None, monitor_append: bool = False, workers: int | None = None, pin: bool = True,
+                     **kwargs: Any) -> Any:
     """`n` envs in one process and one Blender (a :class:`BatchedVectorEnv`) as an SB3 VecEnv, frames stacked by ``VecFrameStack``.
 
     Env ``i`` is seeded ``seed + i``; ``VecMonitor`` writes ``monitor_dir/batch.monitor.csv``
-    (appended to with ``monitor_append``, for a resumed run).
+    (appended to with ``monitor_append``, for a resumed run). ``workers=K``: K processes each hold a batch of
+    about n / K envs, confined to their share of the cores (`pin`).
     """
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
@@ -58,9 +60,15 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     from visualenv.env.batched import make_batched
     from visualenv.env.sb3_batch import SB3Batch
 
-    if threads is not None:
-        kwargs["threads"] = threads
-    vec: Any = SB3Batch(make_batched(target, n, autoreset_mode="same_step", **kwargs))
+    if workers is not None:
+        from visualenv.env.multi_batch import MultiBatchVectorEnv
+
+        batch: Any = MultiBatchVectorEnv(target, n, workers, pin=pin, threads=threads, autoreset_mode="same_step", **kwargs)
+    else:
+        if threads is not None:
+            kwargs["threads"] = threads
+        batch = make_batched(target, n, autoreset_mode="same_step", **kwargs)
+    vec: Any = SB3Batch(batch)
     vec.seed(seed)
     vec = VecMonitor(vec)
     if monitor_dir:

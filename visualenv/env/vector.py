@@ -126,7 +126,8 @@ _warned_gpu = False
 
 
 def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, pin: bool = True,
-             wrapper_class: Callable[[gym.Env], gym.Env] | None = None, batched: bool = False, **kwargs: Any) -> gym.vector.VectorEnv:
+             wrapper_class: Callable[[gym.Env], gym.Env] | None = None, batched: bool = False, workers: int | None = None,
+             **kwargs: Any) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
     Each worker is confined to its own share of the cores and renders with that many threads
@@ -136,7 +137,11 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
     ``batched=True`` gives a :class:`~visualenv.env.batched.BatchedVectorEnv` instead: all `n` envs in
     this process and one Blender scene, one render call per step (kwargs: render, params,
     autoreset_mode, render_mode and the renderer options; stack frames with SB3's VecFrameStack).
+    With ``workers=K`` as well, K processes each hold a batch of about n / K envs, each confined to its
+    share of the cores (:class:`~visualenv.env.multi_batch.MultiBatchVectorEnv`), still one vector env of `n` envs.
     """
+    if workers is not None and not batched:
+        raise ValueError("workers= splits a batch among processes: it goes with batched=True (without it, each env has its own process)")
     if batched:
         from visualenv.env.batched import make_batched
 
@@ -144,6 +149,10 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
         if per_env or wrapper_class is not None:
             raise ValueError(f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
                              "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)")
+        if workers is not None:
+            from visualenv.env.multi_batch import MultiBatchVectorEnv
+
+            return MultiBatchVectorEnv(target, n, workers, pin=pin, threads=threads, **kwargs)
         if threads is not None:
             kwargs["threads"] = threads
         return make_batched(target, n, **kwargs)

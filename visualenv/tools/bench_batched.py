@@ -8,7 +8,9 @@ moved), the readback and cut into tiles, render calls per step (more than one
 where an image is split, or where ``--autoreset same_step`` renders the envs it
 reset again), and resident memory per env. The
 per-process vector env (one Blender per worker, as many workers as usable
-cores) runs beside it for comparison. Figures only: nothing is asserted.
+cores) runs beside it for comparison. ``--workers K`` splits each size among K worker
+processes (:class:`~visualenv.env.multi_batch.MultiBatchVectorEnv`), timed as a whole.
+Figures only: nothing is asserted.
 """
 
 from __future__ import annotations
@@ -74,16 +76,53 @@ def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, queue: A
         queue.put({"envs": n, "error": f"{type(exc).__name__}: {exc}"})
 
 
-def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, autoreset: str = "next_step") -> list[dict[str, Any]]:
-    """Each batch size in its own fresh process; a size that fails is reported, not raised."""
+def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, autoreset: str = "next_step") -> dict[str, Any]:
+    """`n` envs as `workers` batches in worker processes (MultiBatchVectorEnv): env-steps/s and the workers' memory.
+
+    The stages of a step happen in the workers, so only the whole step is timed here.
+    """
+    import psutil
+
+    from visualenv.env.multi_batch import MultiBatchVectorEnv
+
+    start = time.perf_counter()
+    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset)
+    try:
+        env.reset(seed=seed)
+        build_s = time.perf_counter() - start
+        env.action_space.seed(seed)
+        for _ in range(5):
+            env.step(env.action_space.sample())
+        start = time.perf_counter()
+        for _ in range(steps):
+            env.step(env.action_space.sample())
+        elapsed = time.perf_counter() - start
+        rss = sum(psutil.Process(p.pid).memory_info().rss for p in env.processes)
+    finally:
+        env.close()
+    return {"envs": n, "workers": workers, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
+            "autoreset": autoreset, "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n}
+
+
+def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, autoreset: str = "next_step",
+                  workers: tuple[int | None, ...] = (None,)) -> list[dict[str, Any]]:
+    """Each batch size in its own fresh process (`workers` None), or split among K worker processes (each K of `workers`);
+    a size that fails is reported, not raised."""
     context = multiprocessing.get_context("spawn")
     out = []
     for n in sizes:
-        queue = context.Queue()
-        child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, queue))
-        child.start()
-        out.append(queue.get())
-        child.join()
+        for k in workers:
+            if k is not None:
+                try:
+                    out.append(measure_workers(spec, n, k, max(1, steps // n), seed, autoreset))
+                except Exception as exc:  # noqa: BLE001 - reported, and the next size goes on
+                    out.append({"envs": n, "workers": k, "error": f"{type(exc).__name__}: {exc}"})
+                continue
+            queue = context.Queue()
+            child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, queue))
+            child.start()
+            out.append(queue.get())
+            child.join()
     return out
 
 
@@ -95,22 +134,35 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
             f"{'calls':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
             "  (ms per step of all envs, medians; render and readback: per call; update: the render call minus the same call with"
             " nothing moved; calls: render calls per step; +MB/env: memory growth per env over the smallest batch)"]
-    ok = [b for b in batches if "error" not in b]
+    ok = [b for b in batches if "error" not in b and "workers" not in b]
     smallest = min(ok, key=lambda b: b["envs"]) if ok else None
+    split = [b for b in batches if "workers" in b]
     for b in batches:
-        if "error" in b:
+        if "error" in b and "workers" not in b:
             rows.append(f"  {b['envs']:>5} failed: {b['error']}")
+            continue
+        if "workers" in b:
             continue
         assert smallest is not None
         growth = (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"]) if b["envs"] > smallest["envs"] else float("nan")
         rows.append(f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
                     f"{b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
+    if split:
+        rows.append(f"batched in K worker processes (one batch of about N/K envs each, confined to its cores; autoreset {mode}):")
+        rows.append(f"  {'envs':>5} {'K':>3} {'env-steps/s':>12} {'step ms':>8} {'RSS MB':>7} {'MB/env':>7} {'build s':>8}")
+        for b in split:
+            if "error" in b:
+                rows.append(f"  {b['envs']:>5} {b['workers']:>3} failed: {b['error']}")
+            else:
+                rows.append(f"  {b['envs']:>5} {b['workers']:>3} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['rss_mb']:>7.0f} "
+                            f"{b['mb_per_env']:>7.1f} {b['build_s']:>8.1f}")
     if per_process:
         workers = per_process["workers"]
         rows.append(f"per-process vector env, {workers} workers (one Blender each): {per_process['steps_per_s']:.1f} env-steps/s, "
                     f"{per_process['rss_total_mb'] / workers:.0f} MB per env")
         for b in batches:
             if "error" not in b:
-                rows.append(f"  batched {b['envs']}: {b['steps_per_s'] / per_process['steps_per_s']:.2f}x its env-steps/s, "
+                where = f" in {b['workers']} workers" if "workers" in b else ""
+                rows.append(f"  batched {b['envs']}{where}: {b['steps_per_s'] / per_process['steps_per_s']:.2f}x its env-steps/s, "
                             f"{b['rss_mb'] / per_process['rss_total_mb']:.2f}x the memory of its {workers} workers")
     return rows

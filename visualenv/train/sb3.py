@@ -60,6 +60,7 @@ class TrainConfig:
     progress: bool = True
     pin: bool = True  # each training env's process confined to its own cores
     batched: bool = False  # the envs in one process and one Blender (BatchedVectorEnv) instead of one process each
+    workers: int | None = None  # with batched: the envs split into this many batches, one process each
 
     def policy(self, observation_space: Any) -> str:
         """SB3's policy for the env: images through a CNN, several cameras through one CNN each, a state vector through an MLP."""
@@ -175,8 +176,8 @@ def _make_envs(config: TrainConfig, spec_path: str, run_dir: Path, resume: bool)
 
     frame_stack = config.frame_stack if config.render else 0
     if config.batched:
-        train_env = make_sb3_batched(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack,
-                                     monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
+        train_env = make_sb3_batched(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, workers=config.workers,
+                                     pin=config.pin, monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
     else:
         train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
                                  monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))

@@ -1,0 +1,96 @@
+"""Batches at scale: several batches as one vector env, flat memory over many batches, split images without recompiling."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import visualenv
+from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.multi_batch import batch_sizes, merge_infos
+from visualenv.env.visual_env import VisualEnv
+
+SPECS = Path(__file__).parents[1] / "specs"
+
+
+def small(tmp_path: Path, name: str, size: int = 32) -> Path:
+    """A bundled spec at size x size pixels (fast renders)."""
+    path = tmp_path / name
+    path.write_text((SPECS / name).read_text().replace("resolution: [100, 100]", f"resolution: [{size}, {size}]"))
+    return path
+
+
+def test_workers_split_a_batch_and_env_i_is_env_i_of_one_batch(tmp_path):
+    """make_vec(n=5, batched=True, workers=2): batches of 3 and 2 envs in two processes; env i has the states of
+    one env seeded s + i, and the pixels of env i of one 5-env batch; SAME_STEP's final observations come back per env."""
+    spec = small(tmp_path, "visual_cartpole.yaml")
+    vec = visualenv.make_vec(str(spec), 5, batched=True, workers=2, autoreset_mode="same_step")
+    one = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")
+    singles = [VisualEnv(spec, render=False) for _ in range(5)]
+    try:
+        assert vec.num_envs == 5 and vec.sizes == [3, 2] and vec.observation_space.shape == (5, 32, 32, 1)
+        assert len({p.pid for p in vec.processes}) == 2
+        obs, info = vec.reset(seed=7)
+        expected, _ = one.reset(seed=7)
+        assert np.array_equal(obs, expected)
+        for i, env in enumerate(singles):
+            env.reset(seed=7 + i)
+            assert env.state == {k: v[i] for k, v in info["state"].items() if not k.startswith("_")}
+        actions = np.array([0, 1, 0, 0, 1])
+        ended = 0
+        for _ in range(40):
+            obs, rewards, terminated, truncated, info = vec.step(actions)
+            expected, rewards1, terminated1, truncated1, info1 = one.step(actions)
+            assert np.array_equal(rewards, rewards1) and np.array_equal(terminated, terminated1) and np.array_equal(truncated, truncated1)
+            assert all(np.array_equal(info["state"][n], info1["state"][n]) for n in one.program.state_names)
+            assert np.array_equal(obs, expected)
+            done = terminated | truncated
+            if done.any():
+                ended += 1
+                assert np.array_equal(info["_final_obs"], done) and info["final_obs"].shape == (5,)
+                for i in np.flatnonzero(done):
+                    assert np.array_equal(info["final_obs"][i], info1["final_obs"][i])
+                assert np.array_equal(info["final_info"]["outcome"][done], info1["final_info"]["outcome"][done])
+        assert ended, "no episode ended: the test would not see the final observations"
+        assert obs.reshape(5, -1).max(axis=1).min() > 100  # the scene, not black tiles
+    finally:
+        vec.close()
+        one.close()
+    assert not any(p.is_alive() for p in vec.processes)
+
+
+@pytest.mark.parametrize("workers", [0, 6, -1, 1.5, True])
+def test_a_bad_number_of_workers_is_refused(workers):
+    with pytest.raises(ValueError, match="workers must be an integer from 1 to num_envs"):
+        visualenv.make_vec(str(SPECS / "visual_cartpole.yaml"), 5, batched=True, workers=workers)
+
+
+def test_workers_without_batched_and_uneven_splits():
+    with pytest.raises(ValueError, match="batched=True"):
+        visualenv.make_vec(str(SPECS / "visual_cartpole.yaml"), 4, workers=2)
+    assert batch_sizes(10, 4) == [3, 3, 2, 2] and batch_sizes(4, 4) == [1, 1, 1, 1]
+
+
+def test_infos_of_workers_merge_with_masks_for_keys_one_worker_lacks():
+    a = {"outcome": np.array(["x", None], dtype=object), "_outcome": np.ones(2, bool), "error": np.array([None, "boom"], dtype=object),
+         "_error": np.array([False, True]), "state": {"x": np.array([1.0, 2.0]), "_x": np.ones(2, bool)}}
+    b = {"outcome": np.array([None], dtype=object), "_outcome": np.ones(1, bool), "state": {"x": np.array([3.0]), "_x": np.ones(1, bool)}}
+    merged = merge_infos([a, b], [2, 1])
+    assert list(merged["error"]) == [None, "boom", None] and list(merged["_error"]) == [False, True, False]
+    assert list(merged["state"]["x"]) == [1.0, 2.0, 3.0] and merged["_outcome"].all()
+
+
+def test_train_and_bench_refuse_bad_workers(tmp_path):
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+
+    spec = str(SPECS / "visual_cartpole.yaml")
+    result = CliRunner().invoke(main, ["train", spec, "--workers", "2", "-o", str(tmp_path)])
+    assert result.exit_code != 0 and "--batched N" in result.output
+    result = CliRunner().invoke(main, ["train", spec, "--batched", "2", "--workers", "3", "-o", str(tmp_path)])
+    assert result.exit_code != 0 and "each worker holds at least one env" in result.output
+    result = CliRunner().invoke(main, ["bench", spec, "--batched", "4", "--workers", "0"])
+    assert result.exit_code != 0 and "from 1 to the smallest batch size" in result.output
