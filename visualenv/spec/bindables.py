@@ -46,6 +46,8 @@ BINDABLES: dict[str, Bindable] = {b.name: b for b in (
     Bindable("strength", "number", "light strength (on the World actor: the sky's strength)", types=("LIGHT",), binds="a light's power"),
     Bindable("look_at", "vector", "aim the object (a camera) at this point", moves=True),
     Bindable("lens", "number", "camera focal length (mm)", types=("CAMERA",), binds="a camera's focal length"),
+    Bindable("texture", "number", "which file of the material's image texture set: int(floor(value)) modulo the set's size",
+             types=("MESH", "EMPTY"), binds="an image texture set"),
 )}
 
 

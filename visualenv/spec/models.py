@@ -51,7 +51,8 @@ class Texture(StrictModel):
     scale: float = Field(5.0, gt=0, description="texture coordinate scale (procedural kinds)")
     detail: float = Field(2.0, ge=0, le=15, description="noise detail")
     colors: Annotated[list[Color], Field(min_length=2, max_length=2)] | None = Field(None, description="two colours the texture value blends between (procedural kinds)")
-    image: str | None = Field(None, description="image file, relative to the spec (type: image)")
+    image: Union[str, Annotated[list[str], Field(min_length=1)], None] = Field(
+        None, description="image file, relative to the spec (type: image); or a list of files, a texture set an actor's 'texture' picks from")
 
     @model_validator(mode="after")
     def _image_needs_file(self) -> "Texture":

@@ -75,17 +75,13 @@ def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir:
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     coords = nodes.new("ShaderNodeTexCoord")
     if tex.type == "image":
-        file = (base_dir / str(tex.image)).resolve()
-        if not file.is_file():
-            raise SpecError([source.diagnostic(path + ("image",), "image file " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
-        try:
-            image = track(bpy.data.images.load(str(file), check_existing=False))
-        except RuntimeError as exc:
-            raise SpecError([source.diagnostic(path + ("image",), f"cannot read image {file}: {exc}")]) from None
-        if image.size[0] == 0:  # Blender loads lazily and keeps an empty image for a file it cannot decode
-            raise SpecError([source.diagnostic(path + ("image",), f"cannot read image {file}: not an image format Blender reads (PNG, JPEG, EXR, ...)")])
+        files = tex.image if isinstance(tex.image, list) else [str(tex.image)]
+        where = [path + ("image", i) for i in range(len(files))] if isinstance(tex.image, list) else [path + ("image",)]
+        images = [_load_image(base_dir / f, source, at, track) for f, at in zip(files, where)]
         node = nodes.new("ShaderNodeTexImage")
-        node.image = image
+        node.image = images[0]
+        if isinstance(tex.image, list):
+            node[TEXTURE_SET] = "\n".join(image.name for image in images)  # the names Blender gave them (a taken name gets .001)
         links.new(coords.outputs["UV"], node.inputs["Vector"])
         node["visualenv_needs_uv"] = True
         links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
@@ -112,6 +108,31 @@ def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir:
     links.new(factor, mix.inputs["Factor"])
     result = next(s for s in mix.outputs if s.type == "RGBA")
     links.new(result, bsdf.inputs["Base Color"])
+
+
+#: the custom property of an image texture node that lists its texture set (image names, in the spec's order)
+TEXTURE_SET = "visualenv_texture_set"
+
+
+def _load_image(path: Path, source: SourceMap, where: tuple, track: Callable[[Any], Any]) -> Any:
+    file = path.resolve()
+    if not file.is_file():
+        raise SpecError([source.diagnostic(where, "image file " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
+    try:
+        image = track(bpy.data.images.load(str(file), check_existing=False))
+    except RuntimeError as exc:
+        raise SpecError([source.diagnostic(where, f"cannot read image {file}: {exc}")]) from None
+    if image.size[0] == 0:  # Blender loads lazily and keeps an empty image for a file it cannot decode
+        raise SpecError([source.diagnostic(where, f"cannot read image {file}: not an image format Blender reads (PNG, JPEG, EXR, ...)")])
+    return image
+
+
+def texture_sets(mat: Any) -> list[tuple[Any, list[Any]]]:
+    """(image texture node, its images) for every texture set of `mat`."""
+    if mat.node_tree is None:
+        return []
+    return [(node, [bpy.data.images[name] for name in str(node[TEXTURE_SET]).split("\n")])
+            for node in mat.node_tree.nodes if node.type == "TEX_IMAGE" and TEXTURE_SET in node]
 
 
 def fix_uv_coordinates(mat: Any, mesh: Any) -> None:

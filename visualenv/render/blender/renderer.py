@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import math
 from dataclasses import dataclass
 from typing import Any, Callable, Iterator, Sequence
 
@@ -16,7 +17,7 @@ from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file
-from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, world_writer
+from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects
@@ -198,6 +199,7 @@ class BlenderRenderer(Renderer):
             if isinstance(spec, CameraObject) and spec.look_at is not None:
                 targets[name] = tuple(spec.look_at)
         setters: list[tuple[int, int, Callable[[tuple], None]]] = []
+        self._owned: set[int] = set()  # materials copied for this pass's objects
         start = 0
         for target in plan.bindings:
             if is_world(target.object, objects):
@@ -225,7 +227,44 @@ class BlenderRenderer(Renderer):
             return set_look_at
         if prop == "color":
             return self._color_setter(name, obj)
+        if prop == "texture":
+            return self._texture_setter(name, obj)
         return _SETTERS[prop](obj)
+
+    def _own_material(self, mesh_obj: Any, slot: Any) -> Any:
+        """The object's own copy of the slot's material, made once per binding pass (a colour and a texture share it)."""
+        material = slot.material
+        if material is not None and material.as_pointer() in self._owned:
+            return material
+        copy = material.copy() if material is not None else make_material(
+            f"{mesh_obj.name}-bound", Material(), base_dir=self.plan.base_dir, source=self.plan.source, path=(), track=lambda d: d)
+        slot.link = "OBJECT"
+        slot.material = copy
+        self._owned.add(copy.as_pointer())
+        return copy
+
+    def _texture_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
+        """Picks the image of each texture set in the object's own copies of its materials: ``int(floor(v)) % len(set)``."""
+        meshes = [obj] if obj.type == "MESH" else [c for c in obj.children_recursive if c.type == "MESH"]
+        choosers = []
+        for mesh_obj in meshes:
+            for slot in mesh_obj.material_slots:
+                if slot.material is None or not texture_sets(slot.material):
+                    continue
+                for node, images in texture_sets(self._own_material(mesh_obj, slot)):
+                    choosers.append((node, images))
+        if not choosers:
+            raise SpecError([self.plan.source.diagnostic(("actors", name, "texture"),
+                f"'texture' picks one file of an image texture set, but no material of '{name}' has one: "
+                "give it material: {texture: {type: image, image: [a.png, b.png, ...]}}", key=True)])
+
+        def set_texture(v: tuple) -> None:
+            k = math.floor(v[0])
+            for node, images in choosers:
+                image = images[k % len(images)]
+                if node.image is not image:
+                    node.image = image
+        return set_texture
 
     def _color_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
         """A light's colour, or the colour of the object's own copies of its materials."""
@@ -261,10 +300,7 @@ class BlenderRenderer(Renderer):
                 mesh_obj.data.materials.append(None)
             for slot in mesh_obj.material_slots:
                 original = slot.material
-                copy = original.copy() if original is not None else make_material(
-                    f"{mesh_obj.name}-bound", Material(), base_dir=self.plan.base_dir, source=self.plan.source, path=(), track=lambda d: d)
-                slot.link = "OBJECT"
-                slot.material = copy
+                copy = self._own_material(mesh_obj, slot)
                 write = color_writer(copy)
                 if write is None:
                     unreachable.append(f"'{original.name}' of '{mesh_obj.name}'")
@@ -481,7 +517,7 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 
 #: setters of the bindable properties that need only the object; look_at and color need the renderer's state
 #: (BlenderRenderer._setter). Together they cover visualenv.spec.bindables.BINDABLES (tests/test_bindables.py checks).
-SETTERS_WITH_STATE = ("look_at", "color")
+SETTERS_WITH_STATE = ("look_at", "color", "texture")
 _SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
     "location": _set_location, "rotation": _set_rotation, "scale": _set_scale,
     "visible": _set_visible, "strength": _set_strength, "lens": _set_lens,
