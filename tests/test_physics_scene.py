@@ -122,9 +122,13 @@ def test_a_height_field_is_a_located_error(tmp_path: Path) -> None:
         VisualEnv(spec)
 
 
-def brown(image: np.ndarray) -> int:
+def brown_mask(image: np.ndarray) -> np.ndarray:
     pixels = image.astype(int)
-    return int((pixels[..., 0] > pixels[..., 2] + 15).sum())
+    return pixels[..., 0] > pixels[..., 2] + 15
+
+
+def brown(image: np.ndarray) -> int:
+    return int(brown_mask(image).sum())
 
 
 def test_half_cheetahs_track_camera_follows_it() -> None:
@@ -136,6 +140,37 @@ def test_half_cheetahs_track_camera_follows_it() -> None:
         assert env.unwrapped.data.qpos[0] > 4.5
         before, after = brown(first), brown(obs)  # the cheetah's material (rgba .7 .5 .3) against the grey sky and light floor
         assert before > 50 and abs(after - before) < 0.3 * before, (before, after)
-        assert np.abs(obs.astype(int) - first.astype(int)).mean() < 5
+        col_before, col_after = (np.nonzero(brown_mask(image))[1].mean() for image in (first, obs))
+        assert abs(col_after - col_before) < 5, (col_before, col_after)  # where it was in the frame (the checker floor slid by)
+    finally:
+        env.close()
+
+
+def test_a_planes_builtin_checker_texture_is_drawn(tmp_path: Path) -> None:
+    (tmp_path / "c.xml").write_text(textwrap.dedent("""\
+        <mujoco>
+          <asset>
+            <texture name="grid" type="2d" builtin="checker" rgb1="1 1 1" rgb2="0 0 0" width="64" height="64"/>
+            <material name="grid" texture="grid" texrepeat="4 4"/>
+          </asset>
+          <worldbody>
+            <light directional="true" pos="0 0 3" dir="0 0 -1"/>
+            <geom name="floor" type="plane" size="1 1 0.1" material="grid"/>
+            <camera name="top" pos="0 0 1.5"/>
+          </worldbody>
+        </mujoco>
+        """), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: C-v0\nphysics: {model: c.xml}\nobservation: {camera: top, resolution: [32, 32], color: grayscale}\n"
+                    "actions: {discrete: [{}]}\n", encoding="utf-8")
+    env = VisualEnv(spec)
+    try:
+        obs, _ = env.reset(seed=0)
+        gray = obs[..., 0].astype(int)
+        bright, dark = (gray > 150).mean(), (gray < 90).mean()
+        assert bright > 0.2 and dark > 0.2, (bright, dark, gray[16])  # squares of both colours, not the plain grey of a material without texture
+        # 4 repeats of a 2x2 checker across the plane: the colour flips along a row several times
+        flips = int(np.count_nonzero(np.diff(gray[16] > 120)))
+        assert flips >= 4, gray[16]
     finally:
         env.close()

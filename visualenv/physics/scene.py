@@ -37,6 +37,9 @@ class GeomShape:
     rgba: tuple[float, float, float, float]
     vertices: np.ndarray | None = None  # mesh geoms: (n, 3) in the geom's frame
     faces: np.ndarray | None = None  # mesh geoms: (m, 3) vertex indices
+    texture: np.ndarray | None = None  # planes: the material's 2-D texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
+    texrepeat: tuple[float, float] = (1.0, 1.0)  # repetitions across the plane, or per metre when texuniform
+    texuniform: bool = False
 
 
 @dataclass(frozen=True)
@@ -115,5 +118,25 @@ def _geom(model: Any, g: int, kind: str, name: str) -> GeomShape:
         f0, nf = int(model.mesh_faceadr[mesh]), int(model.mesh_facenum[mesh])
         vertices = np.array(model.mesh_vert[v0:v0 + nv], dtype=np.float64)
         faces = np.array(model.mesh_face[f0:f0 + nf], dtype=np.int64)
+    texture, repeat, uniform = _plane_texture(model, mat) if kind == "plane" and mat >= 0 else (None, (1.0, 1.0), False)
     return GeomShape(name, kind, int(model.geom_bodyid[g]), size, tuple(map(float, model.geom_pos[g])),  # type: ignore[arg-type]
-                     tuple(map(float, model.geom_quat[g])), rgba, vertices, faces)  # type: ignore[arg-type]
+                     tuple(map(float, model.geom_quat[g])), rgba, vertices, faces, texture, repeat, uniform)  # type: ignore[arg-type]
+
+
+def _plane_texture(model: Any, mat: int) -> tuple[np.ndarray | None, tuple[float, float], bool]:
+    """A plane material's 2-D texture as MuJoCo compiled it (builtin checker, gradient, flat, or an image: all are pixels by then)."""
+    texids = np.atleast_1d(model.mat_texid[mat])
+    rgb_role = 1 if texids.size > 1 else 0  # MuJoCo 3: one texture per role, mjTEXROLE_RGB = 1
+    tex = int(texids[rgb_role])
+    if tex < 0 or int(model.tex_type[tex]) != 0:  # none, or a cube/skybox texture (not drawn on planes)
+        return None, (1.0, 1.0), False
+    w, h = int(model.tex_width[tex]), int(model.tex_height[tex])
+    channels = int(model.tex_nchannel[tex]) if hasattr(model, "tex_nchannel") else 3
+    adr = int(model.tex_adr[tex])
+    pixels = np.asarray(model.tex_data[adr:adr + w * h * channels], dtype=np.float32).reshape(h, w, channels) / 255.0
+    rgba = np.ones((h, w, 4), np.float32)
+    rgba[..., :min(channels, 3)] = pixels[..., :3]
+    if channels == 1:
+        rgba[..., 1] = rgba[..., 2] = pixels[..., 0]
+    repeat = tuple(float(v) for v in model.mat_texrepeat[mat])
+    return rgba[::-1].copy(), (repeat[0], repeat[1]), bool(model.mat_texuniform[mat])

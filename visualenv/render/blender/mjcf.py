@@ -98,6 +98,38 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     return PoseWriter(moving, cameras)
 
 
+def _plane_texture(mat: Any, geom: GeomShape) -> None:
+    """The plane's texture times its colour, as MuJoCo draws it: tiled `texrepeat` times across the plane (or per metre)."""
+    assert geom.texture is not None
+    h, w = geom.texture.shape[:2]
+    image = bpy.data.images.new(f"mjcf-{geom.name}-texture", w, h, alpha=True)
+    image.pixels.foreach_set(geom.texture.reshape(-1))
+    image.pack()
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
+    coords = nodes.new("ShaderNodeTexCoord")
+    mapping = nodes.new("ShaderNodeMapping")
+    rx, ry = geom.texrepeat
+    if geom.texuniform:  # repeats per metre of the object's own coordinates
+        mapping.inputs["Scale"].default_value = (rx, ry, 1.0)
+    else:  # repeats across the plane's extent [-size, size]
+        mapping.inputs["Location"].default_value = (0.5 * rx, 0.5 * ry, 0.0)
+        mapping.inputs["Scale"].default_value = (rx / (2 * geom.size[0]), ry / (2 * geom.size[1]), 1.0)
+    texture = nodes.new("ShaderNodeTexImage")
+    texture.image = image
+    texture.interpolation = "Closest"
+    texture.extension = "REPEAT"
+    tint = nodes.new("ShaderNodeMix")
+    tint.data_type = "RGBA"
+    tint.blend_type = "MULTIPLY"
+    tint.inputs["Factor"].default_value = 1.0
+    tint.inputs["B"].default_value = bsdf.inputs["Base Color"].default_value
+    links.new(coords.outputs["Object"], mapping.inputs["Vector"])
+    links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
+    links.new(texture.outputs["Color"], tint.inputs["A"])
+    links.new(tint.outputs["Result"], bsdf.inputs["Base Color"])
+
+
 def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any) -> Any:
     mesh = bpy.data.meshes.new(geom.name)
     bm = bmesh.new()
@@ -130,7 +162,10 @@ def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any) -> Any:
     bm.free()
     obj = bpy.data.objects.new(geom.name, mesh)
     material = Material(color=list(geom.rgba), roughness=0.6)
-    mesh.materials.append(make_material(f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d))
+    mat = make_material(f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d)
+    if geom.texture is not None:
+        _plane_texture(mat, geom)
+    mesh.materials.append(mat)
     obj.rotation_mode = "QUATERNION"
     obj.location = geom.pos
     obj.rotation_quaternion = Quaternion(geom.quat)
