@@ -56,11 +56,11 @@ def run(text: str, actions: list[int], name: str = "seg.yaml", base_dir=".") -> 
     env = VisualEnv(load_spec_text(text, name=name, base_dir=base_dir))
     try:
         obs, info = env.reset(seed=0)
-        seen, states = [obs], [info["state"]["x"]]
+        seen, states = [obs], [info["state"].get("x")]
         for a in actions:
             obs, _, _, _, info = env.step(a)
             seen.append(obs)
-            states.append(info["state"]["x"])
+            states.append(info["state"].get("x"))
         return seen, states, env.segmentation_ids
     finally:
         env.close()
@@ -161,3 +161,21 @@ def test_bad_segmentation_specs_are_located_errors(fragment, message):
     with pytest.raises(SpecError, match=message) as err:
         load_spec_text(text, name="bad.yaml")
     assert "bad.yaml:" in str(err.value)
+
+
+def test_mujoco_geoms_take_their_bodys_name():
+    """Gymnasium's InvertedPendulum: the cart's and the pole's geoms each show as their body, the pole above the cart."""
+    pytest.importorskip("mujoco")
+    from pathlib import Path
+
+    folder = Path(__file__).parents[1] / "specs" / "mujoco"
+    text = (folder / "inverted_pendulum.yaml").read_text().replace(
+        "observation: {camera: Camera, resolution: [84, 84], color: rgb}",
+        "observation: {cameras: {eye: {camera: Camera, resolution: [48, 48], color: rgb}, mask: {camera: Camera, resolution: [48, 48], color: segmentation}}}")
+    assert "mask:" in text
+    seen, _, ids = run(text, [], base_dir=folder)
+    assert ids == {"world": 1, "cart": 2, "pole": 3}
+    mask = seen[0]["mask"][:, :, 0]
+    cart, pole = np.argwhere(mask == 2), np.argwhere(mask == 3)
+    assert len(cart) >= 8 and len(pole) >= 8
+    assert pole[:, 0].min() < cart[:, 0].min() and set(np.unique(mask)) <= {0, 1, 2, 3}

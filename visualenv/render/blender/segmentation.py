@@ -9,8 +9,9 @@ It renders with one sample per pixel through a box filter of Cycles' least width
 never blend at edges and carry no noise. Lights are hidden from camera rays
 meanwhile (a lamp seen directly would glow in the image).
 
-Ids follow the scene's objects in order (a ``.blend``'s, then the declared ones);
-objects that share a ``label`` share the id of the label's first object. An
+Ids follow the scene's objects in order (a ``.blend``'s, the declared ones, then a
+MuJoCo model's geoms, which take their body's name); objects that share a ``label``
+share the id of the label's first object. An
 object's children that the spec does not name (the parts of an imported mesh,
 the children of a .blend object that are not in its scene) take its id.
 """
@@ -46,12 +47,14 @@ def assign_ids(built: BuiltScene, plan: RenderPlan) -> dict[str, int]:
     for name, spec in plan.scene.objects.items():
         if isinstance(spec, (PrimitiveObject, MeshObject)) and spec.label is not None:
             labels[name] = spec.label
+    physics = plan.physics  # a MuJoCo model's geoms take their body's name: the parts of one rigid body share an id
+    bodies = {g.name: physics.body_names[g.body] for g in physics.geoms} if physics is not None else {}
     named = {obj.as_pointer() for obj in built.objects.values()}
     ids: dict[str, int] = {}
     for name, obj in built.objects.items():
         if not _shows(obj):
             continue
-        key = labels.get(name, name)
+        key = labels.get(name, bodies.get(name, name))
         if key not in ids:
             ids[key] = len(ids) + 1
         for part in (obj, *(c for c in obj.children_recursive if c.as_pointer() not in named)):
