@@ -174,3 +174,16 @@ def test_a_planes_builtin_checker_texture_is_drawn(tmp_path: Path) -> None:
         assert flips >= 4, gray[16]
     finally:
         env.close()
+
+
+def test_a_spec_binds_a_geoms_colour(tmp_path: Path) -> None:
+    """actors reach the model's geoms by name: a colour drawn at reset recolours the pole (domain randomisation)."""
+    path = tmp_path / "pole.yaml"
+    path.write_text(POLE + "state:\n  red: {init: 'uniform(0.8, 1.0)'}\nactors:\n  cpole: {color: [red, 0, 0]}\n", encoding="utf-8")
+    env = visualenv.make(path)
+    try:
+        obs, _ = env.reset(seed=0)
+        r, g, b = (obs[..., i].astype(int) for i in range(3))
+        assert cyan(obs).sum() == 0 and ((r > g + 40) & (r > b + 40)).sum() >= 8
+    finally:
+        env.close()

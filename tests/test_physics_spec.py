@@ -177,6 +177,7 @@ def test_dt_is_the_models(tmp_path: Path) -> None:
     ("<mujoco><worldbody><body>\n</mujoco>", "XML parse error"),
     ('<mujoco>\n  <include file="missing.xml"/>\n</mujoco>', "Error opening file 'missing.xml' Element 'include', line 2"),
     ('<mujoco>\n<worldbody>\n  <geom type="box" size="1 1 1" colour="red"/>\n</worldbody>\n</mujoco>', "unrecognized attribute: 'colour' Element 'geom', line 3"),
+    ('<mujoco>\n<worldbody>\n  <gizmo name="x"/>\n</worldbody>\n</mujoco>', "unrecognized element Element 'gizmo', line 3"),
 ])
 def test_bad_mjcf_is_a_located_error(tmp_path: Path, model: str, expected: str) -> None:
     message = errors_of(write(tmp_path, spec_with(""), model=model))
@@ -241,3 +242,8 @@ def test_a_state_only_batch_steps_each_envs_own_simulation() -> None:
             assert np.array_equal(obs[i], single_obs) and rewards[i] == single_reward
     with pytest.raises(SpecError, match="a batch cannot render a physics spec yet"):
         BatchedVectorEnv(spec, 2)
+
+
+def test_an_input_for_an_actuator_that_does_not_exist(tmp_path: Path) -> None:
+    message = errors_of(write(tmp_path, spec_with("actions: {continuous: {ctrl_torqe: {low: -1, high: 1}}}\n")))
+    assert "no actuator 'torqe' in the model for 'ctrl_torqe' (did you mean 'ctrl_torque'?" in message and "spec.yaml:" in message

@@ -261,6 +261,13 @@ class _Compiler:
                 self.error(("physics", "model"), str(exc))
         self.pnames = phys.scope(model, section.contacts)
 
+    def physics_objects(self) -> dict[str, str]:
+        """The objects the renderer makes of the model (drawn geoms, lights, cameras) by name, with their Blender types."""
+        if self.plan is None or self.plan.scene is None:
+            return {}
+        scene = self.plan.scene
+        return {**{g.name: "MESH" for g in scene.geoms}, **{light.name: "LIGHT" for light in scene.lights}, **{c.name: "CAMERA" for c in scene.cameras}}
+
     def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: set[str] = frozenset()) -> None:  # type: ignore[assignment]
         """Insert, at statement `at` of `fb`, the read of the physics names in `used` (a statement without a site of its own)."""
         if self.plan is None:
@@ -363,9 +370,12 @@ class _Compiler:
                     seen[n] = group
         for group, names in groups:
             for n in names:
+                path = ("actions", "discrete") if group == "actions.discrete" else tuple(group.split(".")) + (n,)
                 if n in self.pnames and not (group.startswith("actions") and n.startswith("ctrl_")):
-                    path = ("actions", "discrete") if group == "actions.discrete" else tuple(group.split(".")) + (n,)
                     self.error(path, f"'{n}' is a name of the physics model: choose another", key=True)
+                elif self.plan is not None and group.startswith("actions") and n.startswith("ctrl_") and n not in self.pnames:
+                    controls = [f"ctrl_{a}" for a in self.plan.model.actuator_names()]
+                    self.error(path, f"no actuator '{n[5:]}' in the model for '{n}'" + did_you_mean(n, controls).replace("names:", "controls:"), key=True)
         if "max_steps" in spec.outcomes:
             self.error(("outcomes", "max_steps"), "'max_steps' is what info['outcome'] says when an episode reaches max_steps: choose another name", key=True)
         for n in spec.dynamics.update:
@@ -629,8 +639,12 @@ class _Compiler:
         declared = self.spec.scene.objects
         if obj_name == WORLD_ACTOR and obj_name not in declared:
             return True  # the world: the spec's, the file's, or the default one
+        model_objects = self.physics_objects()
+        if obj_name in model_objects and obj_name not in declared:
+            return True  # a geom, light or camera of the MuJoCo model (e.g. a colour drawn at reset: domain randomisation)
         if self.spec.scene.file is None and obj_name not in declared:
-            self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, declared).replace("names:", "objects:"), key=True)
+            known = [*declared, *model_objects]
+            self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, known).replace("names:", "objects:"), key=True)
             return False
         return True
 
@@ -639,6 +653,11 @@ class _Compiler:
         """One binding: its object's type checked, its values assigned one line each (so a fault names it), its target recorded."""
         _, obj_name, prop = path
         obj = self.spec.scene.objects.get(obj_name)
+        if obj is None and obj_name in self.physics_objects():
+            problem = type_problem(prop, obj_name, self.physics_objects()[obj_name])
+            if problem:
+                self.error(path, problem, key=True)
+                return
         problem = type_problem(prop, obj_name, object_type(obj)) if obj is not None else None
         world = obj is None and obj_name == WORLD_ACTOR
         if world and prop not in WORLD_PROPERTIES:
@@ -673,8 +692,7 @@ class _Compiler:
         if spec.observation is None or spec.scene.file is not None:
             return
         types = {n: object_type(o) for n, o in spec.scene.objects.items()}
-        if self.plan is not None and self.plan.scene is not None:  # the model's cameras, by their MuJoCo names
-            types.update({c.name: "CAMERA" for c in self.plan.scene.cameras})
+        types.update({n: t for n, t in self.physics_objects().items() if n not in types})  # the model's cameras, by their MuJoCo names
         for path, camera in spec.camera_uses():
             problem = camera_problem(camera, types)
             if problem:
