@@ -35,7 +35,9 @@ class VisualEnv(gym.Env):
     spec's camera sees, ``Box(0, 255, (H, W, C), uint8)`` with C = 1 for
     grayscale or depth and 3 for RGB; several cameras give a ``Dict`` of those.
     Without (``render=False``, or no ``observation`` in the spec): the state
-    variables marked ``observe`` in declared order, a float32 ``Box`` of shape (n,).
+    variables marked ``observe`` in declared order, a float32 ``Box`` of shape (n,);
+    with ``physics``, ``physics.observe`` as an unbounded float64 ``Box``, as
+    Gymnasium's MuJoCo envs observe (``model`` and ``data`` are then MuJoCo's).
 
     ## Action space
     ``Discrete(n)`` for ``actions.discrete`` (action i sets its inputs for the
