@@ -187,3 +187,34 @@ def test_a_spec_binds_a_geoms_colour(tmp_path: Path) -> None:
         assert cyan(obs).sum() == 0 and ((r > g + 40) & (r > b + 40)).sum() >= 8
     finally:
         env.close()
+
+
+def test_a_light_on_a_body_moves_with_it(tmp_path: Path) -> None:
+    """A light inside a falling body takes MuJoCo's light_xpos each step (a light on a body, or tracking one, moves)."""
+    (tmp_path / "l.xml").write_text(textwrap.dedent("""\
+        <mujoco>
+          <worldbody>
+            <geom name="floor" type="plane" size="2 2 0.1" rgba="0.8 0.8 0.8 1"/>
+            <body name="lamp" pos="0 0 2">
+              <freejoint/>
+              <geom type="sphere" size="0.05" contype="0" conaffinity="0"/>
+              <light name="bulb" pos="0 0 0" dir="0 0 -1" cutoff="60"/>
+            </body>
+            <camera name="side" pos="0 -4 1" xyaxes="1 0 0 0 0.2 1"/>
+          </worldbody>
+        </mujoco>
+        """), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: L-v0\nphysics: {model: l.xml, frame_skip: 10}\nobservation: {camera: side, resolution: [16, 16]}\n"
+                    "actions: {discrete: [{}]}\n", encoding="utf-8")
+    env = VisualEnv(spec)
+    try:
+        env.reset(seed=0)
+        light = env.renderer.object("bulb")
+        assert abs(light.location[2] - 2.0) < 1e-6
+        for _ in range(20):
+            env.step(0)
+        z = env.unwrapped.data.light_xpos[0][2]
+        assert z < 1.5 and abs(light.location[2] - z) < 1e-6, (z, tuple(light.location))
+    finally:
+        env.close()

@@ -386,7 +386,7 @@ class VisualEnv(gym.Env):
         """A physics spec's bodies and cameras take MuJoCo's poses before a render."""
         if self._sim is not None:
             data = self._sim.data
-            self.renderer.set_physics_poses(data.xpos, data.xquat, data.cam_xpos, data.cam_xmat)
+            self.renderer.set_physics_poses(data.xpos, data.xquat, data.cam_xpos, data.cam_xmat, data.light_xpos, data.light_xdir)
 
     def _observe(self) -> Any:
         if self.uses_camera:

@@ -95,8 +95,9 @@ class Renderer(ABC):
     def close(self) -> None:
         """Free everything this renderer created (idempotent)."""
 
-    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray) -> None:  # noqa: B027 - optional
-        """A physics spec's poses for the next render: MjData's body and camera arrays (a backend without physics ignores them)."""
+    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,  # noqa: B027 - optional
+                          light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
+        """A physics spec's poses for the next render: MjData's body, camera and light arrays (a backend without physics ignores them)."""
 
 
 Readback = Literal["auto", "memory", "file"]

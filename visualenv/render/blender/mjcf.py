@@ -33,8 +33,10 @@ class PoseWriter:
 
     bodies: list[tuple[int, Any]]  # (body index, empty) of the moving bodies
     cameras: list[Any]  # camera objects by MuJoCo camera index
+    lights: list[Any]  # light objects by MuJoCo light index (a light on a body, or tracking one, moves)
 
-    def write(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray) -> None:
+    def write(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
+              light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
         if self.bodies:
             rows = [i for i, _ in self.bodies]
             positions, quats = xpos[rows].tolist(), xquat[rows].tolist()
@@ -44,6 +46,10 @@ class PoseWriter:
         for i, cam in enumerate(self.cameras):
             cam.location = cam_xpos[i].tolist()
             cam.rotation_quaternion = Matrix(cam_xmat[i].reshape(3, 3).tolist()).to_quaternion()
+        if light_xpos is not None and light_xdir is not None:
+            for i, light in enumerate(self.lights):
+                light.location = light_xpos[i].tolist()
+                light.rotation_quaternion = Vector(light_xdir[i].tolist()).to_track_quat("-Z", "Y")
 
 
 def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool) -> PoseWriter:
@@ -66,6 +72,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
         built.objects.setdefault(geom.name, obj)
+    lights = []
     for light in scene_data.lights:
         data = bpy.data.lights.new(light.name, "SUN" if light.directional else "SPOT")
         data.color = light.diffuse
@@ -78,6 +85,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         obj.rotation_mode = "QUATERNION"
         obj.rotation_quaternion = Vector(light.direction).to_track_quat("-Z", "Y")
         built.objects.setdefault(light.name, obj)
+        lights.append(obj)
     if add_light:  # MuJoCo's viewer lights a model without lights by a headlight; a sun from above and in front stands in
         sun = bpy.data.objects.new("mujoco-headlight", bpy.data.lights.new("mujoco-headlight", "SUN"))
         sun.data.energy = 3.0
@@ -95,7 +103,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         built.objects.setdefault(cam_info.name, obj)
         cameras.append(obj)
     moving = [(int(b), empties[int(b)]) for b in scene_data.moving if int(b) in empties]
-    return PoseWriter(moving, cameras)
+    return PoseWriter(moving, cameras, lights)
 
 
 def _plane_texture(mat: Any, geom: GeomShape) -> None:

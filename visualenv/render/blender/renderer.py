@@ -321,10 +321,11 @@ class BlenderRenderer(Renderer):
             write_bindings(values, self._last, self._size, self._setters, self._aimed, self._targets)
             self._last = values
 
-    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray) -> None:
-        """Every moving body's and the model's cameras' poses from MuJoCo's arrays (:mod:`mjcf`)."""
+    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
+                          light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
+        """Every moving body's, and the model's cameras' and lights' poses from MuJoCo's arrays (:mod:`mjcf`)."""
         if self._poses is not None:
-            self._poses.write(xpos, xquat, cam_xpos, cam_xmat)
+            self._poses.write(xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir)
 
     def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
         self._check_open()
