@@ -290,7 +290,7 @@ class VisualEnv(gym.Env):
         values = np.asarray(action)
         if values.dtype.kind not in "iuf":
             raise TypeError(f"action {action!r} is not an array of numbers: the action space is {self.action_space}")
-        a = tuple(float(v) for v in values.astype(np.float64).reshape(-1))
+        a = tuple(values.astype(np.float64).reshape(-1).tolist())
         if len(a) != len(self.program.continuous):
             raise ValueError(f"action has {len(a)} values, expected {len(self.program.continuous)}: the action space is {self.action_space}")
         return a
