@@ -19,7 +19,7 @@ import importlib
 import re
 import keyword
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Collection, Mapping
 
 from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean, in_file_order
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
@@ -268,7 +268,7 @@ class _Compiler:
         scene = self.plan.scene
         return {**{g.name: "MESH" for g in scene.geoms}, **{light.name: "LIGHT" for light in scene.lights}, **{c.name: "CAMERA" for c in scene.cameras}}
 
-    def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: set[str] = frozenset()) -> None:  # type: ignore[assignment]
+    def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: Collection[str] = ()) -> None:
         """Insert, at statement `at` of `fb`, the read of the physics names in `used` (a statement without a site of its own)."""
         if self.plan is None:
             return
