@@ -63,6 +63,7 @@ def test_ports_expose_mujoco_model_and_data() -> None:
     env = VisualEnv(SPECS / "half_cheetah.yaml", render=False)
     assert isinstance(env.unwrapped.model, mujoco.MjModel) and isinstance(env.unwrapped.data, mujoco.MjData)
     assert env.action_space.shape == (6,) and env.observation_space.shape == (17,)
+    assert env.metadata["render_fps"] == 20  # 1 / (0.01 s * frame_skip 5), as Gymnasium's HalfCheetah-v5
 
 
 @pytest.mark.parametrize("env_id", ["VisualInvertedPendulum-v0", "VisualHalfCheetah-v0", "VisualReacher-v0"])

@@ -115,6 +115,8 @@ class VisualEnv(gym.Env):
         #: a physics spec's own MuJoCo simulation; ``model`` and ``data`` are its MjModel and MjData, as in Gymnasium's MujocoEnv
         self._sim = program.physics.simulation() if program.physics is not None else None
         self.model: Any = self._sim.model if self._sim is not None else None
+        if program.physics is not None:  # videos play at the simulation's speed, as Gymnasium's MuJoCo envs say
+            self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / program.physics.dt)))}
         self.data: Any = self._sim.data if self._sim is not None else None
         self._fns = program.functions(self._random, self._sim)
         self._faults = FaultDiagnosis(program)
