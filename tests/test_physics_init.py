@@ -28,7 +28,8 @@ def test_inspect_lists_the_names() -> None:
     assert result.exit_code == 0, result.output
     text = result.output
     assert "6 actuators" in text and "actuator bthigh: ctrl_bthigh in [-1, 1]" in text
-    for name in ("qpos_rootx", "qvel_ffoot", "body_torso_z", "body_torso_qw", "geoms (for contacts): floor, torso", "sim_time"):
+    for name in ("qpos_rootx", "qvel_ffoot", "body_torso_z", "body_torso_qw", "geoms (for contacts): floor, torso", "sim_time",
+                 "drawn geoms: floor (plane), torso (capsule)", "cameras (observation.camera): track", "lights: light0"):
         assert name in text, name
 
 

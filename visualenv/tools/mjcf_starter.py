@@ -40,6 +40,14 @@ def mjcf_report(path: Path) -> str:
         lines.append(f"  actuator {name}: ctrl_{name} in [{lo:g}, {hi:g}]")
     for title, names in physics.listing().items():
         lines.append(f"{title}: " + ", ".join(names))
+    kinds = {0: "plane", 1: "hfield", 2: "sphere", 3: "capsule", 4: "ellipsoid", 5: "cylinder", 6: "box", 7: "mesh", 8: "sdf"}
+    drawn = [f"{idents['geom'][g]} ({kinds.get(int(m.geom_type[g]), '?')})" for g in range(m.ngeom) if int(m.geom_group[g]) < 3]
+    hidden = [idents["geom"][g] for g in range(m.ngeom) if int(m.geom_group[g]) >= 3]
+    lines.append("drawn geoms: " + (", ".join(drawn) or "none") + (f"; hidden (group >= 3): {', '.join(hidden)}" if hidden else ""))
+    if "hfield" in " ".join(drawn) or "sdf" in " ".join(drawn):
+        lines.append("  a height field or SDF cannot be drawn yet: a rendered spec over this model is refused (hide it in group 3)")
+    lines.append("cameras (observation.camera): " + (", ".join(idents["camera"]) or "none: the spec adds its own"))
+    lines.append("lights: " + (", ".join(idents["light"]) or "none: a sun stands in for MuJoCo's headlight"))
     return "\n".join(lines)
 
 
