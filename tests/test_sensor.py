@@ -130,3 +130,24 @@ def test_bad_sensors_are_located_spec_errors(observation, message):
     with pytest.raises(SpecError, match=message) as err:
         load_spec_text(text, name="bad.yaml")
     assert "bad.yaml:" in str(err.value)
+
+
+def test_same_step_autoreset_draws_the_noise_one_env_draws_at_its_end_and_its_next_reset():
+    text = flat("{read_noise: 0.05}").replace("max_steps: 5", "max_steps: 2")
+    batch = BatchedVectorEnv(load_spec_text(text, name="flat.yaml"), 2, autoreset_mode="SAME_STEP")
+    singles = [VisualEnv(load_spec_text(text, name="flat.yaml")) for _ in range(2)]
+    try:
+        batch.reset(seed=20)
+        for i, env in enumerate(singles):
+            env.reset(seed=20 + i)
+        for _ in range(2):
+            obs, _, _, truncated, info = batch.step(np.zeros(2, dtype=np.int64))
+            own = [env.step(0) for env in singles]
+        assert truncated.all()
+        for i, env in enumerate(singles):
+            assert np.array_equal(info["final_obs"][i], own[i][0])
+            assert np.array_equal(obs[i], env.reset()[0])  # the next episode's first frame, drawn after the last one
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
