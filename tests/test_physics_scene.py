@@ -218,3 +218,28 @@ def test_a_light_on_a_body_moves_with_it(tmp_path: Path) -> None:
         assert z < 1.5 and abs(light.location[2] - z) < 1e-6, (z, tuple(light.location))
     finally:
         env.close()
+
+
+def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
+    """Copy i of a rendered batch takes lane i's MuJoCo poses: tile i equals env i rendered alone; a moving model camera is refused."""
+    from visualenv.env.batched import BatchedVectorEnv
+
+    path = tmp_path / "pole.yaml"
+    path.write_text(POLE.replace("values: {qpos_hinge: angle}", "values: {qpos_hinge: 'uniform(-1, 1)'}"), encoding="utf-8")
+    batch = BatchedVectorEnv(path, 3)
+    singles = [VisualEnv(path) for _ in range(3)]
+    try:
+        obs, _ = batch.reset(seed=2)
+        for i, env in enumerate(singles):
+            alone, _ = env.reset(seed=2 + i)
+            assert batch.lanes[i].data.qpos[1] == env.data.qpos[1]
+            close = (np.abs(obs[i].astype(int) - alone.astype(int)) <= 8).mean()
+            assert close >= 0.98, (i, close)
+        # the three poles lean differently: the tiles differ where the poles are
+        assert (cyan(obs[0]) != cyan(obs[1])).sum() + (cyan(obs[1]) != cyan(obs[2])).sum() > 4
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
+    with pytest.raises(SpecError, match="this camera of the MuJoCo model moves"):
+        BatchedVectorEnv(Path(__file__).resolve().parents[1] / "specs" / "mujoco" / "half_cheetah.yaml", 2)

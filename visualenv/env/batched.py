@@ -100,9 +100,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if render and observation is None:
             raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
         self.uses_camera = observation is not None and render is not False
-        if self.uses_camera and program.physics is not None:  # one scene of many copies: the copies' MuJoCo poses are not written yet
-            raise SpecError([program.loaded.source.diagnostic(("physics",), "a batch cannot render a physics spec yet: make it with render=False "
-                                                              "(each env steps its own MuJoCo data), or render one env per process (vectorization_mode='async')")])
+        scene = program.physics.scene if program.physics is not None else None
+        moving = [c.name for c in scene.cameras if c.moves] if scene is not None else []
+        if self.uses_camera and observation is not None and any(v.camera in moving for v in observation.views().values()):
+            raise SpecError([program.loaded.source.diagnostic(("observation",), "a batch renders every env through one camera pose, and this "
+                "camera of the MuJoCo model moves (it tracks a body or hangs on one): use a camera of the spec's own, render=False, "
+                "or one process per env (vectorization_mode='async')")])
         if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer))
                                               or max_episode_steps < 1):
             raise ValueError(f"max_episode_steps must be an integer of at least 1, got {max_episode_steps!r}")
@@ -201,6 +204,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             return None
         if not self.uses_camera:
             raise gym.error.Error("a state-only batch (render=False) has no Blender scene to render a view of")
+        self._pose_copies()
         return tuple(self.renderer.render_view_batch(self.binding_values()))
 
     def close_extras(self, **kwargs: Any) -> None:
@@ -298,6 +302,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             return {}
         return dict(getattr(self.renderer, "segmentation_ids", {}))
 
+    def _pose_copies(self) -> None:
+        """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses."""
+        if self.program.physics is not None:
+            datas = [lane.data for lane in self.lanes]
+            self.renderer.set_physics_poses_batch([(d.xpos, d.xquat, d.cam_xpos, d.cam_xmat, d.light_xpos, d.light_xdir) for d in datas])
+
     def _observe(self, envs: np.ndarray | None = None) -> Any:
         """Every env's observation, or those of `envs` (ascending indices) only."""
         if not self.uses_camera and self.program.physics is not None:  # each lane observes its own MuJoCo data (float64, Gymnasium's)
@@ -306,6 +316,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if not self.uses_camera:
             observed = self._state[self.program.observed].T.astype(np.float32)
             return observed if envs is None else observed[envs]
+        self._pose_copies()
         obs = self.renderer.render_batch(self.binding_values(), envs)
         if self._sensors:
             obs = self._through_sensors(obs, envs)

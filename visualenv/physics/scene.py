@@ -56,6 +56,7 @@ class LightInfo:
 class CameraInfo:
     name: str
     fovy: float  # vertical field of view (degrees)
+    moves: bool = False  # it tracks a body, or hangs on one that moves
 
 
 @dataclass(frozen=True)
@@ -92,8 +93,9 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
         LightInfo(idents["light"][i], bool(_light_directional(model, i)), tuple(map(float, data.light_xpos[i])),  # type: ignore[arg-type]
                   tuple(map(float, data.light_xdir[i])), tuple(map(float, model.light_diffuse[i])), float(model.light_cutoff[i]))  # type: ignore[arg-type]
         for i in range(model.nlight))
-    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i])) for i in range(model.ncam))
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
+    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()))
+                    for i in range(model.ncam))
     return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras)
 
 

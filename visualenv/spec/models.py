@@ -462,7 +462,7 @@ class Spec(StrictModel):
     @classmethod
     def _state_given(cls, value: Any, info: ValidationInfo) -> Any:
         """State is required and not empty, except beside physics (whose state is the model's)."""
-        if info.data.get("physics") is not None:
+        if info.data.get("physics") is not None or "physics" not in info.data:  # physics given (or given and invalid: reported there)
             return {} if value is None else value
         if value is None:
             raise PydanticCustomError("missing", "Field required")
@@ -474,7 +474,7 @@ class Spec(StrictModel):
     @classmethod
     def _actions_given(cls, value: Any, info: ValidationInfo) -> Any:
         """Actions are required, except beside physics (default: one Box dimension per actuator)."""
-        if value is None and info.data.get("physics") is None:
+        if value is None and "physics" in info.data and info.data["physics"] is None:
             raise PydanticCustomError("missing", "Field required")
         return value
 

@@ -336,6 +336,16 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._place_copies(reference, self._view.camera if moving else None)
         return self._render_tiles(view)
 
+    def set_physics_poses_batch(self, poses: Sequence[tuple]) -> None:
+        """Each env's MuJoCo poses (xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir) into its copy of the model's objects."""
+        if self._poses is None:
+            return
+        writers = getattr(self, "_copy_poses", None)
+        if writers is None:
+            writers = self._copy_poses = [self._poses.for_objects(copy.objects) for copy in self._copies]
+        for writer, arrays in zip(writers, poses):
+            writer.write(*arrays)
+
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
             write_bindings(values, copy.last, self._size, copy.setters, copy.aimed, copy.targets)

@@ -34,6 +34,13 @@ class PoseWriter:
     bodies: list[tuple[int, Any]]  # (body index, empty) of the moving bodies
     cameras: list[Any]  # camera objects by MuJoCo camera index
     lights: list[Any]  # light objects by MuJoCo light index (a light on a body, or tracking one, moves)
+    keys: tuple[list[str], list[str], list[str]] = ([], [], [])  # their names in BuiltScene.objects: bodies, cameras, lights
+
+    def for_objects(self, objects: dict[str, Any]) -> "PoseWriter":
+        """The same writer for another copy of the scene (a batch's env k), its objects found by name."""
+        bodies, cameras, lights = self.keys
+        return PoseWriter([(i, objects[key]) for (i, _), key in zip(self.bodies, bodies)], [objects[k] for k in cameras],
+                          [objects[k] for k in lights], self.keys)
 
     def write(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
               light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
@@ -65,6 +72,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
             obj.location = scene_data.body_pos[body].tolist()
             obj.rotation_quaternion = scene_data.body_quat[body].tolist()
             empties[body] = obj
+            built.objects.setdefault(f"body:{scene_data.body_names[body]}", obj)  # a batch finds each copy's empty by this name
         return empties[body]
 
     for geom in scene_data.geoms:
@@ -103,7 +111,8 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         built.objects.setdefault(cam_info.name, obj)
         cameras.append(obj)
     moving = [(int(b), empties[int(b)]) for b in scene_data.moving if int(b) in empties]
-    return PoseWriter(moving, cameras, lights)
+    keys = ([f"body:{scene_data.body_names[b]}" for b, _ in moving], [c.name for c in scene_data.cameras], [light.name for light in scene_data.lights])
+    return PoseWriter(moving, cameras, lights, keys)
 
 
 def _plane_texture(mat: Any, geom: GeomShape) -> None:
