@@ -243,3 +243,30 @@ def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
             env.close()
     with pytest.raises(SpecError, match="this camera of the MuJoCo model moves"):
         BatchedVectorEnv(Path(__file__).resolve().parents[1] / "specs" / "mujoco" / "half_cheetah.yaml", 2)
+
+
+def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
+    """An MJCF mesh (inline vertices, no file) is drawn from MuJoCo's compiled vertices and faces: a yellow tetrahedron left of a box."""
+    (tmp_path / "m.xml").write_text(textwrap.dedent("""\
+        <mujoco>
+          <asset><mesh name="tet" vertex="0 0 0  0.6 0 0  0 0.6 0  0 0 0.6"/></asset>
+          <worldbody>
+            <light directional="true" pos="0 -2 3" dir="0 1 -1"/>
+            <body name="thing" pos="-0.4 0 0"><freejoint/><geom name="tet" type="mesh" mesh="tet" rgba="1 1 0 1"/></body>
+            <camera name="front" pos="0 -3 0.3" xyaxes="1 0 0 0 0 1"/>
+          </worldbody>
+          <option gravity="0 0 0"/>
+        </mujoco>
+        """), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: M-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0, 0, 0]}}\n"
+                    "observation: {camera: front, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    env = VisualEnv(spec)
+    try:
+        obs, _ = env.reset(seed=0)
+        r, g, b = (obs[..., i].astype(int) for i in range(3))
+        yellow = (r > b + 40) & (g > b + 40)
+        cols = np.nonzero(yellow)[1]
+        assert yellow.sum() >= 6 and cols.mean() < 12, (yellow.sum(), cols)
+    finally:
+        env.close()
