@@ -270,3 +270,22 @@ def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
         assert yellow.sum() >= 6 and cols.mean() < 12, (yellow.sum(), cols)
     finally:
         env.close()
+
+
+def test_an_object_named_as_a_body_stands_for_it(tmp_path: Path) -> None:
+    """A spec object called 'pole' (a red cylinder) replaces the pole body's geoms and takes its pose: it leans with the hinge."""
+    own = POLE.replace("    Camera:", "    pole: {primitive: cylinder, radius: 0.06, depth: 0.6, origin: bottom, material: {color: [1, 0, 0]}}\n    Camera:")
+    path = tmp_path / "own.yaml"
+    path.write_text(own, encoding="utf-8")
+    centres = []
+    for angle in (0.0, 1.0):
+        env = visualenv.make(path, params={"angle": angle})
+        try:
+            obs, _ = env.reset(seed=0)
+        finally:
+            env.close()
+        r, g, b = (obs[..., i].astype(int) for i in range(3))
+        red = (r > g + 40) & (r > b + 40)
+        assert cyan(obs).sum() == 0 and red.sum() >= 6, (cyan(obs).sum(), red.sum())  # the capsule is not drawn; the cylinder is
+        centres.append(np.nonzero(red)[1].mean())
+    assert centres[1] > centres[0] + 4, centres

@@ -60,14 +60,23 @@ class PoseWriter:
 
 
 def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool) -> PoseWriter:
-    """Every drawable geom, light and camera of the model in `built`'s collection (names added to built.objects)."""
+    """Every drawable geom, light and camera of the model in `built`'s collection (names added to built.objects).
+
+    An object the spec declares (or its .blend holds) under a body's name stands for
+    that body: it takes the body's pose (its origin at the body's frame) and the
+    body's own geoms are not drawn.
+    """
     collection = built.collection
     empties: dict[int, Any] = {}
+    #: bodies the spec (or its .blend) draws itself: an object named as the body takes the body's pose, its geoms are not drawn
+    own = {b: built.objects[name] for b, name in enumerate(scene_data.body_names) if b > 0 and name in built.objects}
 
     def empty_of(body: int) -> Any:
         if body not in empties:
-            obj = bpy.data.objects.new(f"body:{scene_data.body_names[body]}", None)
-            collection.objects.link(obj)
+            obj = own.get(body)
+            if obj is None:
+                obj = bpy.data.objects.new(f"body:{scene_data.body_names[body]}", None)
+                collection.objects.link(obj)
             obj.rotation_mode = "QUATERNION"
             obj.location = scene_data.body_pos[body].tolist()
             obj.rotation_quaternion = scene_data.body_quat[body].tolist()
@@ -75,7 +84,11 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
             built.objects.setdefault(f"body:{scene_data.body_names[body]}", obj)  # a batch finds each copy's empty by this name
         return empties[body]
 
+    for body in own:
+        empty_of(body)
     for geom in scene_data.geoms:
+        if geom.body in own:
+            continue
         obj = _geom_object(geom, base_dir=base_dir, source=source)
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
