@@ -16,9 +16,11 @@ def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
     subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(tmp_path / "dist"), str(ROOT)],
                    check=True, capture_output=True)
     wheel = next((tmp_path / "dist").glob("visualenv-*.whl"))
-    bundled = sorted(p.name for p in (ROOT / "specs").iterdir() if p.suffix in (".yaml", ".toml"))
+    # the specs and the physics specs of specs/mujoco/, by their paths under specs/
+    bundled = sorted(p.relative_to(ROOT / "specs").as_posix() for p in [*(ROOT / "specs").glob("*"), *(ROOT / "specs").glob("mujoco/*")]
+                     if p.suffix in (".yaml", ".toml"))
     with zipfile.ZipFile(wheel) as archive:
-        shipped = sorted(Path(n).name for n in archive.namelist() if n.startswith("visualenv/specs/"))
+        shipped = sorted(n[len("visualenv/specs/"):] for n in archive.namelist() if n.startswith("visualenv/specs/") and n.endswith((".yaml", ".toml")))
         archive.extractall(tmp_path / "site")
     assert shipped == bundled
     # import the unpacked wheel, not the checkout, and look a spec up by id
