@@ -14,6 +14,8 @@ import pytest
 from click.testing import CliRunner
 
 pytest.importorskip("mujoco")
+#: MuJoCo 3 deprecates an attribute of Gymnasium's half_cheetah.xml (settotalmass); MuJoCo's own warnings are Python warnings here
+pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. compiler attribute:RuntimeWarning")
 
 from visualenv.cli import main  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402

@@ -15,6 +15,8 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
+#: MuJoCo 3 deprecates an attribute of Gymnasium's half_cheetah.xml (settotalmass); MuJoCo's own warnings are Python warnings here
+pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. compiler attribute:RuntimeWarning")
 
 from visualenv.compiler.program import compile_spec  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
@@ -190,6 +192,7 @@ def test_missing_model_file(tmp_path: Path) -> None:
     assert "no MJCF file" in errors_of(path) and "nothing.xml" in errors_of(path)
 
 
+@pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 def test_a_simulation_that_blows_up_is_a_located_fault(tmp_path: Path) -> None:
     model = MODEL.replace('gear="1" ctrllimited="true" ctrlrange="-2 2"', 'gear="1e30" ctrllimited="false"')
     path = write(tmp_path, spec_with("""\
