@@ -174,9 +174,10 @@ def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
             (sampled,) = algo.env_runner_group.foreach_env_runner(sample_and_look, local_env_runner=False)
             steps, blender, shape, frames = sampled
             assert steps >= 8 and blender and shape == (2, 24, 24, 4)  # two envs of four stacked frames, made in the runner
-            newest = frames[..., -1]  # the runner's observations are Blender's images: a lit scene, and the ball moves
-            assert frames.dtype == np.uint8 and int(newest.max()) - int(newest.min()) > 40
-            assert not np.array_equal(newest[0], newest[-1])
+            # the runner's observations are Blender's 8-bit images, scaled to 0..1 as the encoder takes them: a lit scene, and the ball moves
+            levels = frames[..., -1] * 255
+            assert np.allclose(levels, np.round(levels), atol=1e-3) and 0 <= levels.min() and levels.max() <= 255
+            assert levels.max() - levels.min() > 40 and not np.array_equal(levels[0], levels[-1])
         finally:
             algo.stop()
     finally:
