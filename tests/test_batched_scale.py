@@ -121,3 +121,45 @@ def test_making_and_closing_batches_does_not_grow_memory():
         round_trip(seed)
         growth.append((process.memory_info().rss - before) / 2**20)
     assert growth[-1] <= 20, [round(g, 1) for g in growth]
+
+
+def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkeypatch, tmp_path):
+    """Past one image, parts of whole rows of copies are rendered by the tiles camera moved down the grid: the
+    tiles equal one image's (a batch that fits), also when SAME_STEP renders reset envs again, and the camera's
+    shader parameters (each change makes Cycles compile it again) are set once, not per call."""
+    from visualenv.render.blender import batched
+
+    spec = small(tmp_path, "visual_cartpole.yaml")
+    actions = np.array([0, 1, 0, 1, 1])
+    whole = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")   # one image
+    try:
+        frames = [whole.reset(seed=2)[0]] + [whole.step(actions)[0] for _ in range(30)]
+    finally:
+        whole.close()
+    monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles an image: 5 envs in three parts of one row of 2
+    split = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")
+    calls: list[int] = []
+    original = batched.BatchedBlenderRenderer.raw_render
+    monkeypatch.setattr(batched.BatchedBlenderRenderer, "raw_render", lambda self: (calls.append(1), original(self))[1])
+    try:
+        obs, _ = split.reset(seed=2)
+        assert split.renderer._cols == 2 and len(calls) == 3
+        updates = split.renderer.shader_updates
+        ended = False
+        for expected in frames[1:]:
+            calls.clear()
+            obs, _, terminated, truncated, info = split.step(actions)
+            done = bool((terminated | truncated).any())
+            assert len(calls) == 3 * (1 + done)  # SAME_STEP renders the grid again for reset envs (16 > 5 envs)
+            for i in range(5):
+                assert agreement(obs[i], expected[i]) >= 0.99
+            ended = ended or done
+        assert ended and split.renderer.shader_updates == updates, "a split step changed the tiles camera's shader parameters"
+        assert obs.reshape(5, -1).max(axis=1).min() > 100
+    finally:
+        split.close()
+
+
+def agreement(a: np.ndarray, b: np.ndarray) -> float:
+    """The share of pixels within 8 levels."""
+    return float((np.abs(a.astype(int) - b.astype(int)) <= 8).mean())

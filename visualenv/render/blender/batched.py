@@ -44,6 +44,8 @@ MAX_IMAGE_PIXELS = 2048 * 2048
 #: what rendering a few envs alone costs beyond their own tiles, in tiles: switching the scene's camera to the
 #: one-tile camera and back makes Cycles re-synchronise, measured 37 ms against 2.5 ms a tile (2-core CPU, N = 16)
 ALONE_OVERHEAD_TILES = 16
+#: the widest and tallest image one render call makes (Cycles renders larger ones in several tiles of its own)
+MAX_IMAGE_SIDE = 2048
 
 TILES_OSL = r"""
 // visualenv: one tile of the image per env. Tile k (row-major from the top left) looks
@@ -160,7 +162,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         scene = built.scene
         self._layer.update()  # matrix_world of every object, read below
         self._spacing = self._copy_spacing(built)
-        self._cols, _ = grid_shape(self.num_envs)
+        self._cols = self._grid_columns()
         copied = [o for o in scene.objects if not _is_sun(o) and not _hidden(o)]  # suns are directional: one serves every copy
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
@@ -172,6 +174,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         self._tiled_view_camera: tuple[_View, Any, bool] | None = None  # the view camera's, built at the first view
         self._alone: dict[int, _View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
+        #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
+        self.shader_updates = 0
         self._anchors_moved = False
 
     def _refuse_turning_cameras(self) -> None:
@@ -209,6 +213,12 @@ class BatchedBlenderRenderer(BlenderRenderer):
                 what = f"its {', '.join(sorted(turning))} binding" if turning else "a constraint"
                 return f"{what} on '{names.get(obj.as_pointer(), obj.name)}'"
         return None
+
+    def _grid_columns(self) -> int:
+        """Columns of the grid of copies: the most square grid, or, for a batch past one image, the columns of one
+        image's grid, so that each image shows whole rows of copies (:meth:`_render_rows`)."""
+        per_call = min((envs_per_call(self.num_envs, v.width, v.height) for v in self._views), default=self.num_envs)
+        return grid_shape(self.num_envs if per_call >= self.num_envs else per_call)[0]
 
     def _copy_spacing(self, built: BuiltScene) -> float:
         """How far apart copies stand: farther than any camera sees, plus the scene's size."""
@@ -264,6 +274,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         data.clip_start, data.clip_end = source.data.clip_start, source.data.clip_end
         camera = bpy.data.objects.new(f"{scene.name}-{view.key}-tiles", data)
         scene.collection.objects.link(camera)
+        self._own(camera, data)
         pose = source.matrix_world.normalized()
         camera.matrix_world = pose
         _compile(camera)
@@ -361,19 +372,56 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._anchors_moved = False
 
     def _render_tiles(self, view: _View) -> np.ndarray:
-        """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS."""
+        """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS.
+
+        A batch past one image is rendered in parts of whole rows of the grid of copies, each
+        part by the same camera translated by its rows: moving a camera is a transform update,
+        while changing which envs its shader shows makes Cycles compile it again (55 ms a call
+        at 441 envs). A camera whose row of tiles does not fit one image (a large view) changes
+        its parameters per part instead.
+        """
         per_call = envs_per_call(self.num_envs, view.width, view.height)
+        rows = per_call // self._cols
+        if per_call < self.num_envs and rows >= 1 and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE:
+            return self._render_rows(view, rows)
         parts = []
-        params = view.camera.data.cycles_custom
         for first in range(0, self.num_envs, per_call):
             count = min(per_call, self.num_envs - first)
             cols, rows = grid_shape(count)
-            if (params["first"], params["count"], params["cols"]) != (first, count, cols):
-                params["first"], params["count"], params["cols"] = first, count, cols
-                view.camera.data.update_tag()  # an ID property change alone does not tell Cycles' persistent data to sync
+            self._set_shown(view.camera, first, count, cols)
             big = _View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
             parts.append(tile(self._render(big), count, view.height, view.width))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
+
+    def _render_rows(self, view: _View, rows: int) -> np.ndarray:
+        """The tiles in parts of `rows` rows of copies: one camera showing the first part, moved down the grid for the others."""
+        count = rows * self._cols
+        self._set_shown(view.camera, 0, count, self._cols)
+        base = view.camera.matrix_world.copy()
+        big = _View(view.key, view.camera, self._cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
+        parts = []
+        try:
+            for p, first in enumerate(range(0, self.num_envs, count)):
+                if p:
+                    view.camera.matrix_world = Matrix.Translation((0.0, p * rows * self._spacing, 0.0)) @ base
+                parts.append(tile(self._render(big), min(count, self.num_envs - first), view.height, view.width))
+        finally:
+            view.camera.matrix_world = base
+        return np.concatenate(parts)
+
+    def _set_shown(self, camera: Any, first: int, count: int, cols: int) -> None:
+        """Which envs the tiles camera shows, and in how many columns (a change makes Cycles compile its shader again)."""
+        params = camera.data.cycles_custom
+        if (params["first"], params["count"], params["cols"]) != (first, count, cols):
+            params["first"], params["count"], params["cols"] = first, count, cols
+            camera.data.update_tag()  # an ID property change alone does not tell Cycles' persistent data to sync
+            self.shader_updates += 1
+
+    def _own(self, *datablocks: Any) -> None:
+        """Datablocks made after construction (cameras built at first use): removed with the scene at close."""
+        ids = getattr(self, "_ids", None)
+        if ids is not None:
+            ids.extend(datablocks)
 
     def _render_alone(self, j: int, envs: Sequence[int]) -> np.ndarray:
         """The tiles of `envs` through observation camera j, one env-sized render each.
@@ -388,6 +436,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             params = alone.camera.data.cycles_custom
             params["first"], params["count"], params["cols"], params["grid"] = 0, 1, 1, 1
             alone.camera.data.update_tag()
+            self.shader_updates += 1
             self._alone[j] = alone
         alone = self._alone[j]
         pose = view.camera.matrix_world.copy()
