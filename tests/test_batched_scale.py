@@ -163,3 +163,23 @@ def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkey
 def agreement(a: np.ndarray, b: np.ndarray) -> float:
     """The share of pixels within 8 levels."""
     return float((np.abs(a.astype(int) - b.astype(int)) <= 8).mean())
+
+
+def test_what_a_batch_cannot_render_is_refused_when_it_is_built():
+    """A turning camera, a bound sun or world: refused by BatchedVectorEnv(...) itself, located, with the reason
+    (before Blender starts); the same spec's state-only batch is fine."""
+    from visualenv.errors import SpecError
+    from visualenv.spec import load_spec_text
+
+    example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text()
+    with pytest.raises(SpecError, match=r"camera 'Camera' turns or zooms with the state \(its location, look_at binding on 'Camera'\)"):
+        BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2)
+    fixed = example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
+    with pytest.raises(SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: a batch shares one sun"):
+        BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 2)
+    world = fixed.replace("  Sun: {strength: sun}\n", "  World: {strength: sun}\n")
+    with pytest.raises(SpecError, match="the world .* is bound to the state"):
+        BatchedVectorEnv(load_spec_text(world, name="dr.yaml"), 2)
+    batch = BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2, render=False)
+    assert batch.reset(seed=0)[0].shape[0] == 2
+    batch.close()

@@ -29,6 +29,7 @@ from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError
 from visualenv.render.base import RendererOptions, load_backend, observation_space
+from visualenv.render.batch_limits import check_batchable
 from visualenv.render.sensor import sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 
@@ -114,6 +115,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps) for _ in range(n)]
         self._batch = program.batch_functions()
         self._renderer_options = RendererOptions.parse(renderer_options)
+        if self.uses_camera and backend == BATCH_BACKEND:
+            check_batchable(program.render_plan().with_options(self._renderer_options))  # refused now, not at the first render
         self._backend = backend
         single = self.lanes[0]
         self.single_action_space = single.action_space

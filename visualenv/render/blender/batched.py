@@ -28,15 +28,14 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.errors import RenderError, SpecError
+from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
+from visualenv.render.batch_limits import TURNS, engine_message, sun_error, turning_error, world_error
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
 from visualenv.render.blender.scene import BuiltScene
 from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
 
-#: properties that turn a camera (bound on it or on an ancestor) or change its lens: a batch cannot follow them
-_TURNS = ("rotation", "scale", "look_at")
 #: the largest image one render call makes; past it a batch is rendered in several calls. Measured: a
 #: larger image comes back black from the in-memory readback (Cycles' result then reaches Blender in
 #: tiles, after the engine's render returns), 2,000 x 2,000 and 2,080 x 800 did not; the file readback is unaffected
@@ -145,8 +144,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
         engine = plan.settings.engine
         if engine != "cycles":
-            raise ValueError(f"render.engine '{engine}' cannot render a batch in one call: only Cycles can (through its custom "
-                             "camera); use engine: cycles, or one process per env (visualenv.make_vec(..., batched=False))")
+            raise ValueError(engine_message(engine))
         self.num_envs = num_envs
         _osl_modules_on_path()
         # Cycles draws each pixel's random numbers from its place in the image, so tile k would carry other
@@ -184,17 +182,13 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for view in plan.views.values():
             why = self._turning(view.camera)
             if why:
-                raise SpecError([plan.source.diagnostic(("observation",), f"camera '{view.camera}' turns or zooms with the state "
-                    f"({why}): a batch renders every env through one camera orientation, so only a camera that moves without "
-                    "turning can be batched; use one process per env (visualenv.make_vec(..., batched=False))")])
+                raise turning_error(plan, view.camera, why)
         for name in dict.fromkeys(target.object for target in plan.bindings):
             if is_world(name, self._objects):
-                raise SpecError([plan.source.diagnostic(("actors", name), "the world (its sky's strength, rotation or tint) is bound to "
-                    "the state: a batch's envs share one world; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
+                raise world_error(plan, name)
             obj = self._objects[name]
             if _is_sun(obj):
-                raise SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares "
-                    "one sun among its envs; use one process per env (visualenv.make_vec(..., batched=False))", key=True)])
+                raise sun_error(plan, name)
 
     def _turning(self, camera_name: str) -> str | None:
         """What turns or zooms this camera with the state ("its rotation binding on 'Rig'"), or None if nothing does."""
@@ -208,7 +202,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         aimed = isinstance(spec, CameraObject) and spec.look_at is not None
         for obj in _with_ancestors(camera):
             props = bound.get(names.get(obj.as_pointer(), ""), set())
-            turning = (props & set(_TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if obj == camera else set())
+            turning = (props & set(TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if obj == camera else set())
             if turning or obj.constraints:
                 what = f"its {', '.join(sorted(turning))} binding" if turning else "a constraint"
                 return f"{what} on '{names.get(obj.as_pointer(), obj.name)}'"

@@ -1,0 +1,80 @@
+"""What a batch (many envs in one Blender scene) cannot render, found from the plan alone, before Blender starts.
+
+A batch renders every env through one orientation of one custom camera, with one
+world and (today) suns shared by every copy. So an engine other than Cycles, a
+bound world, a bound sun and an observation camera that the state turns or zooms
+are refused when the batch is built (``BatchedVectorEnv(...)``), not at its first
+render. Objects of a .blend file (their types, parents, constraints) are only known
+to Blender: the renderer checks those again when it builds the scene, with the
+same messages (:mod:`visualenv.render.blender.batched`).
+"""
+
+from __future__ import annotations
+
+from visualenv.errors import SpecError
+from visualenv.render.base import RenderPlan
+from visualenv.spec.bindables import WORLD_ACTOR
+from visualenv.spec.models import CameraObject, LightObject
+
+#: properties that turn a camera (bound on it or on an ancestor) or change its lens: a batch cannot follow them
+TURNS = ("rotation", "scale", "look_at")
+ONE_PROCESS_EACH = "use one process per env (visualenv.make_vec(..., batched=False))"
+
+
+def engine_message(engine: str) -> str:
+    return (f"render.engine '{engine}' cannot render a batch in one call: only Cycles can (through its custom camera); "
+            "use engine: cycles, or one process per env (visualenv.make_vec(..., batched=False))")
+
+
+def turning_error(plan: RenderPlan, camera: str, why: str) -> SpecError:
+    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' turns or zooms with the state ({why}): a batch "
+                      "renders every env through one camera orientation, so only a camera that moves without turning can be "
+                      f"batched; {ONE_PROCESS_EACH}")])
+
+
+def world_error(plan: RenderPlan, name: str) -> SpecError:
+    return SpecError([plan.source.diagnostic(("actors", name), "the world (its sky's strength, rotation or tint) is bound to the state: "
+                      f"a batch's envs share one world; {ONE_PROCESS_EACH}", key=True)])
+
+
+def sun_error(plan: RenderPlan, name: str) -> SpecError:
+    return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: a batch shares one sun among "
+                      f"its envs; {ONE_PROCESS_EACH}", key=True)])
+
+
+def check_batchable(plan: RenderPlan) -> None:
+    """Raise what a batch of this plan cannot render, as far as the spec's own objects tell (ValueError for the engine)."""
+    engine = plan.settings.engine
+    if engine != "cycles":
+        raise ValueError(engine_message(engine))
+    objects = plan.scene.objects
+    bound: dict[str, set[str]] = {}
+    for target in plan.bindings:
+        bound.setdefault(target.object, set()).add(target.property)
+    for view in plan.views.values():
+        why = spec_turning(plan, view.camera, bound)
+        if why:
+            raise turning_error(plan, view.camera, why)
+    for name in bound:
+        if name == WORLD_ACTOR and name not in objects and not plan.scene.file:
+            raise world_error(plan, name)
+        spec = objects.get(name)
+        if isinstance(spec, LightObject) and spec.light == "sun":
+            raise sun_error(plan, name)
+
+
+def spec_turning(plan: RenderPlan, camera: str, bound: dict[str, set[str]]) -> str | None:
+    """What turns or zooms a spec-declared camera (a binding on it or on a spec-declared ancestor), or None."""
+    objects = plan.scene.objects
+    spec = objects.get(camera)
+    aimed = isinstance(spec, CameraObject) and spec.look_at is not None
+    name: str | None = camera
+    seen: set[str] = set()
+    while name is not None and name in objects and name not in seen:
+        seen.add(name)
+        props = bound.get(name, set())
+        turning = (props & set(TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if name == camera else set())
+        if turning:
+            return f"its {', '.join(sorted(turning))} binding on '{name}'"
+        name = objects[name].parent
+    return None
