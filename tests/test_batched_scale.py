@@ -166,8 +166,8 @@ def agreement(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_what_a_batch_cannot_render_is_refused_when_it_is_built():
-    """A turning camera, a bound sun or world: refused by BatchedVectorEnv(...) itself, located, with the reason
-    (before Blender starts); the same spec's state-only batch is fine."""
+    """A turning camera, a bound world, a bound sun past 63 envs: refused by BatchedVectorEnv(...) itself, located,
+    with the reason (before Blender starts); the same spec's state-only batch is fine."""
     from visualenv.errors import SpecError
     from visualenv.spec import load_spec_text
 
@@ -175,11 +175,40 @@ def test_what_a_batch_cannot_render_is_refused_when_it_is_built():
     with pytest.raises(SpecError, match=r"camera 'Camera' turns or zooms with the state \(its location, look_at binding on 'Camera'\)"):
         BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2)
     fixed = example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
-    with pytest.raises(SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: a batch shares one sun"):
-        BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 2)
+    BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 63).close()   # a bound sun: one per env, up to 63
+    with pytest.raises(SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: .* at most 63 such sets apart, not 64"):
+        BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 64)
     world = fixed.replace("  Sun: {strength: sun}\n", "  World: {strength: sun}\n")
     with pytest.raises(SpecError, match="the world .* is bound to the state"):
         BatchedVectorEnv(load_spec_text(world, name="dr.yaml"), 2)
     batch = BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2, render=False)
     assert batch.reset(seed=0)[0].shape[0] == 2
     batch.close()
+
+
+def test_a_bound_sun_lights_each_copy_with_its_own_strength_colour_and_direction():
+    """A sun bound to the state is copied per env and lights only its own copy (Cycles' light linking): each tile
+    agrees with the env's own render (noise='shared') on >= 98 % of pixels within 8 levels, while the envs' renders
+    differ from each other (so a shared sun would fail), over episodes with other draws."""
+    from visualenv.spec import load_spec_text
+
+    example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text()
+    text = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
+            .replace("  Sun: {strength: sun}\n", "  Sun: {strength: sun, color: [1, green, red], rotation: [0.2 + 0.6 * red, 0.3 * green, x]}\n")
+            .replace("resolution: [84, 84]", "resolution: [32, 32]"))
+    loaded = load_spec_text(text, name="sun.yaml")
+    batch = BatchedVectorEnv(loaded, 3)
+    singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
+    try:
+        for seed in (1, 5):
+            obs, _ = batch.reset(seed=seed)
+            own = [env.reset(seed=seed + i)[0] for i, env in enumerate(singles)]
+            for _ in range(3):
+                assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [agreement(obs[i], own[i]) for i in range(3)]
+                assert min(agreement(obs[i], own[j]) for i in range(3) for j in range(3) if i != j) < 0.9
+                obs, *_ = batch.step(np.array([1, 0, 1]))
+                own = [env.step(a)[0] for env, a in zip(singles, (1, 0, 1))]
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()

@@ -116,7 +116,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._batch = program.batch_functions()
         self._renderer_options = RendererOptions.parse(renderer_options)
         if self.uses_camera and backend == BATCH_BACKEND:
-            check_batchable(program.render_plan().with_options(self._renderer_options))  # refused now, not at the first render
+            check_batchable(program.render_plan().with_options(self._renderer_options), n)  # refused now, not at the first render
         self._backend = backend
         single = self.lanes[0]
         self.single_action_space = single.action_space

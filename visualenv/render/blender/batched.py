@@ -5,7 +5,8 @@ duplicates: the copies share meshes and materials). Copy k hangs under an
 anchor empty placed on a grid whose spacing is larger than the cameras' clip
 distance plus the scene's size, so no camera reaches another copy. Sun lights
 and the world are directional: one of each serves every copy, so they are not
-copied.
+copied, except a sun bound to the state: each copy has its own, which lights and
+shadows only that copy's objects (Cycles' light linking; at most 63 envs).
 
 One render makes one image of ``cols x rows`` tiles, tile k being env k's
 observation. A Cycles custom camera (an OSL camera shader, :data:`TILES_OSL`)
@@ -30,7 +31,7 @@ from mathutils import Matrix, Vector
 
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
-from visualenv.render.batch_limits import TURNS, engine_message, sun_error, turning_error, world_error
+from visualenv.render.batch_limits import MAX_OWN_SUNS, TURNS, engine_message, sun_error, turning_error, world_error
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
 from visualenv.render.blender.scene import BuiltScene
 from visualenv.spec.bindables import BINDABLES
@@ -161,7 +162,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._layer.update()  # matrix_world of every object, read below
         self._spacing = self._copy_spacing(built)
         self._cols = self._grid_columns()
-        copied = [o for o in scene.objects if not _is_sun(o) and not _hidden(o)]  # suns are directional: one serves every copy
+        # suns are directional: one serves every copy, unless bound to the state: then each copy has its own, lighting
+        # only that copy's objects (Cycles' light linking)
+        self._own_suns = {built.objects[t.object].as_pointer() for t in self.plan.bindings
+                          if t.object in built.objects and _is_sun(built.objects[t.object])}
+        copied = [o for o in scene.objects if (not _is_sun(o) or o.as_pointer() in self._own_suns) and not _hidden(o)]
+        if self._own_suns and self.num_envs > MAX_OWN_SUNS:  # a .blend file's sun (the spec's were refused at build)
+            name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
+            raise sun_error(self.plan, name, self.num_envs)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
         for copy in self._copies:
@@ -177,7 +185,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._anchors_moved = False
 
     def _refuse_turning_cameras(self) -> None:
-        """A camera the state turns (or zooms) cannot share one pose with its copies; a bound sun cannot be shared."""
+        """A camera the state turns (or zooms) cannot share one pose with its copies; a bound world cannot be shared."""
         plan = self.plan
         for view in plan.views.values():
             why = self._turning(view.camera)
@@ -186,9 +194,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for name in dict.fromkeys(target.object for target in plan.bindings):
             if is_world(name, self._objects):
                 raise world_error(plan, name)
-            obj = self._objects[name]
-            if _is_sun(obj):
-                raise sun_error(plan, name)
 
     def _turning(self, camera_name: str) -> str | None:
         """What turns or zooms this camera with the state ("its rotation binding on 'Rig'"), or None if nothing does."""
@@ -242,6 +247,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
             mapping = {}
             for original in originals:
                 duplicate = original.copy()
+                if original.as_pointer() in self._own_suns:
+                    duplicate.data = original.data.copy()  # its own strength and colour
                 collection.objects.link(duplicate)
                 mapping[original.as_pointer()] = duplicate
             for original in originals:
@@ -252,8 +259,24 @@ class BatchedBlenderRenderer(BlenderRenderer):
                 obj.parent = anchor
                 obj.matrix_parent_inverse = Matrix.Identity(4)
                 obj.matrix_basis = places[original.as_pointer()]
+        if self._own_suns:
+            self._link_suns(k, scene, originals, mapping)
         objects = {name: mapping.get(obj.as_pointer(), obj) for name, obj in built.objects.items()}
         return _Copy(anchor, objects)
+
+    def _link_suns(self, k: int, scene: Any, originals: list[Any], mapping: dict[int, Any]) -> None:
+        """Copy k's own suns light and shadow only copy k's objects (a receiver and blocker collection of them)."""
+        receivers = bpy.data.collections.new(f"{scene.name}-lit{k}")
+        suns = []
+        for original in originals:
+            obj = mapping[original.as_pointer()]
+            if original.as_pointer() in self._own_suns:
+                suns.append(obj)
+            else:
+                receivers.objects.link(obj)
+        for sun in suns:
+            sun.light_linking.receiver_collection = receivers
+            sun.light_linking.blocker_collection = receivers
 
     def _offset(self, k: int) -> Vector:
         return Vector(((k % self._cols) * self._spacing, (k // self._cols) * self._spacing, 0.0))
