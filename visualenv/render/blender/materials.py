@@ -114,16 +114,17 @@ def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir:
 TEXTURE_SET = "visualenv_texture_set"
 
 
-def _load_image(path: Path, source: SourceMap, where: tuple, track: Callable[[Any], Any]) -> Any:
+def _load_image(path: Path, source: SourceMap, where: tuple, track: Callable[[Any], Any], what: str = "image") -> Any:
+    """An image Blender reads, or a located error: a missing file, a folder, a file Blender cannot decode (`what`: 'image', 'sky image')."""
     file = path.resolve()
     if not file.is_file():
-        raise SpecError([source.diagnostic(where, "image file " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
+        raise SpecError([source.diagnostic(where, (f"{what} file" if what == "image" else what) + " " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
     try:
         image = track(bpy.data.images.load(str(file), check_existing=False))
     except RuntimeError as exc:
-        raise SpecError([source.diagnostic(where, f"cannot read image {file}: {exc}")]) from None
+        raise SpecError([source.diagnostic(where, f"cannot read {what} {file}: {exc}")]) from None
     if image.size[0] == 0:  # Blender loads lazily and keeps an empty image for a file it cannot decode
-        raise SpecError([source.diagnostic(where, f"cannot read image {file}: not an image format Blender reads (PNG, JPEG, EXR, ...)")])
+        raise SpecError([source.diagnostic(where, f"cannot read {what} {file}: not an image format Blender reads (PNG, JPEG, EXR, HDR, ...)")])
     return image
 
 
@@ -215,16 +216,7 @@ def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir:
     if spec.image is None:
         return world
     assert base_dir is not None and source is not None, "an image sky is read relative to the spec"
-    where = ("scene", "world", "image")
-    file = (base_dir / spec.image).resolve()
-    if not file.is_file():
-        raise SpecError([source.diagnostic(where, "sky image " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
-    try:
-        image = track(bpy.data.images.load(str(file), check_existing=False))
-    except RuntimeError as exc:
-        raise SpecError([source.diagnostic(where, f"cannot read sky image {file}: {exc}")]) from None
-    if image.size[0] == 0:
-        raise SpecError([source.diagnostic(where, f"cannot read sky image {file}: not an image format Blender reads (.hdr, .exr, .png, .jpg, ...)")])
+    image = _load_image(base_dir / spec.image, source, ("scene", "world", "image"), track, what="sky image")
     nodes, links = world.node_tree.nodes, world.node_tree.links
     bg = next(n for n in nodes if n.type == "BACKGROUND")
     coords = nodes.new("ShaderNodeTexCoord")
