@@ -200,6 +200,8 @@ def test_what_a_batch_cannot_render_is_refused_when_it_is_built():
     world = fixed.replace("  Sun: {strength: sun}\n", "  World: {strength: sun}\n")
     with pytest.raises(SpecError, match="the world .* is bound to the state"):
         BatchedVectorEnv(load_spec_text(world, name="dr.yaml"), 2)
+    with pytest.raises(SpecError, match="turns or zooms"):   # in worker processes too, before any starts
+        visualenv.make_vec(str(Path(__file__).parents[1] / "examples" / "domain_randomization.yaml"), 4, batched=True, workers=2)
     batch = BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2, render=False)
     assert batch.reset(seed=0)[0].shape[0] == 2
     batch.close()

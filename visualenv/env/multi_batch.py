@@ -57,7 +57,7 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         self.sizes = batch_sizes(num_envs, workers)
         self.num_envs = int(num_envs)
         self.render_mode = kwargs.get("render_mode")
-        self._check_spec(str(target), kwargs)  # a bad spec is reported here, located, before any worker starts
+        self._check_spec(str(target), max(self.sizes), kwargs)  # a bad spec is reported here, located, before any worker starts
         self._pipes: list[Any] = []
         self.processes: list[Any] = []
         self._closed_workers = False  # from here on, close() stops the workers
@@ -90,12 +90,19 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         self._slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
 
     @staticmethod
-    def _check_spec(target: str, kwargs: dict[str, Any]) -> None:
+    def _check_spec(target: str, size: int, kwargs: dict[str, Any]) -> None:
+        """The spec compiled, and what a batch of `size` envs cannot render refused, as one batch would (located, typed)."""
         from visualenv.compiler.program import compile_spec
         from visualenv.env.registration import resolve
+        from visualenv.render.base import RendererOptions
+        from visualenv.render.batch_limits import check_batchable
         from visualenv.spec.loader import load_spec
 
-        compile_spec(load_spec(resolve(target)), kwargs.get("params"))
+        program = compile_spec(load_spec(resolve(target)), kwargs.get("params"))
+        if kwargs.get("render") is not False and program.spec.observation is not None:
+            own = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps")
+            options = RendererOptions.parse({k: v for k, v in kwargs.items() if k not in own})
+            check_batchable(program.render_plan().with_options(options), size)
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
