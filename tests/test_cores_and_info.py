@@ -87,8 +87,9 @@ def _claim(queue, release) -> None:
 
 
 @TWO_CORES
-def test_processes_placed_by_others_claim_distinct_cores():
+def test_processes_placed_by_others_claim_distinct_cores(tmp_path, monkeypatch):
     """RLlib's EnvRunners are placed by Ray: each claims a core no other visualenv process holds."""
+    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the claims' lock files of these processes alone, not of others on the machine
     context = multiprocessing.get_context("spawn")
     queue, release = context.Queue(), context.Event()
     workers = [context.Process(target=_claim, args=(queue, release)) for _ in range(len(os.sched_getaffinity(0)) + 1)]
