@@ -342,7 +342,7 @@ def differences(results: dict[str, Any], recorded: dict[str, Any], *, tolerant: 
 
 
 def _close(key: str, played: Any, kept: Any, tolerant: bool) -> bool:
-    if not tolerant or key in ("successes", "success_rate", "episodes"):
+    if not tolerant or key in ("successes", "success_rate", "episodes") or not isinstance(played, (int, float)):
         return bool(played == kept)
     if key in ("lengths", "mean_length"):
         return abs(played - kept) <= LENGTH_TOLERANCE
