@@ -166,15 +166,9 @@ def color_writer(mat: Any) -> Callable[[Sequence[float]], None] | None:
     if base.is_linked and base.links[0].from_node.name != TINT:
         nodes, links = mat.node_tree.nodes, mat.node_tree.links
         source = base.links[0].from_socket
-        mix = nodes.new("ShaderNodeMix")
-        mix.name = TINT
-        mix.data_type = "RGBA"
-        mix.blend_type = "MULTIPLY"
-        mix.inputs["Factor"].default_value = 1.0
-        texture, tint = [s for s in mix.inputs if s.type == "RGBA"]
-        tint.default_value = (1.0, 1.0, 1.0, 1.0)
+        texture, tinted = _tint_node(nodes, TINT, (1.0, 1.0, 1.0, 1.0))
         links.new(source, texture)
-        links.new(next(s for s in mix.outputs if s.type == "RGBA"), base)
+        links.new(tinted, base)
     target = [s for s in base.links[0].from_node.inputs if s.type == "RGBA"][1] if base.is_linked else base
     alpha = None if bsdf.inputs["Alpha"].is_linked else bsdf.inputs["Alpha"]
 
@@ -204,6 +198,19 @@ SKY_MAPPING, SKY_TINT = "visualenv sky mapping", "visualenv sky tint"
 SKY_MAP_RESOLUTION = 512
 
 
+def _tint_node(nodes: Any, name: str, tint: Any) -> tuple[Any, Any]:
+    """A Mix node that multiplies a colour by `tint` (its second RGBA input, which a colour binding writes): the
+    colour input to link a texture or sky into, and the tinted output."""
+    mix = nodes.new("ShaderNodeMix")
+    mix.name = name
+    mix.data_type = "RGBA"
+    mix.blend_type = "MULTIPLY"
+    mix.inputs["Factor"].default_value = 1.0
+    texture, tint_socket = [sock for sock in mix.inputs if sock.type == "RGBA"]
+    tint_socket.default_value = tint
+    return texture, next(sock for sock in mix.outputs if sock.type == "RGBA")
+
+
 def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir: Path | None = None,
                source: SourceMap | None = None) -> Any:
     """A world with a uniform background, or an image sky: an environment map turned by a Mapping node and tinted.
@@ -225,17 +232,11 @@ def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir:
     mapping.vector_type = "POINT"
     env = nodes.new("ShaderNodeTexEnvironment")
     env.image = image
-    mix = nodes.new("ShaderNodeMix")
-    mix.name = SKY_TINT
-    mix.data_type = "RGBA"
-    mix.blend_type = "MULTIPLY"
-    mix.inputs["Factor"].default_value = 1.0
-    texture, tint_socket = [sock for sock in mix.inputs if sock.type == "RGBA"]
-    tint_socket.default_value = tint
+    texture, tinted = _tint_node(nodes, SKY_TINT, tint)
     links.new(coords.outputs["Generated"], mapping.inputs["Vector"])
     links.new(mapping.outputs["Vector"], env.inputs["Vector"])
     links.new(env.outputs["Color"], texture)
-    links.new(next(sock for sock in mix.outputs if sock.type == "RGBA"), bg.inputs["Color"])
+    links.new(tinted, bg.inputs["Color"])
     rotation = spec.rotation if isinstance(spec.rotation, list) else [0.0, 0.0, spec.rotation]
     mapping.inputs["Rotation"].default_value = rotation
     # Cycles samples the sky by an importance map of it: its automatic size cost 2.2 s at every env start and
