@@ -177,6 +177,10 @@ def test_a_policy_file_plays_like_its_model_and_loads_in_sb3(run_dir, tmp_path):
     assert set(saved) == {"state_dict", "data", "policy_class"}  # no optimizer state
     assert {v.dtype for v in saved["state_dict"].values()} == {torch.float16}
     assert policy_file.stat().st_size < (run_dir / "best_model.zip").stat().st_size / 1.5
+    import zipfile
+
+    with zipfile.ZipFile(policy_file) as archive:  # torch.save's archive, its weights deflated (torch.load reads them)
+        assert {e.compress_type for e in archive.infolist()} == {zipfile.ZIP_DEFLATED}
     model = PPO.load(run_dir / "best_model.zip", device="cpu")
     policy = ActorCriticCnnPolicy.load(str(policy_file), device="cpu")  # SB3 directly: the documented recipe
     obs = torch.as_tensor(np.random.default_rng(0).integers(0, 256, (16, *model.observation_space.shape)), dtype=torch.float32)
