@@ -620,16 +620,20 @@ class _Compiler:
         fb = FunctionBuilder("bind", ["_state", "_steps"])
         fb.unpack([local(n) for n in state_names], "_state")
         fb.assign(local("steps"), name("_steps"))
-        scope: dict[str, Type] = {n: NUM for n in state_names}
+        scope: dict[str, Type] = {**self.pnames, **{n: NUM for n in state_names}}  # a physics spec's names too: a camera can follow a body
         scope["steps"] = NUM
         targets: list[BindingTarget] = []
         values: list[ast.expr] = []
+        start, before = len(fb.body), set(self.used)
+        self.used = set()
         for obj_name, actor in self.spec.actors.items():
             if self.bound_object_known(obj_name):
                 for prop in type(actor).model_fields:
                     raw = getattr(actor, prop)
                     if raw is not None:
                         self.bind_property(fb, ("actors", obj_name, prop), raw, scope, targets, values)
+        self.physics_reads(fb, "bind", start, self.used, set(state_names))
+        self.used |= before
         fb.returns(tuple_of(values))
         self.check_cameras()
         return fb, targets
