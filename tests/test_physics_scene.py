@@ -291,3 +291,39 @@ def test_an_object_named_as_a_body_stands_for_it(tmp_path: Path) -> None:
         assert cyan(obs).sum() == 0 and red.sum() >= 6, (cyan(obs).sum(), red.sum())  # the capsule is not drawn; the cylinder is
         centres.append(np.nonzero(red)[1].mean())
     assert centres[1] > centres[0] + 4, centres
+
+
+FOLLOWING = """\
+id: Follow-v0
+params: {start: 0.0}
+physics:
+  model: package:gymnasium.envs.mujoco/assets/inverted_pendulum.xml
+  reset: {values: {qpos_slider: start}}
+scene:
+  world: {color: [0.02, 0.02, 0.02]}
+  objects:
+    Camera: {camera: perspective, location: [0, -3, 0.3], rotation: [1.5708, 0, 0], lens: 35}
+observation: {camera: Camera, resolution: [48, 48], color: rgb}
+reward: 1.0
+"""
+
+
+def pole_column(tmp_path: Path, text: str, start: float) -> float:
+    """The mean column of the pole's pixels with the cart slid to `start` at reset."""
+    path = tmp_path / "follow.yaml"
+    path.write_text(text, encoding="utf-8")
+    env = visualenv.make(path, params={"start": start})
+    try:
+        obs, _ = env.reset(seed=0)
+        pole = np.argwhere(cyan(obs))
+        assert len(pole) >= 8
+        return float(pole[:, 1].mean())
+    finally:
+        env.close()
+
+
+def test_an_actor_binding_reads_the_models_names_so_a_camera_follows_the_cart(tmp_path: Path) -> None:
+    """`actors: {Camera: {location: [qpos_slider, ...]}}`: the pole stays in the middle of the frame wherever the cart is."""
+    following = FOLLOWING + "actors: {Camera: {location: [qpos_slider, -3, 0.3]}}\n"
+    assert abs(pole_column(tmp_path, following, 0.6) - pole_column(tmp_path, following, 0.0)) < 1.0
+    assert pole_column(tmp_path, FOLLOWING, 0.6) - pole_column(tmp_path, FOLLOWING, 0.0) > 4.0   # a fixed camera sees it move right

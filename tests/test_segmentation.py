@@ -170,12 +170,12 @@ def test_mujoco_geoms_take_their_bodys_name():
 
     folder = Path(__file__).parents[1] / "specs" / "mujoco"
     text = (folder / "inverted_pendulum.yaml").read_text().replace(
-        "observation: {camera: Camera, resolution: [84, 84], color: rgb}",
+        "observation: {camera: Camera, resolution: [64, 64], color: grayscale}",
         "observation: {cameras: {eye: {camera: Camera, resolution: [48, 48], color: rgb}, mask: {camera: Camera, resolution: [48, 48], color: segmentation}}}")
     assert "mask:" in text
     seen, _, ids = run(text, [], base_dir=folder)
-    assert ids == {"world": 1, "cart": 2, "pole": 3}
+    assert set(ids) == {"world", "cart", "pole", "Post0", "PostL1", "PostR1", "PostL2", "PostR2"}   # bodies, then the spec's posts
     mask = seen[0]["mask"][:, :, 0]
-    cart, pole = np.argwhere(mask == 2), np.argwhere(mask == 3)
+    cart, pole = np.argwhere(mask == ids["cart"]), np.argwhere(mask == ids["pole"])
     assert len(cart) >= 8 and len(pole) >= 8
-    assert pole[:, 0].min() < cart[:, 0].min() and set(np.unique(mask)) <= {0, 1, 2, 3}
+    assert pole[:, 0].min() < cart[:, 0].min() and set(np.unique(mask)) <= {0, *ids.values()}
