@@ -119,18 +119,21 @@ def test_a_batch_steps_every_simulation_at_once_and_each_env_equals_one_env(monk
 
 
 @pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
-def test_an_env_of_a_batch_that_blows_up_ends_with_its_own_fault_and_the_others_go_on(tmp_path: Path) -> None:
-    """on_fault: terminate: env 1's simulation blows up, its episode ends with the message one env gives; contacts and dt read as alone."""
+@pytest.mark.parametrize("threads", ["1", "2"])
+def test_an_env_of_a_batch_that_blows_up_ends_with_its_own_fault_and_the_others_go_on(
+        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: str) -> None:
+    """on_fault: terminate: env 3's simulation blows up (in a worker thread), its episode ends with the message one env gives."""
+    monkeypatch.setenv(THREADS_VARIABLE, threads)
     path = arm_spec(tmp_path, "terminate")
-    batch = BatchedVectorEnv(path, 3, render=False)
-    assert batch._physics is not None
-    singles = [VisualEnv(path, render=False) for _ in range(3)]
+    batch = BatchedVectorEnv(path, 4, render=False)
+    assert batch._physics is not None and batch._physics.workers == int(threads)
+    singles = [VisualEnv(path, render=False) for _ in range(4)]
     obs, _ = batch.reset(seed=5)
     for i, env in enumerate(singles):
         assert np.array_equal(obs[i], env.reset(seed=5 + i)[0])
-    actions = np.zeros((25, 3, 2))
-    actions[:, :, 0] = np.random.default_rng(1).uniform(-1, 1, (25, 3))
-    actions[4, 1, 1] = 1e30  # env 1 only, at its fifth step
+    actions = np.zeros((25, 4, 2))
+    actions[:, :, 0] = np.random.default_rng(1).uniform(-1, 1, (25, 4))
+    actions[4, 3, 1] = 1e30  # env 3 only (stepped by the pool's thread with 2 threads), at its fifth step
     ends, errors, hits = assert_same(batch, singles, actions)
     assert errors == 1 and ends >= 1 and hits >= 1, (ends, errors, hits)
     batch.close()

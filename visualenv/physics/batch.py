@@ -27,11 +27,11 @@ from visualenv.physics.simulation import _FATAL_WARNINGS, Simulation
 #: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)
 THREADS_VARIABLE = "VISUALENV_PHYSICS_THREADS"
 #: envs per thread below which a thread pool costs more than it saves
-ENVS_PER_WORKER = 32
+ENVS_PER_WORKER = 16
 
 
 def default_workers(num_envs: int) -> int:
-    """Threads for a batch: one per usable core beyond the first, at least ENVS_PER_WORKER envs each, or the variable's count."""
+    """Threads for a batch: one per usable core, each with at least ENVS_PER_WORKER envs, or the variable's count."""
     given = os.environ.get(THREADS_VARIABLE, "").strip()
     if given:
         try:
