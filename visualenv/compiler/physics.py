@@ -54,9 +54,21 @@ class PhysicsPlan:
     def bind(self, env: dict[str, Any], sim: Any) -> None:
         """Put one env's reads, stepper and reset writer into a generated function's globals."""
         for key, names in self.reads.items():
-            env[READ_PREFIX + key] = sim.reader(names)
+            env[READ_PREFIX + key] = sim.reader(names, key)
         env[ADVANCE] = sim.stepper(self.controls)
         env[WRITE_RESET] = sim.writer(self.reset_targets)
+
+    def batch(self, sims: list[Any], workers: int | None = None) -> Any:
+        """The envs' simulations stepped and read together (:class:`~visualenv.physics.batch.BatchSimulation`)."""
+        from visualenv.physics.batch import BatchSimulation
+
+        return BatchSimulation(sims, self.reads, self.controls, workers)
+
+    def bind_batch(self, env: dict[str, Any], batch: Any) -> None:
+        """Put a batch's column reads and its MuJoCo step into a vectorised function's globals."""
+        for key, names in self.reads.items():
+            env[READ_PREFIX + key] = batch.reader(names, key)
+        env[ADVANCE] = batch.advance
 
 
 def load(section: Physics, base_dir: Any) -> PhysicsModel:
@@ -85,4 +97,7 @@ def call_statement(function: str, values: list[str]) -> ast.stmt:
     return ast.Expr(ast.Call(name(function), [tuple_of([name(local(v)) for v in values])], []))
 
 
-__all__ = ["ADVANCE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "load", "physics_scene", "read_statement", "call_statement", "scope"]
+#: the read of the model before its step: the only one a batch's replay of one env's step takes from the batch
+BEFORE = "before"
+
+__all__ = ["ADVANCE", "BEFORE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "load", "physics_scene", "read_statement", "call_statement", "scope"]

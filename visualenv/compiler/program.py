@@ -25,7 +25,7 @@ from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mea
 from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
 from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
-from visualenv.compiler.vectorized import vectorize
+from visualenv.compiler.vectorized import vectorizable, vectorize
 from visualenv.compiler import physics as phys
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
@@ -118,10 +118,20 @@ class Program:
         built = {key: b.build(env) for key, b in self._builders.items()}
         return CompiledFunctions(built["init"], built["step"], built["bind"], built.get("observe"))
 
-    def batch_functions(self) -> "BatchFunctions":
-        """The step and bind functions of many envs at once, on numpy columns (None where one must stay per env)."""
-        if self.physics is not None:  # each env steps its own MjData
-            return BatchFunctions(None, None)
+    def batch_functions(self, physics: Any = None) -> "BatchFunctions":
+        """The step and bind functions of many envs at once, on numpy columns (None where one must stay per env).
+
+        A physics spec's functions read and step its batch's simulations (`physics`, a
+        :class:`~visualenv.physics.batch.BatchSimulation`), its state-only observation too;
+        without one, or when its step draws random numbers, each env steps its own.
+        """
+        if self.physics is not None:
+            if physics is None or not vectorizable(self._builders["step"]):
+                return BatchFunctions(None, None)
+            env: dict[str, Any] = {}
+            self.physics.bind_batch(env, physics)
+            builders = self._builders
+            return BatchFunctions(vectorize(builders["step"], env), vectorize(builders["bind"], env), vectorize(builders["observe"], env))
         return BatchFunctions(vectorize(self._builders["step"]), vectorize(self._builders["bind"]))
 
     def render_plan(self) -> RenderPlan:
@@ -153,6 +163,7 @@ class CompiledFunctions:
 class BatchFunctions:
     step: Callable[[tuple, Any, Any, Any], tuple] | None
     bind: Callable[[tuple, Any], tuple] | None
+    observe: Callable[[tuple, Any], tuple] | None = None  # a physics spec's state-only observation
 
 
 def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None) -> Program:

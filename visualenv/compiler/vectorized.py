@@ -153,6 +153,8 @@ class _Statements:
             if mask is None:
                 return [ast.Assign([ast.Name(stmt.target.id, ast.Store())], value)]
             return [_masked(stmt.target.id, value, mask)]
+        if isinstance(stmt, ast.Expr) and mask is None:  # a call for its effect: a physics spec's MuJoCo step
+            return [ast.Expr(expr(stmt.value))]
         if isinstance(stmt, ast.If):
             self.masks += 1
             taken, other = f"_mask{self.masks}", f"_else{self.masks}"
@@ -178,12 +180,15 @@ def vectorizable(builder: FunctionBuilder) -> bool:
     return not any(isinstance(n, ast.Name) and n.id in _SCALAR_ONLY for stmt in builder.body for n in ast.walk(stmt))
 
 
-def vectorize(builder: FunctionBuilder) -> Callable[..., Any] | None:
-    """The element-wise version of a generated function (same arguments, columns for numbers), or None if it must stay scalar."""
+def vectorize(builder: FunctionBuilder, extra: dict[str, Any] | None = None) -> Callable[..., Any] | None:
+    """The element-wise version of a generated function (same arguments, columns for numbers), or None if it must stay scalar.
+
+    `extra` adds globals: a physics spec's column reads and batch step (:mod:`visualenv.physics.batch`).
+    """
     if not vectorizable(builder):
         return None
     body = _Statements().rewrite([copy.deepcopy(s) for s in builder.body], None)
     vector = FunctionBuilder(builder.name + "_batch", list(builder.args))
     for stmt in body:
         vector.add(stmt)
-    return vector.build(vector_globals())
+    return vector.build({**vector_globals(), **(extra or {})})

@@ -12,6 +12,11 @@ s + i: each env keeps its own random generator (a state-only
 a spec whose step draws random numbers or calls ``dynamics.python``, or an
 env whose result is not finite (the lane then returns the same value, or
 raises the located fault, exactly as one env would).
+
+A physics spec's batch steps every env's MjData in one call and reads the
+model's names as columns (:class:`~visualenv.physics.batch.BatchSimulation`);
+an env whose result is not finite, or whose simulation blew up, replays its step
+in its lane without stepping MuJoCo again, to the same value or located fault.
 """
 
 from __future__ import annotations
@@ -24,6 +29,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
@@ -113,7 +119,18 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
         self.max_episode_steps = program.spec.max_steps if max_episode_steps is None else int(max_episode_steps)
         self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps) for _ in range(n)]
-        self._batch = program.batch_functions()
+        #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
+        self._physics: Any = None
+        self._pose_arrays: list[tuple] | None = None
+        if program.physics is not None:
+            physics = program.physics.batch([lane.simulation for lane in self.lanes])
+            self._batch = program.batch_functions(physics)
+            if self._batch.step is not None:
+                self._physics = physics
+            else:
+                physics.close()
+        else:
+            self._batch = program.batch_functions()
         self._renderer_options = RendererOptions.parse(renderer_options)
         if self.uses_camera and backend == BATCH_BACKEND:
             check_batchable(program.render_plan().with_options(self._renderer_options), n)  # refused now, not at the first render
@@ -211,6 +228,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return tuple(self.renderer.render_view_batch(self.binding_values()))
 
     def close_extras(self, **kwargs: Any) -> None:
+        if getattr(self, "_physics", None) is not None:
+            self._physics.close()
         if getattr(self, "_renderer", None) is not None:
             self._renderer.close()
             self._renderer = None
@@ -222,6 +241,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         alone = stepping.copy()
         step = self._batch.step
         if step is not None:
+            if self._physics is not None:
+                self._physics.active = np.flatnonzero(stepping)
             columns = tuple(self._state)
             action = tuple(actions.T.astype(np.float64)) if self.program.discrete is None else actions
             with np.errstate(all="ignore"):
@@ -232,6 +253,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             outcome = np.broadcast_to(np.asarray(outcome, dtype=np.int64), (n,))
             fired = np.broadcast_to(np.asarray(fired, dtype=np.int64), (n,))
             finite = np.isfinite(reward) & np.isfinite(state).all(axis=0)
+            if self._physics is not None:
+                finite &= ~self._physics.blown
             ok = stepping & finite
             alone = stepping & ~finite
             self._state[:, ok] = state[:, ok]
@@ -245,7 +268,16 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._outcome[ok] = np.where((outcome[ok] < 0) & truncated[ok], "max_steps", self._names[outcome[ok]])
             self._errors[ok] = None
         for i in np.flatnonzero(alone):
-            self._step_lane(int(i), actions[i], rewards, terminated, truncated)
+            if self._physics is not None:
+                self._replay_lane(int(i), actions[i], rewards, terminated, truncated)
+            else:
+                self._step_lane(int(i), actions[i], rewards, terminated, truncated)
+
+    def _replay_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+        """Env i's step, whose MuJoCo step the batch took, run again by its lane: its result or its located fault, as env i alone."""
+        physics = self._physics
+        with self.lanes[i].simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
+            self._step_lane(i, action, rewards, terminated, truncated)
 
     def _step_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i stepped by its lane: the scalar step, with its checks and faults."""
@@ -266,6 +298,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     def _reset_lane(self, i: int, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         lane = self.lanes[i]
         lane.reset(seed=seed, options=options)
+        if self._physics is not None:
+            self._physics.refresh(i)
         self._state[:, i] = [lane.state[n] for n in self.program.state_names]
         self._steps[i] = 0
         self._fired[i] = 0
@@ -308,14 +342,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     def _pose_copies(self) -> None:
         """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses."""
         if self.program.physics is not None:
-            datas = [lane.data for lane in self.lanes]
-            self.renderer.set_physics_poses_batch([(d.xpos, d.xquat, d.cam_xpos, d.cam_xmat, d.light_xpos, d.light_xdir) for d in datas])
+            if self._pose_arrays is None:  # live views of each lane's MjData, made once
+                datas = [lane.data for lane in self.lanes]
+                self._pose_arrays = [(d.xpos, d.xquat, d.cam_xpos, d.cam_xmat, d.light_xpos, d.light_xdir) for d in datas]
+            self.renderer.set_physics_poses_batch(self._pose_arrays)
 
     def _observe(self, envs: np.ndarray | None = None) -> Any:
         """Every env's observation, or those of `envs` (ascending indices) only."""
-        if not self.uses_camera and self.program.physics is not None:  # each lane observes its own MuJoCo data (float64, Gymnasium's)
-            rows = range(self.num_envs) if envs is None else [int(i) for i in envs]
-            return np.stack([self.lanes[i].physics_observation() for i in rows])
+        if not self.uses_camera and self.program.physics is not None:  # each env's MuJoCo data (float64, Gymnasium's)
+            return self._physics_observations(envs)
         if not self.uses_camera:
             observed = self._state[self.program.observed].T.astype(np.float32)
             return observed if envs is None else observed[envs]
@@ -324,6 +359,20 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self._sensors:
             obs = self._through_sensors(obs, envs)
         return obs
+
+    def _physics_observations(self, envs: np.ndarray | None) -> np.ndarray:
+        """A physics spec's state-only observations: the batch's columns, or each lane's own where they are not finite (or not vectorised)."""
+        n = self.num_envs
+        rows = range(n) if envs is None else [int(i) for i in envs]
+        observe = self._batch.observe
+        if observe is None:
+            return np.stack([self._lane_at(i).physics_observation() for i in rows])
+        with np.errstate(all="ignore"):
+            columns = observe(tuple(self._state), self._steps)
+        table = np.ascontiguousarray(np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in columns]).reshape(len(columns), n).T)
+        for i in np.flatnonzero(~np.isfinite(table).all(axis=1)):
+            table[i] = self._lane_at(int(i)).physics_observation()  # the same values, or the lane's own error
+        return table if envs is None else table[list(rows)]
 
     def _through_sensors(self, obs: Any, envs: np.ndarray | None) -> Any:
         """Each env's frames through the sensor models, drawn from its lane's generator (as env i alone would draw them)."""

@@ -337,6 +337,11 @@ class VisualEnv(gym.Env):
         """The milestones fired this episode, as bits in spec order."""
         return self._fired
 
+    @property
+    def simulation(self) -> Any:
+        """A physics spec's :class:`~visualenv.physics.simulation.Simulation` (None without physics): a batch steps its lanes' together."""
+        return self._sim
+
     def restore(self, state: Any, steps: int, fired: int, success: bool) -> None:
         """Put the env at a point of an episode: a batch hands one env to its lane to step it alone."""
         self._state = tuple(float(v) for v in state)

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import copy
 import math
-from typing import Callable, Sequence
+from contextlib import contextmanager
+from typing import Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -40,6 +41,9 @@ class Simulation:
         warnings = self.mujoco.mjtWarning
         self._fatal = np.array([int(getattr(warnings, w)) for w in _FATAL_WARNINGS])
         self._warnings = self.data.warning.number  # a live view of MuJoCo's warning counters
+        #: while a batch replays this env's step (:meth:`replaying`): the values its reads had before the step, by read
+        self._replay: Mapping[str, tuple] | None = None
+        self._replay_blown = False
 
     # -- reset and step -----------------------------------------------------------------------------
 
@@ -80,6 +84,10 @@ class Simulation:
         qpos, qvel = data.qpos, data.qvel
 
         def advance(values: Sequence[float]) -> None:
+            if self._replay is not None:  # a batch stepped this env already: only its fault is left to raise
+                if self._replay_blown:
+                    raise PhysicsFault(self.blown_up())
+                return
             ctrl[where] = values
             data.ctrl[:] = ctrl
             counts = warnings.tolist()  # eight numbers: cheaper as a list than as numpy reductions
@@ -115,8 +123,12 @@ class Simulation:
 
     # -- reading named values -----------------------------------------------------------------------
 
-    def reader(self, names: Sequence[str]) -> Callable[[], tuple]:
-        """read(): the current values of `names` (value names and declared contacts), as a tuple of floats (contacts: bools)."""
+    def reader(self, names: Sequence[str], key: str = "") -> Callable[[], tuple]:
+        """read(): the current values of `names` (value names and declared contacts), as a tuple of floats (contacts: bools).
+
+        `key` names the read (the generated code's ``before``, ``after``...): while a batch replays
+        the step (:meth:`replaying`), a read it recorded returns the recorded values.
+        """
         table = self.physics.names.values
         plan: list[tuple[str, np.ndarray, np.ndarray]] = []
         for array in {table[n][0] for n in names if n in table}:
@@ -128,6 +140,8 @@ class Simulation:
         out = np.zeros(size)
 
         def read() -> tuple:
+            if self._replay is not None and key in self._replay:
+                return self._replay[key]
             for array, dst, src in plan:
                 view = views[array]
                 out[dst] = data.time if view is None else view[src]
@@ -140,6 +154,20 @@ class Simulation:
             return tuple(values)
 
         return read
+
+    @contextmanager
+    def replaying(self, reads: Mapping[str, tuple], blown: bool) -> Iterator[None]:
+        """This env's generated step run again after a batch has stepped its MjData (:mod:`visualenv.physics.batch`).
+
+        The reads named in `reads` return the values the batch read before the step, the
+        MuJoCo step is not taken again (or raises the blow-up, when `blown`), and reads after it
+        see the stepped data: the step's result, or its located fault, is exactly this env's alone.
+        """
+        self._replay, self._replay_blown = reads, blown
+        try:
+            yield
+        finally:
+            self._replay, self._replay_blown = None, False
 
     def body_poses(self) -> tuple[np.ndarray, np.ndarray]:
         """Every body's world position (nbody x 3) and orientation quaternion w, x, y, z (nbody x 4): live views, no copy."""

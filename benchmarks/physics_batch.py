@@ -1,0 +1,200 @@
+"""A batch of physics envs: the share of a batch step that MuJoCo's stepping and the pose writing take, and memory per env.
+
+    python benchmarks/physics_batch.py [--spec SPEC] [--envs 256] [--steps 40] [--resolution 8] [--mode state|rendered|both]
+    python benchmarks/physics_batch.py --kernels     # N MjData stepped: a Python loop, a thread pool, mujoco.rollout
+
+"physics" is the time in MuJoCo's stepping (the controls written, frame_skip ``mj_step``,
+``mj_rnePostConstraint``, the blow-up check), whether a batch steps each lane's MjData from its
+own generated step or all of them in one call; "poses" is the time writing every env's MuJoCo
+poses into its copy of the scene before a render. Both are timed by wrapping the functions that do
+them, around a batch stepped with random actions (seeded). Memory per env is the growth of the
+process's RSS from before the batch is made to after its steps, divided by N: an upper bound, as
+it includes what the batch builds once (the Blender scene).
+"""
+
+from __future__ import annotations
+
+import argparse
+import os
+import re
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def rss_mb() -> float:
+    with open("/proc/self/status", encoding="ascii") as f:
+        for line in f:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) / 1024
+    return float("nan")
+
+
+class Timer:
+    """Accumulated seconds of the wrapped calls."""
+
+    def __init__(self) -> None:
+        self.seconds = 0.0
+        self.on = False
+
+    def wrap(self, func: Callable[..., Any]) -> Callable[..., Any]:
+        def timed(*args: Any, **kwargs: Any) -> Any:
+            if not self.on:
+                return func(*args, **kwargs)
+            start = time.perf_counter()
+            try:
+                return func(*args, **kwargs)
+            finally:
+                self.seconds += time.perf_counter() - start
+        return timed
+
+
+def instrument(physics: Timer, poses: Timer) -> None:
+    """Wrap the stepping (per lane and batched, where the code has it) and the pose writing."""
+    from visualenv.env import batched
+    from visualenv.physics import simulation
+
+    stepper = simulation.Simulation.stepper
+
+    def timed_stepper(self: Any, controls: Any) -> Any:
+        return physics.wrap(stepper(self, controls))
+
+    simulation.Simulation.stepper = timed_stepper  # type: ignore[method-assign]
+    try:
+        from visualenv.physics import batch  # the batched stepping, where this version of the code has it
+    except ImportError:
+        batch = None
+    if batch is not None:
+        batch.BatchSimulation.advance = physics.wrap(batch.BatchSimulation.advance)  # type: ignore[method-assign]
+    batched.BatchedVectorEnv._pose_copies = poses.wrap(batched.BatchedVectorEnv._pose_copies)  # type: ignore[method-assign]
+
+
+def spec_at(resolution: int, spec: Path, folder: str) -> Path:
+    """A copy of the spec whose observation is resolution x resolution (its model must be named absolutely or as package:)."""
+    text = spec.read_text(encoding="utf-8")
+    text = re.sub(r"resolution: \[\d+, \d+\]", f"resolution: [{resolution}, {resolution}]", text)
+    out = Path(folder) / spec.name
+    out.write_text(text, encoding="utf-8")
+    return out
+
+
+def measure(spec: Path, n: int, steps: int, rendered: bool) -> None:
+    from visualenv.env.batched import BatchedVectorEnv
+
+    physics, poses = Timer(), Timer()
+    instrument(physics, poses)
+    before = rss_mb()
+    env = BatchedVectorEnv(spec, n, render=rendered)
+    env.reset(seed=0)
+    rng = np.random.default_rng(0)
+    space = env.action_space
+
+    def action() -> Any:
+        if hasattr(space, "nvec"):
+            return rng.integers(0, space.nvec)
+        return rng.uniform(np.maximum(space.low, -1), np.minimum(space.high, 1)).astype(space.dtype)
+
+    for _ in range(3):  # warm-up: the first render builds and compiles the scene
+        env.step(action())
+    physics.on = poses.on = True
+    start = time.perf_counter()
+    for _ in range(steps):
+        env.step(action())
+    total = time.perf_counter() - start
+    after = rss_mb()
+    env.close()
+    step_ms = total / steps * 1e3
+    phys_ms, pose_ms = physics.seconds / steps * 1e3, poses.seconds / steps * 1e3
+    share = (phys_ms + pose_ms) / step_ms * 100
+    kind = "rendered" if rendered else "state-only"
+    print(f"{spec.name} {kind} N={n}: batch step {step_ms:.2f} ms ({n / total * steps:.0f} env-steps/s); physics {phys_ms:.2f} ms, "
+          f"poses {pose_ms:.2f} ms: {share:.1f} % of the step; RSS +{after - before:.0f} MB = {(after - before) / n:.2f} MB/env", flush=True)
+
+
+def kernels(spec: Path, sizes: list[int], seconds: float) -> None:
+    """N lanes' MjData stepped frame_skip times, three ways, on the spec's model (the same work, whatever does it)."""
+    from visualenv.compiler.program import compile_spec
+    from visualenv.spec.loader import load_spec
+
+    plan = compile_spec(load_spec(spec)).physics
+    assert plan is not None, f"{spec} has no physics section"
+    for n in sizes:
+        kernel(spec.name, plan, n, seconds)
+
+
+def kernel(label: str, plan: Any, n: int, seconds: float) -> None:
+    from concurrent.futures import ThreadPoolExecutor
+
+    import mujoco
+    from mujoco import rollout
+
+    fs, cores = plan.frame_skip, len(os.sched_getaffinity(0))
+    sims = [plan.simulation() for _ in range(n)]
+    for s in sims:
+        mujoco.mj_forward(s.model, s.data)
+    pairs = [(s.model, s.data) for s in sims]
+    step, post = mujoco.mj_step, mujoco.mj_rnePostConstraint
+
+    def run(chunk: list) -> None:
+        for m, d in chunk:
+            step(m, d, nstep=fs)
+            post(m, d)
+
+    pool = ThreadPoolExecutor(cores)
+    chunks = [pairs[i::cores] for i in range(cores)]
+    model = sims[0].model
+    nstate = mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_FULLPHYSICS)
+    start_state = np.zeros((n, nstate))
+    control = np.zeros((n, fs, model.nu))
+    states, sensors = np.empty((n, fs, nstate)), np.empty((n, fs, model.nsensordata))
+    roller = rollout.Rollout(nthread=cores)
+    scratch = [mujoco.MjData(model) for _ in range(cores)]
+    models = [s.model for s in sims]
+    batch = plan.batch(sims, workers=cores)
+    zeros = [np.zeros(n) for _ in plan.controls]
+    ways = {
+        "python loop": lambda: run(pairs),
+        f"{cores} threads": lambda: list(pool.map(run, chunks)),
+        f"BatchSimulation.advance ({cores} threads)": lambda: batch.advance(zeros),
+        f"rollout ({cores} threads)": lambda: roller.rollout(models, scratch, start_state, control, nstep=fs,
+                                                              state=states, sensordata=sensors, skip_checks=True),
+    }
+    for name, way in ways.items():
+        way()
+        count, start = 0, time.perf_counter()
+        while time.perf_counter() - start < seconds:
+            way()
+            count += 1
+        print(f"{label} N={n} {name}: {(time.perf_counter() - start) / count * 1e3:.3f} ms a batch step", flush=True)
+    pool.shutdown()
+    roller.close()
+    batch.close()
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("--spec", type=Path, default=ROOT / "specs" / "mujoco" / "inverted_pendulum.yaml")
+    parser.add_argument("--envs", type=int, default=256)
+    parser.add_argument("--steps", type=int, default=40)
+    parser.add_argument("--resolution", type=int, default=8, help="the rendered batch's observation size (square)")
+    parser.add_argument("--mode", choices=("state", "rendered", "both"), default="both")
+    parser.add_argument("--kernels", action="store_true", help="only compare ways of stepping N MjData (N = 16, 64, 256)")
+    args = parser.parse_args()
+    if args.kernels:
+        kernels(args.spec, [16, 64, 256], 1.0)
+        return
+    with tempfile.TemporaryDirectory() as folder:
+        spec = spec_at(args.resolution, args.spec, folder)
+        if args.mode in ("state", "both"):
+            measure(spec, args.envs, args.steps, rendered=False)
+        if args.mode in ("rendered", "both"):
+            measure(spec, args.envs, args.steps, rendered=True)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,195 @@
+"""N envs' simulations stepped together, their named values read as numpy columns across envs.
+
+A batch of a physics spec runs the program's vectorised step (:mod:`visualenv.compiler.vectorized`)
+on columns: its reads of the model's names and its MuJoCo step are this module's. Each env keeps
+its own MjModel and MjData (those of its lane, so env i of a batch is env i alone); one call steps
+all of them (``frame_skip`` ``mj_step`` and ``mj_rnePostConstraint`` each), split over a thread
+pool where there are cores for it (MuJoCo releases the GIL while it steps). After the step every
+env's arrays that the program reads are copied into one (N, size) array per MjData field, so a
+read is one numpy indexing per field for the whole batch, and a step's reads before the MuJoCo
+step see the copies made after the last one (or after a reset).
+
+``mujoco.rollout`` is not used: it steps scratch MjData from state vectors and returns states, not
+the stepped MjData (body poses, sensors after ``mj_rnePostConstraint``, contacts) nor the solver's
+warm start, which the next step starts from: env i would no longer equal env i alone to the bit.
+"""
+
+from __future__ import annotations
+
+import os
+from concurrent.futures import ThreadPoolExecutor
+from typing import Any, Callable, Iterable, Mapping, Sequence
+
+import numpy as np
+
+from visualenv.physics.simulation import _FATAL_WARNINGS, Simulation
+
+#: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)
+THREADS_VARIABLE = "VISUALENV_PHYSICS_THREADS"
+#: envs per thread below which a thread pool costs more than it saves
+ENVS_PER_WORKER = 16
+
+
+def default_workers(num_envs: int) -> int:
+    """Threads for a batch: one per usable core, each with at least ENVS_PER_WORKER envs, or the variable's count."""
+    given = os.environ.get(THREADS_VARIABLE, "").strip()
+    if given:
+        try:
+            return max(1, int(given))
+        except ValueError:
+            raise ValueError(f"{THREADS_VARIABLE}={given!r}: expected a number of threads") from None
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else (os.cpu_count() or 1)
+    return max(1, min(cores, num_envs // ENVS_PER_WORKER))
+
+
+class BatchSimulation:
+    """The simulations of a batch's envs (one per env, in env order), stepped and read together."""
+
+    def __init__(self, sims: Sequence[Simulation], reads: Mapping[str, Sequence[str]], controls: Sequence[str],
+                 workers: int | None = None) -> None:
+        self.sims = list(sims)
+        first = self.sims[0]
+        self.num_envs = n = len(self.sims)
+        self.frame_skip = first.frame_skip
+        table = first.physics.names.values
+        self.contacts = dict(first.contacts)
+        used = {table[name][0] for names in reads.values() for name in names if name in table}
+        self.fields = sorted(used | {"qpos", "qvel"})  # qpos and qvel always: a NaN in them is a blow-up
+        self.values = {f: np.zeros((n, 1 if f == "time" else np.atleast_1d(getattr(first.data, f)).size)) for f in self.fields}
+        self.touching = {c: np.zeros(n, dtype=bool) for names in reads.values() for c in names if c in self.contacts}
+        self._copies = [self._copies_of(i) for i in range(n)]
+        self._ctrl_at = np.array([table[c][1] for c in controls], dtype=int)
+        self._ctrl = np.zeros((n, first.model.nu))
+        warning = first.mujoco.mjtWarning
+        self._fatal = [int(getattr(warning, w)) for w in _FATAL_WARNINGS]
+        #: the envs the next :meth:`advance` steps (a batch leaves out those it resets instead)
+        self.active = np.arange(n)
+        #: the envs whose last step blew up (MuJoCo's warning or a non-finite qpos/qvel)
+        self.blown = np.zeros(n, dtype=bool)
+        #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
+        self._last: dict[str, tuple[list[str], list[np.ndarray]]] = {}
+        mujoco = first.mujoco
+        self._mj_step, self._mj_post = mujoco.mj_step, mujoco.mj_rnePostConstraint
+        self._extra = "time" in self.values or bool(self.touching)  # copied by refresh(), not by the plain row copies
+        #: per env, what its step touches: model, data, MuJoCo's warning counters, its ctrl, its row of controls, its copies
+        self._lanes = [(sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
+                       for i, sim in enumerate(self.sims)]
+        self.workers = max(1, min(default_workers(n) if workers is None else workers, n))
+        self._pool = ThreadPoolExecutor(self.workers - 1, thread_name_prefix="visualenv-mujoco") if self.workers > 1 else None
+        for i in range(n):
+            self.refresh(i)
+
+    def _copies_of(self, i: int) -> list[tuple[np.ndarray, np.ndarray]]:
+        """(row of the batch array, the env's live MjData array) for each field but time."""
+        data = self.sims[i].data
+        return [(self.values[f][i], np.atleast_1d(getattr(data, f)).reshape(-1)) for f in self.fields if f != "time"]
+
+    # -- state ---------------------------------------------------------------------------------------
+
+    def refresh(self, i: int) -> None:
+        """Env i's arrays copied into the batch's (after its reset, or a step it took alone)."""
+        for row, live in self._copies[i]:
+            row[:] = live
+        data = self.sims[i].data
+        if "time" in self.values:
+            self.values["time"][i, 0] = data.time
+        if self.touching:
+            ncon = data.ncon
+            g1, g2 = data.contact.geom1[:ncon], data.contact.geom2[:ncon]
+            for c, column in self.touching.items():
+                a, b = self.contacts[c]
+                column[i] = bool(ncon) and bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
+
+    def close(self) -> None:
+        if self._pool is not None:
+            self._pool.shutdown()
+            self._pool = None
+
+    # -- the generated code's calls ------------------------------------------------------------------
+
+    def reader(self, names: Sequence[str], key: str) -> Callable[[], tuple]:
+        """read(): `names` as columns (one value per env), from the copies of the last step; remembered as read `key`."""
+        table = self.values
+        plan: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        values = self.sims[0].physics.names.values
+        for f in sorted({values[n][0] for n in names if n in values}):
+            at = [(j, values[n][1]) for j, n in enumerate(names) if n in values and values[n][0] == f]
+            plan.append((table[f], np.array([j for j, _ in at], int), np.array([k for _, k in at], int)))
+        touching = [(j, self.touching[n]) for j, n in enumerate(names) if n in self.touching]
+        size, order = len(names), list(names)
+        last = self._last
+
+        def read() -> tuple:
+            out: list[Any] = [None] * size
+            for array, dst, src in plan:
+                block = array[:, src]  # a copy: the step that follows refreshes the arrays
+                for j, column in zip(dst.tolist(), block.T):
+                    out[j] = column
+            for j, column in touching:
+                out[j] = column.copy()
+            last[key] = (order, out)
+            return tuple(out)
+
+        return read
+
+    def advance(self, controls: Iterable[Any]) -> None:
+        """Every active env's controls (columns, in the program's control order), then its frame_skip MuJoCo steps.
+
+        Envs whose step blew up are marked in :attr:`blown` (their data is left as MuJoCo left
+        it, as one env's is); the env replays its step alone to raise the located fault.
+        """
+        n = self.num_envs
+        ctrl = self._ctrl
+        ctrl[:] = 0.0
+        if self._ctrl_at.size:
+            ctrl[:, self._ctrl_at] = np.column_stack([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in controls])
+        self.blown[:] = False
+        active = self.active.tolist()
+        if self._pool is None or len(active) < 2 * self.workers:
+            warned = self._run(active)
+        else:
+            size = -(-len(active) // self.workers)
+            chunks = [active[k:k + size] for k in range(0, len(active), size)]
+            futures = [self._pool.submit(self._run, chunk) for chunk in chunks[1:]]
+            warned = self._run(chunks[0])
+            for future in futures:
+                warned += future.result()
+        if warned:
+            self.blown[warned] = True
+        finite = np.isfinite(self.values["qpos"]).all(axis=1) & np.isfinite(self.values["qvel"]).all(axis=1)
+        self.blown[self.active] |= ~finite[self.active]
+
+    def _run(self, envs: list[int]) -> list[int]:
+        """Step `envs` one after another (a thread's share): controls, the steps, the copies; the envs MuJoCo warned about."""
+        step, post, frame_skip = self._mj_step, self._mj_post, self.frame_skip
+        w0, w1, w2, w3 = self._fatal
+        lanes, refresh, extra = self._lanes, self.refresh, self._extra
+        warned: list[int] = []
+        for i in envs:
+            model, data, counters, ctrl, ctrl_row, copies = lanes[i]
+            c = counters.tolist()
+            before = c[w0] + c[w1] + c[w2] + c[w3]
+            ctrl[:] = ctrl_row
+            step(model, data, nstep=frame_skip)
+            post(model, data)
+            c = counters.tolist()
+            if c[w0] + c[w1] + c[w2] + c[w3] != before:
+                warned.append(i)
+            if extra:
+                refresh(i)
+            else:
+                for row, live in copies:
+                    row[:] = live
+        return warned
+
+    def recorded(self, i: int, keys: Iterable[str]) -> dict[str, tuple]:
+        """Env i's values of the reads `keys` as the last batch step made them, as its own reads return them (floats, contacts as bools)."""
+        out: dict[str, tuple] = {}
+        for key in keys:
+            if key in self._last:
+                names, columns = self._last[key]
+                out[key] = tuple(bool(c[i]) if n in self.touching else float(c[i]) for n, c in zip(names, columns))
+        return out
+
+
+__all__ = ["BatchSimulation", "THREADS_VARIABLE", "default_workers"]
