@@ -189,7 +189,8 @@ def agreement(a: np.ndarray, b: np.ndarray) -> float:
 
 
 def test_what_a_batch_cannot_render_is_refused_when_it_is_built(tmp_path):
-    """A zooming camera, a turning camera past its envs or with depth, a bound world, a bound sun past 63 envs: refused
+    """A zooming camera, a turning camera past its envs or with depth, a bound world, a bound sun past 63 envs or under an
+    image sky: refused
     by BatchedVectorEnv(...) itself, located, with the reason (before Blender starts); the same spec's state-only batch is fine."""
     from visualenv.errors import SpecError
     from visualenv.spec import load_spec_text
@@ -208,6 +209,10 @@ def test_what_a_batch_cannot_render_is_refused_when_it_is_built(tmp_path):
     BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 63).close()   # a bound sun: one per env, up to 63
     with pytest.raises(SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: .* at most 63 such sets apart, not 64"):
         BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 64)
+    sky = (Path(__file__).parents[1] / "specs" / "assets" / "goalie" / "sky.png").resolve()
+    under_sky = fixed.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}}}")
+    with pytest.raises(SpecError, match=r"sun 'Sun' is bound to the state while the world is not one colour"):
+        BatchedVectorEnv(load_spec_text(under_sky, name="dr.yaml"), 2)
     world = fixed.replace("  Sun: {strength: sun}\n", "  World: {strength: sun}\n")
     with pytest.raises(SpecError, match="the world .* is bound to the state"):
         BatchedVectorEnv(load_spec_text(world, name="dr.yaml"), 2)
@@ -251,14 +256,17 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
     """examples/domain_randomization.yaml (a bound sun; a camera at a drawn distance aimed by look_at) batched: states
     exact and each tile agrees with the env's own render (noise='shared') on >= 98 % of pixels within 8 levels, over
     episodes with other draws, while the envs' views differ. Then a camera whose bound rotation turns it every step:
-    the rays' rotations change each step (a shader parameter change) and the tiles still agree."""
+    the rays' rotations change each step (a shader parameter change) and the tiles still agree; and under an image sky."""
     from visualenv.spec import load_spec_text
 
     example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text().replace("[84, 84]", "[32, 32]")
     every_step = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n",
                                   "  Camera: {rotation: [1.0 + 0.4 * red, 0, 0.8 * green - 0.5 + x]}\n")
                   .replace("location: [0, -6, 2], look_at: [0, 0, 0]}", "location: [0, -6, 2]}"))
-    for text, seeds, steps in ((example, (1, 5), 3), (every_step, (3,), 4)):
+    sky = (Path(__file__).parents[1] / "specs" / "assets" / "goalie" / "sky.png").resolve()
+    image_sky = (example.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5, rotation: 0.7}}")
+                 .replace("  Sun: {strength: sun}\n", ""))   # each ray is turned, not the scene: any world
+    for text, seeds, steps in ((example, (1, 5), 3), (every_step, (3,), 4), (image_sky, (1,), 2)):
         loaded = load_spec_text(text, name="dr.yaml")
         batch = BatchedVectorEnv(loaded, 3)
         singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]

@@ -36,7 +36,7 @@ from mathutils import Matrix, Vector
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
-                                           turning_error, world_error)
+                                           sun_world_error, turning_error, world_error)
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
 from visualenv.render.blender.scene import BuiltScene, aim
 from visualenv.spec.bindables import BINDABLES
@@ -230,6 +230,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if self._own_suns and self.num_envs > MAX_OWN_SUNS:  # a .blend file's sun (the spec's were refused at build)
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
             raise sun_error(self.plan, name, self.num_envs)
+        if self._own_suns and self.num_envs > 1 and not _one_colour(scene.world):  # a .blend file's world (the spec's: at build)
+            name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
+            raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
         for copy in self._copies:
@@ -631,6 +634,12 @@ def _aim_copy(copy: _Copy) -> None:
             aim(obj, copy.targets[name])
     finally:
         copy.anchor.matrix_basis = place
+
+
+def _one_colour(world: Any) -> bool:
+    """Whether a world is one colour in every direction: no texture node (an image or a procedural sky) in its shader."""
+    tree = getattr(world, "node_tree", None) if world is not None else None
+    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") for node in tree.nodes)
 
 
 def _is_sun(obj: Any) -> bool:
