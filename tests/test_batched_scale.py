@@ -256,7 +256,8 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
     """examples/domain_randomization.yaml (a bound sun; a camera at a drawn distance aimed by look_at) batched: states
     exact and each tile agrees with the env's own render (noise='shared') on >= 98 % of pixels within 8 levels, over
     episodes with other draws, while the envs' views differ. Then a camera whose bound rotation turns it every step:
-    the rays' rotations change each step (a shader parameter change) and the tiles still agree; and under an image sky."""
+    the rays' rotations change each step (a shader parameter change) and the tiles still agree; a camera turned by its
+    parent's bound rotation; and under an image sky."""
     from visualenv.spec import load_spec_text
 
     example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text().replace("[84, 84]", "[32, 32]")
@@ -266,7 +267,11 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
     sky = (Path(__file__).parents[1] / "specs" / "assets" / "goalie" / "sky.png").resolve()
     image_sky = (example.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5, rotation: 0.7}}")
                  .replace("  Sun: {strength: sun}\n", ""))   # each ray is turned, not the scene: any world
-    for text, seeds, steps in ((example, (1, 5), 3), (every_step, (3,), 4), (image_sky, (1,), 2)):
+    rig = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "  Rig: {rotation: [0, 0, 0.6 * green - 0.3 + x]}\n")
+           .replace("    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], look_at: [0, 0, 0]}",
+                    "    Rig: {empty: true}\n    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], rotation: [1.2, 0, 0], parent: Rig}"))
+    assert "parent: Rig" in rig and "Rig: {rotation" in rig
+    for text, seeds, steps in ((example, (1, 5), 3), (every_step, (3,), 4), (image_sky, (1,), 2), (rig, (2,), 2)):
         loaded = load_spec_text(text, name="dr.yaml")
         batch = BatchedVectorEnv(loaded, 3)
         singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
@@ -282,7 +287,7 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
                     updates = batch.renderer.shader_updates
                     obs, _, _, _, info = batch.step(np.array([1, 0, 1]))
                     own = [env.step(a)[0] for env, a in zip(singles, (1, 0, 1))]
-                    assert (batch.renderer.shader_updates > updates) == (text is every_step)   # turned each step, or only at resets
+                    assert (batch.renderer.shader_updates > updates) == (text in (every_step, rig))   # turned each step, or at resets
         finally:
             batch.close()
             for env in singles:

@@ -568,6 +568,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
         flip = np.diag([1.0, 1.0, -1.0])
         to_camera = flip @ np.linalg.inv(_rotation(tiles.matrix_basis))
         values = {}
+        if any(copy.objects[name].parent != copy.anchor for copy in self._copies[:1]):
+            self._layer.update()  # the camera's rotation depends on its parents: evaluate them (once for all copies)
         for k, copy in enumerate(self._copies):
             rotation = to_camera @ _rotation(self._camera_pose(copy, name)) @ flip
             for i in range(9):
@@ -580,13 +582,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self.shader_updates += 1
             self._rays[tiles.as_pointer()] = values
 
-    def _camera_pose(self, copy: _Copy, name: str) -> Matrix:
-        """The world pose of a copy's camera, up to its anchor's translation; evaluated if it hangs under other objects."""
+    @staticmethod
+    def _camera_pose(copy: _Copy, name: str) -> Matrix:
+        """The world pose of a copy's camera, up to its anchor's translation (as evaluated, if it hangs under other objects)."""
         camera = copy.objects[name]
-        if camera.parent == copy.anchor:
-            return camera.matrix_basis
-        self._layer.update()
-        return camera.matrix_world
+        return camera.matrix_basis if camera.parent == copy.anchor else camera.matrix_world
 
     def _env_pose(self, tiles: Any, pose: Matrix, i: int) -> Matrix:
         """Env i's camera pose at the tiles camera's place (before its grid offset): `pose` turned by env i's rays."""
