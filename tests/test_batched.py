@@ -244,9 +244,14 @@ def test_engines_and_cameras_a_batch_cannot_render_are_refused(tmp_path):
     base = (SPECS / "visual_cartpole.yaml").read_text()
     with pytest.raises(ValueError, match="render.engine 'workbench' cannot render a batch"):  # refused when the batch is built
         BatchedVectorEnv(load_spec_text(base.replace("engine: cycles", "engine: workbench"), name="w.yaml"), 2)
+    zooming = base.replace("actors:\n", "actors:\n  Camera: {lens: 30 + 10 * theta}\n", 1)
+    with pytest.raises(SpecError, match=r"camera 'Camera' cannot be batched \(its lens binding on 'Camera'\): .* one lens"):
+        BatchedVectorEnv(load_spec_text(zooming, name="zooming.yaml"), 2)
+    scaled = base.replace("actors:\n", "actors:\n  Camera: {scale: [1, 1, 1 + theta]}\n", 1)
+    with pytest.raises(SpecError, match=r"cannot be batched \(its scale binding on 'Camera'\)"):
+        BatchedVectorEnv(load_spec_text(scaled, name="scaled.yaml"), 2)
     turning = base.replace("actors:\n", "actors:\n  Camera: {rotation: [1.5, 0, theta]}\n", 1)
-    with pytest.raises(SpecError, match="camera 'Camera' turns or zooms with the state"):
-        BatchedVectorEnv(load_spec_text(turning, name="turning.yaml"), 2)
+    BatchedVectorEnv(load_spec_text(turning, name="turning.yaml"), 2).close()   # a turning camera is followed (test_batched_scale)
 
 
 def test_several_cameras_give_a_dict_of_tiles_per_camera(tmp_path):

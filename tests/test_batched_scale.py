@@ -188,24 +188,37 @@ def agreement(a: np.ndarray, b: np.ndarray) -> float:
     return float((np.abs(a.astype(int) - b.astype(int)) <= 8).mean())
 
 
-def test_what_a_batch_cannot_render_is_refused_when_it_is_built():
-    """A turning camera, a bound world, a bound sun past 63 envs: refused by BatchedVectorEnv(...) itself, located,
-    with the reason (before Blender starts); the same spec's state-only batch is fine."""
+def test_what_a_batch_cannot_render_is_refused_when_it_is_built(tmp_path):
+    """A zooming camera, a turning camera past its envs or with depth, a bound world, a bound sun past 63 envs or under an
+    image sky: refused
+    by BatchedVectorEnv(...) itself, located, with the reason (before Blender starts); the same spec's state-only batch is fine."""
     from visualenv.errors import SpecError
     from visualenv.spec import load_spec_text
 
     example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text()
-    with pytest.raises(SpecError, match=r"camera 'Camera' turns or zooms with the state \(its location, look_at binding on 'Camera'\)"):
-        BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2)
+    BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2).close()   # a camera that moves and turns (look_at)
+    zoom = example.replace("look_at: [0, 0, 0]}\n\nobservation", "look_at: [0, 0, 0], lens: 20 + 5 * distance}\n\nobservation")
+    with pytest.raises(SpecError, match=r"dr.yaml:\d+.*camera 'Camera' cannot be batched \(its lens binding on 'Camera'\)"):
+        BatchedVectorEnv(load_spec_text(zoom, name="dr.yaml"), 2)
+    unlit = example.replace("  Sun: {strength: sun}\n", "")
+    with pytest.raises(SpecError, match=r"turns with the state: .* at most 1024 envs, not 1025"):
+        BatchedVectorEnv(load_spec_text(unlit, name="dr.yaml"), 1025)
+    with pytest.raises(SpecError, match=r"turns with the state: .* depth observation"):
+        BatchedVectorEnv(load_spec_text(example.replace("color: rgb", "color: depth"), name="dr.yaml"), 2)
     fixed = example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
     BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 63).close()   # a bound sun: one per env, up to 63
     with pytest.raises(SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: .* at most 63 such sets apart, not 64"):
         BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 64)
+    sky = (Path(__file__).parents[1] / "specs" / "assets" / "goalie" / "sky.png").resolve()
+    under_sky = fixed.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}}}")
+    with pytest.raises(SpecError, match=r"sun 'Sun' is bound to the state while the world is not one colour"):
+        BatchedVectorEnv(load_spec_text(under_sky, name="dr.yaml"), 2)
     world = fixed.replace("  Sun: {strength: sun}\n", "  World: {strength: sun}\n")
     with pytest.raises(SpecError, match="the world .* is bound to the state"):
         BatchedVectorEnv(load_spec_text(world, name="dr.yaml"), 2)
-    with pytest.raises(SpecError, match="turns or zooms"):   # in worker processes too, before any starts
-        visualenv.make_vec(str(Path(__file__).parents[1] / "examples" / "domain_randomization.yaml"), 4, batched=True, workers=2)
+    (tmp_path / "zoom.yaml").write_text(zoom)
+    with pytest.raises(SpecError, match="cannot be batched"):   # in worker processes too, before any starts
+        visualenv.make_vec(str(tmp_path / "zoom.yaml"), 4, batched=True, workers=2)
     batch = BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2, render=False)
     assert batch.reset(seed=0)[0].shape[0] == 2
     batch.close()
@@ -233,6 +246,76 @@ def test_a_bound_sun_lights_each_copy_with_its_own_strength_colour_and_direction
                 assert min(agreement(obs[i], own[j]) for i in range(3) for j in range(3) if i != j) < 0.9
                 obs, *_ = batch.step(np.array([1, 0, 1]))
                 own = [env.step(a)[0] for env, a in zip(singles, (1, 0, 1))]
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
+
+
+def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
+    """examples/domain_randomization.yaml (a bound sun; a camera at a drawn distance aimed by look_at) batched: states
+    exact and each tile agrees with the env's own render (noise='shared') on >= 98 % of pixels within 8 levels, over
+    episodes with other draws, while the envs' views differ. Then a camera whose bound rotation turns it every step:
+    the rays' rotations change each step (a shader parameter change) and the tiles still agree; a camera turned by its
+    parent's bound rotation; and under an image sky."""
+    from visualenv.spec import load_spec_text
+
+    example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text().replace("[84, 84]", "[32, 32]")
+    every_step = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n",
+                                  "  Camera: {rotation: [1.0 + 0.4 * red, 0, 0.8 * green - 0.5 + x]}\n")
+                  .replace("location: [0, -6, 2], look_at: [0, 0, 0]}", "location: [0, -6, 2]}"))
+    sky = (Path(__file__).parents[1] / "specs" / "assets" / "goalie" / "sky.png").resolve()
+    image_sky = (example.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5, rotation: 0.7}}")
+                 .replace("  Sun: {strength: sun}\n", ""))   # each ray is turned, not the scene: any world
+    rig = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "  Rig: {rotation: [0, 0, 0.6 * green - 0.3 + x]}\n")
+           .replace("    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], look_at: [0, 0, 0]}",
+                    "    Rig: {empty: true}\n    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], rotation: [1.2, 0, 0], parent: Rig}"))
+    assert "parent: Rig" in rig and "Rig: {rotation" in rig
+    for text, seeds, steps in ((example, (1, 5), 3), (every_step, (3,), 4), (image_sky, (1,), 2), (rig, (2,), 2)):
+        loaded = load_spec_text(text, name="dr.yaml")
+        batch = BatchedVectorEnv(loaded, 3)
+        singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
+        try:
+            for seed in seeds:
+                obs, info = batch.reset(seed=seed)
+                own = [env.reset(seed=seed + i)[0] for i, env in enumerate(singles)]
+                for _ in range(steps):
+                    assert all(env.state == {k: v[i] for k, v in info["state"].items() if not k.startswith("_")}
+                               for i, env in enumerate(singles))
+                    assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [agreement(obs[i], own[i]) for i in range(3)]
+                    assert max(agreement(obs[i], own[j]) for i in range(3) for j in range(3) if i != j) < 0.9
+                    updates = batch.renderer.shader_updates
+                    obs, _, _, _, info = batch.step(np.array([1, 0, 1]))
+                    own = [env.step(a)[0] for env, a in zip(singles, (1, 0, 1))]
+                    assert (batch.renderer.shader_updates > updates) == (text in (every_step, rig))   # turned each step, or at resets
+        finally:
+            batch.close()
+            for env in singles:
+                env.close()
+
+
+def test_a_turning_camera_renders_reset_envs_alone_split_batches_and_views(monkeypatch):
+    """With a turning camera: envs rendered alone (after an autoreset), a batch split over several calls, and the
+    high-resolution view are each env's own render."""
+    from visualenv.render.blender import batched
+    from visualenv.spec import load_spec_text
+
+    monkeypatch.setattr(batched, "ALONE_OVERHEAD_TILES", 0)
+    monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles a call: three envs take two calls
+    example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text()
+    text = example.replace("[84, 84]", "[32, 32]") + "render: {engine: cycles, view: {resolution: [40, 40], preset: fast}}\n"
+    loaded = load_spec_text(text, name="dr.yaml")
+    batch = BatchedVectorEnv(loaded, 3, render_mode="rgb_array")
+    singles = [VisualEnv(loaded, render_mode="rgb_array", renderer_options={"noise": "shared"}) for _ in range(3)]
+    try:
+        obs, _ = batch.reset(seed=1)
+        own = [env.reset(seed=1 + i)[0] for i, env in enumerate(singles)]
+        assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [agreement(obs[i], own[i]) for i in range(3)]
+        alone = batch.renderer.render_batch(batch.binding_values(), envs=[0, 2])
+        assert agreement(alone[0], own[0]) >= 0.98 and agreement(alone[1], own[2]) >= 0.98
+        views = batch.render()
+        assert all(agreement(views[i], env.render()) >= 0.98 for i, env in enumerate(singles))
+        assert agreement(views[0], views[1]) < 0.9
     finally:
         batch.close()
         for env in singles:

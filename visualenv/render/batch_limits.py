@@ -1,13 +1,16 @@
 """What a batch (many envs in one Blender scene) cannot render, found from the plan alone, before Blender starts.
 
-A batch renders every env through one orientation of one custom camera, with one
-world; a bound sun is copied per env and lights only its own copy (Cycles' light
-linking, at most :data:`MAX_OWN_SUNS` envs). So an engine other than Cycles, a
-bound world, a bound sun past that many envs and an observation camera that the state turns or zooms
-are refused when the batch is built (``BatchedVectorEnv(...)``), not at its first
-render. Objects of a .blend file (their types, parents, constraints) are only known
-to Blender: the renderer checks those again when it builds the scene, with the
-same messages (:mod:`visualenv.render.blender.batched`).
+A batch renders every env through one custom camera with one world; a bound sun
+is copied per env and lights only its own copy (Cycles' light linking, at most
+:data:`MAX_OWN_SUNS` envs). A camera the state turns (a bound rotation, a
+``look_at``, an aimed camera that moves) is followed by turning each env's rays
+in the camera's shader, up to :data:`MAX_TURNING_ENVS` envs. So an engine other
+than Cycles, a bound world, a bound sun past that many envs or under a world that is not one colour, a camera the state
+zooms (``lens``) or scales, a turning camera past its envs or with a depth
+observation are refused when the batch is built (``BatchedVectorEnv(...)``),
+not at its first render. Objects of a .blend file (their types, parents,
+constraints) are only known to Blender: the renderer checks those again when it
+builds the scene, with the same messages (:mod:`visualenv.render.blender.batched`).
 """
 
 from __future__ import annotations
@@ -17,8 +20,13 @@ from visualenv.render.base import RenderPlan
 from visualenv.spec.bindables import WORLD_ACTOR
 from visualenv.spec.models import CameraObject, LightObject
 
-#: properties that turn a camera (bound on it or on an ancestor) or change its lens: a batch cannot follow them
-TURNS = ("rotation", "scale", "look_at")
+#: properties that turn a camera (bound on it or on an ancestor): a batch follows them by turning each env's rays
+TURNS = ("rotation", "look_at")
+#: properties a batch cannot follow: a scale bound on a camera or an ancestor, and the camera's own lens
+UNFOLLOWED = ("scale",)
+#: envs of a batch whose camera turns: its tiles shader holds 9 parameters an env and Cycles compiles it again whenever
+#: a rotation changes, measured about 0.1 s a change at 64 envs and 3-5 s at 1,024 (2-core CPU); more were not tried
+MAX_TURNING_ENVS = 1024
 #: envs with their own sun in one batch: Cycles' light linking tells 64 light sets apart, one of them the default set;
 #: measured: 63 envs' tiles equal their own renders, at 64 every tile is wrong (31 % of pixels within 8 levels)
 MAX_OWN_SUNS = 63
@@ -31,9 +39,16 @@ def engine_message(engine: str) -> str:
 
 
 def turning_error(plan: RenderPlan, camera: str, why: str) -> SpecError:
-    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' turns or zooms with the state ({why}): a batch "
-                      "renders every env through one camera orientation, so only a camera that moves without turning can be "
-                      f"batched; {ONE_PROCESS_EACH}")])
+    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' cannot be batched ({why}): a batch "
+                      "renders every env through one custom camera with one lens; it follows a camera that moves (each env's copy "
+                      "moved) and turns (each env's rays turned), but no move of a copy zooms like a lens (a uniform scale about "
+                      "the camera changes nothing in the image, a scale across its view distorts the shading), and it follows no "
+                      f"scale or constraint on the camera or its parents; {ONE_PROCESS_EACH}")])
+
+
+def turning_limit_error(plan: RenderPlan, camera: str, why: str) -> SpecError:
+    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' turns with the state: a batch turns each env's "
+                      f"rays in its camera's shader, {why}; {ONE_PROCESS_EACH}")])
 
 
 def world_error(plan: RenderPlan, name: str) -> SpecError:
@@ -46,6 +61,14 @@ def sun_error(plan: RenderPlan, name: str, num_envs: int) -> SpecError:
                       f"its own sun, lighting only its own copy through Cycles' light linking, which tells at most {MAX_OWN_SUNS} "
                       f"such sets apart, not {num_envs}; use batches of at most {MAX_OWN_SUNS} envs (make_vec(..., workers=K) "
                       f"runs several), or {ONE_PROCESS_EACH}", key=True)])
+
+
+def sun_world_error(plan: RenderPlan, name: str) -> SpecError:
+    return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state while the world is not one "
+                      "colour (an image sky, or a .blend file's world with textures): each env of a batch then has its own sun "
+                      "(Cycles' light linking), and with such a world Cycles' light sampling lit all but one env's copy otherwise "
+                      "than one env alone (measured: 31-59 % of pixels within 8 levels); use a world colour, or "
+                      f"{ONE_PROCESS_EACH}", key=True)])
 
 
 def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
@@ -61,16 +84,30 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
         why = spec_turning(plan, view.camera, bound)
         if why:
             raise turning_error(plan, view.camera, why)
+        if spec_turns(plan, view.camera, bound):
+            check_turning(plan, view.camera, view.color, num_envs)
     for name in bound:
         if name == WORLD_ACTOR and name not in objects and not plan.scene.file:
             raise world_error(plan, name)
         spec = objects.get(name)
         if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > MAX_OWN_SUNS:
             raise sun_error(plan, name, num_envs)
+        if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > 1 and plan.scene.world is not None \
+                and plan.scene.world.image is not None:
+            raise sun_world_error(plan, name)
 
 
-def spec_turning(plan: RenderPlan, camera: str, bound: dict[str, set[str]]) -> str | None:
-    """What turns or zooms a spec-declared camera (a binding on it or on a spec-declared ancestor), or None."""
+def check_turning(plan: RenderPlan, camera: str, color: str, num_envs: int) -> None:
+    """Refuse what a batch of a turning camera cannot render: more envs than its shader holds, depth along turned rays."""
+    if num_envs > MAX_TURNING_ENVS:
+        raise turning_limit_error(plan, camera, f"which holds at most {MAX_TURNING_ENVS} envs, not {num_envs}; use batches of "
+                                  f"at most {MAX_TURNING_ENVS} envs (make_vec(..., workers=K) runs several)")
+    if color == "depth":
+        raise turning_limit_error(plan, camera, "while a depth observation is measured along one camera's forward axis for every env")
+
+
+def spec_turns(plan: RenderPlan, camera: str, bound: dict[str, set[str]]) -> bool:
+    """Whether the state turns a spec-declared camera: a rotation or look_at bound on it or an ancestor, or it is aimed and moves."""
     objects = plan.scene.objects
     spec = objects.get(camera)
     aimed = isinstance(spec, CameraObject) and spec.look_at is not None
@@ -79,7 +116,21 @@ def spec_turning(plan: RenderPlan, camera: str, bound: dict[str, set[str]]) -> s
     while name is not None and name in objects and name not in seen:
         seen.add(name)
         props = bound.get(name, set())
-        turning = (props & set(TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if name == camera else set())
+        if props & set(TURNS) or (aimed and props & {"location"}):
+            return True
+        name = objects[name].parent
+    return False
+
+
+def spec_turning(plan: RenderPlan, camera: str, bound: dict[str, set[str]]) -> str | None:
+    """What zooms or scales a spec-declared camera (a binding on it or on a spec-declared ancestor), or None."""
+    objects = plan.scene.objects
+    name: str | None = camera
+    seen: set[str] = set()
+    while name is not None and name in objects and name not in seen:
+        seen.add(name)
+        props = bound.get(name, set())
+        turning = (props & set(UNFOLLOWED)) | (props & {"lens"} if name == camera else set())
         if turning:
             return f"its {', '.join(sorted(turning))} binding on '{name}'"
         name = objects[name].parent

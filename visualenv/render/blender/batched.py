@@ -13,9 +13,13 @@ observation. A Cycles custom camera (an OSL camera shader, :data:`TILES_OSL`)
 sits at the observation camera's pose and sends the rays of tile k from the
 camera's pose shifted to copy k, with the spec camera's lens. A camera bound to
 the state moves its copy instead: the anchor of copy k is shifted so that the
-camera lands on the shared pose, which keeps every tile exact as long as the
-camera only translates (a rotating camera would turn its copy against the
-shared sun and sky, so it is refused).
+camera lands on the shared pose. A camera the state turns (a bound rotation, a
+look_at) gets a shader with every env's own rotation (:data:`TURNING_OSL`):
+tile k's rays are turned by copy k's camera rotation, while the copies only
+translate. Turning the copies instead would turn them against the shared world,
+suns and Cycles' sampling directions (with shared noise every pixel samples the
+world light in one direction, in world space: a turned copy got another
+"shadow" of the world). A camera the state zooms (lens) or scales is refused.
 """
 
 from __future__ import annotations
@@ -31,9 +35,10 @@ from mathutils import Matrix, Vector
 
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
-from visualenv.render.batch_limits import MAX_OWN_SUNS, TURNS, engine_message, sun_error, turning_error, world_error
+from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
+                                           sun_world_error, turning_error, world_error)
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
-from visualenv.render.blender.scene import BuiltScene
+from visualenv.render.blender.scene import BuiltScene, aim
 from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
 
@@ -83,6 +88,61 @@ shader visualenv_tiles(
     }
 }
 """
+
+
+#: the tiles shader for a camera the state turns: as TILES_OSL, and each env's rays are turned by its own camera's
+#: rotation relative to this camera's ({rotations}: 9 parameters an env, r<k>_<i> row-major, in Cycles' camera space)
+TURNING_OSL = r"""
+// visualenv: one tile of the image per env, each looking from the camera's pose shifted by
+// the env's place on the grid of copies and turned by the env's own camera rotation.
+shader visualenv_tiles_turning(
+    int cols = 1, int count = 1, int first = 0, int ortho = 0,
+    float half_w = 0.5, float half_h = 0.5, float shift_x = 0, float shift_y = 0,
+    float ax = 0, float ay = 0, float az = 0, float bx = 0, float by = 0, float bz = 0,
+    int grid = 1,
+{rotations}
+    output point position = 0, output vector direction = 0, output color throughput = 1)
+{
+    float R[{size}] = {{{names}}};
+    point r = camera_shader_raster_position();
+    int rows = (count + cols - 1) / cols;
+    float fx = r[0] * cols;
+    float fy = (1.0 - r[1]) * rows;
+    int c = clamp((int)floor(fx), 0, cols - 1);
+    int t = clamp((int)floor(fy), 0, rows - 1);
+    int k = t * cols + c;
+    if (k >= count) {
+        throughput = 0;
+    } else {
+        int env = first + k;
+        float u = (fx - c) * 2.0 - 1.0;
+        float v = 1.0 - (fy - t) * 2.0;
+        vector offset = (env % grid) * vector(ax, ay, az) + (env / grid) * vector(bx, by, bz);
+        float x = u * half_w + shift_x;
+        float y = v * half_h + shift_y;
+        vector p = ortho ? vector(x, y, 0) : vector(0, 0, 0);
+        vector d = ortho ? vector(0, 0, 1) : normalize(vector(x, y, 1.0));
+        int i = 9 * clamp(env, 0, {last});
+        position = point(offset[0] + R[i] * p[0] + R[i + 1] * p[1] + R[i + 2] * p[2],
+                         offset[1] + R[i + 3] * p[0] + R[i + 4] * p[1] + R[i + 5] * p[2],
+                         offset[2] + R[i + 6] * p[0] + R[i + 7] * p[1] + R[i + 8] * p[2]);
+        direction = vector(R[i] * d[0] + R[i + 1] * d[1] + R[i + 2] * d[2],
+                           R[i + 3] * d[0] + R[i + 4] * d[1] + R[i + 5] * d[2],
+                           R[i + 6] * d[0] + R[i + 7] * d[1] + R[i + 8] * d[2]);
+    }
+}
+"""
+
+
+TURNING_NAME = "visualenv_tiles_turning"
+
+
+def turning_source(num_envs: int) -> str:
+    """The tiles shader of a turning camera for `num_envs` envs: every env's rotation starts as the identity."""
+    names = [f"r{k}_{i}" for k in range(num_envs) for i in range(9)]
+    rotations = "\n".join(f"    float r{k}_{i} = {1 if i in (0, 4, 8) else 0}," for k in range(num_envs) for i in range(9))
+    return (TURNING_OSL.replace("{rotations}", rotations).replace("{size}", str(9 * num_envs))
+            .replace("{{{names}}}", "{" + ", ".join(names) + "}").replace("{last}", str(num_envs - 1)))
 
 
 def _osl_modules_on_path() -> None:
@@ -170,6 +230,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if self._own_suns and self.num_envs > MAX_OWN_SUNS:  # a .blend file's sun (the spec's were refused at build)
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
             raise sun_error(self.plan, name, self.num_envs)
+        if self._own_suns and self.num_envs > 1 and not _one_colour(scene.world):  # a .blend file's world (the spec's: at build)
+            name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
+            raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
         for copy in self._copies:
@@ -183,6 +246,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
         #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
         self.shader_updates = 0
         self._anchors_moved = False
+        #: per tiles camera of a turning camera: its rotation parameters as last written (:meth:`_aim_rays`)
+        self._rays: dict[int, dict[str, float]] = {}
 
     def _refuse_turning_cameras(self) -> None:
         """A camera the state turns (or zooms) cannot share one pose with its copies; a bound world cannot be shared."""
@@ -191,27 +256,38 @@ class BatchedBlenderRenderer(BlenderRenderer):
             why = self._turning(view.camera)
             if why:
                 raise turning_error(plan, view.camera, why)
+            if self._turns(view.camera):
+                check_turning(plan, view.camera, view.color, self.num_envs)
         for name in dict.fromkeys(target.object for target in plan.bindings):
             if is_world(name, self._objects):
                 raise world_error(plan, name)
 
     def _turning(self, camera_name: str) -> str | None:
-        """What turns or zooms this camera with the state ("its rotation binding on 'Rig'"), or None if nothing does."""
+        """What zooms or scales this camera with the state ("its scale binding on 'Rig'"), or None if nothing does."""
         plan, objects = self.plan, self._objects
         bound: dict[str, set[str]] = {}
         for target in plan.bindings:
             bound.setdefault(target.object, set()).add(target.property)
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         camera = objects[camera_name]
-        spec = plan.scene.objects.get(camera_name)
-        aimed = isinstance(spec, CameraObject) and spec.look_at is not None
         for obj in _with_ancestors(camera):
             props = bound.get(names.get(obj.as_pointer(), ""), set())
-            turning = (props & set(TURNS)) | (props & {"location"} if aimed else set()) | (props & {"lens"} if obj == camera else set())
+            turning = (props & set(UNFOLLOWED)) | (props & {"lens"} if obj == camera else set())
             if turning or obj.constraints:
                 what = f"its {', '.join(sorted(turning))} binding" if turning else "a constraint"
                 return f"{what} on '{names.get(obj.as_pointer(), obj.name)}'"
         return None
+
+    def _turns(self, camera_name: str) -> bool:
+        """Whether the state turns this camera (a rotation or look_at bound on it or an ancestor, or it is aimed and moves):
+        its tiles shader then turns each env's rays (:meth:`_aim_rays`)."""
+        objects = self._objects
+        names = {obj.as_pointer(): name for name, obj in objects.items()}
+        spec = self.plan.scene.objects.get(camera_name)
+        aimed = isinstance(spec, CameraObject) and spec.look_at is not None
+        props = {t.property for t in self.plan.bindings
+                 if t.object in {names.get(o.as_pointer(), "") for o in _with_ancestors(objects[camera_name])}}
+        return bool(props & set(TURNS) or (aimed and props & {"location"}))
 
     def _grid_columns(self) -> int:
         """Columns of the grid of copies: the most square grid, or, for a batch past one image, the columns of one
@@ -287,7 +363,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         data = bpy.data.cameras.new(f"{scene.name}-{view.key}-tiles")
         data.type = "CUSTOM"
         data.custom_mode = "INTERNAL"
-        data.custom_shader = _tiles_text()
+        data.custom_shader = self._shader_text(source)
         data.clip_start, data.clip_end = source.data.clip_start, source.data.clip_end
         camera = bpy.data.objects.new(f"{scene.name}-{view.key}-tiles", data)
         scene.collection.objects.link(camera)
@@ -333,6 +409,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         images = {}
         for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
             self._place_copies(reference, source.camera if moving else None)
+            self._aim_rays(view.camera, source.camera)
             if alone:
                 images[view.key] = self._render_alone(j, chosen)  # type: ignore[arg-type]
             else:
@@ -353,8 +430,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
             camera_name = self.plan.view_camera
             why = self._turning(camera_name) if camera_name is not None else None
             if why:
-                raise RenderError(f"the view camera '{camera_name}' turns or zooms with the state ({why}): a batch renders "
-                                  "every env through one camera orientation; record a view with one env (visualenv.make)")
+                raise RenderError(f"the view camera '{camera_name}' cannot be batched ({why}): a batch renders "
+                                  "every env through one custom camera with one lens; record a view with one env (visualenv.make)")
+            if camera_name is not None and self._turns(camera_name) and self.num_envs > MAX_TURNING_ENVS:
+                raise RenderError(f"the view camera '{camera_name}' turns with the state: a batch's tiles shader turns the rays "
+                                  f"of at most {MAX_TURNING_ENVS} envs, not {self.num_envs}; record a view with one env (visualenv.make)")
             self._tiled_view_camera = self._tiled_view(self._view)
         if len(values) != self.num_envs:
             raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
@@ -362,6 +442,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._apply_copy(copy, tuple(v))
         view, reference, moving = self._tiled_view_camera
         self._place_copies(reference, self._view.camera if moving else None)
+        self._aim_rays(view.camera, self._view.camera)
         return self._render_tiles(view)
 
     def set_physics_poses_batch(self, poses: Sequence[tuple]) -> None:
@@ -376,7 +457,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
-            write_bindings(values, copy.last, self._size, copy.setters, copy.aimed, copy.targets)
+            write_bindings(values, copy.last, self._size, copy.setters, [], copy.targets)
+            _aim_copy(copy)
             copy.last = values
 
     def _place_copies(self, reference: Vector, moving_camera: Any) -> None:
@@ -399,7 +481,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """
         per_call = envs_per_call(self.num_envs, view.width, view.height)
         rows = per_call // self._cols
-        if per_call < self.num_envs and rows >= 1 and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE:
+        turned = view.camera.as_pointer() in self._rays  # its rotations are indexed by env: shown by parameters (first)
+        if (per_call < self.num_envs and rows >= 1 and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE
+                and not turned):
             return self._render_rows(view, rows)
         parts = []
         for first in range(0, self.num_envs, per_call):
@@ -459,9 +543,60 @@ class BatchedBlenderRenderer(BlenderRenderer):
         pose = view.camera.matrix_world.copy()
         images = []
         for i in envs:
-            alone.camera.matrix_world = Matrix.Translation(self._offset(i)) @ pose
+            alone.camera.matrix_world = Matrix.Translation(self._offset(i)) @ self._env_pose(view.camera, pose, i)
             images.append(tile(self._render(alone), 1, view.height, view.width))
         return np.concatenate(images)
+
+    def _shader_text(self, source: Any) -> Any:
+        """The tiles shader of a camera: with every env's own ray rotation if the state turns it."""
+        name = next(n for n, o in self._objects.items() if o == source)
+        return _tiles_text(self.num_envs if self._turns(name) else 0)
+
+    def _aim_rays(self, tiles: Any, source: Any) -> None:
+        """Turn each env's rays by its camera's rotation relative to the tiles camera (a turning camera only).
+
+        The copies only translate (:meth:`_follow`), so the shared world, suns and Cycles' sampling
+        directions stay those of one env: turning the copies instead made the sampled light of the
+        world fall in other directions (noise="shared" draws the same directions for every pixel).
+        A change of rotations is a shader parameter change: Cycles compiles the shader again.
+        """
+        if tiles.data.custom_shader is None or not tiles.data.custom_shader.name.startswith(TURNING_NAME):
+            return
+        name = next(n for n, o in self._objects.items() if o == source)
+        # in float64, from the matrices Blender composes from location, rotation and scale (those Cycles renders):
+        # rounding here shows as whole rows of a fine floor texture flipping between its checks
+        flip = np.diag([1.0, 1.0, -1.0])
+        to_camera = flip @ np.linalg.inv(_rotation(tiles.matrix_basis))
+        values = {}
+        if any(copy.objects[name].parent != copy.anchor for copy in self._copies[:1]):
+            self._layer.update()  # the camera's rotation depends on its parents: evaluate them (once for all copies)
+        for k, copy in enumerate(self._copies):
+            rotation = to_camera @ _rotation(self._camera_pose(copy, name)) @ flip
+            for i in range(9):
+                values[f"r{k}_{i}"] = float(rotation[i // 3, i % 3])
+        if values != self._rays.get(tiles.as_pointer()):
+            params = tiles.data.cycles_custom
+            for key, value in values.items():
+                params[key] = value
+            tiles.data.update_tag()
+            self.shader_updates += 1
+            self._rays[tiles.as_pointer()] = values
+
+    @staticmethod
+    def _camera_pose(copy: _Copy, name: str) -> Matrix:
+        """The world pose of a copy's camera, up to its anchor's translation (as evaluated, if it hangs under other objects)."""
+        camera = copy.objects[name]
+        return camera.matrix_basis if camera.parent == copy.anchor else camera.matrix_world
+
+    def _env_pose(self, tiles: Any, pose: Matrix, i: int) -> Matrix:
+        """Env i's camera pose at the tiles camera's place (before its grid offset): `pose` turned by env i's rays."""
+        values = self._rays.get(tiles.as_pointer())
+        if values is None:
+            return pose
+        flip = Matrix.Diagonal((1.0, 1.0, -1.0))
+        rotation = Matrix([[values[f"r{i}_{3 * r + c}"] for c in range(3)] for r in range(3)])
+        turned = pose.to_3x3().normalized() @ flip @ rotation @ flip
+        return Matrix.Translation(pose.translation) @ turned.to_4x4()
 
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
@@ -478,6 +613,33 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def close(self) -> None:
         self._copies = []
         super().close()
+
+
+def _rotation(matrix: Matrix) -> np.ndarray:
+    """The rotation of a 4x4 matrix, in float64, its columns normalised (no scale)."""
+    rotation = np.array(matrix.to_3x3(), dtype=np.float64)
+    return rotation / np.linalg.norm(rotation, axis=0)
+
+
+def _aim_copy(copy: _Copy) -> None:
+    """Aim a copy's aimed objects at their targets in the copy's own frame (a look_at point is where it is in one env):
+    the anchor's place, a grid offset, must not turn them. Aimed with the anchor at the origin (it only translates), the
+    rotations are those of one env to the bit, where aiming at the offset target rounds at the offset's magnitude."""
+    if not copy.aimed:
+        return
+    place = copy.anchor.matrix_basis.copy()
+    copy.anchor.matrix_basis = Matrix.Identity(4)
+    try:
+        for obj, name in copy.aimed:
+            aim(obj, copy.targets[name])
+    finally:
+        copy.anchor.matrix_basis = place
+
+
+def _one_colour(world: Any) -> bool:
+    """Whether a world is one colour in every direction: no texture node (an image or a procedural sky) in its shader."""
+    tree = getattr(world, "node_tree", None) if world is not None else None
+    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") for node in tree.nodes)
 
 
 def _is_sun(obj: Any) -> bool:
@@ -553,13 +715,15 @@ def tiles_camera_check() -> dict[str, Any]:
         bpy.data.cameras.remove(data)
 
 
-def _tiles_text() -> Any:
-    name = "visualenv_tiles.osl"
+def _tiles_text(turning: int = 0) -> Any:
+    """The tiles shader's text: TILES_OSL, or for a camera that turns, :func:`turning_source` for `turning` envs."""
+    name = f"{TURNING_NAME}{turning}.osl" if turning else "visualenv_tiles.osl"
+    source = turning_source(turning) if turning else TILES_OSL
     text = bpy.data.texts.get(name)
-    if text is None or text.as_string() != TILES_OSL:
+    if text is None or text.as_string() != source:
         text = text or bpy.data.texts.new(name)
         text.clear()
-        text.write(TILES_OSL)
+        text.write(source)
     return text
 
 
