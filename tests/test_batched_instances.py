@@ -12,7 +12,8 @@ from visualenv.spec import load_spec_text
 pytest.importorskip("bpy")
 
 #: parents three deep (an empty, a mesh, a mesh), bound location, rotation, scale, visibility (of an empty: everything
-#: under it) and colour; a static floor; a point light whose strength is bound, which stays a copy per env
+#: under it) and colour (of a mesh, and of an empty: its meshes'); a static floor; a point light whose strength is
+#: bound, which stays a copy per env
 SCENE = """\
 id: Instances-v0
 scene:
@@ -23,6 +24,8 @@ scene:
     Body:  {primitive: cube, size: [1.0, 0.6, 0.4], parent: Rig, material: {color: [0.8, 0.2, 0.2]}}
     Arm:   {primitive: cylinder, radius: 0.12, depth: 1.2, parent: Body, location: [0.3, 0, 0.5], rotation: [0.3, 0, 0], material: {color: [0.2, 0.7, 0.3]}}
     Ball:  {primitive: sphere, radius: 0.35, location: [1.6, 0, 0.35], material: {color: [0.9, 0.9, 0.2]}}
+    Group: {empty: true, location: [-1.5, 0, 0]}
+    Cone:  {primitive: cone, radius: 0.3, depth: 0.8, parent: Group, material: {color: [1, 1, 1]}}
     Lamp:  {light: point, strength: 300, location: [2, -2, 3]}
     Sun:   {light: sun, strength: 2.0, rotation: [0.6, 0.2, 0.4]}
     Camera: {camera: perspective, location: [0, -6, 3], look_at: [0, 0, 0.5], lens: 30}
@@ -38,6 +41,7 @@ actors:
   Body: {rotation: [0, 0, a], scale: [1 + 0.3 * x, 1, 1], color: [0.5 + 0.4 * x, 0.3, 0.6 - 0.3 * x]}
   Arm:  {rotation: [a, 0, 0]}
   Ball: {visible: "x > 0", color: [0.9, 0.5 + 0.4 * a, 0.2]}
+  Group: {color: [0.2, 0.3, 0.9 - 0.2 * x]}
   Lamp: {strength: 250 + 100 * a}
 observation: {camera: Camera, resolution: [32, 32], color: rgb}
 render: {engine: cycles, preset: fast, device: cpu}
@@ -61,8 +65,8 @@ def test_instanced_tiles_equal_copied_tiles():
     env.reset(seed=5)
     instanced, copied = _renderers(env)
     try:
-        names = {instanced.object(n).as_pointer(): n for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Lamp", "Camera")}
-        assert {names[p] for p in instanced._removed if p in names} == {"Floor", "Rig", "Body", "Arm", "Ball", "Camera"}
+        names = {instanced.object(n).as_pointer(): n for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Lamp", "Camera")}
+        assert {names[p] for p in instanced._removed if p in names} == {"Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Camera"}
         assert instanced._per_copy  # the lamp's strength is still written into its copies
         tiles, seen = [], set()
         x, a = (env.program.state_names.index(name) for name in ("x", "a"))
