@@ -225,7 +225,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if not self.uses_camera:
             raise gym.error.Error("a state-only batch (render=False) has no Blender scene to render a view of")
         self._pose_copies()
-        return tuple(self.renderer.render_view_batch(self.binding_values()))
+        return tuple(self.renderer.render_view_batch(self.binding_table()))
 
     def close_extras(self, **kwargs: Any) -> None:
         if getattr(self, "_physics", None) is not None:
@@ -355,7 +355,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             observed = self._state[self.program.observed].T.astype(np.float32)
             return observed if envs is None else observed[envs]
         self._pose_copies()
-        obs = self.renderer.render_batch(self.binding_values(), envs)
+        obs = self.renderer.render_batch(self.binding_table(), envs)
         if self._sensors:
             obs = self._through_sensors(obs, envs)
         return obs
@@ -391,19 +391,20 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def binding_values(self) -> list[tuple]:
         """Every env's actor binding values (program.bindings order)."""
+        return list(map(tuple, self.binding_table().tolist()))
+
+    def binding_table(self) -> np.ndarray:
+        """Every env's actor binding values as one array, ``(N, values)``: what the renderer takes (no tuple per env)."""
         bind = self._batch.bind
         n = self.num_envs
-        if bind is not None:
-            with np.errstate(all="ignore"):
-                values = bind(tuple(self._state), self._steps)
-            table = np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values]).reshape(len(values), n)
-            bad = ~np.isfinite(table).all(axis=0)
-            rows = list(map(tuple, table.T.tolist()))
-        else:
-            bad, rows = np.ones(n, dtype=bool), [()] * n
-        for i in np.flatnonzero(bad):
-            rows[i] = self._lane_at(int(i)).binding_values()  # the same values, or the located fault
-        return rows
+        if bind is None:
+            return np.array([self._lane_at(i).binding_values() for i in range(n)], dtype=np.float64).reshape(n, -1)
+        with np.errstate(all="ignore"):
+            values = bind(tuple(self._state), self._steps)
+        table = np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values]).reshape(len(values), n).T.copy()
+        for i in np.flatnonzero(~np.isfinite(table).all(axis=1)):
+            table[i] = self._lane_at(int(i)).binding_values()  # the same values, or the located fault
+        return table
 
     def _info(self, mask: np.ndarray) -> dict[str, Any]:
         state: dict[str, Any] = {}

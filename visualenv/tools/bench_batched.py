@@ -2,9 +2,10 @@
 
 Each batch size runs in a fresh process (its memory is its own) and reports,
 per step of all N envs: env-steps/s, the dynamics (the vectorised step), the
-bindings written into the N copies, Blender's render call, the part of that
+bindings computed for the N envs, their writes into the scene (the copies'
+setters and the instances' attributes), Blender's render call, the part of that
 call spent updating the moved scene (the call minus the same call with nothing
-moved), the readback and cut into tiles, render calls per step (more than one
+moved; the scene update is the writes plus this part), the readback and cut into tiles, render calls per step (more than one
 where an image is split, or where ``--autoreset same_step`` renders the envs it
 reset again), and resident memory per env. The
 per-process vector env (one Blender per worker, as many workers as usable
@@ -26,8 +27,11 @@ def _median_ms(times: list[float]) -> float:
     return 1000 * float(np.median(times)) if times else 0.0
 
 
-def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str = "next_step") -> dict[str, Any]:
-    """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory)."""
+def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str = "next_step", instanced: bool = True) -> dict[str, Any]:
+    """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory).
+
+    ``instanced=False`` copies every object, as batches did before instanced copies (for before/after figures).
+    """
     import psutil
 
     from visualenv.env.batched import BatchedVectorEnv
@@ -37,6 +41,11 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     before = process.memory_info().rss
     start = time.perf_counter()
     env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset)
+    if not instanced:
+        from visualenv.render.blender.batched import BatchedBlenderRenderer
+
+        plan = env.program.render_plan().with_options(env._renderer_options)
+        env._renderer = BatchedBlenderRenderer(plan, env._renderer_options, num_envs=n, instanced=False)
     env.reset(seed=seed)
     build_s = time.perf_counter() - start
     rng = np.random.default_rng(seed)
@@ -44,9 +53,10 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     for _ in range(5):
         env.step(env.action_space.sample())
     renderer = env.renderer
-    times: dict[str, list[float]] = {"dynamics": [], "bind": [], "render": [], "readback": []}
-    for obj, name, into in ((env, "_advance", "dynamics"), (env, "binding_values", "bind"), (renderer, "raw_render", "render"),
-                            (renderer, "_read_capture", "readback")):
+    times: dict[str, list[float]] = {"dynamics": [], "bind": [], "write": [], "render": [], "readback": []}
+    for obj, name, into in ((env, "_advance", "dynamics"), (env, "binding_table", "bind"), (renderer, "raw_render", "render"),
+                            (renderer, "_read_capture", "readback"), (renderer, "_write_copies", "write"),
+                            (renderer, "_write_instances", "write")):
         setattr(obj, name, timed(getattr(obj, name), times[into]))  # an instance attribute over the method
     start = time.perf_counter()
     for _ in range(steps):
@@ -60,10 +70,11 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     rss = process.memory_info().rss
     env.close()
     render = _median_ms(times["render"])
+    write = 1000 * sum(times["write"]) / steps  # per step: the copies' writes once, the instances' once per camera
     return {
         "envs": n, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
-        "dynamics_ms": _median_ms(times["dynamics"]), "bind_ms": _median_ms(times["bind"]), "render_ms": render,
-        "scene_update_ms": max(0.0, render - _median_ms(still)), "readback_ms": _median_ms(times["readback"]),
+        "dynamics_ms": _median_ms(times["dynamics"]), "bind_ms": _median_ms(times["bind"]), "write_ms": write, "render_ms": render,
+        "scene_update_ms": max(0.0, render - _median_ms(still)), "instanced": instanced, "readback_ms": _median_ms(times["readback"]),
         "calls_per_step": len(times["render"]) / steps, "autoreset": autoreset,
         "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n, "python_mb": before / 2**20,
     }
@@ -130,10 +141,10 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
     """The table `visualenv bench --batched` prints."""
     mode = batches[0].get("autoreset", "next_step") if batches else "next_step"
     rows = [f"batched (one process, autoreset {mode}):",
-            f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'render':>8} {'update':>7} {'readback':>9} "
+            f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'write':>7} {'render':>8} {'update':>7} {'readback':>9} "
             f"{'calls':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
-            "  (ms per step of all envs, medians; render and readback: per call; update: the render call minus the same call with"
-            " nothing moved; calls: render calls per step; +MB/env: memory growth per env over the smallest batch)"]
+            "  (ms per step of all envs, medians; write: the bindings written into the scene, per step; render and readback: per call;"
+            " update: the render call minus the same call with nothing moved (the scene update is write + update); calls: render calls per step; +MB/env: memory growth per env over the smallest batch)"]
     ok = [b for b in batches if "error" not in b and "workers" not in b]
     smallest = min(ok, key=lambda b: b["envs"]) if ok else None
     split = [b for b in batches if "workers" in b]
@@ -146,7 +157,7 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
         assert smallest is not None
         growth = (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"]) if b["envs"] > smallest["envs"] else float("nan")
         rows.append(f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
-                    f"{b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
+                    f"{b.get('write_ms', float('nan')):>7.2f} {b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
     if split:
         rows.append(f"batched in K worker processes (one batch of about N/K envs each, confined to its cores; autoreset {mode}):")
         rows.append(f"  {'envs':>5} {'K':>3} {'env-steps/s':>12} {'step ms':>8} {'RSS MB':>7} {'MB/env':>7} {'build s':>8}")

@@ -1,9 +1,15 @@
 """Many envs in one Blender scene, rendered by one Cycles call per camera: :class:`BatchedBlenderRenderer`.
 
-The scene is built once, as for one env, then copied N - 1 times (linked
-duplicates: the copies share meshes and materials). Copy k hangs under an
-anchor empty placed on a grid whose spacing is larger than the cameras' clip
-distance plus the scene's size, so no camera reaches another copy. Sun lights
+The scene is built once, as for one env. Env k's copy of it stands on a grid
+whose spacing is larger than the cameras' clip distance plus the scene's size,
+so no camera reaches another copy. Meshes and empties whose world matrices
+numpy can compute (moving or not) are drawn as Geometry Nodes instances, one
+instancer per mesh posed for every env from the binding values in one call
+(:mod:`instances`); cameras that do not move are not copied. What remains
+(lights, moving cameras, objects with constraints, animation or a bound
+texture, and their parents) is copied N - 1 times as linked duplicates (the
+copies share meshes and materials), copy k under an anchor empty at k's grid
+place, its bindings written copy by copy. Sun lights
 and the world are directional: one of each serves every copy, so they are not
 copied, except a sun bound to the state: each copy has its own, which lights and
 shadows only that copy's objects (Cycles' light linking; at most 63 envs).
@@ -37,6 +43,7 @@ from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
+from visualenv.render.blender.instances import InstancedCopies, removable
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
 from visualenv.render.blender.scene import BuiltScene, aim
 from visualenv.spec.bindables import BINDABLES
@@ -181,7 +188,7 @@ class _Copy:
     """One env's objects: its anchor, its binding setters and what they last wrote."""
 
     def __init__(self, anchor: Any, objects: dict[str, Any]) -> None:
-        self.anchor = anchor
+        self.anchor = anchor  # None: nothing of this env is copied (its objects are instances), as with a camera that does not move
         self.objects = objects
         self.setters: list = []
         self.aimed: list = []
@@ -192,7 +199,8 @@ class _Copy:
 class BatchedBlenderRenderer(BlenderRenderer):
     """Renders `num_envs` copies of a plan's scene in one Blender scene, one Cycles call per observation camera.
 
-    ``render_batch(values)`` takes one tuple of binding values per env and
+    ``render_batch(values)`` takes one tuple of binding values per env (or
+    an ``(N, values)`` array, as :meth:`BatchedVectorEnv.binding_table` gives) and
     returns what :meth:`BlenderRenderer.render_observation` returns for one env,
     stacked: ``(N, H, W, C)`` uint8, or a dict of those for several cameras.
     """
@@ -200,9 +208,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
     #: the Camera Data node measures depth from the custom camera's pose (copy 0's); a ray starts at its own copy's camera
     DEPTH_ALONG_RAY = True
 
-    def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1) -> None:
+    def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1, instanced: bool = True) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
+        #: whether moving meshes may be drawn as instances (:mod:`instances`); False copies every object (the path before)
+        self.instanced = instanced
         engine = plan.settings.engine
         if engine != "cycles":
             raise ValueError(engine_message(engine))
@@ -216,6 +226,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     # -- construction -------------------------------------------------------------------------------
 
     def _setup(self, built: BuiltScene, threads: int) -> None:
+        self._removed: set[int] = set()  # objects drawn as instances rather than copied (none while the base class compiles)
         super()._setup(built, threads)
         self._refuse_turning_cameras()
         scene = built.scene
@@ -234,12 +245,16 @@ class BatchedBlenderRenderer(BlenderRenderer):
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
             raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
+        self._removed = self._removable(copied)
         self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
         for copy in self._copies:
             self._objects, self._last = copy.objects, None
-            copy.setters = self._compile_bindings()
+            copy.setters = [s for s in self._compile_bindings() if s[2] is not _instanced]
             copy.aimed, copy.targets = self._aimed, self._targets
         self._objects = built.objects
+        self._per_copy = bool(self._copies[0].setters or self._copies[0].aimed)  # whether any binding is written per copy
+        self._offsets = np.array([tuple(self._offset(k)) for k in range(self.num_envs)])  # each copy's anchor, as its instances see it
+        self._instances = self._instance(copied)
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         self._tiled_view_camera: tuple[_View, Any, bool] | None = None  # the view camera's, built at the first view
         self._alone: dict[int, _View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
@@ -248,6 +263,27 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._anchors_moved = False
         #: per tiles camera of a turning camera: its rotation parameters as last written (:meth:`_aim_rays`)
         self._rays: dict[int, dict[str, float]] = {}
+
+    def _removable(self, copied: list[Any]) -> set[int]:
+        """The objects to draw as instances (:func:`instances.removable`): none without instancing, with a sun of each
+        copy's own (light linking is per object, and one instancer's instances share it) or with MuJoCo poses (written per copy)."""
+        if not self.instanced or self._own_suns or self._poses is not None:
+            return set()
+        return removable(copied, self.plan.bindings, self._objects, {name for _, name in self._aimed})
+
+    def _instance(self, copied: list[Any]) -> InstancedCopies | None:
+        """The instancers of the removed objects, in copy 0's collection, posed for the first render by :meth:`_write_instances`."""
+        removed = [o for o in copied if o.as_pointer() in self._removed]
+        if not removed:
+            return None
+        anchor = self._copies[0].anchor
+        return InstancedCopies(anchor.users_collection[0], anchor, removed, self.plan.bindings, self._objects, self.num_envs)
+
+    def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Any:
+        """No setter for an object drawn as instances: its instances are posed from numpy (:meth:`_write_instances`)."""
+        if obj.as_pointer() in self._removed:
+            return _instanced
+        return super()._setter(name, obj, prop, targets)
 
     def _refuse_turning_cameras(self) -> None:
         """A camera the state turns (or zooms) cannot share one pose with its copies; a bound world cannot be shared."""
@@ -310,8 +346,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at k's grid place.
 
         An object whose parent is not copied with it hangs from the anchor at its own world place (`places`).
+        Objects drawn as instances are not copied: a copy with nothing else to copy has no anchor (None) and no objects of its own.
         """
         scene = built.scene
+        if k and all(o.as_pointer() in self._removed for o in originals):
+            return _Copy(None, dict(built.objects))
         collection = bpy.data.collections.new(f"{scene.name}-env{k}")
         scene.collection.children.link(collection)
         anchor = bpy.data.objects.new(f"{scene.name}-anchor{k}", None)
@@ -322,15 +361,19 @@ class BatchedBlenderRenderer(BlenderRenderer):
         else:
             mapping = {}
             for original in originals:
+                if original.as_pointer() in self._removed:
+                    continue  # drawn by its instancer
                 duplicate = original.copy()
                 if original.as_pointer() in self._own_suns:
                     duplicate.data = original.data.copy()  # its own strength and colour
                 collection.objects.link(duplicate)
                 mapping[original.as_pointer()] = duplicate
-            for original in originals:
-                _remap_references(mapping[original.as_pointer()], mapping)
+            for duplicate in mapping.values():
+                _remap_references(duplicate, mapping)
         for original in originals:
-            obj = mapping[original.as_pointer()]
+            obj = mapping.get(original.as_pointer())
+            if obj is None:
+                continue
             if original.parent is None or original.parent.as_pointer() not in mapping:
                 obj.parent = anchor
                 obj.matrix_parent_inverse = Matrix.Identity(4)
@@ -388,7 +431,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     # -- rendering ----------------------------------------------------------------------------------
 
-    def render_batch(self, values: Sequence[Sequence[Any]], envs: Sequence[int] | None = None) -> np.ndarray | dict[str, np.ndarray]:
+    def render_batch(self, values: Sequence[Sequence[Any]] | np.ndarray, envs: Sequence[int] | None = None) -> np.ndarray | dict[str, np.ndarray]:
         """Apply each env's binding values to its copy and render every observation camera for all envs.
 
         With `envs` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``:
@@ -403,13 +446,13 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if chosen is not None and (not chosen or any(b <= a for a, b in zip(chosen, chosen[1:]))
                                    or not 0 <= chosen[0] <= chosen[-1] < self.num_envs):
             raise ValueError(f"envs must be ascending indices below {self.num_envs}, got {chosen}")
-        for i in range(self.num_envs) if chosen is None else chosen:
-            self._apply_copy(self._copies[i], tuple(values[i]))
+        self._write_copies(values, chosen)
         alone = chosen is not None and len(chosen) + ALONE_OVERHEAD_TILES < self.num_envs  # else every tile is cheaper
         images = {}
         for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
             self._place_copies(reference, source.camera if moving else None)
             self._aim_rays(view.camera, source.camera)
+            self._write_instances()
             if alone:
                 images[view.key] = self._render_alone(j, chosen)  # type: ignore[arg-type]
             else:
@@ -417,7 +460,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
                 images[view.key] = tiles if chosen is None else tiles[chosen]
         return next(iter(images.values())) if self.plan.single else images
 
-    def render_view_batch(self, values: Sequence[Sequence[Any]]) -> np.ndarray:
+    def render_view_batch(self, values: Sequence[Sequence[Any]] | np.ndarray) -> np.ndarray:
         """Every env's high-resolution RGB view, ``(N, H, W, 3)``: the view camera's tiles, in as few calls as fit.
 
         The view's render settings differ from the observations', so the next observation
@@ -438,11 +481,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._tiled_view_camera = self._tiled_view(self._view)
         if len(values) != self.num_envs:
             raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
-        for copy, v in zip(self._copies, values):
-            self._apply_copy(copy, tuple(v))
+        self._write_copies(values, None)
         view, reference, moving = self._tiled_view_camera
         self._place_copies(reference, self._view.camera if moving else None)
         self._aim_rays(view.camera, self._view.camera)
+        self._write_instances()
         return self._render_tiles(view)
 
     def set_physics_poses_batch(self, poses: Sequence[tuple]) -> None:
@@ -454,6 +497,21 @@ class BatchedBlenderRenderer(BlenderRenderer):
             writers = self._copy_poses = [self._poses.for_objects(copy.objects) for copy in self._copies]
         for writer, arrays in zip(writers, poses):
             writer.write(*arrays)
+
+    def _write_copies(self, values: Sequence[Sequence[Any]] | np.ndarray, envs: Sequence[int] | None) -> None:
+        """Each env's binding values into its copy (the bindings of copied objects, env by env; `envs` only, when given)
+        and into the table its instances are posed from (:meth:`_write_instances`, every env: the others are not shown)."""
+        if self._per_copy:
+            rows = values.tolist() if isinstance(values, np.ndarray) else values
+            for i in range(self.num_envs) if envs is None else envs:
+                self._apply_copy(self._copies[i], tuple(rows[i]))
+        if self._instances is not None:
+            self._table = np.asarray(values, dtype=np.float64).reshape(self.num_envs, self._instances.size)
+
+    def _write_instances(self) -> None:
+        """Pose every env's instances from the last binding table, at their copies' anchors (moved by :meth:`_place_copies`)."""
+        if self._instances is not None:
+            self._instances.write(self._table, self._offsets)
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
@@ -467,7 +525,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._follow(moving_camera, reference)
         elif self._anchors_moved:
             for k, copy in enumerate(self._copies):
-                copy.anchor.location = self._offset(k)
+                self._offsets[k] = tuple(self._offset(k))
+                if copy.anchor is not None:
+                    copy.anchor.location = self._offset(k)
             self._anchors_moved = False
 
     def _render_tiles(self, view: _View) -> np.ndarray:
@@ -608,10 +668,12 @@ class BatchedBlenderRenderer(BlenderRenderer):
             cam = copy.objects[name]
             where = Vector(cam.location) if on_anchor else (copy.anchor.matrix_world.inverted() @ cam.matrix_world).translation
             copy.anchor.location = self._offset(k) + reference - where
+            self._offsets[k] = tuple(copy.anchor.location)
         self._anchors_moved = True
 
     def close(self) -> None:
         self._copies = []
+        self._instances = None
         super().close()
 
 
@@ -640,6 +702,10 @@ def _one_colour(world: Any) -> bool:
     """Whether a world is one colour in every direction: no texture node (an image or a procedural sky) in its shader."""
     tree = getattr(world, "node_tree", None) if world is not None else None
     return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") for node in tree.nodes)
+
+
+def _instanced(values: tuple) -> None:
+    """The setter of a binding on an object drawn as instances: nothing to write per copy (dropped from the copies' setters)."""
 
 
 def _is_sun(obj: Any) -> bool:

@@ -150,15 +150,10 @@ def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
 TINT = "visualenv tint"  # the node a bound colour writes when a texture drives the base colour
 
 
-def color_writer(mat: Any) -> Callable[[Sequence[float]], None] | None:
-    """What writes a bound colour into `mat`, its sockets found once rather than at every step.
-
-    The colour goes to the Principled base colour, its alpha to Alpha (unless
-    a node drives it), and both to the viewport colour. When a texture (or any
-    node) drives the base colour, it is multiplied by a tint node (white: the
-    texture unchanged) and the colour goes to the tint. None when the material
-    has no Principled BSDF: a bound colour could not show in its render.
-    """
+def color_sockets(mat: Any) -> tuple[Any, Any] | None:
+    """The sockets a bound colour writes in `mat`: the colour's (Principled base colour, or its tint node's) and the
+    alpha's (None when a node drives Alpha). When a texture (or any node) drives the base colour, it is multiplied by
+    a tint node (white: the texture unchanged) made here. None when the material has no Principled BSDF."""
     bsdf = _principled(mat)
     if bsdf is None:
         return None
@@ -171,6 +166,21 @@ def color_writer(mat: Any) -> Callable[[Sequence[float]], None] | None:
         links.new(tinted, base)
     target = [s for s in base.links[0].from_node.inputs if s.type == "RGBA"][1] if base.is_linked else base
     alpha = None if bsdf.inputs["Alpha"].is_linked else bsdf.inputs["Alpha"]
+    return target, alpha
+
+
+def color_writer(mat: Any) -> Callable[[Sequence[float]], None] | None:
+    """What writes a bound colour into `mat`, its sockets (:func:`color_sockets`) found once rather than at every step.
+
+    The colour goes to the Principled base colour (or the tint node multiplying
+    a texture), its alpha to Alpha (unless a node drives it), and both to the
+    viewport colour. None when the material has no Principled BSDF: a bound
+    colour could not show in its render.
+    """
+    sockets = color_sockets(mat)
+    if sockets is None:
+        return None
+    target, alpha = sockets
 
     def write(color: Sequence[float]) -> None:
         value = rgba(color)
