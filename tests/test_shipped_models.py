@@ -22,8 +22,10 @@ from visualenv.train.models import pretrained_model
 pytestmark = pytest.mark.slow
 
 # every bundled env's agent
-SHIPPED = ["Goalie-v0", "Hover2D-v0", "LunarLanding-v0", "VisualCartPole-v0"]
+SHIPPED = ["Goalie-v0", "Hover2D-v0", "LunarLanding-v0", "VisualCartPole-v0", "VisualInvertedPendulum-v0"]
 EPISODES = 10
+#: fewer episodes where each is long: a balancing pendulum plays 1,000 steps (one episode is as long as 50 of Goalie's)
+FEWER = {"VisualInvertedPendulum-v0": 3}
 SEED = 2026  # not the runs' evaluation seed: episodes the final evaluations did not play
 REPO = Path(__file__).resolve().parents[1]
 
@@ -56,13 +58,16 @@ def test_the_random_baseline_is_the_one_readme_quotes(env_id, low, high):
 @pytest.mark.parametrize("env_id", SHIPPED)
 def test_shipped_agent_clearly_beats_the_random_policy(env_id, tmp_path):
     out = tmp_path / "eval.json"
-    run = _eval_in_a_fresh_process(env_id, "pretrained", out, "--episodes", str(EPISODES), "--seed", str(SEED))
+    run = _eval_in_a_fresh_process(env_id, "pretrained", out, "--episodes", str(FEWER.get(env_id, EPISODES)), "--seed", str(SEED))
     assert run.returncode == 0, run.stdout + run.stderr
     results = json.loads(out.read_text())
     random_return, random_success = random_policy(env_id)
     # the agent's whole 95 % interval lies above random's mean return, and it succeeds more often
     assert results["reward_ci95"][0] > random_return, (results, random_return)
-    assert results["success_rate"] > random_success + 0.2, (results, random_success)
+    if env_id in FEWER:  # three long episodes make a coarse success rate: the pendulum's return is 5 at random, about 960 trained
+        assert results["mean_reward"] > 100 * random_return, (results, random_return)
+    else:
+        assert results["success_rate"] > random_success + 0.2, (results, random_success)
 
 
 #: the first episodes of each final evaluation played again (results.json keeps every episode: the whole 100-200 took 2-3 min each)
@@ -72,7 +77,7 @@ REPLAYED = 20
 def _eval_in_a_fresh_process(env_id: str, model: str, out: Path, *options: str) -> subprocess.CompletedProcess[str]:
     """`visualenv eval` as a user runs it, in a process of its own: in the suite's process, which holds every scene
     rendered before, 2,000 steps of VisualCartPole took 258 s. Default options: the first REPLAYED episodes of results.json."""
-    options = options or ("--episodes", str(REPLAYED))
+    options = options or ("--episodes", str(FEWER.get(env_id, REPLAYED)))
     return subprocess.run([sys.executable, "-m", "visualenv.cli", "eval", env_id, "--model", model, *options, "-o", str(out)],
                           cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=600)
 
@@ -86,10 +91,11 @@ def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_
     out = tmp_path / "eval.json"
     result = _eval_in_a_fresh_process(env_id, "pretrained", out)
     assert result.returncode == 0, result.stdout + result.stderr
-    assert f"reproduces the first {REPLAYED} episodes of its run's results.json" in result.stdout, result.stdout
+    replayed = FEWER.get(env_id, REPLAYED)
+    assert f"reproduces the first {replayed} episodes of its run's results.json" in result.stdout, result.stdout
     recorded = json.loads((pretrained_model(env_id).parent / "results.json").read_text())
     evaluation = json.loads(out.read_text())
-    kept, played = {k: v[:REPLAYED] for k, v in recorded["per_episode"].items()}, evaluation["per_episode"]
+    kept, played = {k: v[:replayed] for k, v in recorded["per_episode"].items()}, evaluation["per_episode"]
     assert evaluation["machine"]["pinned"] is True  # a fresh process: MKL pinned before the policy was built
     if evaluation["comparison"] == "exact":
         assert kept == played
