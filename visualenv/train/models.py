@@ -63,19 +63,22 @@ def _load_rllib(model_path: str) -> Any:
 
 
 def save_policy(model: Any, path: str | Path, *, half: bool = True) -> Path:
-    """The policy of an SB3 model as a policy file (SB3's ``BasePolicy.save`` format; `half`: float16 weights)."""
+    """The policy of an SB3 model as a policy file (SB3's ``BasePolicy.save`` format; `half`: float16 weights), its
+    large weights packed (:mod:`visualenv.train.packed`: the same numbers in 8 % less space)."""
     import copy
 
     import torch
 
+    from visualenv.train.packed import packed_state
+
     policy = model.policy if hasattr(model, "policy") else model
     # converted as a module, so the feature extractor that SB3 lists three times (shared by both heads) is stored once
-    weights = (copy.deepcopy(policy).half() if half else policy).state_dict()
+    weights = packed_state((copy.deepcopy(policy).half() if half else policy).state_dict())
     kind = type(policy)
     path = Path(path)
     buffer = io.BytesIO()
     torch.save({"state_dict": weights, "data": policy._get_constructor_parameters(),
-                "policy_class": f"{kind.__module__}:{kind.__qualname__}"}, buffer)
+                "policy_class": f"{kind.__module__}:{kind.__qualname__}"}, buffer, pickle_protocol=4)  # bytes as they are
     deflate_zip(buffer.getvalue(), path)
     return path
 
@@ -92,12 +95,14 @@ def deflate_zip(archive: bytes, path: Path) -> None:
 
 def save_rllib_policy(checkpoint: str | Path, out: str | Path, *, half: bool = True) -> Path:
     """The policy of an RLlib checkpoint folder (its RLModule, without the learner's optimizer) as a checkpoint folder
-    that :func:`load_model` and RLlib's ``RLModule.from_checkpoint`` read; `half`: float16 weights."""
+    that :func:`load_model` and RLlib's ``RLModule.from_checkpoint`` read; `half`: float16 weights. Its pickles are
+    written again with their large arrays packed (:mod:`visualenv.train.packed`), which RLlib unpickles as they were."""
     import pickle
     import shutil
 
     import numpy as np
 
+    from visualenv.train import packed
     from visualenv.train.rllib_setup import MODULE_DIR
 
     source, target = Path(checkpoint) / MODULE_DIR, Path(out) / MODULE_DIR
@@ -107,12 +112,16 @@ def save_rllib_policy(checkpoint: str | Path, out: str | Path, *, half: bool = T
     steps = Path(checkpoint) / "visualenv.json"  # the steps the checkpoint had trained
     if steps.is_file():
         shutil.copy2(steps, Path(out) / steps.name)
-    if half:
-        with (target / "module_state.pkl").open("rb") as f:
-            state = pickle.load(f)  # RLlib's own checkpoint file, which RLlib unpickles the same way
-        state = type(state)((k, v.astype(np.float16) if getattr(v, "dtype", None) == np.float32 else v) for k, v in state.items())
-        with (target / "module_state.pkl").open("wb") as f:
-            pickle.dump(state, f, protocol=pickle.HIGHEST_PROTOCOL)
+    for name in ("module_state.pkl", "class_and_ctor_args.pkl"):
+        if not (target / name).is_file():
+            continue
+        with (target / name).open("rb") as f:
+            content = pickle.load(f)  # RLlib's own checkpoint files, which RLlib unpickles the same way
+        if half and name == "module_state.pkl":
+            content = type(content)((k, v.astype(np.float16) if getattr(v, "dtype", None) == np.float32 else v)
+                                    for k, v in content.items())
+        with (target / name).open("wb") as f:
+            packed.dump(content, f)
     return Path(out)
 
 
