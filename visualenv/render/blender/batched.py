@@ -20,7 +20,7 @@ sits at the observation camera's pose and sends the rays of tile k from the
 camera's pose shifted to copy k, with the spec camera's lens. A camera bound to
 the state moves its copy instead: the anchor of copy k is shifted so that the
 camera lands on the shared pose. A camera the state turns (a bound rotation, a
-look_at) gets a shader with every env's own rotation (:data:`TURNING_OSL`):
+look_at) gets a shader with every env's own rotation (:func:`turning_source`):
 tile k's rays are turned by copy k's camera rotation, while the copies only
 translate. Turning the copies instead would turn them against the shared world,
 suns and Cycles' sampling directions (with shared noise every pixel samples the
@@ -59,59 +59,19 @@ ALONE_OVERHEAD_TILES = 16
 #: the widest and tallest image one render call makes (Cycles renders larger ones in several tiles of its own)
 MAX_IMAGE_SIDE = 2048
 
-TILES_OSL = r"""
+#: the tiles shader, written once for both cameras: @NAME@ and the parts a turning camera adds (@ROTATIONS@, its
+#: parameters; @TABLE@, them as one array; @TURN@, the turn of the ray's position and direction by env's rotation)
+_TILES_TEMPLATE = r"""
 // visualenv: one tile of the image per env. Tile k (row-major from the top left) looks
-// from the camera's pose shifted by k's place on the grid of copies.
-shader visualenv_tiles(
+// from the camera's pose shifted by k's place on the grid of copies@TURNED@.
+shader @NAME@(
     int cols = 1, int count = 1, int first = 0, int ortho = 0,
     float half_w = 0.5, float half_h = 0.5, float shift_x = 0, float shift_y = 0,
     float ax = 0, float ay = 0, float az = 0, float bx = 0, float by = 0, float bz = 0,
     int grid = 1,
-    output point position = 0, output vector direction = 0, output color throughput = 1)
+@ROTATIONS@    output point position = 0, output vector direction = 0, output color throughput = 1)
 {
-    point r = camera_shader_raster_position();
-    int rows = (count + cols - 1) / cols;
-    float fx = r[0] * cols;
-    float fy = (1.0 - r[1]) * rows;
-    int c = clamp((int)floor(fx), 0, cols - 1);
-    int t = clamp((int)floor(fy), 0, rows - 1);
-    int k = t * cols + c;
-    if (k >= count) {
-        throughput = 0;
-    } else {
-        int env = first + k;
-        float u = (fx - c) * 2.0 - 1.0;
-        float v = 1.0 - (fy - t) * 2.0;
-        vector offset = (env % grid) * vector(ax, ay, az) + (env / grid) * vector(bx, by, bz);
-        float x = u * half_w + shift_x;
-        float y = v * half_h + shift_y;
-        if (ortho) {
-            position = point(offset[0] + x, offset[1] + y, offset[2]);
-            direction = vector(0, 0, 1);
-        } else {
-            position = point(offset[0], offset[1], offset[2]);
-            direction = normalize(vector(x, y, 1.0));
-        }
-    }
-}
-"""
-
-
-#: the tiles shader for a camera the state turns: as TILES_OSL, and each env's rays are turned by its own camera's
-#: rotation relative to this camera's ({rotations}: 9 parameters an env, r<k>_<i> row-major, in Cycles' camera space)
-TURNING_OSL = r"""
-// visualenv: one tile of the image per env, each looking from the camera's pose shifted by
-// the env's place on the grid of copies and turned by the env's own camera rotation.
-shader visualenv_tiles_turning(
-    int cols = 1, int count = 1, int first = 0, int ortho = 0,
-    float half_w = 0.5, float half_h = 0.5, float shift_x = 0, float shift_y = 0,
-    float ax = 0, float ay = 0, float az = 0, float bx = 0, float by = 0, float bz = 0,
-    int grid = 1,
-{rotations}
-    output point position = 0, output vector direction = 0, output color throughput = 1)
-{
-    float R[{size}] = {{{names}}};
-    point r = camera_shader_raster_position();
+@TABLE@    point r = camera_shader_raster_position();
     int rows = (count + cols - 1) / cols;
     float fx = r[0] * cols;
     float fy = (1.0 - r[1]) * rows;
@@ -129,27 +89,37 @@ shader visualenv_tiles_turning(
         float y = v * half_h + shift_y;
         vector p = ortho ? vector(x, y, 0) : vector(0, 0, 0);
         vector d = ortho ? vector(0, 0, 1) : normalize(vector(x, y, 1.0));
-        int i = 9 * clamp(env, 0, {last});
-        position = point(offset[0] + R[i] * p[0] + R[i + 1] * p[1] + R[i + 2] * p[2],
-                         offset[1] + R[i + 3] * p[0] + R[i + 4] * p[1] + R[i + 5] * p[2],
-                         offset[2] + R[i + 6] * p[0] + R[i + 7] * p[1] + R[i + 8] * p[2]);
-        direction = vector(R[i] * d[0] + R[i + 1] * d[1] + R[i + 2] * d[2],
-                           R[i + 3] * d[0] + R[i + 4] * d[1] + R[i + 5] * d[2],
-                           R[i + 6] * d[0] + R[i + 7] * d[1] + R[i + 8] * d[2]);
+@TURN@        position = point(offset[0] + p[0], offset[1] + p[1], offset[2] + p[2]);
+        direction = d;
     }
 }
 """
 
+_TURN = """        int i = 9 * clamp(env, 0, @LAST@);
+        p = vector(R[i] * p[0] + R[i + 1] * p[1] + R[i + 2] * p[2],
+                   R[i + 3] * p[0] + R[i + 4] * p[1] + R[i + 5] * p[2],
+                   R[i + 6] * p[0] + R[i + 7] * p[1] + R[i + 8] * p[2]);
+        d = vector(R[i] * d[0] + R[i + 1] * d[1] + R[i + 2] * d[2],
+                   R[i + 3] * d[0] + R[i + 4] * d[1] + R[i + 5] * d[2],
+                   R[i + 6] * d[0] + R[i + 7] * d[1] + R[i + 8] * d[2]);
+"""
+
+#: the tiles shader of a camera that does not turn
+TILES_OSL = (_TILES_TEMPLATE.replace("@NAME@", "visualenv_tiles").replace("@TURNED@", "")
+             .replace("@ROTATIONS@", "").replace("@TABLE@", "").replace("@TURN@", ""))
 
 TURNING_NAME = "visualenv_tiles_turning"
 
 
 def turning_source(num_envs: int) -> str:
-    """The tiles shader of a turning camera for `num_envs` envs: every env's rotation starts as the identity."""
+    """The tiles shader for a camera the state turns: as :data:`TILES_OSL`, and each env's rays are turned by its
+    own camera's rotation relative to this camera's (9 parameters an env, r<k>_<i> row-major, in Cycles' camera
+    space), every rotation starting as the identity."""
     names = [f"r{k}_{i}" for k in range(num_envs) for i in range(9)]
-    rotations = "\n".join(f"    float r{k}_{i} = {1 if i in (0, 4, 8) else 0}," for k in range(num_envs) for i in range(9))
-    return (TURNING_OSL.replace("{rotations}", rotations).replace("{size}", str(9 * num_envs))
-            .replace("{{{names}}}", "{" + ", ".join(names) + "}").replace("{last}", str(num_envs - 1)))
+    rotations = "".join(f"    float r{k}_{i} = {1 if i in (0, 4, 8) else 0},\n" for k in range(num_envs) for i in range(9))
+    return (_TILES_TEMPLATE.replace("@NAME@", TURNING_NAME).replace("@TURNED@", " and turned by the env's own camera rotation")
+            .replace("@ROTATIONS@", rotations).replace("@TABLE@", f"    float R[{9 * num_envs}] = {{{', '.join(names)}}};\n")
+            .replace("@TURN@", _TURN.replace("@LAST@", str(num_envs - 1))))
 
 
 def _osl_modules_on_path() -> None:
