@@ -293,19 +293,10 @@ def test_an_object_named_as_a_body_stands_for_it(tmp_path: Path) -> None:
     assert centres[1] > centres[0] + 4, centres
 
 
-FOLLOWING = """\
-id: Follow-v0
-params: {start: 0.0}
-physics:
-  model: package:gymnasium.envs.mujoco/assets/inverted_pendulum.xml
-  reset: {values: {qpos_slider: start}}
-scene:
-  world: {color: [0.02, 0.02, 0.02]}
-  objects:
-    Camera: {camera: perspective, location: [0, -3, 0.3], rotation: [1.5708, 0, 0], lens: 35}
-observation: {camera: Camera, resolution: [48, 48], color: rgb}
-reward: 1.0
-"""
+#: POLE with the cart slid to `start` at reset, seen by a camera that looks along +y without aiming at the pole
+FOLLOWING = (POLE.replace("Pole-v0", "Follow-v0").replace("{angle: 0.0}", "{start: 0.0}").replace("qpos_hinge: angle", "qpos_slider: start")
+             .replace("look_at: [0, 0, 0.3]", "rotation: [1.5708, 0, 0]"))
+assert FOLLOWING.count("start") == 2 and "rotation" in FOLLOWING
 
 
 def pole_column(tmp_path: Path, text: str, start: float) -> float:
