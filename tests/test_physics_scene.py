@@ -339,6 +339,7 @@ TEXTURED = """\
     <material name="flat" texture="flat"/>
     <material name="quads" texture="quads"/>
     <mesh name="cube" vertex="-.2 -.2 -.2  .2 -.2 -.2  .2 .2 -.2  -.2 .2 -.2  -.2 -.2 .2  .2 -.2 .2  .2 .2 .2  -.2 .2 .2"/>
+    <mesh name="pyramid" file="pyramid.obj"/>
   </asset>
   <worldbody>
     <light directional="true" pos="0 -3 1" dir="0 1 -0.2"/>
@@ -349,9 +350,30 @@ TEXTURED = """\
     <geom name="sphere" type="sphere" size="0.22" pos="-0.9 0 -0.45" material="flat"/>
     <geom name="mesh" type="mesh" mesh="cube" pos="-0.3 0 -0.45" material="cube"/>
     <geom name="picture" type="box" size="0.2 0.2 0.2" pos="0.3 0 -0.45" euler="90 0 0" material="quads"/>
+    <geom name="uv" type="mesh" mesh="pyramid" pos="0.9 0 -0.45" material="quads"/>
     <camera name="front" pos="0 -3.2 0" xyaxes="1 0 0 0 0 1"/>
   </worldbody>
 </mujoco>
+"""
+
+#: a square pyramid whose base faces the camera (-y), with texture coordinates that put the whole image on the base
+PYRAMID = """\
+v -0.2 0 -0.2
+v 0.2 0 -0.2
+v 0.2 0 0.2
+v -0.2 0 0.2
+v 0 0.2 0
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+vt 0.5 0.5
+f 1/1 2/2 3/3
+f 1/1 3/3 4/4
+f 1/1 5/5 2/2
+f 2/2 5/5 3/3
+f 3/3 5/5 4/4
+f 4/4 5/5 1/1
 """
 
 
@@ -362,7 +384,8 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
     a box (or a cube mesh) as 2x2 squares, red at top left on the face toward the
     camera (-Y: OpenGL's cube map face with s = x, t = -z); a 2-D texture projects
     along the geom's z axis, so a box turned to face the camera with its +z shows
-    the image upright (its top row at the box's +y).
+    the image upright (its top row at the box's +y); a mesh with its own texture
+    coordinates (an OBJ's) shows the image as they place it.
     """
     from PIL import Image
 
@@ -370,6 +393,7 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
     quads[:2, :2], quads[:2, 2:], quads[2:, :2], quads[2:, 2:] = (255, 0, 255), (0, 255, 255), (255, 255, 0), (255, 255, 255)
     Image.fromarray(quads).save(tmp_path / "quads.png")
     (tmp_path / "m.xml").write_text(TEXTURED, encoding="utf-8")
+    (tmp_path / "pyramid.obj").write_text(PYRAMID, encoding="utf-8")
     spec = tmp_path / "s.yaml"
     spec.write_text("id: T-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0.5, 0.5, 0.5]}}\n"
                     "observation: {camera: front, resolution: [64, 64], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
@@ -396,7 +420,8 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
     for name, x, z in (("box", -0.9, 0.45), ("mesh", -0.3, -0.45)):  # (left/right, down/up) quadrants of the face toward the camera
         seen = [quadrant(x, z, dx, dz) for dz in (1, -1) for dx in (-1, 1)]
         assert seen == ["red", "blue", "blue", "red"], (name, seen)
-    assert [quadrant(0.3, -0.45, dx, dz) for dz in (1, -1) for dx in (-1, 1)] == ["magenta", "cyan", "yellow", "white"]
+    for x in (0.3, 0.9):  # the turned box's 2-D projection, the mesh's own UVs: the image upright
+        assert [quadrant(x, -0.45, dx, dz) for dz in (1, -1) for dx in (-1, 1)] == ["magenta", "cyan", "yellow", "white"], x
     for name, x, z, pair in (("ellipsoid", -0.3, 0.45, ("red", "blue")), ("capsule", 0.3, 0.45, ("red", "blue")),
                              ("cylinder", 0.9, 0.45, ("red", "blue")), ("sphere", -0.9, -0.45, ("yellow", "green"))):
         col, row = (int(v) for v in centre(x, z))
