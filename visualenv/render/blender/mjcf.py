@@ -145,8 +145,8 @@ def _texture_image(geom: GeomShape, images: dict[int, Any]) -> Any:
 
 
 def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
-    """Builds the geom's surface in `bm` (its own frame, metres): its vertices' MuJoCo object coordinates (texcoords.py),
-    and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped)."""
+    """Builds the geom's surface in `bm` (its own frame, metres): a textured geom's vertices' MuJoCo object coordinates
+    (texcoords.py; none without a texture), and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped)."""
     size = geom.size
     caps: list[tuple[list[Any], float]] = []  # a capsule's end spheres and their centres: MuJoCo textures each about its centre
     made: list[int] = []
@@ -175,8 +175,13 @@ def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
                 made.append(f)
             except ValueError:  # a duplicate face: MuJoCo keeps it, Blender cannot
                 pass
+    if geom.texture is None:  # nothing reads the object coordinates
+        return np.zeros((0, 3)), made
     bm.verts.index_update()
-    points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit)
+    if geom.kind == "mesh" and geom.vertices is not None:  # made in this order, at the geom's own coordinates
+        points = np.asarray(geom.vertices, dtype=np.float64).reshape(-1, 3)
+    else:
+        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit)
     for sphere, z in caps:  # MuJoCo's caps are unit hemispheres about their own centres, scaled by the radius
         rows = [v.index for v in sphere]
         points[rows] = (np.array([v.co[:] for v in sphere]) - (0.0, 0.0, z)) / size[0]
