@@ -428,3 +428,37 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
         window = (slice(row - 4, row + 5), slice(col - 4, col + 5))
         counts = [int(colours[c][window].sum()) for c in pair]
         assert min(counts) >= 4, (name, counts)  # both of the texture's colours, not one flat colour
+
+
+def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:
+    """A batch's tiles camera takes the model camera's pose when it is built: MuJoCo's pose at qpos0, not Blender's origin."""
+    from visualenv.env.batched import BatchedVectorEnv
+
+    (tmp_path / "m.xml").write_text(textwrap.dedent("""\
+        <mujoco>
+          <worldbody>
+            <light directional="true" pos="0 -3 1" dir="0 1 -0.3"/>
+            <geom name="ball" type="sphere" size="0.3" pos="-0.4 0 0" rgba="0 1 0 1"/>
+            <geom name="block" type="box" size="0.25 0.25 0.25" pos="0.5 0 0" rgba="1 0 0 1"/>
+            <camera name="front" pos="0 -3 0" xyaxes="1 0 0 0 0 1"/>
+          </worldbody>
+        </mujoco>
+        """), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: F-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0, 0, 0]}}\n"
+                    "observation: {camera: front, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    batch = BatchedVectorEnv(spec, 2)
+    alone = VisualEnv(spec)
+    try:
+        tiles, _ = batch.reset(seed=0)
+        single, _ = alone.reset(seed=0)
+    finally:
+        batch.close()
+        alone.close()
+    for image in (single, *tiles):
+        r, g, b = (image[..., i].astype(int) for i in range(3))
+        green, red = (g > r + 60) & (g > b + 60), (r > g + 60) & (r > b + 60)
+        assert green[:, :12].sum() >= 10 and red[:, 12:].sum() >= 10, (green.sum(), red.sum())  # the ball left, the block right
+        assert green[:, 12:].sum() + red[:, :12].sum() == 0
+    for tile in tiles:
+        assert (np.abs(tile.astype(int) - single.astype(int)) <= 8).mean() >= 0.95

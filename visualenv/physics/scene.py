@@ -62,6 +62,8 @@ class CameraInfo:
     name: str
     fovy: float  # vertical field of view (degrees)
     moves: bool = False  # it tracks a body, or hangs on one that moves
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)  # world, at qpos0 (cam_xpos): where a camera that never moves stays
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
 
 
 @dataclass(frozen=True)
@@ -100,9 +102,16 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
                   tuple(map(float, data.light_xdir[i])), tuple(map(float, model.light_diffuse[i])), float(model.light_cutoff[i]))  # type: ignore[arg-type]
         for i in range(model.nlight))
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
-    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()))
+    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()),
+                               tuple(map(float, data.cam_xpos[i])), _quat(mujoco, data.cam_xmat[i]))  # type: ignore[arg-type]
                     for i in range(model.ncam))
     return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras)
+
+
+def _quat(mujoco: Any, mat: np.ndarray) -> tuple[float, ...]:
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.asarray(mat, dtype=np.float64).reshape(9))
+    return tuple(float(v) for v in quat)
 
 
 def _light_directional(model: Any, i: int) -> bool:

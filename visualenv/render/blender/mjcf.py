@@ -124,6 +124,8 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         cam.clip_start, cam.clip_end = 0.01, 100.0
         obj = bpy.data.objects.new(cam_info.name, cam)
         obj.rotation_mode = "QUATERNION"
+        obj.location = cam_info.pos  # MuJoCo's pose at qpos0: a batch's tiles camera takes a fixed camera's pose when built
+        obj.rotation_quaternion = cam_info.quat
         collection.objects.link(obj)
         built.objects.setdefault(cam_info.name, obj)
         cameras.append(obj)
