@@ -318,3 +318,138 @@ def test_an_actor_binding_reads_the_models_names_so_a_camera_follows_the_cart(tm
     following = FOLLOWING + "actors: {Camera: {location: [qpos_slider, -3, 0.3]}}\n"
     assert abs(pole_column(tmp_path, following, 0.6) - pole_column(tmp_path, following, 0.0)) < 1.0
     assert pole_column(tmp_path, FOLLOWING, 0.6) - pole_column(tmp_path, FOLLOWING, 0.0) > 4.0   # a fixed camera sees it move right
+
+
+TEXTURED = """\
+<mujoco>
+  <asset>
+    <texture name="cube" type="cube" builtin="checker" rgb1="1 0 0" rgb2="0 0 1" width="16" height="16"/>
+    <texture name="flat" type="2d" builtin="checker" rgb1="1 1 0" rgb2="0 0.8 0" width="16" height="16"/>
+    <texture name="quads" type="2d" file="quads.png"/>
+    <material name="cube" texture="cube"/>
+    <material name="flat" texture="flat"/>
+    <material name="quads" texture="quads"/>
+    <mesh name="cube" vertex="-.2 -.2 -.2  .2 -.2 -.2  .2 .2 -.2  -.2 .2 -.2  -.2 -.2 .2  .2 -.2 .2  .2 .2 .2  -.2 .2 .2"/>
+    <mesh name="pyramid" file="pyramid.obj"/>
+  </asset>
+  <worldbody>
+    <light directional="true" pos="0 -3 1" dir="0 1 -0.2"/>
+    <geom name="box" type="box" size="0.2 0.2 0.2" pos="-0.9 0 0.45" material="cube"/>
+    <geom name="ellipsoid" type="ellipsoid" size="0.15 0.15 0.22" pos="-0.3 0 0.45" material="cube"/>
+    <geom name="capsule" type="capsule" size="0.12 0.12" pos="0.3 0 0.45" material="cube"/>
+    <geom name="cylinder" type="cylinder" size="0.18 0.2" pos="0.9 0 0.45" material="cube"/>
+    <geom name="sphere" type="sphere" size="0.22" pos="-0.9 0 -0.45" material="flat"/>
+    <geom name="mesh" type="mesh" mesh="cube" pos="-0.3 0 -0.45" material="cube"/>
+    <geom name="picture" type="box" size="0.2 0.2 0.2" pos="0.3 0 -0.45" euler="90 0 0" material="quads"/>
+    <geom name="uv" type="mesh" mesh="pyramid" pos="0.9 0 -0.45" material="quads"/>
+    <camera name="front" pos="0 -3.2 0" xyaxes="1 0 0 0 0 1"/>
+  </worldbody>
+</mujoco>
+"""
+
+#: a square pyramid whose base faces the camera (-y), with texture coordinates that put the whole image on the base
+PYRAMID = """\
+v -0.2 0 -0.2
+v 0.2 0 -0.2
+v 0.2 0 0.2
+v -0.2 0 0.2
+v 0 0.2 0
+vt 0 0
+vt 1 0
+vt 1 1
+vt 0 1
+vt 0.5 0.5
+f 1/1 2/2 3/3
+f 1/1 3/3 4/4
+f 1/1 5/5 2/2
+f 2/2 5/5 3/3
+f 3/3 5/5 4/4
+f 4/4 5/5 1/1
+"""
+
+
+def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Path) -> None:
+    """Cube, builtin 2-D and image textures on boxes, ellipsoids, capsules, cylinders, spheres and meshes (64x64).
+
+    MuJoCo's mapping, read in its pixels: a builtin cube checker shows each face of
+    a box (or a cube mesh) as 2x2 squares, red at top left on the face toward the
+    camera (-Y: OpenGL's cube map face with s = x, t = -z); a 2-D texture projects
+    along the geom's z axis, so a box turned to face the camera with its +z shows
+    the image upright (its top row at the box's +y); a mesh with its own texture
+    coordinates (an OBJ's) shows the image as they place it.
+    """
+    from PIL import Image
+
+    quads = np.zeros((4, 4, 3), np.uint8)
+    quads[:2, :2], quads[:2, 2:], quads[2:, :2], quads[2:, 2:] = (255, 0, 255), (0, 255, 255), (255, 255, 0), (255, 255, 255)
+    Image.fromarray(quads).save(tmp_path / "quads.png")
+    (tmp_path / "m.xml").write_text(TEXTURED, encoding="utf-8")
+    (tmp_path / "pyramid.obj").write_text(PYRAMID, encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: T-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0.5, 0.5, 0.5]}}\n"
+                    "observation: {camera: front, resolution: [64, 64], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    env = VisualEnv(spec)
+    try:
+        obs, _ = env.reset(seed=0)
+    finally:
+        env.close()
+    r, g, b = (obs[..., i].astype(int) for i in range(3))
+    colours = {"red": (r > g + 60) & (r > b + 60), "blue": (b > r + 60) & (b > g + 60), "yellow": (r > b + 60) & (g > b + 60),
+               "green": (g > r + 60) & (g > b + 60), "magenta": (r > g + 60) & (b > g + 60), "cyan": (g > r + 60) & (b > r + 60),
+               "white": (r > 200) & (g > 200) & (b > 200)}
+    scale = 32 / np.tan(np.radians(22.5)) / 3.2  # pixels per metre at the geoms' depth (MuJoCo's default fovy, 45 degrees)
+
+    def centre(x: float, z: float) -> tuple[float, float]:
+        return 32 + x * scale, 32 - z * scale
+
+    def quadrant(x: float, z: float, dx: float, dz: float) -> str:
+        col, row = centre(x, z)
+        col, row = int(col + dx * 2.5), int(row - dz * 2.5)
+        block = {name: int(mask[row - 1:row + 1, col - 1:col + 1].sum()) for name, mask in colours.items()}
+        return max(block, key=lambda k: block[k])
+
+    for name, x, z in (("box", -0.9, 0.45), ("mesh", -0.3, -0.45)):  # (left/right, down/up) quadrants of the face toward the camera
+        seen = [quadrant(x, z, dx, dz) for dz in (1, -1) for dx in (-1, 1)]
+        assert seen == ["red", "blue", "blue", "red"], (name, seen)
+    for x in (0.3, 0.9):  # the turned box's 2-D projection, the mesh's own UVs: the image upright
+        assert [quadrant(x, -0.45, dx, dz) for dz in (1, -1) for dx in (-1, 1)] == ["magenta", "cyan", "yellow", "white"], x
+    for name, x, z, pair in (("ellipsoid", -0.3, 0.45, ("red", "blue")), ("capsule", 0.3, 0.45, ("red", "blue")),
+                             ("cylinder", 0.9, 0.45, ("red", "blue")), ("sphere", -0.9, -0.45, ("yellow", "green"))):
+        col, row = (int(v) for v in centre(x, z))
+        window = (slice(row - 4, row + 5), slice(col - 4, col + 5))
+        counts = [int(colours[c][window].sum()) for c in pair]
+        assert min(counts) >= 4, (name, counts)  # both of the texture's colours, not one flat colour
+
+
+def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:
+    """A batch's tiles camera takes the model camera's pose when it is built: MuJoCo's pose at qpos0, not Blender's origin."""
+    from visualenv.env.batched import BatchedVectorEnv
+
+    (tmp_path / "m.xml").write_text(textwrap.dedent("""\
+        <mujoco>
+          <worldbody>
+            <light directional="true" pos="0 -3 1" dir="0 1 -0.3"/>
+            <geom name="ball" type="sphere" size="0.3" pos="-0.4 0 0" rgba="0 1 0 1"/>
+            <geom name="block" type="box" size="0.25 0.25 0.25" pos="0.5 0 0" rgba="1 0 0 1"/>
+            <camera name="front" pos="0 -3 0" xyaxes="1 0 0 0 0 1"/>
+          </worldbody>
+        </mujoco>
+        """), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text("id: F-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0, 0, 0]}}\n"
+                    "observation: {camera: front, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    batch = BatchedVectorEnv(spec, 2)
+    alone = VisualEnv(spec)
+    try:
+        tiles, _ = batch.reset(seed=0)
+        single, _ = alone.reset(seed=0)
+    finally:
+        batch.close()
+        alone.close()
+    for image in (single, *tiles):
+        r, g, b = (image[..., i].astype(int) for i in range(3))
+        green, red = (g > r + 60) & (g > b + 60), (r > g + 60) & (r > b + 60)
+        assert green[:, :12].sum() >= 10 and red[:, 12:].sum() >= 10, (green.sum(), red.sum())  # the ball left, the block right
+        assert green[:, 12:].sum() + red[:, :12].sum() == 0
+    for tile in tiles:
+        assert (np.abs(tile.astype(int) - single.astype(int)) <= 8).mean() >= 0.95

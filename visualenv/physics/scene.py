@@ -5,12 +5,14 @@ so a renderer builds its objects without knowing MuJoCo: each body is a frame
 whose world pose arrives as arrays every step (``xpos``, ``xquat``); each geom a
 shape fixed in its body's frame. Geoms in groups MuJoCo's viewer hides by
 default (3 and up) are left out; a height field (or any type a renderer cannot
-draw) is a :class:`~visualenv.physics.model.PhysicsError` naming the geom.
+draw) is a :class:`~visualenv.physics.model.PhysicsError` naming the geom. A
+geom's 2-D or cube texture comes as pixels with the numbers MuJoCo's renderer
+maps it by (:mod:`visualenv.physics.texcoords`).
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -37,9 +39,12 @@ class GeomShape:
     rgba: tuple[float, float, float, float]
     vertices: np.ndarray | None = None  # mesh geoms: (n, 3) in the geom's frame
     faces: np.ndarray | None = None  # mesh geoms: (m, 3) vertex indices
-    texture: np.ndarray | None = None  # planes: the material's 2-D texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
-    texrepeat: tuple[float, float] = (1.0, 1.0)  # repetitions across the plane, or per metre when texuniform
-    texuniform: bool = False
+    texture: np.ndarray | None = None  # the material's texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
+    texture_type: str = "2d"  # "2d", or "cube": six square faces stacked (h = 6 w), or one face for all six (h = w)
+    texture_id: int = -1  # the MuJoCo texture's index (geoms that share one share its image)
+    texscale: tuple[float, float, float] = (1.0, 1.0, 1.0)  # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
+    unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
+    texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
 
 
 @dataclass(frozen=True)
@@ -57,6 +62,8 @@ class CameraInfo:
     name: str
     fovy: float  # vertical field of view (degrees)
     moves: bool = False  # it tracks a body, or hangs on one that moves
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)  # world, at qpos0 (cam_xpos): where a camera that never moves stays
+    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
 
 
 @dataclass(frozen=True)
@@ -80,6 +87,7 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
     mujoco.mj_forward(model, data)
     idents = physics.names.ident
     geoms = []
+    textures: dict[int, np.ndarray] = {}  # by MuJoCo texture index: geoms that share a texture share its pixels
     for g in range(model.ngeom):
         if int(model.geom_group[g]) >= VISIBLE_GROUPS or float(model.geom_rgba[g][3]) == 0.0:
             continue
@@ -88,15 +96,22 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
             kind = {1: "a height field (hfield)", 8: "an SDF"}.get(gtype, f"of type {gtype}")
             raise PhysicsError(f"geom '{idents['geom'][g]}' is {kind}, which visualenv cannot draw yet: move it to group 3 "
                                "(hidden) or replace it with a mesh or boxes")
-        geoms.append(_geom(model, g, GEOM_KINDS[gtype], idents["geom"][g]))
+        geoms.append(_geom(model, g, GEOM_KINDS[gtype], idents["geom"][g], textures))
     lights = tuple(
         LightInfo(idents["light"][i], bool(_light_directional(model, i)), tuple(map(float, data.light_xpos[i])),  # type: ignore[arg-type]
                   tuple(map(float, data.light_xdir[i])), tuple(map(float, model.light_diffuse[i])), float(model.light_cutoff[i]))  # type: ignore[arg-type]
         for i in range(model.nlight))
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
-    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()))
+    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()),
+                               tuple(map(float, data.cam_xpos[i])), _quat(mujoco, data.cam_xmat[i]))  # type: ignore[arg-type]
                     for i in range(model.ncam))
     return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras)
+
+
+def _quat(mujoco: Any, mat: np.ndarray) -> tuple[float, ...]:
+    quat = np.zeros(4)
+    mujoco.mju_mat2Quat(quat, np.asarray(mat, dtype=np.float64).reshape(9))
+    return tuple(float(v) for v in quat)
 
 
 def _light_directional(model: Any, i: int) -> bool:
@@ -105,7 +120,7 @@ def _light_directional(model: Any, i: int) -> bool:
     return bool(model.light_directional[i])
 
 
-def _geom(model: Any, g: int, kind: str, name: str) -> GeomShape:
+def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarray]) -> GeomShape:
     rgba = tuple(float(v) for v in model.geom_rgba[g])
     mat = int(model.geom_matid[g])
     if mat >= 0 and np.allclose(rgba, _DEFAULT_RGBA):  # MuJoCo: a material's colour wins over the default geom colour
@@ -120,18 +135,67 @@ def _geom(model: Any, g: int, kind: str, name: str) -> GeomShape:
         f0, nf = int(model.mesh_faceadr[mesh]), int(model.mesh_facenum[mesh])
         vertices = np.array(model.mesh_vert[v0:v0 + nv], dtype=np.float64)
         faces = np.array(model.mesh_face[f0:f0 + nf], dtype=np.int64)
-    texture, repeat, uniform = _plane_texture(model, mat) if kind == "plane" and mat >= 0 else (None, (1.0, 1.0), False)
-    return GeomShape(name, kind, int(model.geom_bodyid[g]), size, tuple(map(float, model.geom_pos[g])),  # type: ignore[arg-type]
-                     tuple(map(float, model.geom_quat[g])), rgba, vertices, faces, texture, repeat, uniform)  # type: ignore[arg-type]
+    shape = GeomShape(name, kind, int(model.geom_bodyid[g]), size, tuple(map(float, model.geom_pos[g])),  # type: ignore[arg-type]
+                      tuple(map(float, model.geom_quat[g])), rgba, vertices, faces)  # type: ignore[arg-type]
+    tex = _texture_id(model, mat)
+    if tex < 0:
+        return shape
+    if tex not in textures:
+        textures[tex] = _pixels(model, tex)
+    return replace(shape, texture=textures[tex], texture_type="cube" if int(model.tex_type[tex]) == 1 else "2d", texture_id=tex,
+                   **_texgen(model, g, kind, mat, tex))
 
 
-def _plane_texture(model: Any, mat: int) -> tuple[np.ndarray | None, tuple[float, float], bool]:
-    """A plane material's 2-D texture as MuJoCo compiled it (builtin checker, gradient, flat, or an image: all are pixels by then)."""
+def _texture_id(model: Any, mat: int) -> int:
+    """The material's colour texture, if MuJoCo draws it on geoms: a 2-D or cube texture (a skybox is the world's)."""
+    if mat < 0:
+        return -1
     texids = np.atleast_1d(model.mat_texid[mat])
     rgb_role = 1 if texids.size > 1 else 0  # MuJoCo 3: one texture per role, mjTEXROLE_RGB = 1
     tex = int(texids[rgb_role])
-    if tex < 0 or int(model.tex_type[tex]) != 0:  # none, or a cube/skybox texture (not drawn on planes)
-        return None, (1.0, 1.0), False
+    return tex if tex >= 0 and int(model.tex_type[tex]) in (0, 1) else -1
+
+
+def _texgen(model: Any, g: int, kind: str, mat: int, tex: int) -> dict[str, Any]:
+    """MuJoCo's texture coordinate generation for geom `g` (``settexture`` in render_gl3.c), as GeomShape fields.
+
+    Primitives are MuJoCo's unit shapes scaled by their size (their object
+    coordinates are the vertices over ``unit``); planes and meshes are drawn at
+    their size (``unit`` 1), so a 2-D texture's repeat is divided by it.
+    """
+    raw = tuple(float(v) for v in model.geom_size[g])
+    size = {"sphere": (raw[0],) * 3, "capsule": (raw[0], raw[0], raw[1]), "cylinder": (raw[0], raw[0], raw[1])}.get(kind, raw)
+    drawn_at_size = kind in ("plane", "mesh")
+    uniform = bool(model.mat_texuniform[mat])
+    fields: dict[str, Any] = {"unit": (1.0, 1.0, 1.0) if drawn_at_size else size}
+    if int(model.tex_type[tex]) == 1:  # cube: the object coordinates, times the size when uniform
+        fields["texscale"] = size if uniform else (1.0, 1.0, 1.0)
+    else:
+        scale = [float(v) for v in model.mat_texrepeat[mat]]
+        for k in (0, 1):
+            if drawn_at_size and size[k] > 0:
+                scale[k] /= max(size[k], 1e-15)
+            if uniform and size[k] > 0:
+                scale[k] *= size[k]
+        fields["texscale"] = (scale[0], scale[1], 0.0)
+    if kind == "mesh":
+        fields["texcoords"] = _mesh_texcoords(model, int(model.geom_dataid[g]))
+    return fields
+
+
+def _mesh_texcoords(model: Any, mesh: int) -> np.ndarray | None:
+    """A mesh's own texture coordinates per face corner, as Blender UVs; None when its file had none."""
+    adr = int(model.mesh_texcoordadr[mesh])
+    if adr < 0:
+        return None
+    f0, nf = int(model.mesh_faceadr[mesh]), int(model.mesh_facenum[mesh])
+    uv = np.asarray(model.mesh_texcoord, dtype=np.float64)[adr + np.asarray(model.mesh_facetexcoord[f0:f0 + nf], dtype=np.int64)]
+    uv[..., 1] = 1.0 - uv[..., 1]  # OpenGL's t counts rows from the image's first (top) one
+    return uv
+
+
+def _pixels(model: Any, tex: int) -> np.ndarray:
+    """A texture as MuJoCo compiled it (builtin checker, gradient, flat, or an image: all are pixels by then)."""
     w, h = int(model.tex_width[tex]), int(model.tex_height[tex])
     channels = int(model.tex_nchannel[tex]) if hasattr(model, "tex_nchannel") else 3
     adr = int(model.tex_adr[tex])
@@ -140,5 +204,4 @@ def _plane_texture(model: Any, mat: int) -> tuple[np.ndarray | None, tuple[float
     rgba[..., :min(channels, 3)] = pixels[..., :3]
     if channels == 1:
         rgba[..., 1] = rgba[..., 2] = pixels[..., 0]
-    repeat = tuple(float(v) for v in model.mat_texrepeat[mat])
-    return rgba[::-1].copy(), (repeat[0], repeat[1]), bool(model.mat_texuniform[mat])
+    return rgba[::-1].copy()

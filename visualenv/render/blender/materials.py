@@ -192,6 +192,20 @@ def color_writer(mat: Any) -> Callable[[Sequence[float]], None] | None:
     return write
 
 
+def tint_image(mat: Any, image: Any, *, repeat: bool) -> None:
+    """`image`, read at the mesh's UV map texel by texel (repeated, or clamped at its edges), times the material's
+    base colour drives the base colour; that colour moves to a tint node (:data:`TINT`), where a bound colour writes."""
+    bsdf = _principled(mat)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    node = nodes.new("ShaderNodeTexImage")  # no vector input: the active UV map
+    node.image = image
+    node.interpolation = "Closest"
+    node.extension = "REPEAT" if repeat else "EXTEND"
+    texture, tinted = _tint_node(nodes, TINT, tuple(bsdf.inputs["Base Color"].default_value))
+    links.new(node.outputs["Color"], texture)
+    links.new(tinted, bsdf.inputs["Base Color"])
+
+
 def see_through(scene: Any) -> bool:
     """Whether any material in `scene` has a Principled alpha below 1."""
     for obj in scene.objects:

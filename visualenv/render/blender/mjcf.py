@@ -4,7 +4,9 @@ Each body that has geoms (or a camera) becomes an empty; its geoms are meshes
 parented to it at their fixed offsets, so a step writes one location and one
 quaternion per moving body (rows of ``xpos`` and ``xquat``) and nothing per geom.
 Cameras take ``cam_xpos`` and ``cam_xmat`` as MuJoCo computes them, so fixed,
-``track`` and ``trackcom`` cameras move as in MuJoCo. Geoms keep their MuJoCo
+``track`` and ``trackcom`` cameras move as in MuJoCo. A textured geom's mesh
+gets a UV map with MuJoCo's texture coordinates (:mod:`visualenv.physics.texcoords`)
+and its material reads the texture's pixels, times the geom's colour. Geoms keep their MuJoCo
 names (objects a spec can refer to); bodies are ``body:<name>``.
 """
 
@@ -20,7 +22,8 @@ import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.physics.scene import GeomShape, PhysicsScene
-from visualenv.render.blender.materials import make_material
+from visualenv.physics.texcoords import cube_uv, planar_uv
+from visualenv.render.blender.materials import make_material, tint_image
 from visualenv.spec.models import Material
 
 #: round shapes' segments: enough for smooth silhouettes at observation sizes
@@ -86,10 +89,11 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
 
     for body in own:
         empty_of(body)
+    images: dict[int, Any] = {}  # by MuJoCo texture: geoms sharing a texture share its image
     for geom in scene_data.geoms:
         if geom.body in own:
             continue
-        obj = _geom_object(geom, base_dir=base_dir, source=source)
+        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images)
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
         built.objects.setdefault(geom.name, obj)
@@ -120,6 +124,8 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         cam.clip_start, cam.clip_end = 0.01, 100.0
         obj = bpy.data.objects.new(cam_info.name, cam)
         obj.rotation_mode = "QUATERNION"
+        obj.location = cam_info.pos  # MuJoCo's pose at qpos0: a batch's tiles camera takes a fixed camera's pose when built
+        obj.rotation_quaternion = cam_info.quat
         collection.objects.link(obj)
         built.objects.setdefault(cam_info.name, obj)
         cameras.append(obj)
@@ -128,42 +134,24 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     return PoseWriter(moving, cameras, lights, keys)
 
 
-def _plane_texture(mat: Any, geom: GeomShape) -> None:
-    """The plane's texture times its colour, as MuJoCo draws it: tiled `texrepeat` times across the plane (or per metre)."""
+def _texture_image(geom: GeomShape, images: dict[int, Any]) -> Any:
+    """The Blender image of the geom's MuJoCo texture, made once per texture from its pixels (packed: no file)."""
     assert geom.texture is not None
-    h, w = geom.texture.shape[:2]
-    image = bpy.data.images.new(f"mjcf-{geom.name}-texture", w, h, alpha=True)
-    image.pixels.foreach_set(geom.texture.reshape(-1))
-    image.pack()
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
-    coords = nodes.new("ShaderNodeTexCoord")
-    mapping = nodes.new("ShaderNodeMapping")
-    rx, ry = geom.texrepeat
-    if geom.texuniform:  # repeats per metre of the object's own coordinates
-        mapping.inputs["Scale"].default_value = (rx, ry, 1.0)
-    else:  # repeats across the plane's extent [-size, size]
-        mapping.inputs["Location"].default_value = (0.5 * rx, 0.5 * ry, 0.0)
-        mapping.inputs["Scale"].default_value = (rx / (2 * geom.size[0]), ry / (2 * geom.size[1]), 1.0)
-    texture = nodes.new("ShaderNodeTexImage")
-    texture.image = image
-    texture.interpolation = "Closest"
-    texture.extension = "REPEAT"
-    tint = nodes.new("ShaderNodeMix")
-    tint.data_type = "RGBA"
-    tint.blend_type = "MULTIPLY"
-    tint.inputs["Factor"].default_value = 1.0
-    tint.inputs["B"].default_value = bsdf.inputs["Base Color"].default_value
-    links.new(coords.outputs["Object"], mapping.inputs["Vector"])
-    links.new(mapping.outputs["Vector"], texture.inputs["Vector"])
-    links.new(texture.outputs["Color"], tint.inputs["A"])
-    links.new(tint.outputs["Result"], bsdf.inputs["Base Color"])
+    if geom.texture_id not in images:
+        h, w = geom.texture.shape[:2]
+        image = bpy.data.images.new(f"mjcf-texture-{geom.texture_id}", w, h, alpha=True)
+        image.pixels.foreach_set(geom.texture.reshape(-1))
+        image.pack()
+        images[geom.texture_id] = image
+    return images[geom.texture_id]
 
 
-def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any) -> Any:
-    mesh = bpy.data.meshes.new(geom.name)
-    bm = bmesh.new()
+def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
+    """Builds the geom's surface in `bm` (its own frame, metres): a textured geom's vertices' MuJoCo object coordinates
+    (texcoords.py; none without a texture), and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped)."""
     size = geom.size
+    caps: list[tuple[list[Any], float]] = []  # a capsule's end spheres and their centres: MuJoCo textures each about its centre
+    made: list[int] = []
     if geom.kind == "plane":
         bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=1.0)
         bmesh.ops.scale(bm, vec=Vector((size[0], size[1], 1.0)), verts=bm.verts)
@@ -178,14 +166,54 @@ def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any) -> Any:
         bmesh.ops.create_cone(bm, cap_ends=True, segments=SEGMENTS, radius1=size[0], radius2=size[0], depth=2 * size[1])
         if geom.kind == "capsule":  # a cylinder and two spheres: the overlap does not show
             for z in (-size[1], size[1]):
-                bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=size[0], matrix=Matrix.Translation((0, 0, z)))
+                made_sphere = bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=size[0],
+                                                        matrix=Matrix.Translation((0, 0, z)))
+                caps.append((made_sphere["verts"], z))
     elif geom.kind == "mesh" and geom.vertices is not None and geom.faces is not None:
         verts = [bm.verts.new(v) for v in geom.vertices.tolist()]
-        for face in geom.faces.tolist():
+        for f, face in enumerate(geom.faces.tolist()):
             try:
                 bm.faces.new([verts[i] for i in face])
+                made.append(f)
             except ValueError:  # a duplicate face: MuJoCo keeps it, Blender cannot
                 pass
+    if geom.texture is None:  # nothing reads the object coordinates
+        return np.zeros((0, 3)), made
+    bm.verts.index_update()
+    if geom.kind == "mesh" and geom.vertices is not None:  # made in this order, at the geom's own coordinates
+        points = np.asarray(geom.vertices, dtype=np.float64).reshape(-1, 3)
+    else:
+        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit)
+    for sphere, z in caps:  # MuJoCo's caps are unit hemispheres about their own centres, scaled by the radius
+        rows = [v.index for v in sphere]
+        points[rows] = (np.array([v.co[:] for v in sphere]) - (0.0, 0.0, z)) / size[0]
+    return points, made
+
+
+def _uv_map(mesh: Any, geom: GeomShape, points: np.ndarray, made: list[int]) -> None:
+    """The UV map by which the mesh reads the geom's texture as MuJoCo maps it (texcoords.py), one UV per face corner."""
+    loop_vertex = np.empty(len(mesh.loops), dtype=np.int64)
+    mesh.loops.foreach_get("vertex_index", loop_vertex)
+    starts = np.empty(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("loop_start", starts)
+    if geom.texcoords is not None and geom.texture_type == "2d" and len(made) == len(starts):  # a mesh's own UVs, matched corner by corner
+        faces, uvs = geom.faces[made], geom.texcoords[made]  # type: ignore[index]
+        corner = np.argmax(faces[np.repeat(np.arange(len(made)), 3)] == loop_vertex[:, None], axis=1)
+        uv = uvs[np.repeat(np.arange(len(made)), 3), corner]
+    elif geom.texture_type == "cube":
+        assert geom.texture is not None
+        h, w = geom.texture.shape[:2]
+        uv = cube_uv(points * np.array(geom.texscale), starts, loop_vertex, faces=6 if h == 6 * w else 1, texels=w)
+    else:
+        uv = planar_uv(points, geom.texscale[:2])[loop_vertex]
+    layer = mesh.uv_layers.new(name="UVMap")
+    layer.data.foreach_set("uv", uv.astype(np.float32).reshape(-1))
+
+
+def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any]) -> Any:
+    mesh = bpy.data.meshes.new(geom.name)
+    bm = bmesh.new()
+    points, made = _shape(bm, geom)
     for face in bm.faces:
         face.smooth = geom.kind in ("sphere", "ellipsoid", "capsule", "cylinder")
     bm.to_mesh(mesh)
@@ -193,8 +221,9 @@ def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any) -> Any:
     obj = bpy.data.objects.new(geom.name, mesh)
     material = Material(color=list(geom.rgba), roughness=0.6)
     mat = make_material(f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d)
-    if geom.texture is not None:
-        _plane_texture(mat, geom)
+    if geom.texture is not None:  # MuJoCo multiplies the texture by the geom's colour
+        _uv_map(mesh, geom, points, made)
+        tint_image(mat, _texture_image(geom, images), repeat=geom.texture_type == "2d")
     mesh.materials.append(mat)
     obj.rotation_mode = "QUATERNION"
     obj.location = geom.pos

@@ -1,0 +1,69 @@
+"""MuJoCo's texture mapping as numbers: where each corner of a geom's polygons samples its material's texture.
+
+MuJoCo's OpenGL renderer (``settexture`` in ``render_gl3.c``) generates texture
+coordinates from each vertex's *object coordinates*: the coordinates of the unit
+shape it scales by the geom's size (a box is [-1, 1]^3, a sphere the unit
+sphere, a cylinder radius 1 from z=-1 to 1, a capsule's caps unit hemispheres
+about their own centres), or the vertices themselves for planes and meshes.
+
+* ``2d``: ``s = 0.5 scl_x x - 0.5`` and ``t = -0.5 scl_y y - 0.5``, repeated
+  (``scl`` is the material's ``texrepeat``, over the size for planes and meshes,
+  times the size with ``texuniform``): a projection along the geom's z axis.
+* ``cube``: ``(x, y, z)`` (times the size with ``texuniform``) is a direction
+  looked up in a cube map, as OpenGL does: the largest component picks one of
+  the six faces (+X, -X, +Y, -Y, +Z, -Z, MuJoCo's order in ``tex_data``), the
+  other two divided by it place the point on that face. A box's faces each show
+  one face of the cube map; round shapes show it projected from their centre.
+
+Blender interpolates texture coordinates linearly across a polygon, while OpenGL
+divides per pixel for cube maps: exact on flat faces facing an axis (boxes),
+close on the finely divided round shapes. A polygon that straddles two faces of
+the cube takes the face its centre points to (its corners clamped to that face).
+Coordinates returned here are Blender UVs (v up, images stored bottom row first).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+#: OpenGL's cube map selection (OpenGL 4.6 core, table 8.19), per face in MuJoCo's order:
+#: (major axis, its sign, (axis, sign) of s_c, (axis, sign) of t_c)
+CUBE_FACES = (
+    (0, 1.0, (2, -1.0), (1, -1.0)),   # +X
+    (0, -1.0, (2, 1.0), (1, -1.0)),   # -X
+    (1, 1.0, (0, 1.0), (2, 1.0)),     # +Y
+    (1, -1.0, (0, 1.0), (2, -1.0)),   # -Y
+    (2, 1.0, (0, 1.0), (1, -1.0)),    # +Z
+    (2, -1.0, (0, -1.0), (1, -1.0)),  # -Z
+)
+
+
+def planar_uv(points: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
+    """(n, 2) Blender UVs of a 2-D texture at object coordinates `points` (n, 3); the image repeats outside [0, 1]."""
+    s = 0.5 * scale[0] * points[:, 0] - 0.5
+    t = -0.5 * scale[1] * points[:, 1] - 0.5  # OpenGL's t runs down the image's rows from its first (top) one
+    return np.stack([s, 1.0 - t], axis=1)
+
+
+def cube_uv(points: np.ndarray, loop_starts: np.ndarray, loop_vertex: np.ndarray, *, faces: int, texels: int) -> np.ndarray:
+    """(loops, 2) Blender UVs in a cube texture stored as `faces` (6, or 1 repeated) square images of `texels` a side,
+    stacked from the top (face 0) down, for polygons whose loops start at `loop_starts` and visit `loop_vertex`.
+
+    `points` (n, 3) are the vertices' object coordinates (already scaled for ``texuniform``).
+    """
+    corners = points[loop_vertex]
+    counts = np.diff(np.append(loop_starts, len(loop_vertex)))
+    centres = np.add.reduceat(corners, loop_starts, axis=0) / counts[:, None] if len(loop_starts) else np.zeros((0, 3))
+    axis = np.argmax(np.abs(centres), axis=1)
+    negative = centres[np.arange(len(centres)), axis] < 0
+    face = np.repeat(2 * axis + negative, counts)
+    table = np.array([(a, sg, sa, ss, ta, ts) for a, sg, (sa, ss), (ta, ts) in CUBE_FACES])[face]
+    rows = np.arange(len(corners))
+    major = np.maximum(corners[rows, table[:, 0].astype(int)] * table[:, 1], 1e-9)
+    sc = corners[rows, table[:, 2].astype(int)] * table[:, 3] / major
+    tc = corners[rows, table[:, 4].astype(int)] * table[:, 5] / major
+    inset = 0.5 / max(texels, 1)  # OpenGL clamps to the face's edge texels: stay half a texel inside the face
+    s = np.clip(0.5 * (sc + 1.0), inset, 1.0 - inset)
+    t = np.clip(0.5 * (tc + 1.0), inset, 1.0 - inset)
+    band = face if faces == 6 else np.zeros_like(face)
+    return np.stack([s, 1.0 - (band + t) / faces], axis=1)
