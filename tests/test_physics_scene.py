@@ -319,6 +319,32 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
         batch.close()
 
 
+def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:
+    """A batch observing through a fixed camera of the model renders from that camera's pose (its tiles camera is built
+    before any step, so the model's camera stands at its pose from the start): tile i is env i alone."""
+    from visualenv.env.batched import BatchedVectorEnv
+
+    lamp = ARM[ARM.index('    <body name="lamp"'):ARM.index("  </worldbody>")]  # a spot light per copy: more lights to sample, other noise
+    (tmp_path / "arm.xml").write_text(ARM.replace(lamp, '    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>\n'
+                                                  '    <camera name="side" pos="0.3 -2.2 1.1" xyaxes="1 0 0 0 0.1 1"/>\n'), encoding="utf-8")
+    path = tmp_path / "side.yaml"
+    path.write_text("id: Side-v0\nphysics: {model: arm.xml, reset: {values: {qpos_hinge: 'uniform(-1, 1)'}}}\n"
+                    "observation: {camera: side, resolution: [16, 16], color: rgb}\nactions: {discrete: [{}]}\nreward: 0.0\n", encoding="utf-8")
+    batch = BatchedVectorEnv(path, 2)
+    singles = [VisualEnv(path) for _ in range(2)]
+    try:
+        obs, _ = batch.reset(seed=6)
+        for i, env in enumerate(singles):
+            alone, _ = env.reset(seed=6 + i)
+            close = (np.abs(obs[i].astype(int) - alone.astype(int)) <= 8).mean()  # as the batch test above (the world at the origin: 0.67)
+            assert close >= 0.98, (i, close)
+        assert not np.array_equal(obs[0], obs[1])  # the arms swing differently: each tile shows its own env
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
+
+
 def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
     """An MJCF mesh (inline vertices, no file) is drawn from MuJoCo's compiled vertices and faces: a yellow tetrahedron left of a box."""
     (tmp_path / "m.xml").write_text(textwrap.dedent("""\

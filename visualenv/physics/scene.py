@@ -57,6 +57,8 @@ class CameraInfo:
     name: str
     fovy: float  # vertical field of view (degrees)
     moves: bool = False  # it tracks a body, or hangs on one that moves
+    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)  # its place at qpos0 (where a camera that does not move stays)
+    xmat: tuple[float, ...] = (1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0)  # its orientation there, row-major (MuJoCo's cam_xmat)
 
 
 @dataclass(frozen=True)
@@ -94,7 +96,8 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
                   tuple(map(float, data.light_xdir[i])), tuple(map(float, model.light_diffuse[i])), float(model.light_cutoff[i]))  # type: ignore[arg-type]
         for i in range(model.nlight))
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
-    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()))
+    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()),
+                               tuple(map(float, data.cam_xpos[i])), tuple(map(float, data.cam_xmat[i])))  # type: ignore[arg-type]
                     for i in range(model.ncam))
     return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras)
 

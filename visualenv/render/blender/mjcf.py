@@ -135,6 +135,8 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         cam.clip_start, cam.clip_end = 0.01, 100.0
         obj = bpy.data.objects.new(cam_info.name, cam)
         obj.rotation_mode = "QUATERNION"
+        obj.location = cam_info.pos  # posed before the first step: a batch's tiles camera takes this pose when it is built
+        obj.rotation_quaternion = Matrix(np.reshape(cam_info.xmat, (3, 3)).tolist()).to_quaternion()
         collection.objects.link(obj)
         built.objects.setdefault(cam_info.name, obj)
         cameras.append(obj)
