@@ -310,18 +310,17 @@ def _basis(node: _Node, values: np.ndarray, n: int) -> np.ndarray:
 
     out = np.zeros((n, 4, 4), dtype=np.float32)
     if node.rotation.size == 4:  # quaternion mode: nothing binds its rotation (_computable)
-        loc = column("location", node.location)
         out[:, :3, :3] = _quaternion_matrices(node.rotation[None])
     else:  # Blender's eulO_to_mat3 for XYZ: in double from the float angles
-        loc = column("location", node.location)
-        ci, cj, ch = np.cos(column("rotation", node.rotation).astype(np.float64)).T
-        si, sj, sh = np.sin(column("rotation", node.rotation).astype(np.float64)).T
+        angles = column("rotation", node.rotation).astype(np.float64)
+        ci, cj, ch = np.cos(angles).T
+        si, sj, sh = np.sin(angles).T
         cc, cs, sc, ss = ci * ch, ci * sh, si * ch, si * sh
         out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = cj * ch, sj * sc - cs, sj * cc + ss
         out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = cj * sh, sj * ss + cc, sj * cs - sc
         out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -sj, cj * si, cj * ci
     out[:, :3, :3] *= column("scale", node.scale)[:, None, :]
-    out[:, :3, 3] = loc
+    out[:, :3, 3] = column("location", node.location)
     out[:, 3, 3] = 1.0
     return out
 
