@@ -1,15 +1,23 @@
 """A batch of physics envs: the share of a batch step that MuJoCo's stepping and the pose writing take, and memory per env.
 
     python benchmarks/physics_batch.py [--spec SPEC] [--envs 256] [--steps 40] [--resolution 8] [--mode state|rendered|both]
+                                       [--copies] [--spec-camera]
     python benchmarks/physics_batch.py --kernels     # N MjData stepped: a Python loop, a thread pool, mujoco.rollout
 
 "physics" is the time in MuJoCo's stepping (the controls written, frame_skip ``mj_step``,
 ``mj_rnePostConstraint``, the blow-up check), whether a batch steps each lane's MjData from its
 own generated step or all of them in one call; "poses" is the time writing every env's MuJoCo
-poses into its copy of the scene before a render. Both are timed by wrapping the functions that do
+poses into the scene: into each env's copy of the model's objects, and, where the bodies are drawn
+as instances, composing and writing every instancer's transforms (the whole of ``InstancedCopies.write``,
+the spec's own instanced objects included). Both are timed by wrapping the functions that do
 them, around a batch stepped with random actions (seeded). Memory per env is the growth of the
 process's RSS from before the batch is made to after its steps, divided by N: an upper bound, as
 it includes what the batch builds once (the Blender scene).
+
+``--copies`` renders with every object copied per env, its poses written copy by copy (the path
+before the model's bodies were instanced: before/after figures). ``--spec-camera`` replaces an
+observation camera of the model that moves (HalfCheetah's ``track``, which a batch refuses) by a
+fixed camera of the spec's own, from the side.
 """
 
 from __future__ import annotations
@@ -72,24 +80,42 @@ def instrument(physics: Timer, poses: Timer) -> None:
     if batch is not None:
         batch.BatchSimulation.advance = physics.wrap(batch.BatchSimulation.advance)  # type: ignore[method-assign]
     batched.BatchedVectorEnv._pose_copies = poses.wrap(batched.BatchedVectorEnv._pose_copies)  # type: ignore[method-assign]
+    try:
+        from visualenv.render.blender import instances  # the instanced bodies' poses, where this version of the code has them
+    except ImportError:
+        return
+    instances.InstancedCopies.write = poses.wrap(instances.InstancedCopies.write)  # type: ignore[method-assign]
 
 
-def spec_at(resolution: int, spec: Path, folder: str) -> Path:
+#: --spec-camera: a fixed camera from the side, for a spec whose observation camera is the model's moving one
+SIDE_CAMERA = "scene:\n  objects:\n    BenchSide: {camera: perspective, location: [0, -4, 0.6], rotation: [1.5708, 0, 0], lens: 30}\n"
+
+
+def spec_at(resolution: int, spec: Path, folder: str, spec_camera: bool = False) -> Path:
     """A copy of the spec whose observation is resolution x resolution (its model must be named absolutely or as package:)."""
     text = spec.read_text(encoding="utf-8")
     text = re.sub(r"resolution: \[\d+, \d+\]", f"resolution: [{resolution}, {resolution}]", text)
+    if spec_camera:
+        if re.search(r"^scene:", text, re.M):
+            raise SystemExit("--spec-camera: the spec has a scene section of its own; give it a camera there")
+        text = re.sub(r"observation: \{camera: \w+", "observation: {camera: BenchSide", text) + SIDE_CAMERA
     out = Path(folder) / spec.name
     out.write_text(text, encoding="utf-8")
     return out
 
 
-def measure(spec: Path, n: int, steps: int, rendered: bool) -> None:
+def measure(spec: Path, n: int, steps: int, rendered: bool, copies: bool = False) -> None:
     from visualenv.env.batched import BatchedVectorEnv
 
     physics, poses = Timer(), Timer()
     instrument(physics, poses)
     before = rss_mb()
     env = BatchedVectorEnv(spec, n, render=rendered)
+    if rendered and copies:
+        from visualenv.render.blender.batched import BatchedBlenderRenderer
+
+        plan = env.program.render_plan().with_options(env._renderer_options)
+        env._renderer = BatchedBlenderRenderer(plan, env._renderer_options, num_envs=n, instanced=False)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     space = env.action_space
@@ -111,7 +137,7 @@ def measure(spec: Path, n: int, steps: int, rendered: bool) -> None:
     step_ms = total / steps * 1e3
     phys_ms, pose_ms = physics.seconds / steps * 1e3, poses.seconds / steps * 1e3
     share = (phys_ms + pose_ms) / step_ms * 100
-    kind = "rendered" if rendered else "state-only"
+    kind = ("rendered, copies" if copies else "rendered") if rendered else "state-only"
     print(f"{spec.name} {kind} N={n}: batch step {step_ms:.2f} ms ({n / total * steps:.0f} env-steps/s); physics {phys_ms:.2f} ms, "
           f"poses {pose_ms:.2f} ms: {share:.1f} % of the step; RSS +{after - before:.0f} MB = {(after - before) / n:.2f} MB/env", flush=True)
 
@@ -184,16 +210,18 @@ def main() -> None:
     parser.add_argument("--resolution", type=int, default=8, help="the rendered batch's observation size (square)")
     parser.add_argument("--mode", choices=("state", "rendered", "both"), default="both")
     parser.add_argument("--kernels", action="store_true", help="only compare ways of stepping N MjData (N = 16, 64, 256)")
+    parser.add_argument("--copies", action="store_true", help="rendered: copy every object per env (the path before instanced bodies)")
+    parser.add_argument("--spec-camera", action="store_true", help="observe through a fixed camera of the spec's own (for a moving model camera)")
     args = parser.parse_args()
     if args.kernels:
         kernels(args.spec, [16, 64, 256], 1.0)
         return
     with tempfile.TemporaryDirectory() as folder:
-        spec = spec_at(args.resolution, args.spec, folder)
+        spec = spec_at(args.resolution, args.spec, folder, args.spec_camera)
         if args.mode in ("state", "both"):
             measure(spec, args.envs, args.steps, rendered=False)
         if args.mode in ("rendered", "both"):
-            measure(spec, args.envs, args.steps, rendered=True)
+            measure(spec, args.envs, args.steps, rendered=True, copies=args.copies)
 
 
 if __name__ == "__main__":

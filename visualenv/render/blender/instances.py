@@ -12,6 +12,15 @@ XYZ rotation, scale, down the chain of parents, then the env's grid place) and
 writes each attribute with one ``foreach_set``: no Python per env or per
 copied object. Static meshes (the floor) are instanced too, posed once.
 
+A MuJoCo model's bodies (:mod:`mjcf`: an empty per moving body, its geoms
+under it in quaternion mode) are instanced the same way: a body's location and
+rotation are its row of every env's ``xpos`` and ``xquat``, handed over as two
+``(N, nbody, ...)`` arrays, so a batch's pose writing is a few numpy
+operations and one ``foreach_set`` per geom, whatever N. The matrices are
+composed in float32 as Blender composes an object's (its quaternion normalised
+in float32, ``mul_m4_m4m4``'s order of sums, the anchor's place included), so
+an instance stands exactly where the copied object stood: the same pixels.
+
 An env's visibility is its point's selection (a hidden instance is left out),
 and a bound colour an instance attribute that the mesh's own materials read
 with an Attribute node (type Instancer). The instances stay instances:
@@ -20,15 +29,17 @@ step (about four times the cost); Cycles' persistent data keeps them.
 
 What numpy cannot compute so stays a copy (:func:`removable`): lights (a light's
 strength and colour are its own data, not an instance attribute), moving
-cameras, objects with constraints, animation, deltas, non-XYZ rotation modes or
-non-object parents, aimed objects, objects whose texture is bound, and the
-parents of any copied object (the copy needs its parent).
+cameras, objects with constraints, animation, deltas, rotation modes other than
+XYZ and quaternion (or a bound rotation in quaternion mode), non-object parents,
+aimed objects, objects whose texture is bound, a MuJoCo body whose location or
+rotation is also bound, and the parents of any copied object (the copy needs its
+parent).
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Iterable, Sequence
+from typing import Any, Collection, Iterable, Mapping, Sequence
 
 import bpy
 import numpy as np
@@ -42,10 +53,19 @@ COMPUTED = frozenset({"location", "rotation", "scale", "visible", "color"})
 TRANSFORM, VISIBLE, COLOR = "visualenv_transform", "visualenv_visible", "visualenv_color"
 
 
-def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int]) -> bool:
-    """Whether numpy can compute this object's world matrix from its bindings, as Blender would (ancestors too)."""
+def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Collection[int] = ()) -> bool:
+    """Whether numpy can compute this object's world matrix from its bindings, as Blender would (ancestors too).
+
+    An object in `posed` (a MuJoCo body's) takes its location and rotation from MuJoCo's poses, so nothing may bind
+    them; a quaternion-rotated object (the MJCF geoms and bodies) is computable while nothing binds its rotation.
+    """
     while obj is not None:
-        if obj.type not in ("MESH", "EMPTY") or obj.constraints or obj.rotation_mode != "XYZ" or obj.parent_type != "OBJECT":
+        if obj.type not in ("MESH", "EMPTY") or obj.constraints or obj.parent_type != "OBJECT":
+            return False
+        props = bound.get(obj.as_pointer(), set())
+        if obj.rotation_mode not in ("XYZ", "QUATERNION") or (obj.rotation_mode == "QUATERNION" and "rotation" in props):
+            return False
+        if obj.as_pointer() in posed and props & {"location", "rotation"}:
             return False
         animation = obj.animation_data
         if animation is not None and (animation.action is not None or len(animation.drivers) or len(animation.nla_tracks)):
@@ -58,11 +78,13 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int]) -> bool:
     return True
 
 
-def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects: dict[str, Any], aimed: Iterable[str]) -> set[int]:
+def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects: dict[str, Any], aimed: Iterable[str],
+              posed: Collection[int] = ()) -> set[int]:
     """Pointers of the objects that need no copies, with only such objects (or objects never copied) under them:
     meshes and empties whose world matrices numpy computes (:func:`_computable`; the meshes are drawn as instances,
     moving or not: every object in the scene adds to Blender's update of a moved one, about 10 us each), and cameras
-    that nothing moves (a batch renders through its own tiles camera; a moving camera's copies place their anchors)."""
+    that nothing moves (a batch renders through its own tiles camera; a moving camera's copies place their anchors).
+    `posed`: pointers of the objects that take MuJoCo bodies' poses (:class:`InstancedCopies` computes them too)."""
     bound: dict[int, set[str]] = {}
     for target in bindings:
         if target.object in objects:
@@ -73,7 +95,7 @@ def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects:
     def dynamic(obj: Any) -> bool:
         return any(o.as_pointer() in bound for o in _chain(obj))
 
-    candidates = {o.as_pointer(): o for o in copied if _computable(o, bound, aimed_ptrs)
+    candidates = {o.as_pointer(): o for o in copied if _computable(o, bound, aimed_ptrs, posed)
                   or (o.type == "CAMERA" and not dynamic(o) and o.as_pointer() not in aimed_ptrs)}
     changed = True
     while changed:  # drop any candidate with a copied object under it that is not removable
@@ -98,13 +120,15 @@ class _Node:
 
     obj: Any
     parent: int | None  # index of its parent's node; None: it hangs from its copy's anchor
-    parent_inverse: np.ndarray
+    parent_inverse: np.ndarray | None  # None: the identity
     location: np.ndarray
-    rotation: np.ndarray
+    rotation: np.ndarray  # Euler XYZ, or a quaternion (w, x, y, z) for an object in quaternion mode
     scale: np.ndarray
     slices: dict[str, slice] = field(default_factory=dict)  # property -> its values in the binding table
-    static: bool = False  # no binding moves it or its ancestors: its world matrix is computed once
-    world: np.ndarray | None = None  # a static node's world matrices (relative to its anchor)
+    body: int | None = None  # the MuJoCo body whose pose (a row of xpos and xquat) is its location and rotation
+    basis: np.ndarray | None = None  # its matrix_basis ``(1, 4, 4)`` where no binding moves it (a body's: until poses come)
+    static: bool = False  # no binding or pose moves it or its ancestors: its world matrix is computed once
+    world: np.ndarray | None = None  # a static node's world matrices, its anchor's place included (recomputed when anchors move)
 
 
 @dataclass
@@ -123,8 +147,10 @@ class InstancedCopies:
     """The batch's removable objects (:func:`removable`), drawn by one instancer per mesh; :meth:`write` poses every env."""
 
     def __init__(self, collection: Any, anchor: Any, originals: Sequence[Any], bindings: Sequence[BindingTarget],
-                 objects: dict[str, Any], num_envs: int) -> None:
+                 objects: dict[str, Any], num_envs: int, bodies: Mapping[int, int] | None = None) -> None:
+        """`bodies`: the MuJoCo body index of each object (by pointer) that takes a body's pose (:meth:`write`'s `poses`)."""
         self.num_envs = num_envs
+        bodies = bodies or {}
         originals = [o for o in originals if o.type in ("MESH", "EMPTY")]  # the cameras removed need no instances
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         starts: dict[tuple[str, str], slice] = {}
@@ -144,9 +170,21 @@ class InstancedCopies:
             name = names.get(o.as_pointer(), "")
             slices = {prop: s for (n, prop), s in starts.items() if n == name and prop in COMPUTED}
             parent = index.get(o.parent.as_pointer()) if o.parent is not None else None
-            static = not ({"location", "rotation", "scale"} & set(slices)) and (parent is None or self._nodes[parent].static)
-            self._nodes.append(_Node(o, parent, _matrix(o.matrix_parent_inverse) if parent is not None else np.eye(4),
-                                     np.array(o.location), np.array(o.rotation_euler), np.array(o.scale), slices, static))
+            body = bodies.get(o.as_pointer())
+            static = (not ({"location", "rotation", "scale"} & set(slices)) and body is None
+                      and (parent is None or self._nodes[parent].static))
+            rotation = o.rotation_quaternion if o.rotation_mode == "QUATERNION" else o.rotation_euler
+            inverse = _matrix(o.matrix_parent_inverse) if parent is not None else None
+            node = _Node(o, parent, None if inverse is None or np.array_equal(inverse, np.eye(4)) else inverse,
+                         np.array(o.location), np.array(rotation), np.array(o.scale), slices, body=body, static=static)
+            if not {"location", "rotation", "scale"} & set(slices):
+                node.basis = _basis(node, np.zeros((1, self.size)), 1)
+            self._nodes.append(node)
+        self._posed = [i for i, node in enumerate(self._nodes) if node.body is not None]
+        self._pose_columns = np.array([self._nodes[i].body for i in self._posed], dtype=int)
+        self._anchors: np.ndarray | None = None  # the anchors' world matrices the static nodes' world matrices were computed with
+        #: whether any object takes a MuJoCo body's pose
+        self.posed = bool(self._posed)
         self._instancers: list[_Instancer] = []
         for obj in originals:
             if obj.type == "MESH":
@@ -185,29 +223,48 @@ class InstancedCopies:
     def _node_of(self, obj: Any) -> int:
         return next(i for i, n in enumerate(self._nodes) if n.obj == obj)
 
-    def write(self, values: np.ndarray, offsets: np.ndarray) -> None:
+    def write(self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Pose every env's instances: `values` the binding table ``(N, size)``, `offsets` each env's anchor, a
-        translation ``(N, 3)`` or a whole matrix ``(N, 4, 4)``.
+        translation ``(N, 3)`` or a whole matrix ``(N, 4, 4)``, `poses` every env's MuJoCo body poses, ``xpos``
+        ``(N, nbody, 3)`` and ``xquat`` ``(N, nbody, 4)`` (None: the bodies stay where they were built).
 
         An attribute is written (and its mesh tagged for the depsgraph) only when it changed.
         """
         n = self.num_envs
+        anchors = offsets.astype(np.float32)
+        if self._anchors is None or anchors.shape != self._anchors.shape or not np.array_equal(anchors, self._anchors):
+            self._anchors = anchors  # the anchors moved: every world matrix with them
+            for node in self._nodes:
+                node.world = None
+        bases: dict[int, np.ndarray] = {}
+        if poses is not None and self._posed:  # every body's basis for every env: a few numpy operations for all of them
+            rotations = _quaternion_matrices(poses[1][:, self._pose_columns].reshape(-1, 4)).reshape(n, len(self._posed), 3, 3)
+            locations = poses[0][:, self._pose_columns].astype(np.float32)
+            for j, i in enumerate(self._posed):
+                basis = np.zeros((n, 4, 4), dtype=np.float32)
+                basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(np.float32)  # rotation @ scale, as Blender's
+                basis[:, :3, 3] = locations[:, j]
+                basis[:, 3, 3] = 1.0
+                bases[i] = basis
         worlds: list[np.ndarray] = []
-        for node in self._nodes:
+        for i, node in enumerate(self._nodes):
             if node.world is not None:
                 worlds.append(node.world)
                 continue
-            local = node.parent_inverse @ _basis(node, values, n)
-            worlds.append(local if node.parent is None else worlds[node.parent] @ local)
-            if node.static:
-                node.world = worlds[-1]
-        for inst in self._instancers:
-            if offsets.ndim == 3:
-                world = offsets @ worlds[inst.node]
+            given = bases.get(i, node.basis)
+            basis = given if given is not None else _basis(node, values, n)
+            # as Blender composes it: (parent's world @ parent inverse) @ basis, the anchor's place included (rounding with it)
+            if node.parent is None and anchors.ndim == 2:  # an anchor that only translates: the basis shifted, to the bit
+                world = np.repeat(basis, n, axis=0) if len(basis) < n else basis.copy()
+                world[:, :3, 3] += anchors
             else:
-                world = worlds[inst.node].copy()
-                world[:, :3, 3] += offsets
-            changed = _write(inst, TRANSFORM, np.ascontiguousarray(world.astype(np.float32).transpose(0, 2, 1)))  # Blender's matrices are column-major
+                parent = anchors if node.parent is None else worlds[node.parent]
+                world = _mul(parent if node.parent_inverse is None else _mul(parent, node.parent_inverse), basis)
+            worlds.append(world)
+            if node.static:
+                node.world = world
+        for inst in self._instancers:
+            changed = _write(inst, TRANSFORM, np.ascontiguousarray(worlds[inst.node].transpose(0, 2, 1)))  # Blender's matrices are column-major
             if inst.selected:
                 shown = np.full(n, bool(inst.visible))
                 for part in inst.visible:
@@ -232,28 +289,56 @@ def _write(inst: _Instancer, name: str, array: np.ndarray) -> bool:
 
 
 def _matrix(m: Any) -> np.ndarray:
-    return np.array([list(row) for row in m], dtype=np.float64)
+    return np.array([list(row) for row in m], dtype=np.float32)
+
+
+def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """``a @ b`` of 4x4 float32 matrices (stacks broadcast), summed as Blender's ``mul_m4_m4m4`` sums (its SSE order):
+    each world matrix rounds as Blender's own would, so an instance stands where the copied object stood, to the bit."""
+    terms = a[..., :, :, None] * b[..., None, :, :]  # [..., i, k, j] = a[i, k] * b[k, j]
+    return (terms[..., 0, :] + terms[..., 1, :]) + (terms[..., 2, :] + terms[..., 3, :])
 
 
 def _basis(node: _Node, values: np.ndarray, n: int) -> np.ndarray:
-    """Each env's ``matrix_basis`` of the node: translation @ Euler XYZ rotation @ scale, ``(N, 4, 4)``."""
+    """Each env's ``matrix_basis`` of the node: translation @ rotation (Euler XYZ or quaternion) @ scale, ``(N, 4, 4)``.
+    In float32 from float32 values, as Blender computes it from an object's (float32) properties (``BKE_object_to_mat4``)."""
     def column(prop: str, fixed: np.ndarray) -> np.ndarray:
         part = node.slices.get(prop)
         if part is None:
-            return np.broadcast_to(fixed, (n, 3))
-        return np.broadcast_to(values[:, part], (n, 3))  # a scale of one value scales every axis
+            return np.broadcast_to(fixed.astype(np.float32), (n, fixed.size))
+        return np.broadcast_to(values[:, part].astype(np.float32), (n, 3))  # a scale of one value scales every axis
 
-    loc, rot, scale = column("location", node.location), column("rotation", node.rotation), column("scale", node.scale)
-    cx, cy, cz = np.cos(rot).T
-    sx, sy, sz = np.sin(rot).T
-    out = np.zeros((n, 4, 4))
-    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = cy * cz, sx * sy * cz - cx * sz, cx * sy * cz + sx * sz
-    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = cy * sz, sx * sy * sz + cx * cz, cx * sy * sz - sx * cz
-    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -sy, sx * cy, cx * cy
-    out[:, :3, :3] *= scale[:, None, :]
-    out[:, :3, 3] = loc
+    out = np.zeros((n, 4, 4), dtype=np.float32)
+    if node.rotation.size == 4:  # quaternion mode: nothing binds its rotation (_computable)
+        out[:, :3, :3] = _quaternion_matrices(node.rotation[None])
+    else:  # Blender's eulO_to_mat3 for XYZ: in double from the float angles
+        angles = column("rotation", node.rotation).astype(np.float64)
+        ci, cj, ch = np.cos(angles).T
+        si, sj, sh = np.sin(angles).T
+        cc, cs, sc, ss = ci * ch, ci * sh, si * ch, si * sh
+        out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = cj * ch, sj * sc - cs, sj * cc + ss
+        out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = cj * sh, sj * ss + cc, sj * cs - sc
+        out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -sj, cj * si, cj * ci
+    out[:, :3, :3] *= column("scale", node.scale)[:, None, :]
+    out[:, :3, 3] = column("location", node.location)
     out[:, 3, 3] = 1.0
     return out
+
+
+def _quaternion_matrices(quats: np.ndarray) -> np.ndarray:
+    """Rotation matrices ``(M, 3, 3)`` of quaternions ``(M, 4)`` (w, x, y, z, MuJoCo's and Blender's order) as Blender
+    makes them from an object's float32 quaternion: normalised in float32, then its ``quat_to_mat3`` in double."""
+    q = quats.astype(np.float32)
+    dot = ((q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1]) + q[:, 2] * q[:, 2]) + q[:, 3] * q[:, 3]
+    length = np.sqrt(dot)
+    q = q * (np.float32(1.0) / np.where(length == 0, np.float32(1.0), length))[:, None]
+    q0, q1, q2, q3 = (np.sqrt(2.0) * q.astype(np.float64)).T
+    qda, qdb, qdc, qaa, qab, qac, qbb, qbc, qcc = q0 * q1, q0 * q2, q0 * q3, q1 * q1, q1 * q2, q1 * q3, q2 * q2, q2 * q3, q3 * q3
+    out = np.empty((len(q), 3, 3))
+    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = 1.0 - qbb - qcc, -qdc + qab, qdb + qac
+    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = qdc + qab, 1.0 - qaa - qcc, -qda + qbc
+    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -qdb + qac, qda + qbc, 1.0 - qaa - qbb
+    return out.astype(np.float32)
 
 
 def _node_group(name: str, obj: Any, selected: bool) -> Any:

@@ -45,6 +45,21 @@ class PoseWriter:
         return PoseWriter([(i, objects[key]) for (i, _), key in zip(self.bodies, bodies)], [objects[k] for k in cameras],
                           [objects[k] for k in lights], self.keys)
 
+    def without(self, removed: set[int], keep_cameras: bool) -> "PoseWriter":
+        """The same writer less the objects in `removed` (pointers: in a batch, objects drawn as instances, or the
+        originals that another copy shares), cameras kept where `keep_cameras`."""
+        bodies = [j for j, (_, e) in enumerate(self.bodies) if e.as_pointer() not in removed]
+        cameras = [j for j, c in enumerate(self.cameras) if keep_cameras or c.as_pointer() not in removed]
+        lights = [j for j, light in enumerate(self.lights) if light.as_pointer() not in removed]
+        keys = tuple([names[j] for j in kept] if names else [] for names, kept in zip(self.keys, (bodies, cameras, lights)))
+        return PoseWriter([self.bodies[j] for j in bodies], [self.cameras[j] for j in cameras], [self.lights[j] for j in lights],
+                          keys)  # type: ignore[arg-type]
+
+    @property
+    def empty(self) -> bool:
+        """Whether it writes nothing."""
+        return not (self.bodies or self.cameras or self.lights)
+
     def write(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
               light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
         if self.bodies:
