@@ -517,3 +517,54 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
         window = (slice(row - 4, row + 5), slice(col - 4, col + 5))
         counts = [int(colours[c][window].sum()) for c in pair]
         assert min(counts) >= 4, (name, counts)  # both of the texture's colours, not one flat colour
+
+
+SKYBOX = """\
+<mujoco>
+  <asset>{sky}</asset>
+  <worldbody>
+    <light directional="true" pos="0 -2 3" dir="0 0.5 -1"/>
+    <geom name="block" type="box" size="0.5 0.5 0.5" rgba="0.8 0.3 0.2 1"/>
+    <camera name="level" pos="0 -3 0" xyaxes="1 0 0 0 0 1"/>
+  </worldbody>
+</mujoco>
+"""
+
+
+def skybox_frame(tmp_path: Path, *, sky: bool, world: str = "") -> np.ndarray:
+    (tmp_path / "m.xml").write_text(SKYBOX.format(sky='<texture type="skybox" builtin="gradient" rgb1="1 1 1" rgb2="0 0 0" '
+                                                      'width="32" height="32"/>' if sky else ""), encoding="utf-8")
+    spec = tmp_path / "s.yaml"
+    spec.write_text(f"id: Sky-v0\nphysics: {{model: m.xml}}\n{world}observation: {{camera: level, resolution: [24, 24], color: rgb}}\n"
+                    "actions: {discrete: [{}]}\n", encoding="utf-8")
+    env = VisualEnv(spec)
+    try:
+        return env.reset(seed=0)[0].astype(int)
+    finally:
+        env.close()
+
+
+def test_the_models_skybox_shows_behind_it_and_lights_nothing(tmp_path: Path) -> None:
+    """MuJoCo draws a skybox behind the model, unlit and lighting nothing: rgb1 above the horizon, rgb2 below.
+    A batch shows it behind every tile; a world the spec declares replaces it."""
+    with_sky, without = skybox_frame(tmp_path, sky=True), skybox_frame(tmp_path, sky=False)
+    rows = with_sky.mean(axis=(1, 2))
+    assert rows[:3].mean() > rows[-3:].mean() + 60, rows  # the camera looks level: brighter above than below
+    assert np.ptp(without.mean(axis=(1, 2))[[0, 1, 2, -3, -2, -1]]) < 5  # without a skybox: the plain default world
+    block = (without[..., 0] > without[..., 2] + 40) & (with_sky[..., 0] > with_sky[..., 2] + 40)
+    inner = block[1:-1, 1:-1] & block[:-2, 1:-1] & block[2:, 1:-1] & block[1:-1, :-2] & block[1:-1, 2:]  # off the edges
+    assert inner.sum() >= 30, inner.sum()
+    diff = np.abs(with_sky[1:-1, 1:-1][inner] - without[1:-1, 1:-1][inner])
+    assert diff.max() <= 1, diff.max()  # the block lit as without the skybox (the same pixels, measured)
+    from visualenv.env.batched import BatchedVectorEnv
+
+    skybox_frame(tmp_path, sky=True)  # the files again, with the skybox
+    batch = BatchedVectorEnv(tmp_path / "s.yaml", 2)
+    try:
+        tiles = batch.reset(seed=0)[0].astype(int)
+    finally:
+        batch.close()
+    assert np.abs(tiles - with_sky[None]).max() <= 8  # each tile of a batch: the sky behind it as in one env
+    declared = skybox_frame(tmp_path, sky=True, world="scene: {world: {color: [0.2, 0.2, 0.2]}}\n")
+    corners = declared[[0, 0, -1, -1], [0, -1, 0, -1]]
+    assert np.ptp(corners) < 5, corners  # the spec's world wins: one colour above and below

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from visualenv.physics.texcoords import cube_uv, planar_uv
+from visualenv.physics.texcoords import cube_to_equirect, cube_uv, planar_uv
 
 
 def test_a_2d_texture_follows_mujocos_texgen_planes() -> None:
@@ -50,3 +50,32 @@ def test_one_cube_face_for_all_six_and_the_edges_stay_inside_the_face() -> None:
     """A cube texture of one square image repeats it on every face; corners keep half a texel from the face's edge."""
     uv = cube_uv(unit_cube_face(2, 1.0), np.array([0]), np.array([0, 1, 2, 3]), faces=1, texels=4)
     assert uv.min() == pytest.approx(0.125) and uv.max() == pytest.approx(0.875)
+
+
+def test_a_skybox_becomes_an_equirectangular_sky_with_the_cube_maps_plus_y_up() -> None:
+    """Six faces of one grey level each: each world direction shows the face MuJoCo's z-up skybox puts there."""
+    texels = 4
+    levels = np.arange(6) / 10.0  # face k (MuJoCo's order +X, -X, +Y, -Y, +Z, -Z) is k / 10
+    top_first = np.repeat(levels, texels)[:, None, None] * np.ones((6 * texels, texels, 4))
+    sky = cube_to_equirect(top_first[::-1], width=64)  # the texture as GeomShape holds it: bottom row first
+    assert sky.shape == (32, 64, 4)
+    level = np.round(sky[..., 0] * 10).astype(int)  # the face's index
+    assert set(level[-1]) == {2}  # zenith (top row, world +z): the cube's +Y, where a gradient puts rgb1
+    assert set(level[0]) == {3}  # nadir: -Y
+    # on the horizon, Blender's azimuth atan2(y, x) is 0 at the centre column and grows leftwards
+    horizon = level[16]
+    assert horizon[32] == 0  # world +x: +X
+    assert horizon[16] == 5  # world +y: -Z
+    assert horizon[48] == 4  # world -y: +Z
+    assert horizon[0] == horizon[63] == 1  # world -x: -X
+
+
+def test_a_gradient_skybox_is_rgb1_above_and_rgb2_below() -> None:
+    mujoco = pytest.importorskip("mujoco")
+    from visualenv.physics.scene import _pixels
+
+    model = mujoco.MjModel.from_xml_string('<mujoco><asset><texture type="skybox" builtin="gradient" rgb1="1 1 1" '
+                                           'rgb2="0 0 0" width="16" height="16"/></asset><worldbody/></mujoco>')
+    level = cube_to_equirect(_pixels(model, 0))[..., 0].mean(axis=1)  # by row, bottom first
+    assert level[-1] > 0.9 and level[0] < 0.1
+    assert np.all(np.diff(level) > -0.03)  # brighter upwards all the way (nearest texels: steps, no dips)

@@ -7,7 +7,8 @@ shape fixed in its body's frame. Geoms in groups MuJoCo's viewer hides by
 default (3 and up) are left out; a height field (or any type a renderer cannot
 draw) is a :class:`~visualenv.physics.model.PhysicsError` naming the geom. A
 geom's 2-D or cube texture comes as pixels with the numbers MuJoCo's renderer
-maps it by (:mod:`visualenv.physics.texcoords`).
+maps it by (:mod:`visualenv.physics.texcoords`); the model's skybox comes as the
+equirectangular image a renderer shows behind the model.
 """
 
 from __future__ import annotations
@@ -18,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.physics.model import PhysicsError, PhysicsModel, mujoco_module
+from visualenv.physics.texcoords import cube_to_equirect
 
 #: MuJoCo's geom types (mjtGeom) a renderer draws
 GEOM_KINDS = {0: "plane", 2: "sphere", 3: "capsule", 4: "ellipsoid", 5: "cylinder", 6: "box", 7: "mesh"}
@@ -77,6 +79,9 @@ class PhysicsScene:
     geoms: tuple[GeomShape, ...]
     lights: tuple[LightInfo, ...]
     cameras: tuple[CameraInfo, ...]
+    #: the model's skybox as an equirectangular image (h, w, 4), bottom row first, z up (texcoords.cube_to_equirect):
+    #: what MuJoCo draws behind the model and lights nothing with; None without a skybox texture
+    sky: np.ndarray | None = None
 
 
 def physics_scene(physics: PhysicsModel) -> PhysicsScene:
@@ -105,7 +110,9 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
     cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()),
                                tuple(map(float, data.cam_xpos[i])), _quat(mujoco, data.cam_xmat[i]))  # type: ignore[arg-type]
                     for i in range(model.ncam))
-    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras)
+    skyboxes = [t for t in range(model.ntex) if int(model.tex_type[t]) == 2]  # mjTEXTURE_SKYBOX
+    sky = cube_to_equirect(_pixels(model, skyboxes[0])) if skyboxes else None
+    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky)
 
 
 def _quat(mujoco: Any, mat: np.ndarray) -> tuple[float, ...]:

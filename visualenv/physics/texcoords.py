@@ -67,3 +67,43 @@ def cube_uv(points: np.ndarray, loop_starts: np.ndarray, loop_vertex: np.ndarray
     t = np.clip(0.5 * (tc + 1.0), inset, 1.0 - inset)
     band = face if faces == 6 else np.zeros_like(face)
     return np.stack([s, 1.0 - (band + t) / faces], axis=1)
+
+
+#: the most texels across an equirectangular sky made from a cube map (4 per cube texel, up to this)
+SKY_WIDTH = 1024
+
+
+def cube_to_equirect(pixels: np.ndarray, *, width: int | None = None) -> np.ndarray:
+    """A skybox cube map as the equirectangular image Blender's Environment Texture maps (z up), bottom row first.
+
+    `pixels` is the cube texture as :class:`~visualenv.physics.scene.GeomShape` holds
+    one: six square faces stacked from the top (MuJoCo's order), or one face for all
+    six, bottom row first. MuJoCo draws its skybox turned so the cube map's +Y (where
+    a gradient puts ``rgb1``) is the world's +Z: a direction ``(x, y, z)`` samples the
+    cube map at ``(x, z, -y)``. Blender's equirectangular mapping puts azimuth
+    ``atan2(y, x) = 0`` at the image's centre column and the zenith at its top row.
+    Texels are taken nearest (Blender interpolates the image it is given).
+    """
+    texels = pixels.shape[1]
+    faces = pixels.shape[0] // texels
+    width = width or min(4 * texels, SKY_WIDTH)
+    height = max(width // 2, 1)
+    u = (np.arange(width) + 0.5) / width
+    v = (np.arange(height) + 0.5) / height
+    azimuth = (0.5 - u)[None, :] * 2.0 * np.pi
+    elevation = (v - 0.5)[:, None] * np.pi
+    d = np.stack(np.broadcast_arrays(np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
+                                     np.sin(elevation)), axis=-1).reshape(-1, 3)
+    tex = np.stack([d[:, 0], d[:, 2], -d[:, 1]], axis=1)
+    axis = np.argmax(np.abs(tex), axis=1)
+    face = 2 * axis + (tex[np.arange(len(tex)), axis] < 0)
+    table = np.array([(a, sg, sa, ss, ta, ts) for a, sg, (sa, ss), (ta, ts) in CUBE_FACES])[face]
+    rows = np.arange(len(tex))
+    major = np.maximum(np.abs(tex[rows, axis]), 1e-9)
+    sc = tex[rows, table[:, 2].astype(int)] * table[:, 3] / major
+    tc = tex[rows, table[:, 4].astype(int)] * table[:, 5] / major
+    col = np.clip((0.5 * (sc + 1.0) * texels).astype(int), 0, texels - 1)
+    row = np.clip((0.5 * (tc + 1.0) * texels).astype(int), 0, texels - 1)  # from the face's top row
+    band = face if faces == 6 else np.zeros_like(face)
+    top_first = pixels[::-1]
+    return top_first[band * texels + row, col].reshape(height, width, pixels.shape[2]).astype(np.float32)

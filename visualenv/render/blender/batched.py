@@ -45,6 +45,7 @@ from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
 from visualenv.render.blender.instances import InstancedCopies, removable
+from visualenv.render.blender.materials import SKYBOX
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
 from visualenv.render.blender.scene import BuiltScene, aim
 from visualenv.spec.bindables import BINDABLES
@@ -694,9 +695,10 @@ def _aim_copy(copy: _Copy) -> None:
 
 
 def _one_colour(world: Any) -> bool:
-    """Whether a world is one colour in every direction: no texture node (an image or a procedural sky) in its shader."""
+    """Whether a world lights in one colour from every direction: no texture node (an image or a procedural sky) in
+    its shader, but a model's skybox (seen by camera rays only)."""
     tree = getattr(world, "node_tree", None) if world is not None else None
-    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") for node in tree.nodes)
+    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") and node.name != SKYBOX for node in tree.nodes)
 
 
 def _instanced(values: tuple) -> None:

@@ -23,7 +23,7 @@ from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.physics.scene import GeomShape, PhysicsScene
 from visualenv.physics.texcoords import cube_uv, planar_uv
-from visualenv.render.blender.materials import make_material, tint_image
+from visualenv.render.blender.materials import make_material, show_skybox, tint_image
 from visualenv.spec.models import Material
 
 #: round shapes' segments: enough for smooth silhouettes at observation sizes
@@ -147,6 +147,17 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     moving = [(int(b), empties[int(b)]) for b in scene_data.moving if int(b) in empties]
     keys = ([f"body:{scene_data.body_names[b]}" for b, _ in moving], [c.name for c in scene_data.cameras], [light.name for light in scene_data.lights])
     return PoseWriter(moving, cameras, lights, keys)
+
+
+def show_model_sky(scene_data: PhysicsScene, world: Any) -> None:
+    """The model's skybox behind the scene (seen by the camera, lighting nothing), when it has one."""
+    if scene_data.sky is None or world is None or world.node_tree is None:
+        return
+    h, w = scene_data.sky.shape[:2]
+    image = bpy.data.images.new("mjcf-skybox", w, h, alpha=True)
+    image.pixels.foreach_set(scene_data.sky.reshape(-1))
+    image.pack()
+    show_skybox(world, image)
 
 
 def _texture_image(geom: GeomShape, images: dict[int, Any]) -> Any:

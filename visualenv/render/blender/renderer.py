@@ -20,7 +20,7 @@ from visualenv.render.blender import user_file
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
-from visualenv.render.blender.mjcf import build_physics_objects
+from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
@@ -88,6 +88,8 @@ class BlenderRenderer(Renderer):
             self._poses = None if plan.physics is None else build_physics_objects(
                 plan.physics, built, base_dir=plan.base_dir, source=plan.source,
                 add_light=not plan.physics.lights and not any(o.type == "LIGHT" for o in built.objects.values()))
+            if plan.physics is not None and plan.scene.world is None and not plan.scene.file:  # the spec's world wins
+                show_model_sky(plan.physics, built.scene.world)
             self._check_names(built)
             self._setup(built, settings.threads)
         except BaseException:
