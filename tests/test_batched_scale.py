@@ -102,10 +102,12 @@ def batch_rounds(rounds: int, queue: Any) -> None:
     rounds, and the number of Blender datablocks before the rounds and after each."""
     import gc
 
-    import bpy
     import psutil
 
+    # visualenv's Blender package first: it drops the script folders a process spawned by one that imported bpy
+    # inherits on sys.path, whose `bpy` package would shadow the real module
     from visualenv.render.blender.scene import ID_COLLECTIONS
+    import bpy
 
     spec = SPECS / "goalie.yaml"   # at 100x100: the 16 tiles' image (400x400, 2.6 MB) is one mapping of its own
     process = psutil.Process()
@@ -139,13 +141,19 @@ def test_making_and_closing_batches_does_not_grow_memory():
     once more at 4x4, Blender kept every scene's last frame (the 2.6 MB tiles image) after the scene was removed,
     and these rounds grew 7-40 MB; now 0.3-1.5 MB. In a fresh process, so that earlier tests do not count."""
     import multiprocessing
+    import queue as queue_module
 
     context = multiprocessing.get_context("spawn")
     queue = context.Queue()
     child = context.Process(target=batch_rounds, args=(20, queue))
     child.start()
     try:
-        growth, ids, counts = queue.get(timeout=300)
+        while True:   # until the child reports, or has died (then at once, not at the suite's timeout)
+            try:
+                growth, ids, counts = queue.get(timeout=5)
+                break
+            except queue_module.Empty:
+                assert child.is_alive() or not queue.empty(), f"the rounds' process died (exit code {child.exitcode})"
     finally:
         child.join(timeout=60)
     assert child.exitcode == 0
