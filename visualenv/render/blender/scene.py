@@ -120,8 +120,8 @@ def release_freed_memory() -> None:
 
     Why: glibc keeps freed memory in the arenas of Blender's render threads, so each env or batch made
     and closed in one process left its RSS higher: twenty 16-env Goalie batches (100x100) made and closed
-    in one process grew it by 68 MB. With this and :func:`returnable_large_buffers`, 7-23 MB over seven
-    runs (median 12), levelling off, on the 2-core VM.
+    in one process grew it by 68 MB. With this and :func:`returnable_large_buffers`, 7-40 MB; the rest
+    was the scenes' last frames (:func:`release_render_result`): with those released, 0.7-1.5 MB.
     """
     libc = _glibc()
     if libc is not None:
