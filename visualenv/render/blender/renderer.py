@@ -21,7 +21,7 @@ from visualenv.render.blender.materials import color_writer, depth_material, dep
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
-from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids
+from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, release_render_result, remove_ids
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, Material
@@ -438,10 +438,10 @@ class BlenderRenderer(Renderer):
         self._overrides = {}
         self._views = []
         scene_ids, self._ids = self._ids, []
-        with contextlib.suppress(ReferenceError, AttributeError):
-            # Turning persistent data off frees the render engine Cycles keeps for this scene,
-            # which would otherwise outlive the scene it points to.
-            self._scene.render.use_persistent_data = False
+        with contextlib.suppress(ReferenceError, AttributeError, RuntimeError):
+            # Frees the render engine Cycles keeps for this scene and the last frame Blender
+            # keeps for its name, which would otherwise outlive the scene.
+            release_render_result(self._scene)
         self._scene = None
         remove_ids(scene_ids)
         self._output.close()
