@@ -43,6 +43,15 @@ def cyan(image: np.ndarray) -> np.ndarray:
     return (g > r + 40) & (b > r + 40)
 
 
+def first_frame(spec: Path) -> np.ndarray:
+    """The observation of the spec's env after reset(seed=0), as ints (the env closed)."""
+    env = VisualEnv(spec)
+    try:
+        return env.reset(seed=0)[0].astype(int)
+    finally:
+        env.close()
+
+
 def pole_pixels(tmp_path: Path, angle: float) -> np.ndarray:
     path = tmp_path / "pole.yaml"
     path.write_text(POLE, encoding="utf-8")
@@ -165,17 +174,12 @@ def test_a_planes_builtin_checker_texture_is_drawn(tmp_path: Path) -> None:
     spec = tmp_path / "s.yaml"
     spec.write_text("id: C-v0\nphysics: {model: c.xml}\nobservation: {camera: top, resolution: [32, 32], color: grayscale}\n"
                     "actions: {discrete: [{}]}\n", encoding="utf-8")
-    env = VisualEnv(spec)
-    try:
-        obs, _ = env.reset(seed=0)
-        gray = obs[..., 0].astype(int)
-        bright, dark = (gray > 150).mean(), (gray < 90).mean()
-        assert bright > 0.2 and dark > 0.2, (bright, dark, gray[16])  # squares of both colours, not the plain grey of a material without texture
-        # 4 repeats of a 2x2 checker across the plane: the colour flips along a row several times
-        flips = int(np.count_nonzero(np.diff(gray[16] > 120)))
-        assert flips >= 4, gray[16]
-    finally:
-        env.close()
+    gray = first_frame(spec)[..., 0]
+    bright, dark = (gray > 150).mean(), (gray < 90).mean()
+    assert bright > 0.2 and dark > 0.2, (bright, dark, gray[16])  # squares of both colours, not the plain grey of a material without texture
+    # 4 repeats of a 2x2 checker across the plane: the colour flips along a row several times
+    flips = int(np.count_nonzero(np.diff(gray[16] > 120)))
+    assert flips >= 4, gray[16]
 
 
 def test_a_spec_binds_a_geoms_colour(tmp_path: Path) -> None:
@@ -361,15 +365,10 @@ def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
     spec = tmp_path / "s.yaml"
     spec.write_text("id: M-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0, 0, 0]}}\n"
                     "observation: {camera: front, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
-    env = VisualEnv(spec)
-    try:
-        obs, _ = env.reset(seed=0)
-        r, g, b = (obs[..., i].astype(int) for i in range(3))
-        yellow = (r > b + 40) & (g > b + 40)
-        cols = np.nonzero(yellow)[1]
-        assert yellow.sum() >= 6 and cols.mean() < 12, (yellow.sum(), cols)
-    finally:
-        env.close()
+    r, g, b = (first_frame(spec)[..., i] for i in range(3))
+    yellow = (r > b + 40) & (g > b + 40)
+    cols = np.nonzero(yellow)[1]
+    assert yellow.sum() >= 6 and cols.mean() < 12, (yellow.sum(), cols)
 
 
 def test_an_object_named_as_a_body_stands_for_it(tmp_path: Path) -> None:
@@ -486,12 +485,7 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
     spec = tmp_path / "s.yaml"
     spec.write_text("id: T-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0.5, 0.5, 0.5]}}\n"
                     "observation: {camera: front, resolution: [64, 64], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
-    env = VisualEnv(spec)
-    try:
-        obs, _ = env.reset(seed=0)
-    finally:
-        env.close()
-    r, g, b = (obs[..., i].astype(int) for i in range(3))
+    r, g, b = (first_frame(spec)[..., i] for i in range(3))
     colours = {"red": (r > g + 60) & (r > b + 60), "blue": (b > r + 60) & (b > g + 60), "yellow": (r > b + 60) & (g > b + 60),
                "green": (g > r + 60) & (g > b + 60), "magenta": (r > g + 60) & (b > g + 60), "cyan": (g > r + 60) & (b > r + 60),
                "white": (r > 200) & (g > 200) & (b > 200)}
@@ -537,11 +531,7 @@ def skybox_frame(tmp_path: Path, *, sky: bool, world: str = "") -> np.ndarray:
     spec = tmp_path / "s.yaml"
     spec.write_text(f"id: Sky-v0\nphysics: {{model: m.xml}}\n{world}observation: {{camera: level, resolution: [24, 24], color: rgb}}\n"
                     "actions: {discrete: [{}]}\n", encoding="utf-8")
-    env = VisualEnv(spec)
-    try:
-        return env.reset(seed=0)[0].astype(int)
-    finally:
-        env.close()
+    return first_frame(spec)
 
 
 def test_the_models_skybox_shows_behind_it_and_lights_nothing(tmp_path: Path) -> None:
