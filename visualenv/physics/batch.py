@@ -22,7 +22,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from visualenv.physics.simulation import _FATAL_WARNINGS, Simulation
+from visualenv.physics.simulation import _FATAL_WARNINGS, Simulation, touching
 
 #: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)
 THREADS_VARIABLE = "VISUALENV_PHYSICS_THREADS"
@@ -93,12 +93,8 @@ class BatchSimulation:
         data = self.sims[i].data
         if "time" in self.values:
             self.values["time"][i, 0] = data.time
-        if self.touching:
-            ncon = data.ncon
-            g1, g2 = data.contact.geom1[:ncon], data.contact.geom2[:ncon]
-            for c, column in self.touching.items():
-                a, b = self.contacts[c]
-                column[i] = bool(ncon) and bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
+        for c, column in self.touching.items():
+            column[i] = touching(data, self.contacts[c])
 
     def close(self) -> None:
         if self._pool is not None:

@@ -13,7 +13,7 @@ from __future__ import annotations
 import copy
 import math
 from contextlib import contextmanager
-from typing import Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
@@ -26,6 +26,16 @@ class PhysicsFault(ValueError):
 
 #: MuJoCo warnings that mean the simulation is no longer trustworthy (MuJoCo resets the state on a bad qacc and goes on)
 _FATAL_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
+
+
+def touching(data: Any, pair: tuple[int, int]) -> bool:
+    """Whether the geoms `pair` touch in `data`'s contact list (in either order): a declared contact's value."""
+    ncon = data.ncon
+    if not ncon:
+        return False
+    g1, g2 = data.contact.geom1[:ncon], data.contact.geom2[:ncon]
+    a, b = pair
+    return bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
 
 
 class Simulation:
@@ -146,11 +156,8 @@ class Simulation:
                 view = views[array]
                 out[dst] = data.time if view is None else view[src]
             values = out.tolist()
-            if touches:
-                ncon = data.ncon
-                g1, g2 = data.contact.geom1[:ncon], data.contact.geom2[:ncon]
-                for i, (a, b) in touches:
-                    values[i] = bool(ncon) and bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
+            for i, pair in touches:
+                values[i] = touching(data, pair)
             return tuple(values)
 
         return read
