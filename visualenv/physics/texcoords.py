@@ -36,6 +36,23 @@ CUBE_FACES = (
     (2, 1.0, (0, 1.0), (1, -1.0)),    # +Z
     (2, -1.0, (0, -1.0), (1, -1.0)),  # -Z
 )
+#: CUBE_FACES as rows of numbers: major axis, its sign, s_c's axis and sign, t_c's axis and sign
+_FACE_TABLE = np.array([(a, sg, sa, ss, ta, ts) for a, sg, (sa, ss), (ta, ts) in CUBE_FACES])
+
+
+def _face_of(directions: np.ndarray) -> np.ndarray:
+    """The cube face (MuJoCo's order) each direction (n, 3) points to: its largest component and that one's sign."""
+    axis = np.argmax(np.abs(directions), axis=1)
+    return 2 * axis + (directions[np.arange(len(directions)), axis] < 0)
+
+
+def _on_face(points: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(s_c, t_c), in [-1, 1] on the face, of each point (n, 3) on its cube face (n,), as OpenGL's cube map places it."""
+    table = _FACE_TABLE[face]
+    rows = np.arange(len(points))
+    major = np.maximum(points[rows, table[:, 0].astype(int)] * table[:, 1], 1e-9)
+    return (points[rows, table[:, 2].astype(int)] * table[:, 3] / major,
+            points[rows, table[:, 4].astype(int)] * table[:, 5] / major)
 
 
 def planar_uv(points: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
@@ -54,14 +71,8 @@ def cube_uv(points: np.ndarray, loop_starts: np.ndarray, loop_vertex: np.ndarray
     corners = points[loop_vertex]
     counts = np.diff(np.append(loop_starts, len(loop_vertex)))
     centres = np.add.reduceat(corners, loop_starts, axis=0) / counts[:, None] if len(loop_starts) else np.zeros((0, 3))
-    axis = np.argmax(np.abs(centres), axis=1)
-    negative = centres[np.arange(len(centres)), axis] < 0
-    face = np.repeat(2 * axis + negative, counts)
-    table = np.array([(a, sg, sa, ss, ta, ts) for a, sg, (sa, ss), (ta, ts) in CUBE_FACES])[face]
-    rows = np.arange(len(corners))
-    major = np.maximum(corners[rows, table[:, 0].astype(int)] * table[:, 1], 1e-9)
-    sc = corners[rows, table[:, 2].astype(int)] * table[:, 3] / major
-    tc = corners[rows, table[:, 4].astype(int)] * table[:, 5] / major
+    face = np.repeat(_face_of(centres), counts)
+    sc, tc = _on_face(corners, face)
     inset = 0.5 / max(texels, 1)  # OpenGL clamps to the face's edge texels: stay half a texel inside the face
     s = np.clip(0.5 * (sc + 1.0), inset, 1.0 - inset)
     t = np.clip(0.5 * (tc + 1.0), inset, 1.0 - inset)
@@ -95,13 +106,8 @@ def cube_to_equirect(pixels: np.ndarray, *, width: int | None = None) -> np.ndar
     d = np.stack(np.broadcast_arrays(np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
                                      np.sin(elevation)), axis=-1).reshape(-1, 3)
     tex = np.stack([d[:, 0], d[:, 2], -d[:, 1]], axis=1)
-    axis = np.argmax(np.abs(tex), axis=1)
-    face = 2 * axis + (tex[np.arange(len(tex)), axis] < 0)
-    table = np.array([(a, sg, sa, ss, ta, ts) for a, sg, (sa, ss), (ta, ts) in CUBE_FACES])[face]
-    rows = np.arange(len(tex))
-    major = np.maximum(np.abs(tex[rows, axis]), 1e-9)
-    sc = tex[rows, table[:, 2].astype(int)] * table[:, 3] / major
-    tc = tex[rows, table[:, 4].astype(int)] * table[:, 5] / major
+    face = _face_of(tex)
+    sc, tc = _on_face(tex, face)
     col = np.clip((0.5 * (sc + 1.0) * texels).astype(int), 0, texels - 1)
     row = np.clip((0.5 * (tc + 1.0) * texels).astype(int), 0, texels - 1)  # from the face's top row
     band = face if faces == 6 else np.zeros_like(face)
