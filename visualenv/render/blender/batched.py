@@ -521,9 +521,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._follow(moving_camera, reference)
         elif self._anchors_moved:
             for k, copy in enumerate(self._copies):
-                self._offsets[k] = tuple(self._offset(k))
+                offset = self._offset(k)
+                self._offsets[k] = tuple(offset)
                 if copy.anchor is not None:
-                    copy.anchor.location = self._offset(k)
+                    copy.anchor.location = offset
             self._anchors_moved = False
 
     def _render_tiles(self, view: _View) -> np.ndarray:

@@ -153,23 +153,24 @@ def show_model_sky(scene_data: PhysicsScene, world: Any) -> None:
     """The model's skybox behind the scene (seen by the camera, lighting nothing), when it has one."""
     if scene_data.sky is None or world is None or world.node_tree is None:
         return
-    h, w = scene_data.sky.shape[:2]
-    image = bpy.data.images.new("mjcf-skybox", w, h, alpha=True)
-    image.pixels.foreach_set(scene_data.sky.reshape(-1))
-    image.pack()
-    show_skybox(world, image)
+    show_skybox(world, _packed_image("mjcf-skybox", scene_data.sky))
 
 
 def _texture_image(geom: GeomShape, images: dict[int, Any]) -> Any:
-    """The Blender image of the geom's MuJoCo texture, made once per texture from its pixels (packed: no file)."""
+    """The Blender image of the geom's MuJoCo texture, made once per texture from its pixels."""
     assert geom.texture is not None
     if geom.texture_id not in images:
-        h, w = geom.texture.shape[:2]
-        image = bpy.data.images.new(f"mjcf-texture-{geom.texture_id}", w, h, alpha=True)
-        image.pixels.foreach_set(geom.texture.reshape(-1))
-        image.pack()
-        images[geom.texture_id] = image
+        images[geom.texture_id] = _packed_image(f"mjcf-texture-{geom.texture_id}", geom.texture)
     return images[geom.texture_id]
+
+
+def _packed_image(name: str, pixels: np.ndarray) -> Any:
+    """A Blender image of `pixels` ((h, w, 4) floats, bottom row first), packed: it has no file."""
+    h, w = pixels.shape[:2]
+    image = bpy.data.images.new(name, w, h, alpha=True)
+    image.pixels.foreach_set(pixels.reshape(-1))
+    image.pack()
+    return image
 
 
 def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
