@@ -72,7 +72,7 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
             return False
         if any(obj.delta_location) or any(obj.delta_rotation_euler) or tuple(obj.delta_scale) != (1.0, 1.0, 1.0):
             return False
-        if obj.as_pointer() in aimed or not bound.get(obj.as_pointer(), set()) <= COMPUTED:
+        if obj.as_pointer() in aimed or not props <= COMPUTED:
             return False
         obj = obj.parent
     return True
@@ -164,7 +164,7 @@ class InstancedCopies:
             for o in reversed(list(_chain(obj, anchor))):
                 if o not in order:
                     order.append(o)
-        index = {o.as_pointer(): i for i, o in enumerate(order)}
+        self._index = index = {o.as_pointer(): i for i, o in enumerate(order)}  # node of each object, by pointer
         self._nodes: list[_Node] = []
         for o in order:
             name = names.get(o.as_pointer(), "")
@@ -198,7 +198,7 @@ class InstancedCopies:
         visible = [self._nodes[node].slices["visible"]] if "visible" in self._nodes[node].slices else []
         color = self._nodes[node].slices.get("color")
         for ancestor in chain[1:]:
-            slices = self._nodes[self._node_of(ancestor)].slices
+            slices = self._nodes[self._index[ancestor.as_pointer()]].slices
             if ancestor.type == "EMPTY" and "visible" in slices:
                 visible.append(slices["visible"])  # an empty's visibility is that of everything under it
             if color is None and ancestor.type == "EMPTY" and "color" in slices:
@@ -219,9 +219,6 @@ class InstancedCopies:
         modifier = holder.modifiers.new("visualenv instances", "NODES")
         modifier.node_group = _node_group(f"{obj.name}-instances", obj, selected)
         return _Instancer(node, mesh, visible, selected, color)
-
-    def _node_of(self, obj: Any) -> int:
-        return next(i for i, n in enumerate(self._nodes) if n.obj == obj)
 
     def write(self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Pose every env's instances: `values` the binding table ``(N, size)``, `offsets` each env's anchor, a
