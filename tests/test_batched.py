@@ -375,14 +375,14 @@ def test_render_gives_each_envs_own_view():
     vec.close()
 
 
-@pytest.mark.parametrize("overhead", [0, 16], ids=["alone", "all_again"])
-def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, overhead):
+@pytest.mark.parametrize("alone", [True, False], ids=["alone", "all_again"])
+def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, alone):
     """SAME_STEP: an ended env's final frame and its next episode's first frame are the frames a NEXT_STEP batch
     shows one step apart. The reset envs are rendered alone (one env-sized call each) where that costs less than
-    every tile again (ALONE_OVERHEAD_TILES, 0 here to see it with 3 envs), else the grid is rendered again."""
+    every tile again (alone_limit, set here so that both ways are seen with 3 envs), else the grid is rendered again."""
     from visualenv.render.blender import batched
 
-    monkeypatch.setattr(batched, "ALONE_OVERHEAD_TILES", overhead)
+    monkeypatch.setattr(batched, "alone_limit", (lambda n, device, threads: n) if alone else (lambda n, device, threads: 0))
     same = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3, autoreset_mode="same_step")
     nxt = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3)
     pixels: list[int] = []
@@ -408,7 +408,7 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, over
             assert agreement(info["final_obs"][i], expected[i]) >= 0.98
         for i in np.flatnonzero(~done):
             assert agreement(obs[i], expected[i]) >= 0.98
-        again = [100 * 100] * len(ended) if overhead == 0 else [4 * 100 * 100]   # each reset tile alone, or the grid again
+        again = [100 * 100] * len(ended) if alone else [4 * 100 * 100]   # each reset tile alone, or the grid again
         assert pixels == [4 * 100 * 100] + again, pixels                           # after the 2 x 2 grid of the step
         first, *_ = nxt.step(actions)   # NEXT_STEP resets the ended envs now, with the same draws
         for i in ended:
@@ -418,11 +418,23 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, over
         nxt.close()
 
 
+def test_reset_envs_are_rendered_alone_only_while_that_is_cheaper():
+    """One env alone is a call over the whole scene (its cost grows with N); the grid again costs N tiles, cheap on
+    many threads and on a GPU. So the limit grows slower than N, is lower on a GPU and with more threads, and few
+    envs never render alone past the camera switch's cost."""
+    from visualenv.render.blender.batched import ALONE_OVERHEAD_TILES, alone_limit
+
+    cpu2, cpu16, gpu = (alone_limit(1024, "CPU", 2), alone_limit(1024, "CPU", 16), alone_limit(1024, "GPU", 16))
+    assert gpu < cpu16 < cpu2 < 1024 - ALONE_OVERHEAD_TILES
+    assert alone_limit(4096, "CPU", 2) / alone_limit(1024, "CPU", 2) == pytest.approx(2.0)   # 4x the envs, 2x the limit
+    assert alone_limit(16, "CPU", 2) <= 0 and alone_limit(20, "CPU", 1) == 20 - ALONE_OVERHEAD_TILES
+
+
 def test_reset_envs_rendered_alone_follow_a_moving_camera(monkeypatch):
     """Goalie's camera moves with the state: an env rendered alone after SAME_STEP's reset is still its own view."""
     from visualenv.render.blender import batched
 
-    monkeypatch.setattr(batched, "ALONE_OVERHEAD_TILES", 0)
+    monkeypatch.setattr(batched, "alone_limit", lambda n, device, threads: n)
     same = BatchedVectorEnv(SPECS / "goalie.yaml", 3, autoreset_mode="same_step")
     nxt = BatchedVectorEnv(SPECS / "goalie.yaml", 3)
     try:

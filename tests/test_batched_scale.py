@@ -315,7 +315,7 @@ def test_a_turning_camera_renders_reset_envs_alone_split_batches_and_views(monke
     from visualenv.render.blender import batched
     from visualenv.spec import load_spec_text
 
-    monkeypatch.setattr(batched, "ALONE_OVERHEAD_TILES", 0)
+    monkeypatch.setattr(batched, "alone_limit", lambda n, device, threads: n)
     monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles a call: three envs take two calls
     example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text()
     text = example.replace("[84, 84]", "[32, 32]") + "render: {engine: cycles, view: {resolution: [40, 40], preset: fast}}\n"

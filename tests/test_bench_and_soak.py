@@ -58,13 +58,13 @@ def test_bench_measures_scaling_against_one_confined_worker(tmp_path):
 def test_bench_compares_batches_with_the_per_process_vector_env(tmp_path):
     out = tmp_path / "bench.json"
     result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "20", "--batched", "1,3", "--autoreset", "same_step",
-                                       "--json", str(out)])
+                                       "--device", "cpu", "--json", str(out)])
     assert result.exit_code == 0, result.output
     assert "batched (one process, autoreset same_step)" in result.output and "per-process vector env, 2 workers" in result.output
     (record,) = json.loads(out.read_text())
     assert [b["envs"] for b in record["batched"]] == [1, 3]
     assert all(b["autoreset"] == "same_step" and b["calls_per_step"] >= 1 for b in record["batched"]), record
-    assert all(b["steps_per_s"] > 0 and b["render_ms"] > 0 and b["rss_mb"] > 0 for b in record["batched"]), record
+    assert all(b["steps_per_s"] > 0 and b["render_ms"] > 0 and b["rss_mb"] > 0 and b["alone_ms"] > 0 for b in record["batched"]), record
     assert record["per_process"]["workers"] == 2 and record["per_process"]["steps_per_s"] > 0
     bad = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--batched", "0,4"])
     assert bad.exit_code == 2 and "expected batch sizes or a list such as 1,2,4,8, got '0,4'" in bad.output
@@ -140,3 +140,17 @@ def test_repeated_make_and_close_do_not_leak_blender_data():
         env.step(0)
         env.close()
     assert blender_data_blocks() == before
+
+
+def test_a_measuring_process_that_dies_is_reported_not_waited_for():
+    """A batch size whose process dies (a crashed Blender or GPU driver) gives an error row, and the next size goes on."""
+    import multiprocessing
+    import os
+
+    from visualenv.tools.bench_batched import _result_of
+
+    context = multiprocessing.get_context("spawn")
+    queue = context.Queue()
+    child = context.Process(target=os._exit, args=(3,))
+    child.start()
+    assert _result_of(child, queue, 64) == {"envs": 64, "error": "the measuring process died (exit code 3)"}

@@ -555,7 +555,7 @@ def _worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
 
 
 def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, autoreset: str, results: list[Any],
-                   split: tuple[int, ...] | None = None) -> None:
+                   split: tuple[int, ...] | None = None, device: str | None = None) -> None:
     """`bench --batched`: each batch size in a fresh process (or in K workers each, `split`), then the per-process
     vector env with one worker per usable core."""
     from visualenv.tools.bench import bench_parallel
@@ -566,9 +566,9 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
             raise click.BadParameter(f"with --batched, each count of workers must be from 1 to the smallest batch size ({min(sizes)}): "
                                      f"each worker holds a batch of at least one env, got {k}", param_hint="--workers")
     for spec in specs:
-        batches = bench_batched(spec, sizes, steps, autoreset=autoreset, workers=split or (None,))
+        batches = bench_batched(spec, sizes, steps, autoreset=autoreset, workers=split or (None,), device=device)
         workers = max(2, cores)
-        per_process = bench_parallel(spec, workers, steps, 0, 0.0)
+        per_process = bench_parallel(spec, workers, steps, 0, 0.0, device=device)
         click.echo(f"{spec}")
         for line in lines(batches, per_process):
             click.echo(line)
@@ -590,10 +590,11 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
               help="batch sizes such as 1,16,64: N envs in one Blender against the per-process vector env (one worker per core)")
 @click.option("--autoreset", type=click.Choice(["next_step", "same_step"]), default="next_step", show_default=True,
               help="with --batched: when an ended env is reset (same_step: as SB3's VecEnvs and train --batched do)")
+@click.option("--device", type=click.Choice(["cpu", "gpu"]), default=None, help="render on this device (default: the spec's render.device)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @_friendly
 def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads: int | None, readback: str, pin: bool, soak_steps: int,
-          batch_sizes: tuple[int, ...] | None, autoreset: str, json_out: str | None) -> None:
+          batch_sizes: tuple[int, ...] | None, autoreset: str, device: str | None, json_out: str | None) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
 
@@ -612,10 +613,11 @@ def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads:
     results: list[Any] = []
     if batch_sizes:
         split = workers if click.get_current_context().get_parameter_source("workers") is ParameterSource.COMMANDLINE else None
-        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split)
+        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split, device)
     for spec in specs if not batch_sizes else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
-        figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling)
+        figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling,
+                            device=device)
         for line in figures.lines():
             click.echo(line)
         results.append(as_dict(figures))

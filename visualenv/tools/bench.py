@@ -154,12 +154,14 @@ def blender_data_blocks() -> int:
 
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
               workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = True,
-              scaling: tuple[int, ...] = ()) -> Figures:
+              scaling: tuple[int, ...] = (), device: str | None = None) -> Figures:
     from visualenv.env.make import make
 
     options: dict[str, Any] = {"readback": readback}
     if threads:
         options["threads"] = threads
+    if device:
+        options["device"] = device
     env = StepTimes(make(spec, **options))
     base: Any = env.unwrapped  # the VisualEnv under the wrappers
     figures = Figures(spec=str(spec), steps=steps)
@@ -194,23 +196,24 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     figures.rss_final_mb = _rss_mb()
     env.close()
     if workers > 1:
-        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin)
+        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin, device=device)
     if scaling:
-        figures.scaling = bench_scaling(spec, scaling, steps, seed, readback=readback, pin=pin)
+        figures.scaling = bench_scaling(spec, scaling, steps, seed, readback=readback, pin=pin, device=device)
     return figures
 
 
-def bench_scaling(spec: str, counts: tuple[int, ...], steps: int, seed: int, *, readback: str = "auto", pin: bool = True) -> list[dict[str, Any]]:
+def bench_scaling(spec: str, counts: tuple[int, ...], steps: int, seed: int, *, readback: str = "auto", pin: bool = True,
+                  device: str | None = None) -> list[dict[str, Any]]:
     """steps/s of n parallel workers for each n in `counts`, against n times one worker confined to one core.
 
     The first row is that reference: one worker process on one core with one render thread.
     """
     from visualenv.env.cores import usable_cores
 
-    one = bench_parallel(spec, 1, steps, seed, 0.0, readback=readback, shares=[(usable_cores()[0],)], threads=1)
+    one = bench_parallel(spec, 1, steps, seed, 0.0, readback=readback, shares=[(usable_cores()[0],)], threads=1, device=device)
     rows = [one]
     for n in counts:
-        row = bench_parallel(spec, n, steps, seed, 0.0, readback=readback, pin=pin)
+        row = bench_parallel(spec, n, steps, seed, 0.0, readback=readback, pin=pin, device=device)
         row["vs_confined"] = row["steps_per_s"] / (n * one["steps_per_s"])
         rows.append(row)
     return rows
@@ -334,7 +337,8 @@ class StepTimes(gym.Wrapper):
 
 
 def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
-                   pin: bool = True, shares: list[tuple[int, ...] | None] | None = None, threads: int | None = None) -> dict[str, Any]:
+                   pin: bool = True, shares: list[tuple[int, ...] | None] | None = None, threads: int | None = None,
+                   device: str | None = None) -> dict[str, Any]:
     """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each).
 
     Each worker gets its own cores as make_vec gives them (`pin`), or the `shares` given.
@@ -343,7 +347,7 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
     from visualenv.env.vector import WorkerVectorEnv, env_factory, with_render_threads
 
     shares = shares or worker_cores(workers, pin)
-    options = {"readback": readback}
+    options: dict[str, Any] = {"readback": readback, **({"device": device} if device else {})}
     vec: Any = WorkerVectorEnv([env_factory(str(spec), cores=share, wrapper_class=StepTimes, **with_render_threads(options, share, workers, threads))
                                 for share in shares], context="spawn", shared_memory=True)
     pinned = any(share is not None for share in shares)

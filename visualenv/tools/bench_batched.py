@@ -27,10 +27,12 @@ def _median_ms(times: list[float]) -> float:
     return 1000 * float(np.median(times)) if times else 0.0
 
 
-def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str = "next_step", instanced: bool = True) -> dict[str, Any]:
+def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str = "next_step", instanced: bool = True,
+                  device: str | None = None) -> dict[str, Any]:
     """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory).
 
     ``instanced=False`` copies every object, as batches did before instanced copies (for before/after figures).
+    ``device`` ("cpu" or "gpu") overrides the spec's render device.
     """
     import psutil
 
@@ -40,7 +42,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     process = psutil.Process()
     before = process.memory_info().rss
     start = time.perf_counter()
-    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset)
+    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset, renderer_options=_device_option(device))
     if not instanced:
         from visualenv.render.blender.batched import BatchedBlenderRenderer
 
@@ -67,6 +69,12 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
         t = time.perf_counter()
         renderer.__class__.raw_render(renderer)
         still.append(time.perf_counter() - t)
+    del renderer.raw_render  # the timed instance attribute: the renders below are not steps
+    alone: list[float] = []
+    for _ in range(6):  # one env rendered alone, as a partial re-render of a reset env does (the first call also makes its camera)
+        t = time.perf_counter()
+        renderer._render_alone(0, [0])
+        alone.append(time.perf_counter() - t)
     rss = process.memory_info().rss
     env.close()
     render = _median_ms(times["render"])
@@ -75,19 +83,25 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
         "envs": n, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
         "dynamics_ms": _median_ms(times["dynamics"]), "bind_ms": _median_ms(times["bind"]), "write_ms": write, "render_ms": render,
         "scene_update_ms": max(0.0, render - _median_ms(still)), "instanced": instanced, "readback_ms": _median_ms(times["readback"]),
+        "alone_ms": _median_ms(alone[1:]),
         "calls_per_step": len(times["render"]) / steps, "autoreset": autoreset,
         "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n, "python_mb": before / 2**20,
     }
 
 
-def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, queue: Any) -> None:
+def _device_option(device: str | None) -> dict[str, Any]:
+    return {"device": device} if device else {}
+
+
+def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, device: str | None, queue: Any) -> None:
     try:
-        queue.put(measure_batch(spec, n, steps, seed, autoreset))
+        queue.put(measure_batch(spec, n, steps, seed, autoreset, device=device))
     except BaseException as exc:  # noqa: BLE001 - reported by the parent, which goes on with the next size
         queue.put({"envs": n, "error": f"{type(exc).__name__}: {exc}"})
 
 
-def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, autoreset: str = "next_step") -> dict[str, Any]:
+def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, autoreset: str = "next_step",
+                    device: str | None = None) -> dict[str, Any]:
     """`n` envs as `workers` batches in worker processes (MultiBatchVectorEnv): env-steps/s and the workers' memory.
 
     The stages of a step happen in the workers, so only the whole step is timed here.
@@ -97,7 +111,7 @@ def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, 
     from visualenv.env.multi_batch import MultiBatchVectorEnv
 
     start = time.perf_counter()
-    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset)
+    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset, **_device_option(device))
     try:
         env.reset(seed=seed)
         build_s = time.perf_counter() - start
@@ -115,8 +129,20 @@ def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, 
             "autoreset": autoreset, "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n}
 
 
+def _result_of(child: Any, queue: Any, n: int) -> dict[str, Any]:
+    """The child's figures, or its death reported (a crashed Blender, a GPU driver that failed) instead of waiting forever."""
+    import queue as queues
+
+    while True:
+        try:
+            return queue.get(timeout=1.0)
+        except queues.Empty:
+            if not child.is_alive() and queue.empty():
+                return {"envs": n, "error": f"the measuring process died (exit code {child.exitcode})"}
+
+
 def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, autoreset: str = "next_step",
-                  workers: tuple[int | None, ...] = (None,)) -> list[dict[str, Any]]:
+                  workers: tuple[int | None, ...] = (None,), device: str | None = None) -> list[dict[str, Any]]:
     """Each batch size in its own fresh process (`workers` None), or split among K worker processes (each K of `workers`);
     a size that fails is reported, not raised."""
     context = multiprocessing.get_context("spawn")
@@ -125,14 +151,14 @@ def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, 
         for k in workers:
             if k is not None:
                 try:
-                    out.append(measure_workers(spec, n, k, max(1, steps // n), seed, autoreset))
+                    out.append(measure_workers(spec, n, k, max(1, steps // n), seed, autoreset, device))
                 except Exception as exc:  # noqa: BLE001 - reported, and the next size goes on
                     out.append({"envs": n, "workers": k, "error": f"{type(exc).__name__}: {exc}"})
                 continue
             queue = context.Queue()
-            child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, queue))
+            child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, device, queue))
             child.start()
-            out.append(queue.get())
+            out.append(_result_of(child, queue, n))
             child.join()
     return out
 

@@ -32,6 +32,7 @@ world light in one direction, in world space: a turned copy got another
 from __future__ import annotations
 
 import math
+import os
 import sys
 from dataclasses import replace
 from typing import Any, Sequence
@@ -58,6 +59,22 @@ MAX_IMAGE_PIXELS = 2048 * 2048
 #: what rendering a few envs alone costs beyond their own tiles, in tiles: switching the scene's camera to the
 #: one-tile camera and back makes Cycles re-synchronise, measured 37 ms against 2.5 ms a tile (2-core CPU, N = 16)
 ALONE_OVERHEAD_TILES = 16
+#: reset envs rendered alone, at most, per square root of N (:func:`alone_limit`): Cycles on the CPU, times the
+#: square root of its render threads; Cycles on a GPU
+ALONE_PER_ROOT_CPU = 6.0
+ALONE_PER_ROOT_GPU = 0.5
+
+
+def alone_limit(num_envs: int, device: str, threads: int) -> float:
+    """How many reset envs a batch renders alone (one env-sized call each) before rendering all N tiles again is cheaper.
+
+    One env alone is a render call over the whole scene, whose cost grows with N; the grid again costs N tiles, and a
+    tile costs less the more threads trace it, and little on a GPU. Break-even measured at 100x100
+    (docs/performance.md, *Reset envs rendered alone*): 3.5 to 4.7 times the square root of N on 2 CPU threads,
+    1.3 on 16, 0.3 to 0.8 on an H200 with OptiX. Below about 16 envs the camera switch (ALONE_OVERHEAD_TILES) decides.
+    """
+    per_root = ALONE_PER_ROOT_GPU if device == "GPU" else ALONE_PER_ROOT_CPU / math.sqrt(max(1, threads))
+    return min(per_root * math.sqrt(num_envs), num_envs - ALONE_OVERHEAD_TILES)
 #: the widest and tallest image one render call makes (Cycles renders larger ones in several tiles of its own)
 MAX_IMAGE_SIDE = 2048
 
@@ -198,6 +215,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     # -- construction -------------------------------------------------------------------------------
 
     def _setup(self, built: BuiltScene, threads: int) -> None:
+        self._threads = threads or len(os.sched_getaffinity(0))  # Cycles' render threads (0: every core this process may use)
         self._removed: set[int] = set()  # objects drawn as instances rather than copied (none while the base class compiles)
         super()._setup(built, threads)
         self._refuse_turning_cameras()
@@ -415,9 +433,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """Apply each env's binding values to its copy and render every observation camera for all envs.
 
         With `envs` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``:
-        the envs an autoreset just reset. They are rendered alone where that costs fewer
-        tiles' time than all N (:data:`ALONE_OVERHEAD_TILES`), so a large batch does not
-        pay for every other tile again.
+        the envs an autoreset just reset. They are rendered alone where that costs less than
+        all N tiles again (:func:`alone_limit`), so a large batch does not pay for every
+        other tile again.
         """
         self._check_open()
         if len(values) != self.num_envs:
@@ -427,7 +445,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
                                    or not 0 <= chosen[0] <= chosen[-1] < self.num_envs):
             raise ValueError(f"envs must be ascending indices below {self.num_envs}, got {chosen}")
         self._write_copies(values, chosen)
-        alone = chosen is not None and len(chosen) + ALONE_OVERHEAD_TILES < self.num_envs  # else every tile is cheaper
+        alone = chosen is not None and len(chosen) < alone_limit(self.num_envs, self.device, self._threads)  # else every tile is cheaper
         images = {}
         for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
             self._place_copies(reference, source.camera if moving else None)
