@@ -107,7 +107,8 @@ def test_processes_placed_by_others_claim_distinct_cores(tmp_path, monkeypatch):
 
 @pytest.mark.parametrize("facts, expected", [
     (("CUDA", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", False), ("/var/tmp/OptixCache_root", False))), "sm_90"),
-    (("OPTIX", ("sm_75", "sm_89", "sm_90"), ("sm_90",), (("~/.nv/ComputeCache", False),)), "OptiX builds its kernels from PTX"),
+    (("OPTIX", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", False),)), "no CUDA binary for sm_90"),
+    (("OPTIX", ("sm_75", "sm_89", "sm_90"), ("sm_90",), (("~/.nv/ComputeCache", False),)), None),  # OptiX's own modules: seconds
     (("CUDA", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", True),)), None),  # the driver's cache serves it
     (("CUDA", ("sm_75", "sm_89"), ("sm_89",), (("~/.nv/ComputeCache", False),)), None),  # a shipped binary
     (("HIP", (), (), (("~/.nv/ComputeCache", False),)), None),

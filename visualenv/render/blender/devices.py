@@ -5,8 +5,9 @@
 
 Also the one-line notice before a process's first Cycles GPU render when Blender must first
 compile its kernels for this GPU: bpy 5.0.1 ships CUDA binaries for some architectures only
-(``kernel_sm_XX.cubin``), and OptiX always compiles from PTX; the driver then caches the result,
-so it happens once per machine. On an H100 (sm_90) that first frame took 356 s.
+(``kernel_sm_XX.cubin``), and OptiX runs those CUDA kernels beside its own; the driver then caches
+the compiled PTX, so it happens once per machine. On an H100 (sm_90) that first frame took 356 s; with an sm_90
+binary compiled ahead (docs/performance.md, *On a GPU*), 8 s on an H200 (OptiX's own modules).
 """
 
 from __future__ import annotations
@@ -41,11 +42,11 @@ def kernels_to_compile(facts: KernelFacts) -> str | None:
     if facts.backend not in NVIDIA or any(filled for _, filled in facts.caches):
         return None
     missing = [arch for arch in facts.gpu_archs if arch not in facts.shipped_archs]
+    if not missing:  # OptiX still builds its own modules from PTX, but in seconds (8 s measured on an H200)
+        return None
     if facts.backend == "OPTIX":
-        return "OptiX builds its kernels from PTX" + (f" (and bpy has no CUDA binary for {', '.join(missing)})" if missing else "")
-    if missing:
-        return f"bpy ships no CUDA binary for {', '.join(missing)}: the driver compiles its PTX"
-    return None
+        return f"OptiX runs Cycles' CUDA kernels too, and bpy has no CUDA binary for {', '.join(missing)}: the driver compiles its PTX"
+    return f"bpy ships no CUDA binary for {', '.join(missing)}: the driver compiles its PTX"
 
 
 def compile_notice(facts: KernelFacts) -> str | None:
