@@ -245,6 +245,12 @@ def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
             assert close >= 0.98, (i, close)
         # the three poles lean differently: the tiles differ where the poles are
         assert (cyan(obs[0]) != cyan(obs[1])).sum() + (cyan(obs[1]) != cyan(obs[2])).sum() > 4
+        # the poses handed are the ones drawn, also where the list handed before now holds other arrays
+        poses = batch._pose_arrays
+        poses[:] = [tuple(np.array(a, copy=True) for a in poses[j]) for j in (2, 0, 1)]
+        renderer.set_physics_poses_batch(poses)
+        assert not np.array_equal(poses[0][1], poses[1][1])   # env 2's pole leans otherwise than env 0's
+        assert all(np.array_equal(renderer._body_poses[part][i], poses[i][part]) for i in range(3) for part in (0, 1))
     finally:
         batch.close()
         for env in singles:

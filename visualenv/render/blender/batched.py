@@ -236,7 +236,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._removed = self._removable(copied)
-        self._pose_source: Sequence[tuple] | None = None  # the MuJoCo poses last handed to set_physics_poses_batch
+        self._copy_poses: list[tuple[int, Any]] | None = None  # the pose writers of the copies (None: no poses handed yet)
         self._body_poses: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))  # every env's xpos and xquat
         self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
         for copy in self._copies:
@@ -496,9 +496,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """
         if self._poses is None:
             return
-        if self._pose_source is not poses:  # the env hands the same live views of its MjData every step
-            self._pose_source = poses
-            self._pose_rows = ([p[0] for p in poses], [p[1] for p in poses])
+        if self._copy_poses is None:  # the writers depend on the model alone: made at the first call
             nbody = len(poses[0][0])
             self._body_poses = (np.empty((self.num_envs, nbody, 3)), np.empty((self.num_envs, nbody, 4)))
             # copy 0 holds the originals: all but the instanced bodies; another copy: its duplicates (lights, bodies left as copies)
@@ -507,8 +505,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
                        for k, copy in enumerate(self._copies)]
             self._copy_poses = [(k, writer) for k, writer in enumerate(writers) if not writer.empty]
         if self._instances is not None and self._instances.posed:
-            for rows, out in zip(self._pose_rows, self._body_poses):  # one C loop over the envs' arrays (0.1 ms at N = 256)
-                np.concatenate(rows, out=out.reshape(-1, out.shape[2]))
+            for part, out in enumerate(self._body_poses):  # one C loop over the envs' arrays (0.1 ms at N = 256)
+                np.concatenate([p[part] for p in poses], out=out.reshape(-1, out.shape[2]))
         for k, writer in self._copy_poses:
             writer.write(*poses[k])
 
@@ -525,7 +523,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _write_instances(self) -> None:
         """Pose every env's instances from the last binding table, at their copies' anchors (moved by :meth:`_place_copies`)."""
         if self._instances is not None:
-            self._instances.write(self._table, self._offsets, self._body_poses if self._pose_source is not None else None)
+            self._instances.write(self._table, self._offsets, self._body_poses if self._copy_poses is not None else None)
 
     def _apply_copy(self, copy: _Copy, values: tuple) -> None:
         if values != copy.last:
