@@ -63,6 +63,8 @@ ALONE_OVERHEAD_TILES = 16
 #: square root of its render threads; Cycles on a GPU
 ALONE_PER_ROOT_CPU = 6.0
 ALONE_PER_ROOT_GPU = 0.5
+#: the widest and tallest image one render call makes (Cycles renders larger ones in several tiles of its own)
+MAX_IMAGE_SIDE = 2048
 
 
 def alone_limit(num_envs: int, device: str, threads: int) -> float:
@@ -70,13 +72,12 @@ def alone_limit(num_envs: int, device: str, threads: int) -> float:
 
     One env alone is a render call over the whole scene, whose cost grows with N; the grid again costs N tiles, and a
     tile costs less the more threads trace it, and little on a GPU. Break-even measured at 100x100
-    (docs/performance.md, *Reset envs rendered alone*): 3.5 to 4.7 times the square root of N on 2 CPU threads,
+    (docs/performance.md, *Reset envs rendered alone*): 3.4 to 6.8 times the square root of N on 2 CPU threads,
     1.3 on 16, 0.3 to 0.8 on an H200 with OptiX. Below about 16 envs the camera switch (ALONE_OVERHEAD_TILES) decides.
     """
     per_root = ALONE_PER_ROOT_GPU if device == "GPU" else ALONE_PER_ROOT_CPU / math.sqrt(max(1, threads))
     return min(per_root * math.sqrt(num_envs), num_envs - ALONE_OVERHEAD_TILES)
-#: the widest and tallest image one render call makes (Cycles renders larger ones in several tiles of its own)
-MAX_IMAGE_SIDE = 2048
+
 
 #: the tiles shader, written once for both cameras: @NAME@ and the parts a turning camera adds (@ROTATIONS@, its
 #: parameters; @TABLE@, them as one array; @TURN@, the turn of the ray's position and direction by env's rotation)
