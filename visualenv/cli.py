@@ -1,4 +1,5 @@
-"""The `visualenv` command: validate, build, inspect, init, preview, schema, train, play, eval, export-policy, bench, info.
+"""The `visualenv` command: validate, build, inspect, init, preview, schema, train, play, eval, export-policy, bench, info,
+compile-kernels.
 
 Bad input never shows a traceback: spec problems print as
 ``file:line:column: field: message`` lines and exit with status 2.
@@ -635,6 +636,34 @@ def info(as_json: bool, warm_gpu: bool) -> None:
 
     report = gather(warm_gpu=warm_gpu)
     click.echo(json.dumps(report, indent=2) if as_json else format_report(report))
+
+
+@main.command("compile-kernels")
+@click.option("--arch", "archs", multiple=True, help="CUDA architecture such as sm_90 (repeatable; default: this machine's NVIDIA GPUs)")
+@click.option("--ptxas", type=click.Path(dir_okay=False), default=None, help="the CUDA toolkit's ptxas (default: PATH, $CUDA_HOME, /usr/local/cuda)")
+@click.option("--force", is_flag=True, help="compile even where bpy already has a binary for the architecture")
+@_friendly
+def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> None:
+    """Compile Cycles' CUDA kernels into bpy for GPUs it ships no binary for (H100, H200: sm_90), once, so that a machine
+    that starts bare renders its first GPU frame in seconds rather than minutes. Needs the CUDA toolkit's ptxas, no GPU."""
+    import time
+
+    from visualenv.render.blender.cuda_kernels import compile_cuda_kernels, find_ptxas
+    from visualenv.render.blender.devices import nvidia_archs, shipped_cuda_archs
+
+    archs = archs or nvidia_archs()
+    if not archs:
+        raise click.UsageError("no NVIDIA GPU found here (nvidia-smi): name the architecture, e.g. --arch sm_90")
+    shipped = shipped_cuda_archs()
+    tool = find_ptxas(ptxas)
+    for arch in archs:
+        if arch in shipped and not force:
+            click.echo(f"{arch}: bpy already has its binary (--force compiles it again)")
+            continue
+        click.echo(f"{arch}: compiling Cycles' kernels with {tool} (minutes: 433 s of one core for sm_90)...")
+        started = time.perf_counter()
+        path = compile_cuda_kernels(arch, ptxas=tool)
+        click.echo(f"{arch}: {path} ({path.stat().st_size / 2**20:.1f} MB) in {time.perf_counter() - started:.0f} s")
 
 
 @main.command("bench-rllib")

@@ -1,0 +1,80 @@
+"""Cycles' CUDA kernels compiled ahead for a GPU that bpy ships no binary for (``visualenv compile-kernels``).
+
+bpy 5.0.1 ships CUDA binaries (``kernel_sm_XX.cubin.zst``) for some architectures and PTX
+(``kernel_compute_XY.ptx.zst``) for the rest. On an H100 or H200 (sm_90) the driver compiles that
+PTX at the first GPU frame, OptiX included (it runs Cycles' CUDA kernels beside its own): 356 s
+measured, cached per machine in ``~/.nv/ComputeCache``. A machine that starts bare (a cloud
+instance, a container) pays it at every start. Compiled once with the CUDA toolkit's ``ptxas`` and
+put where Cycles looks first, the first frame of a batch took 8.2 s on an H200 (docs/performance.md,
+*On a GPU*). Compile in the image the machines start from, with a ``ptxas`` no newer than their
+driver supports. Needs no GPU and no bpy import: only its files.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shutil
+import subprocess
+import tempfile
+from pathlib import Path
+
+from visualenv.errors import ConfigError
+from visualenv.render.blender.devices import cycles_lib
+
+
+def _number(arch: str) -> int:
+    return int(arch.split("_")[1])
+
+
+def find_ptxas(given: str | None = None) -> str:
+    """The CUDA toolkit's ptxas: `given`, else on PATH, else under CUDA_HOME or /usr/local/cuda."""
+    candidates = [given] if given else [shutil.which("ptxas"),
+                                        *(str(Path(root) / "bin" / "ptxas") for root in (os.environ.get("CUDA_HOME"), "/usr/local/cuda") if root)]
+    for candidate in candidates:
+        if candidate and Path(candidate).is_file() and os.access(candidate, os.X_OK):
+            return candidate
+    where = f"{given} is not an executable file" if given else "not on PATH, nor in $CUDA_HOME/bin or /usr/local/cuda/bin"
+    raise ConfigError(f"compiling Cycles' kernels needs the CUDA toolkit's ptxas ({where}): install the toolkit "
+                      f"(its version no newer than the GPU driver supports) or name it with --ptxas")
+
+
+def source_ptx(arch: str, lib: Path) -> Path:
+    """The PTX that compiles for `arch`: bpy's highest ``kernel_compute_XY`` not above it."""
+    found = {int(m.group(1)): p for p in lib.glob("kernel_compute_*.ptx.zst") if (m := re.fullmatch(r"kernel_compute_(\d+)\.ptx\.zst", p.name))}
+    usable = [n for n in found if n <= _number(arch)]
+    if not usable:
+        raise ConfigError(f"bpy ships no PTX that compiles for {arch} in {lib} (has: {', '.join(f'compute_{n}' for n in sorted(found)) or 'none'})")
+    return found[max(usable)]
+
+
+def compile_cuda_kernels(arch: str, *, lib: Path | None = None, ptxas: str | None = None) -> Path:
+    """Compile bpy's Cycles PTX for `arch` ('sm_90') into ``kernel_<arch>.cubin.zst`` beside bpy's own binaries.
+
+    Takes minutes (433 s of one core for sm_90): ptxas compiles Cycles' whole kernel. The file is
+    written whole or not at all. Returns its path.
+    """
+    import zstandard  # a dependency of bpy: Cycles reads its kernels zstd-compressed
+
+    if not re.fullmatch(r"sm_\d{2,3}", arch):
+        raise ConfigError(f"expected a CUDA architecture such as sm_90, got {arch!r}")
+    folder = lib or cycles_lib()
+    if folder is None:
+        raise ConfigError("bpy is not installed here: there are no Cycles kernels to compile")
+    ptx = source_ptx(arch, folder)
+    tool = find_ptxas(ptxas)
+    target = folder / f"kernel_{arch}.cubin.zst"
+    with tempfile.TemporaryDirectory() as tmp:
+        plain, cubin = Path(tmp) / "kernel.ptx", Path(tmp) / "kernel.cubin"
+        plain.write_bytes(zstandard.ZstdDecompressor().decompressobj().decompress(ptx.read_bytes()))
+        done = subprocess.run([tool, f"-arch={arch}", "-O3", str(plain), "-o", str(cubin)], capture_output=True, text=True)
+        if done.returncode != 0:
+            raise ConfigError(f"ptxas could not compile {ptx.name} for {arch}: {(done.stderr or done.stdout).strip()[-800:]}")
+        partial = folder / f".{target.name}.partial"
+        try:
+            partial.write_bytes(zstandard.ZstdCompressor(level=19).compress(cubin.read_bytes()))
+            partial.replace(target)
+        except OSError as exc:
+            partial.unlink(missing_ok=True)
+            raise ConfigError(f"cannot write {target}: {exc.strerror or exc} (run it where bpy is installed writable)") from None
+    return target
