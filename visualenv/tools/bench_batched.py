@@ -168,9 +168,10 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
     mode = batches[0].get("autoreset", "next_step") if batches else "next_step"
     rows = [f"batched (one process, autoreset {mode}):",
             f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'write':>7} {'render':>8} {'update':>7} {'readback':>9} "
-            f"{'calls':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
+            f"{'calls':>6} {'alone':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
             "  (ms per step of all envs, medians; write: the bindings written into the scene, per step; render and readback: per call;"
-            " update: the render call minus the same call with nothing moved (the scene update is write + update); calls: render calls per step; +MB/env: memory growth per env over the smallest batch)"]
+            " update: the render call minus the same call with nothing moved (the scene update is write + update); calls: render calls per step;"
+            " alone: one env rendered by itself, as a reset env is; +MB/env: memory growth per env over the smallest batch)"]
     ok = [b for b in batches if "error" not in b and "workers" not in b]
     smallest = min(ok, key=lambda b: b["envs"]) if ok else None
     split = [b for b in batches if "workers" in b]
@@ -183,7 +184,7 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
         assert smallest is not None
         growth = (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"]) if b["envs"] > smallest["envs"] else float("nan")
         rows.append(f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
-                    f"{b.get('write_ms', float('nan')):>7.2f} {b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
+                    f"{b.get('write_ms', float('nan')):>7.2f} {b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b.get('alone_ms', float('nan')):>6.1f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
     if split:
         rows.append(f"batched in K worker processes (one batch of about N/K envs each, confined to its cores; autoreset {mode}):")
         rows.append(f"  {'envs':>5} {'K':>3} {'env-steps/s':>12} {'step ms':>8} {'RSS MB':>7} {'MB/env':>7} {'build s':>8}")
