@@ -7,7 +7,7 @@ measured, cached per machine in ``~/.nv/ComputeCache``. A machine that starts ba
 instance, a container) pays it at every start. Compiled once with the CUDA toolkit's ``ptxas`` and
 put where Cycles looks first, the first frame of a batch took 8.2 s on an H200 (docs/performance.md,
 *On a GPU*). Compile in the image the machines start from, with a ``ptxas`` no newer than their
-driver supports. Needs no GPU and no bpy import: only its files.
+driver supports. Needs no GPU, only bpy's files.
 """
 
 from __future__ import annotations
