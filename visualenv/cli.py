@@ -481,6 +481,10 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
             f"the first {results['episodes']} episodes of its run's results.json"
         click.echo((f"reproduces {what}" + (" within that tolerance" if other_machine else "")) if matches
                    else f"differs from {what}: " + "; ".join(wrong[:5]))
+        if not matches and not other_machine:
+            click.echo("note: Cycles' pixels vary across processes in their last bits, now and then by one 8-bit level: an agent "
+                       "that acts on every level, in a long balancing episode, can end it a few steps apart "
+                       "(docs/testing.md, 'Not bit for bit across processes')")
         if recorded.note:
             click.echo(f"note: {recorded.note}")
     if write_results:
