@@ -11,6 +11,7 @@ import os
 import subprocess
 import sys
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import pytest
@@ -69,6 +70,13 @@ def _eval_in_a_fresh_process(env_id: str, model: str, out: Path, *options: str) 
                           cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=600)
 
 
+def assert_close_episodes(played: dict, kept: dict, lengths: Any, returns: Any) -> None:
+    """Each replayed episode keeps its recorded outcome exactly, its length and return within the bounds given."""
+    assert played["successes"] == kept["successes"], (played, kept)
+    assert np.all(np.abs(np.subtract(played["lengths"], kept["lengths"])) <= lengths), (played, kept)
+    assert np.all(np.abs(np.subtract(played["returns"], kept["returns"])) <= returns), (played, kept)
+
+
 @pytest.mark.parametrize("env_id", SHIPPED)
 def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_json(env_id, tmp_path):
     """Bit for bit on a machine like the one that wrote results.json; elsewhere (another CPU's renderer kernels) every
@@ -87,16 +95,12 @@ def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_
     assert evaluation["machine"]["pinned"] is True  # a fresh process: MKL pinned before the policy was built
     if evaluation["comparison"] == "exact" and env_id in CHAOTIC and kept != played:
         share = CHAOTIC[env_id]   # every episode keeps its outcome; its length and return stay within this share
-        assert played["successes"] == kept["successes"], (played, kept)
-        assert np.all(np.abs(np.subtract(played["lengths"], kept["lengths"])) <= share * np.array(kept["lengths"])), (played, kept)
-        assert np.all(np.abs(np.subtract(played["returns"], kept["returns"])) <= share * np.abs(kept["returns"])), (played, kept)
+        assert_close_episodes(played, kept, share * np.array(kept["lengths"]), share * np.abs(kept["returns"]))
     elif evaluation["comparison"] == "exact":
         assert kept == played
     else:
         assert evaluation["comparison"] == "tolerance" and "is unlike the one that wrote results.json" in result.stdout
-        assert played["successes"] == kept["successes"]
-        assert np.all(np.abs(np.subtract(played["lengths"], kept["lengths"])) <= LENGTH_TOLERANCE)
-        assert np.all(np.abs(np.subtract(played["returns"], kept["returns"])) <= RETURN_TOLERANCE * np.maximum(1.0, np.abs(kept["returns"])))
+        assert_close_episodes(played, kept, LENGTH_TOLERANCE, RETURN_TOLERANCE * np.maximum(1.0, np.abs(kept["returns"])))
     # the recorded episodes are the figures results.json reports, of the file that ships
     assert np.mean(recorded["per_episode"]["returns"]) == pytest.approx(recorded["mean_reward"])
     assert np.mean(recorded["per_episode"]["successes"]) == pytest.approx(recorded["success_rate"])

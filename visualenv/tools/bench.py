@@ -152,16 +152,19 @@ def blender_data_blocks() -> int:
     return sum(len(getattr(bpy.data, kind)) for kind in ("objects", "meshes", "materials", "images", "scenes", "node_groups", "cameras", "lights", "worlds"))
 
 
+def device_option(device: str | None) -> dict[str, Any]:
+    """The renderer option that renders on `device` ("cpu" or "gpu"), none to keep the spec's render.device."""
+    return {"device": device} if device else {}
+
+
 def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
               workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = True,
               scaling: tuple[int, ...] = (), device: str | None = None) -> Figures:
     from visualenv.env.make import make
 
-    options: dict[str, Any] = {"readback": readback}
+    options: dict[str, Any] = {"readback": readback, **device_option(device)}
     if threads:
         options["threads"] = threads
-    if device:
-        options["device"] = device
     env = StepTimes(make(spec, **options))
     base: Any = env.unwrapped  # the VisualEnv under the wrappers
     figures = Figures(spec=str(spec), steps=steps)
@@ -347,7 +350,7 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
     from visualenv.env.vector import WorkerVectorEnv, env_factory, with_render_threads
 
     shares = shares or worker_cores(workers, pin)
-    options: dict[str, Any] = {"readback": readback, **({"device": device} if device else {})}
+    options: dict[str, Any] = {"readback": readback, **device_option(device)}
     vec: Any = WorkerVectorEnv([env_factory(str(spec), cores=share, wrapper_class=StepTimes, **with_render_threads(options, share, workers, threads))
                                 for share in shares], context="spawn", shared_memory=True)
     pinned = any(share is not None for share in shares)

@@ -37,12 +37,12 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     import psutil
 
     from visualenv.env.batched import BatchedVectorEnv
-    from visualenv.tools.bench import timed
+    from visualenv.tools.bench import device_option, timed
 
     process = psutil.Process()
     before = process.memory_info().rss
     start = time.perf_counter()
-    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset, renderer_options=_device_option(device))
+    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset, renderer_options=device_option(device))
     if not instanced:
         from visualenv.render.blender.batched import BatchedBlenderRenderer
 
@@ -89,10 +89,6 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     }
 
 
-def _device_option(device: str | None) -> dict[str, Any]:
-    return {"device": device} if device else {}
-
-
 def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, device: str | None, queue: Any) -> None:
     try:
         queue.put(measure_batch(spec, n, steps, seed, autoreset, device=device))
@@ -109,9 +105,10 @@ def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, 
     import psutil
 
     from visualenv.env.multi_batch import MultiBatchVectorEnv
+    from visualenv.tools.bench import device_option
 
     start = time.perf_counter()
-    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset, **_device_option(device))
+    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset, **device_option(device))
     try:
         env.reset(seed=seed)
         build_s = time.perf_counter() - start
