@@ -68,6 +68,7 @@ def test_instanced_tiles_equal_copied_tiles():
         names = {instanced.object(n).as_pointer(): n for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Lamp", "Camera")}
         assert {names[p] for p in instanced._removed if p in names} == {"Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Camera"}
         assert instanced._per_copy  # the lamp's strength is still written into its copies
+        assert _realized(instanced) == {"Floor"}  # the one mesh nothing moves, hides or colours: one realized mesh
         tiles, seen = [], set()
         x, a = (env.program.state_names.index(name) for name in ("x", "a"))
         for step in range(4):
@@ -86,6 +87,36 @@ def test_instanced_tiles_equal_copied_tiles():
         env.close()
 
 
+def _realized(renderer) -> set[str]:
+    return {inst.mesh.name.removesuffix("-instances") for inst in renderer._instances._instancers if inst.realized}
+
+
+def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
+    """A static mesh is realized unless its material reads its placement (a procedural texture in object coordinates:
+    realized, 23 pixels of this scene differ) or a moving camera moves the copies' anchors; either way every tile
+    equals the copied objects' tile."""
+    scene = SCENE.replace(
+        "    Lamp:", "    Tiles: {primitive: cube, size: 0.6, location: [-2.4, 1, 0.3], material: {color: [0.9, 0.9, 0.9], "
+        "texture: {type: checker, scale: 3}}}\n    Lamp:")
+    follow = scene.replace("  Lamp: {strength: 250 + 100 * a}", "  Lamp: {strength: 250 + 100 * a}\n  Camera: {location: [0.5 * x, -6, 3]}")
+    for text, realized in ((scene, {"Floor"}), (follow, set())):
+        env = BatchedVectorEnv(load_spec_text(text, name="instances.yaml"), 3, render=False)
+        env.reset(seed=2)
+        instanced, copied = _renderers(env)
+        try:
+            assert _realized(instanced) == realized
+            assert "Tiles" in {inst.mesh.name.removesuffix("-instances") for inst in instanced._instances._instancers}
+            for step in range(2):
+                table = env.binding_table()
+                ours, theirs = instanced.render_batch(table), copied.render_batch(table)
+                assert np.array_equal(ours, theirs), f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
+                env.step(np.array([1, 0, 1]))
+        finally:
+            instanced.close()
+            copied.close()
+            env.close()
+
+
 def test_a_batch_of_instances_adds_no_objects_per_env():
     """VisualCartPole's objects all become instances: the scene holds as many objects for 6 envs as for 2, and no binding
     is written per env."""
@@ -100,5 +131,6 @@ def test_a_batch_of_instances_adds_no_objects_per_env():
         renderer = env.renderer  # built, not rendered
         counts[n] = len(renderer.scene.objects)
         assert not renderer._per_copy and all(copy.anchor is None for copy in renderer._copies[1:])
+        assert _realized(renderer) == {"Track"}  # the moving cart and pole stay instances
         env.close()
     assert counts[2] == counts[6], counts

@@ -275,8 +275,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if not removed:
             return None
         anchor = self._copies[0].anchor
+        cameras = [view.camera for view in self._views] + ([self._view.camera] if self._view is not None else [])
+        anchored = not any(self._camera_moves(camera) for camera in cameras)  # anchors that stay put: static meshes realized
         return InstancedCopies(anchor.users_collection[0], anchor, removed, self.plan.bindings, self._objects, self.num_envs,
-                               self._posed_bodies())
+                               self._posed_bodies(), realize_static=anchored)
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Any:
         """No setter for an object drawn as instances: its instances are posed from numpy (:meth:`_write_instances`)."""
@@ -422,11 +424,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for key, value in dict(cols=self._cols, grid=self._cols, ortho=int(ortho), half_w=half_w, half_h=half_h, shift_x=shift_x,
                                shift_y=shift_y, ax=a.x, ay=a.y, az=a.z, bx=b.x, by=b.y, bz=b.z).items():
             params[key] = value
-        chain = {o.as_pointer() for o in _with_ancestors(source)}
-        carriers = {name for name, obj in self._objects.items() if obj.as_pointer() in chain}
-        moving = any(t.object in carriers and BINDABLES[t.property].moves for t in self.plan.bindings)
         tiled = _View(view.key, camera, view.width, view.height, view.color, view.depth_range, view.config)
-        return tiled, pose.translation.copy(), moving
+        return tiled, pose.translation.copy(), self._camera_moves(source)
+
+    def _camera_moves(self, camera: Any) -> bool:
+        """Whether a binding moves the camera (or an ancestor): then the copies' anchors follow it every step."""
+        chain = {o.as_pointer() for o in _with_ancestors(camera)}
+        carriers = {name for name, obj in self._objects.items() if obj.as_pointer() in chain}
+        return any(t.object in carriers and BINDABLES[t.property].moves for t in self.plan.bindings)
 
     # -- rendering ----------------------------------------------------------------------------------
 

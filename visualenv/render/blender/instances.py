@@ -23,9 +23,19 @@ an instance stands exactly where the copied object stood: the same pixels.
 
 An env's visibility is its point's selection (a hidden instance is left out),
 and a bound colour an instance attribute that the mesh's own materials read
-with an Attribute node (type Instancer). The instances stay instances:
+with an Attribute node (type Instancer). Moving instances stay instances:
 realizing them, or merging the meshes, makes Cycles rebuild the geometry every
 step (about four times the cost); Cycles' persistent data keeps them.
+
+Static meshes are the other way round. Once anything moves, Cycles syncs every
+instance in the scene, moved or not (about 7 us each on the 2-core VM), so
+VisualCartPole's 1,024 track instances cost as much a step as its carts. A
+static mesh whose every env's copy stands still (no binding moves, hides or
+colours it, no camera moves the anchors) is *realized*: one mesh of every env's
+copy, built once and never synced again (:func:`_realizable`). Its materials
+must not read where the object is (object or generated coordinates, object
+info: :func:`_reads_placement`), and its copies stay under
+:data:`REALIZED_TRIANGLES`.
 
 What numpy cannot compute so stays a copy (:func:`removable`): lights (a light's
 strength and colour are its own data, not an instance attribute), moving
@@ -39,7 +49,7 @@ parent).
 from __future__ import annotations
 
 from dataclasses import dataclass, field
-from typing import Any, Collection, Iterable, Mapping, Sequence
+from typing import Any, Callable, Collection, Iterable, Mapping, Sequence
 
 import bpy
 import numpy as np
@@ -51,6 +61,21 @@ from visualenv.render.blender.materials import color_sockets
 COMPUTED = frozenset({"location", "rotation", "scale", "visible", "color"})
 #: attribute names on the instancers' points (and so on their instances)
 TRANSFORM, VISIBLE, COLOR = "visualenv_transform", "visualenv_visible", "visualenv_color"
+#: the most triangles a static mesh's realized copies (every env's, in one mesh) may hold; past it they stay instances
+REALIZED_TRIANGLES = 250_000
+#: what Cycles reads from an instance's own object, given to the object that holds the realized mesh
+RAY_SETTINGS = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter",
+                "visible_shadow", "is_shadow_catcher", "is_holdout", "pass_index", "color", "lightgroup",
+                "shadow_terminator_shading_offset", "shadow_terminator_geometry_offset")
+CYCLES_SETTINGS = ("is_caustics_caster", "is_caustics_receiver", "ao_distance")
+#: shader nodes that read the object itself (its place, index, instancer or particles): a realized mesh would differ
+PLACEMENT_NODES = frozenset({"ShaderNodeObjectInfo", "ShaderNodeParticleInfo", "ShaderNodeHairInfo", "ShaderNodePointInfo",
+                             "ShaderNodeScript", "ShaderNodeDisplacement", "ShaderNodeVectorDisplacement",
+                             "ShaderNodeTexPointDensity"})
+#: textures whose unlinked vector is the generated coordinates (an Image texture's is the UV map: the same once realized)
+GENERATED_BY_DEFAULT = frozenset({"ShaderNodeTexBrick", "ShaderNodeTexChecker", "ShaderNodeTexGabor", "ShaderNodeTexGradient",
+                                  "ShaderNodeTexMagic", "ShaderNodeTexNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
+                                  "ShaderNodeTexWhiteNoise", "ShaderNodeTexEnvironment"})
 
 
 def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Collection[int] = ()) -> bool:
@@ -140,6 +165,7 @@ class _Instancer:
     visible: list[slice]  # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
     selected: bool  # whether the points carry a visible attribute
     color: slice | None
+    realized: bool = False  # every env's copy in one static mesh, built once (:func:`_realizable`)
     last: dict[str, np.ndarray] = field(default_factory=dict)
 
 
@@ -147,9 +173,12 @@ class InstancedCopies:
     """The batch's removable objects (:func:`removable`), drawn by one instancer per mesh; :meth:`write` poses every env."""
 
     def __init__(self, collection: Any, anchor: Any, originals: Sequence[Any], bindings: Sequence[BindingTarget],
-                 objects: dict[str, Any], num_envs: int, bodies: Mapping[int, int] | None = None) -> None:
-        """`bodies`: the MuJoCo body index of each object (by pointer) that takes a body's pose (:meth:`write`'s `poses`)."""
+                 objects: dict[str, Any], num_envs: int, bodies: Mapping[int, int] | None = None, *,
+                 realize_static: bool = False) -> None:
+        """`bodies`: the MuJoCo body index of each object (by pointer) that takes a body's pose (:meth:`write`'s `poses`).
+        `realize_static`: whether the anchors stay where they are built, so static meshes may be realized."""
         self.num_envs = num_envs
+        self._realize_static = realize_static
         bodies = bodies or {}
         originals = [o for o in originals if o.type in ("MESH", "EMPTY")]  # the cameras removed need no instances
         names = {obj.as_pointer(): name for name, obj in objects.items()}
@@ -216,9 +245,16 @@ class InstancedCopies:
                     _read_instance_color(slot.material)
         holder = bpy.data.objects.new(f"{obj.name}-instances", mesh)
         collection.objects.link(holder)
+        realized = (self._realize_static and self._nodes[node].static and not selected and color is None
+                    and _realizable(obj, self.num_envs))
+        if realized:  # Cycles reads these from an instance's object, and from the holder of a realized mesh
+            for name in RAY_SETTINGS:
+                setattr(holder, name, getattr(obj, name))
+            for name in CYCLES_SETTINGS:
+                setattr(holder.cycles, name, getattr(obj.cycles, name))
         modifier = holder.modifiers.new("visualenv instances", "NODES")
-        modifier.node_group = _node_group(f"{obj.name}-instances", obj, selected)
-        return _Instancer(node, mesh, visible, selected, color)
+        modifier.node_group = _node_group(f"{obj.name}-instances", obj, selected, realized)
+        return _Instancer(node, mesh, visible, selected, color, realized)
 
     def write(self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Pose every env's instances: `values` the binding table ``(N, size)``, `offsets` each env's anchor, a
@@ -338,8 +374,52 @@ def _quaternion_matrices(quats: np.ndarray) -> np.ndarray:
     return out.astype(np.float32)
 
 
-def _node_group(name: str, obj: Any, selected: bool) -> Any:
-    """Points -> Instance on Points (`obj` as an instance, the visible attribute as selection) -> Set Instance Transform."""
+def _realizable(obj: Any, num_envs: int) -> bool:
+    """Whether every env's copy of this static mesh may be one realized mesh, with the same pixels as its instances:
+    its materials do not read its placement, no object-level material, light linking or modifier sets it apart, and
+    the copies' triangles stay under :data:`REALIZED_TRIANGLES`."""
+    if obj.light_linking.receiver_collection is not None or obj.light_linking.blocker_collection is not None:
+        return False
+    if any(slot.link == "OBJECT" for slot in obj.material_slots):  # an object's own materials are not realized with it
+        return False
+    if any(slot.material is not None and _reads_placement(slot.material.node_tree) for slot in obj.material_slots):
+        return False
+    if obj.modifiers:  # their triangles are not known before evaluation (a subdivision's can be many): kept instanced
+        return False
+    return num_envs * _triangles(obj.data) <= REALIZED_TRIANGLES
+
+
+def _triangles(mesh: Any) -> int:
+    totals = np.empty(len(mesh.polygons), dtype=np.int64)
+    mesh.polygons.foreach_get("loop_total", totals)
+    return int((totals - 2).sum())
+
+
+#: per shader node kind, whether such a node reads its object's placement (see :func:`_reads_placement`)
+_PLACEMENT_READERS: dict[str, Callable[[Any], bool]] = {
+    "ShaderNodeTexCoord": lambda n: n.from_instancer or any(n.outputs[o].is_linked for o in ("Generated", "Object", "Normal")),
+    "ShaderNodeAttribute": lambda n: n.attribute_type in ("OBJECT", "INSTANCER"),
+    "ShaderNodeUVMap": lambda n: n.from_instancer,
+    "ShaderNodeNormalMap": lambda n: n.space not in ("TANGENT", "WORLD"),
+    "ShaderNodeVectorTransform": lambda n: "OBJECT" in (n.convert_from, n.convert_to),
+    "ShaderNodeTangent": lambda n: n.direction_type == "RADIAL",  # around the generated coordinates' axis
+    "ShaderNodeTexImage": lambda n: n.projection != "FLAT",  # box, sphere and tube projections are in object space
+    "ShaderNodeOutputMaterial": lambda n: n.inputs["Displacement"].is_linked,
+    "ShaderNodeGroup": lambda n: _reads_placement(n.node_tree),
+    **{kind: lambda n: True for kind in PLACEMENT_NODES},
+    **{kind: lambda n: not n.inputs["Vector"].is_linked for kind in GENERATED_BY_DEFAULT},
+}
+
+
+def _reads_placement(tree: Any) -> bool:
+    """Whether a shader node tree reads where its object is (object, generated or instancer coordinates, object
+    info, object space), which differs between an instance and a realized copy; node groups are searched too."""
+    return tree is not None and any(_PLACEMENT_READERS.get(node.bl_idname, lambda n: False)(node) for node in tree.nodes)
+
+
+def _node_group(name: str, obj: Any, selected: bool, realized: bool = False) -> Any:
+    """Points -> Instance on Points (`obj` as an instance, the visible attribute as selection) -> Set Instance Transform
+    (-> Realize Instances, for a static mesh realized once)."""
     group = bpy.data.node_groups.new(name, "GeometryNodeTree")
     group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
     group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
@@ -357,7 +437,12 @@ def _node_group(name: str, obj: Any, selected: bool) -> Any:
     transform = nodes.new("GeometryNodeSetInstanceTransform")
     links.new(on_points.outputs["Instances"], transform.inputs["Instances"])
     links.new(_named(nodes, "FLOAT4X4", TRANSFORM), transform.inputs["Transform"])
-    links.new(transform.outputs["Instances"], outputs.inputs[0])
+    last = transform.outputs["Instances"]
+    if realized:
+        realize = nodes.new("GeometryNodeRealizeInstances")
+        links.new(last, realize.inputs["Geometry"])
+        last = realize.outputs["Geometry"]
+    links.new(last, outputs.inputs[0])
     return group
 
 

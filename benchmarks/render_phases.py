@@ -1,0 +1,123 @@
+"""Where a batch's render call goes: Cycles' sync, Cycles' tracing and result, and Blender's pipeline around them.
+
+    python benchmarks/render_phases.py [SPEC] [--envs 1024] [--resolution 100] [--steps 10] [--device cpu|gpu]
+                                       [--static-instanced]
+
+A render call (``bpy.ops.render.render``) runs the engine's ``update`` (Cycles' session is made or reset) and then
+its ``render`` (Cycles syncs the scene, every instance once anything moved; path traces; copies the render buffers
+into Blender's result; then the capture's copy). Both methods of Cycles' engine class are timed here; what is left of the call is Blender's pipeline
+around them (the depsgraph update of the moved instancers, the render result's buffers). Each figure is the median
+per call, for the calls of the measured steps ("moved") and for the same calls again with nothing moved ("still").
+Cycles syncs inside the engine's render, so the scene update is what "moved" costs over "still".
+``--static-instanced`` keeps static meshes as instances (the path before they were realized), for a before/after.
+"""
+
+from __future__ import annotations
+
+import argparse
+import statistics
+import tempfile
+import time
+from pathlib import Path
+from typing import Any, Callable
+
+import yaml
+
+
+def _timed_engine(engine: Any, phases: dict[str, list[float]]) -> None:
+    """Time the engine's update and render (Blender passes a registered method as many arguments as it names: explicit
+    signatures, not *args)."""
+    update, render = engine.update, engine.render
+
+    def timed_update(self: Any, data: Any, depsgraph: Any) -> None:
+        start = time.perf_counter()
+        update(self, data, depsgraph)
+        phases["update"].append(time.perf_counter() - start)
+
+    def timed_render(self: Any, depsgraph: Any) -> None:
+        start = time.perf_counter()
+        render(self, depsgraph)
+        phases["render"].append(time.perf_counter() - start)
+
+    engine.update, engine.render = timed_update, timed_render
+
+
+def _timed(function: Callable[[], Any], into: list[float]) -> Callable[[], Any]:
+    def timed() -> Any:
+        start = time.perf_counter()
+        try:
+            return function()
+        finally:
+            into.append(time.perf_counter() - start)
+
+    return timed
+
+
+def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, dict[str, float]]:
+    """Median ms per render call of each phase, for moved and still calls."""
+    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.tools.bench import device_option
+
+    env = BatchedVectorEnv(spec, envs, autoreset_mode="next_step", renderer_options=device_option(device))
+    env.reset(seed=0)
+    for _ in range(3):  # the first calls build the scene in Cycles and compile the tiles camera
+        env.step(env.action_space.sample())
+    renderer = env.renderer
+    import cycles  # Blender's bundled add-on, importable once bpy is loaded
+
+    engine = cycles.CyclesRender
+    update, render = engine.update, engine.render
+    figures = {}
+    try:
+        for kind in ("moved", "still"):
+            phases: dict[str, list[float]] = {"update": [], "render": [], "call": []}
+            _timed_engine(engine, phases)
+            call = renderer.raw_render
+            renderer.raw_render = _timed(call, phases["call"])  # an instance attribute over the method
+            try:
+                for _ in range(steps):
+                    if kind == "moved":
+                        env.step(env.action_space.sample())
+                    else:
+                        renderer.render_batch(env.binding_table())  # the same tiles again: nothing moved
+            finally:
+                engine.update, engine.render = update, render
+                del renderer.raw_render
+            median = {name: 1000 * statistics.median(values) for name, values in phases.items()}
+            median["around"] = median["call"] - median["update"] - median["render"]
+            median["calls per step"] = len(phases["call"]) / steps
+            figures[kind] = median
+    finally:
+        env.close()
+    return figures
+
+
+def main() -> None:
+    parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    parser.add_argument("spec", nargs="?", default="specs/visual_cartpole.yaml")
+    parser.add_argument("--envs", type=int, default=1024)
+    parser.add_argument("--resolution", type=int, default=100)
+    parser.add_argument("--steps", type=int, default=10)
+    parser.add_argument("--device", choices=("cpu", "gpu"), default=None)
+    parser.add_argument("--static-instanced", action="store_true", help="keep static meshes as instances (not realized)")
+    args = parser.parse_args()
+    if args.static_instanced:
+        from visualenv.render.blender import instances
+
+        instances.REALIZED_TRIANGLES = 0
+    data = yaml.safe_load(Path(args.spec).read_text())
+    data["observation"]["resolution"] = [args.resolution, args.resolution]
+    with tempfile.TemporaryDirectory() as folder:
+        spec = Path(folder) / Path(args.spec).name
+        spec.write_text(yaml.safe_dump(data, sort_keys=False))
+        figures = measure(str(spec), args.envs, args.steps, args.device)
+    static = "instanced" if args.static_instanced else "realized"
+    print(f"{args.spec} at {args.resolution}x{args.resolution}, {args.envs} envs, device {args.device or 'of the spec'}, "
+          f"static meshes {static}; ms per render call (medians)")
+    print(f"  {'':>6} {'call':>8} {'engine.update':>14} {'engine.render':>14} {'around':>8} {'calls/step':>11}")
+    for kind, m in figures.items():
+        print(f"  {kind:>6} {m['call']:>8.1f} {m['update']:>14.1f} {m['render']:>14.1f} {m['around']:>8.1f} {m['calls per step']:>11.1f}")
+
+
+if __name__ == "__main__":
+    main()
