@@ -28,7 +28,7 @@ realizing them, or merging the meshes, makes Cycles rebuild the geometry every
 step (about four times the cost); Cycles' persistent data keeps them.
 
 Static meshes are the other way round. Once anything moves, Cycles syncs every
-instance in the scene, moved or not (about 7 us each on the 2-core VM), so
+instance in the scene, moved or not (about 6 us each on the 2-core VM), so
 VisualCartPole's 1,024 track instances cost as much a step as its carts. A
 static mesh whose every env's copy stands still (no binding moves, hides or
 colours it, no camera moves the anchors) is *realized*: one mesh of every env's
