@@ -44,6 +44,7 @@ small.close()
 print("FAULTS", allocator._applied, plain, kept)
 """
 
+
 @pytest.mark.skipif(platform.libc_ver()[0] != "glibc", reason="mallopt is glibc's")
 def test_a_batch_reuses_freed_blocks_instead_of_faulting_them_in():
     out = subprocess.run([sys.executable, "-c", CHILD], capture_output=True, text=True, timeout=300, cwd=Path(__file__).parents[1])

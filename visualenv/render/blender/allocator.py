@@ -7,9 +7,10 @@ again and the kernel zeroes every page. Measured (docs/performance.md, *On a GPU
 an H200 (153 -> 66 ms, system time 12.8 -> 4.2 s of a run) and 12 % of one on the 2-core VM's CPU.
 
 :func:`keep_freed_memory` tells glibc to serve every block from its heap and to keep what is freed at the heap's
-top up to 1 GiB: the process's resident memory stays at its peak instead of rising and falling each call. A batch
-whose images reach :data:`LARGE_IMAGE_PIXELS` asks for it; one that closes hands what is free back (:func:`release_freed_memory`), so that making and closing batches in one
-process (notebooks, sweeps) does not hold on to each one's peak.
+top up to 1 GiB: the process's resident memory stays at its peak instead of rising and falling each call. The
+setting is the whole process's. A batch whose images reach :data:`LARGE_IMAGE_PIXELS` asks for it; a batch that
+closes hands what is free back (:func:`release_freed_memory`), so that making and closing batches in one process
+(notebooks, sweeps) does not hold on to each one's peak.
 """
 
 from __future__ import annotations

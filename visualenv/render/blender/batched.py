@@ -43,9 +43,9 @@ from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
-from visualenv.render.blender.allocator import LARGE_IMAGE_PIXELS, keep_freed_memory, release_freed_memory
 from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
+from visualenv.render.blender.allocator import LARGE_IMAGE_PIXELS, keep_freed_memory, release_freed_memory
 from visualenv.render.blender.instances import InstancedCopies, removable
 from visualenv.render.blender.materials import SKYBOX
 from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
