@@ -6,7 +6,7 @@
 #38 asks for <= 15 ms at N = 1,024 of VisualCartPole on 2 cores.
 
 The observation is shrunk to RESOLUTION x RESOLUTION so that tracing does not
-hide the update. Each round measures both paths, each in a fresh process,
+hide the update. Each round measures every chosen path, each in a fresh process,
 alternated (the machine is shared: compare figures of one run). The scene
 update is the writes into the scene (Python) plus the render call minus the
 same call with nothing moved (Blender's depsgraph and Cycles' sync). The paths: ``copies`` (every object copied per
