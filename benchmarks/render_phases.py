@@ -19,7 +19,7 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import yaml
 
@@ -42,21 +42,10 @@ def _timed_engine(engine: Any, phases: dict[str, list[float]]) -> None:
     engine.update, engine.render = timed_update, timed_render
 
 
-def _timed(function: Callable[[], Any], into: list[float]) -> Callable[[], Any]:
-    def timed() -> Any:
-        start = time.perf_counter()
-        try:
-            return function()
-        finally:
-            into.append(time.perf_counter() - start)
-
-    return timed
-
-
 def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, dict[str, float]]:
     """Median ms per render call of each phase, for moved and still calls."""
     from visualenv.env.batched import BatchedVectorEnv
-    from visualenv.tools.bench import device_option
+    from visualenv.tools.bench import device_option, timed
 
     env = BatchedVectorEnv(spec, envs, autoreset_mode="next_step", renderer_options=device_option(device))
     env.reset(seed=0)
@@ -73,7 +62,7 @@ def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, d
             phases: dict[str, list[float]] = {"update": [], "render": [], "call": []}
             _timed_engine(engine, phases)
             call = renderer.raw_render
-            renderer.raw_render = _timed(call, phases["call"])  # an instance attribute over the method
+            renderer.raw_render = timed(call, phases["call"])  # an instance attribute over the method
             try:
                 for _ in range(steps):
                     if kind == "moved":
