@@ -22,7 +22,7 @@ BLENDER_MODULES = {
     "test_bench_and_soak", "test_blend_corpus", "test_build_and_preview", "test_capture", "test_determinism", "test_evaluation",
     "test_inspect_init", "test_parallel", "test_render_blender", "test_rllib", "test_train_play", "test_shipped_models",
     "test_api_strict", "test_make_options", "test_batched", "test_batched_scale", "test_batched_instances",
-    "test_sensor", "test_heightmap", "test_segmentation", "test_physics_scene",
+    "test_sensor", "test_heightmap", "test_segmentation", "test_physics_scene", "test_rendering_determinism",
     "test_sky_textures", "test_texture_sets",
 }
 #: single tests that render, in modules that otherwise do not

@@ -165,6 +165,12 @@ class Capture:
             return luma.astype(np.uint8)[:, :, None]
         return self._convert(1, rows_to_bytes)
 
+    def linear(self) -> np.ndarray:
+        """(H, W, 4) a copy of the linear Combined pass, top row first: every bit the 8-bit readers round away."""
+        self._check_filled()
+        height, width = self._shape
+        return self._buffer.reshape(height, width, 4)[::-1].copy()
+
     def raw(self) -> np.ndarray:
         """(H, W, 1) the red channel's linear values as bytes (Blender's 'Raw' view: used for depth)."""
         return self._convert(1, lambda rows: self._quantised(255, rows)[:, :, :1].astype(np.uint8))

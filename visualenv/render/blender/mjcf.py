@@ -21,6 +21,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
+from visualenv.compat.blender import sort_faces
 from visualenv.physics.scene import GeomShape, PhysicsScene
 from visualenv.physics.texcoords import cube_uv, planar_uv
 from visualenv.render.blender.materials import make_material, show_skybox, tint_image
@@ -243,6 +244,8 @@ def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[in
     points, made = _shape(bm, geom)
     for face in bm.faces:
         face.smooth = geom.kind in ("sphere", "ellipsoid", "capsule", "cylinder")
+    if geom.kind in ("sphere", "ellipsoid", "capsule"):  # made by create_uvsphere (a mesh keeps MuJoCo's face order: _uv_map reads it)
+        sort_faces(bm)
     bm.to_mesh(mesh)
     bm.free()
     obj = bpy.data.objects.new(geom.name, mesh)

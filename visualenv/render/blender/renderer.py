@@ -378,6 +378,13 @@ class BlenderRenderer(Renderer):
         self.raw_render()
         return self._read_capture(view, capture) if capture is not None else self._read_file(view)
 
+    def last_linear_pass(self) -> np.ndarray | None:
+        """The linear Combined pass (H, W, RGBA float32, top row first) the last Cycles image was read from; None where
+        pixels leave Blender through a file. Renders of one state compare bit for bit here, where 8-bit levels hide most bits."""
+        if self._active_capture is None:
+            return None
+        return self._active_capture.linear()
+
     def _read_capture(self, view: _View, capture: Capture) -> np.ndarray:
         if view.color in ("depth", "segmentation"):
             return capture.raw()

@@ -27,6 +27,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
+from visualenv.compat.blender import sort_faces
 from visualenv.render.blender.blendfile import BlendReadError
 from visualenv.render.blender import blendfile
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
@@ -390,6 +391,8 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject, heights: np.ndarray | None
         bmesh.ops.translate(bm, vec=Vector((0.0, 0.0, -low)), verts=bm.verts)
     for face in bm.faces:
         face.smooth = spec.smooth
+    if kind == "sphere":
+        sort_faces(bm)
     bm.to_mesh(mesh)
     bm.free()
 
