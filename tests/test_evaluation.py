@@ -211,3 +211,16 @@ def test_machines_that_differ_in_what_decides_the_last_digits_are_named():
     assert unlike(dict(here, cpu_isa=other), here) == [f"cpu_isa {other} there, {here['cpu_isa']} here"]
     assert unlike(dict(here, cpu="another name"), here) == []  # the model name alone decides nothing
     assert unlike(None, dict(here, cpu_isa="AVX2")) == ["pinned False there, True here"]  # records before machines were kept
+
+
+def test_episodes_that_cannot_replay_are_compared_as_a_sample():
+    """A chaotic agent on another machine plays new episodes: those that could be drawn from results.json's agree, an
+    agent that lost its skill does not."""
+    from visualenv.train.evaluation import sample_differences
+
+    recorded = {"per_episode": {"returns": [1000.0] * 54 + [900.0] * 46, "lengths": [1000] * 54 + [900] * 46,
+                                "successes": [True] * 54 + [False] * 46}}
+    like = {"per_episode": {"returns": [900.0, 1000.0, 900.0], "lengths": [900, 1000, 900], "successes": [False, True, False]}}
+    assert sample_differences(like, recorded) == []
+    lost = {"per_episode": {"returns": [50.0, 60.0, 70.0], "lengths": [51, 61, 71], "successes": [False] * 3}}
+    assert [d.split(" of ")[0] for d in sample_differences(lost, recorded)] == ["returns", "lengths"]

@@ -27,9 +27,9 @@ pytestmark = pytest.mark.slow
 SHIPPED = ["Goalie-v0", "Hover2D-v0", "LunarLanding-v0", "VisualCartPole-v0", "VisualInvertedPendulum-v0"]
 #: fewer episodes where each is long: a balancing pendulum plays 1,000 steps (one episode is as long as 50 of Goalie's)
 FEWER = {"VisualInvertedPendulum-v0": 3}
-#: agents whose episodes are chaotic: Cycles' pixels vary across processes in their last float bits, which now and then
-#: moves one 8-bit level, and a balancing episode of 1,000 steps then ends a few steps apart (docs/testing.md)
-CHAOTIC = {"VisualInvertedPendulum-v0": 0.02}
+#: agents whose episodes are chaotic: on another CPU's kernels a pixel's last bits differ, now and then by one 8-bit
+#: level, and a balancing episode of 1,000 steps grows it; there they are compared as a sample (docs/testing.md)
+CHAOTIC = {"VisualInvertedPendulum-v0"}
 REPO = Path(__file__).resolve().parents[1]
 
 
@@ -87,17 +87,16 @@ def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_
     result = _eval_in_a_fresh_process(env_id, "pretrained", out)
     assert result.returncode == 0, result.stdout + result.stderr
     replayed = FEWER.get(env_id, REPLAYED)
-    if env_id not in CHAOTIC:
+    if env_id not in CHAOTIC or "is unlike the one" not in result.stdout:
         assert f"reproduces the first {replayed} episodes of its run's results.json" in result.stdout, result.stdout
     recorded = json.loads((pretrained_model(env_id).parent / "results.json").read_text())
     evaluation = json.loads(out.read_text())
     kept, played = {k: v[:replayed] for k, v in recorded["per_episode"].items()}, evaluation["per_episode"]
     assert evaluation["machine"]["pinned"] is True  # a fresh process: MKL pinned before the policy was built
-    if evaluation["comparison"] == "exact" and env_id in CHAOTIC and kept != played:
-        share = CHAOTIC[env_id]   # every episode keeps its outcome; its length and return stay within this share
-        assert_close_episodes(played, kept, share * np.array(kept["lengths"]), share * np.abs(kept["returns"]))
-    elif evaluation["comparison"] == "exact":
+    if evaluation["comparison"] == "exact":  # rendering is deterministic: every agent, the pendulum included, replays every bit
         assert kept == played
+    elif env_id in CHAOTIC:  # another machine: the episodes are a new sample of the agent's, and must look like one
+        assert evaluation["consistent_sample"] is True, result.stdout
     else:
         assert evaluation["comparison"] == "tolerance" and "is unlike the one that wrote results.json" in result.stdout
         assert_close_episodes(played, kept, LENGTH_TOLERANCE, RETURN_TOLERANCE * np.maximum(1.0, np.abs(kept["returns"])))

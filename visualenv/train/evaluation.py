@@ -349,6 +349,29 @@ def _close(key: str, played: Any, kept: Any, tolerant: bool) -> bool:
     return abs(played - kept) <= RETURN_TOLERANCE * max(1.0, abs(kept))
 
 
+#: episodes that cannot replay (a chaotic agent on another CPU's kernels) are compared as a sample: each total must lie
+#: where the totals of as many episodes drawn from results.json's fall this often
+SAMPLE_CONFIDENCE = 0.999
+
+
+def sample_differences(results: dict[str, Any], recorded: dict[str, Any]) -> list[str]:
+    """The totals of `results`' episodes (return, length, successes) that as many episodes drawn at random from
+    results.json's would give less often than SAMPLE_CONFIDENCE ([] if the episodes could be a sample of those)."""
+    played, kept = results.get("per_episode", {}), recorded.get("per_episode", {})
+    n = len(played.get("returns", []))
+    if not n or not kept.get("returns"):
+        return []
+    draws = np.random.default_rng(0).integers(0, len(kept["returns"]), (BOOTSTRAP_RESAMPLES, n))
+    wrong = []
+    for key in ("returns", "lengths", "successes"):
+        totals = np.asarray(kept[key], dtype=np.float64)[draws].sum(axis=1)
+        low, high = np.quantile(totals, [(1 - SAMPLE_CONFIDENCE) / 2, (1 + SAMPLE_CONFIDENCE) / 2])
+        total = float(np.sum(np.asarray(played[key], dtype=np.float64)))
+        if not low <= total <= high:
+            wrong.append(f"{key} of {n} episodes total {total:g}, where {n} of results.json's give {low:g} to {high:g}")
+    return wrong
+
+
 def replays_prefix(results: dict[str, Any], recorded: dict[str, Any]) -> bool:
     """Whether `results` (fewer episodes, the same seed) can be checked against results.json's per-episode records."""
     return 0 < results.get("episodes", 0) < recorded.get("episodes", 0) and len(recorded.get("per_episode", {}).get("returns", [])) == recorded["episodes"]
