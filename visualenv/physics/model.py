@@ -18,7 +18,6 @@ with one numpy indexing per array (:mod:`visualenv.physics.simulation`).
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -26,10 +25,9 @@ from pathlib import Path
 from typing import Any
 
 from visualenv.errors import VisualEnvError
+from visualenv.files import PACKAGE_PREFIX, package_file
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
-#: the prefix of a model path inside an installed Python package: ``package:<importable.package>/<path inside it>``
-PACKAGE_PREFIX = "package:"
 #: arrays a name can point into (attributes of MjData; ``time`` is a scalar)
 ARRAYS = ("qpos", "qvel", "xpos", "xquat", "site_xpos", "sensordata", "ctrl", "time")
 _FREE_QPOS = ("x", "y", "z", "qw", "qx", "qy", "qz")
@@ -65,22 +63,14 @@ def _warn(message: str) -> None:
 def resolve_model_path(text: str, base_dir: Path) -> Path:
     """The MJCF file a spec names: relative to the spec, absolute, or ``package:pkg.name/path/in/it.xml``.
 
-    The package form reads a file that an installed package ships (Gymnasium's
-    MuJoCo assets: ``package:gymnasium.envs.mujoco/assets/half_cheetah.xml``),
-    found where Python imports the package from, whatever the install path.
+    The package form reads a file that an installed package ships, found in the
+    package's folders on disk without importing it (:func:`visualenv.files.package_file`).
     """
     if text.startswith(PACKAGE_PREFIX):
-        rest = text[len(PACKAGE_PREFIX):]
-        package, _, inner = rest.partition("/")
-        if not package or not inner:
-            raise PhysicsError(f"'{text}': expected package:<package>/<path inside it>, e.g. package:gymnasium.envs.mujoco/assets/hopper.xml")
         try:
-            found = importlib.util.find_spec(package)
-        except (ImportError, ValueError):
-            found = None
-        if found is None or not found.submodule_search_locations:
-            raise PhysicsError(f"'{text}': no installed package '{package}'")
-        return Path(list(found.submodule_search_locations)[0]) / inner
+            return package_file(text)
+        except VisualEnvError as exc:
+            raise PhysicsError(str(exc)) from None
     path = Path(text).expanduser()
     return path if path.is_absolute() else base_dir / path
 
