@@ -31,7 +31,7 @@ BLENDER_TESTS = {
     "test_bindables.py::test_the_blender_backend_has_a_setter_for_every_bindable_property",
     "test_first_hour.py::test_build_says_an_rgb_observation_is_sketched_in_grayscale",
     "test_pickle_episode.py::test_a_rendered_env_goes_on_with_its_frames_and_sensor_noise",
-    "test_package_paths.py::test_build_renders_a_package_model_without_importing_the_package",
+    "test_specs_import_nothing.py::test_build_renders_a_package_model_without_importing_the_package",
 }
 
 

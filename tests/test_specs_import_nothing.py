@@ -1,8 +1,11 @@
-"""`package:` model paths are found on disk, never imported: a spec is data.
+"""A spec is data: the files it names are read, never imported or run.
 
-The package here is written by the test; importing it (its top-level ``__init__`` or the
-subpackage's) writes a marker file. Validating, compiling, making, stepping and building a
-spec that names ``package:`` of it must write nothing; importing it, as the control, does.
+``package:`` model paths are found on disk. The package here is written by the test;
+importing it (its top-level ``__init__`` or the subpackage's) writes a marker file.
+Validating, compiling, making, stepping and building a spec that names ``package:`` of it
+must write nothing; importing it, as the control, does. MJCF ``include`` and ``file``
+attributes are files MuJoCo reads (XML, meshes, images): naming a Python file there is an
+error, never an import.
 """
 
 from __future__ import annotations
@@ -132,3 +135,19 @@ def test_build_renders_a_package_model_without_importing_the_package(tmp_path: P
     assert (tmp_path / "build" / "PackagedPole-v0" / "preview.png").is_file()
     assert not marker.exists() and name not in sys.modules
 
+
+
+@pytest.mark.parametrize("element, expected", [
+    ('<include file="__init__.py"/>', "Include error: 'XML parse error"),
+    ('<asset><mesh name="m" file="__init__.py"/></asset>', "no decoder found for mesh file"),
+    ('<asset><texture name="t" type="2d" file="__init__.py"/></asset>', "Element name 't'"),
+])
+def test_mjcf_include_and_file_attributes_are_files_mujoco_reads(tmp_path: Path, hostile_package, element: str, expected: str) -> None:
+    name, marker = hostile_package
+    folder = tmp_path / "site" / name / "models"
+    (folder / "pole.xml").write_text(MODEL.replace('<option timestep="0.01"/>', element), encoding="utf-8")
+    with pytest.raises(SpecError) as caught:
+        compile_spec(load_spec(write_spec(tmp_path, f"package:{name}.models/pole.xml")))
+    message = str(caught.value)
+    assert "physics.model" in message and "MuJoCo cannot load" in message and expected in message, message
+    assert not marker.exists() and name not in sys.modules
