@@ -32,6 +32,7 @@ BLENDER_TESTS = {
     "test_first_hour.py::test_build_says_an_rgb_observation_is_sketched_in_grayscale",
     "test_pickle_episode.py::test_a_rendered_env_goes_on_with_its_frames_and_sensor_noise",
     "test_specs_import_nothing.py::test_build_renders_a_package_model_without_importing_the_package",
+    "test_bundled_ports.py::test_building_half_cheetah_prints_nothing_on_stderr",
 }
 
 
