@@ -4,8 +4,9 @@ A .blend can carry Python that Blender runs by itself: a text block registered t
 file opens, and driver expressions, evaluated whenever the scene is. Blender runs neither while
 auto-run (the preference ``filepaths.use_scripts_auto_execute``) is off: a registered text block
 is skipped and a driver whose expression is outside Blender's safe subset (arithmetic and math
-functions on the driver's variables) evaluates to 0 (checked with bpy 5.0.1). bpy starts with it off; a process can turn it on (the preference, or opening a file with
-``use_scripts=True``), and a driver is compiled with the setting of the moment it first runs.
+functions on the driver's variables) evaluates to 0 (checked with bpy 5.0.1). bpy starts with it
+off; a process can turn it on (the preference, or opening a file with ``use_scripts=True``), and a
+driver is compiled with the setting of the moment it first runs.
 So visualenv turns it off when it loads bpy and again before it reads each .blend (setting the
 preference also turns off Blender's run-time flag), and refuses to read one if it will not stay off.
 Freestyle, which runs line-style scripts even then, is switched off in every render (settings.py).
