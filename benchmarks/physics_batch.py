@@ -92,8 +92,9 @@ SIDE_CAMERA = "scene:\n  objects:\n    BenchSide: {camera: perspective, location
 
 
 def spec_at(resolution: int, spec: Path, folder: str, spec_camera: bool = False) -> Path:
-    """A copy of the spec whose observation is resolution x resolution (its model must be named absolutely or as package:)."""
+    """A copy of the spec whose observation is resolution x resolution (its model, named relative to the spec, made absolute)."""
     text = spec.read_text(encoding="utf-8")
+    text = re.sub(r"^(  model: )(?!package:)(\S+)$", lambda m: m.group(1) + str((spec.parent / m.group(2)).resolve()), text, flags=re.M)
     text = re.sub(r"resolution: \[\d+, \d+\]", f"resolution: [{resolution}, {resolution}]", text)
     if spec_camera:
         if re.search(r"^scene:", text, re.M):

@@ -23,7 +23,7 @@ BLENDER_MODULES = {
     "test_inspect_init", "test_parallel", "test_render_blender", "test_rllib", "test_train_play", "test_shipped_models",
     "test_api_strict", "test_make_options", "test_batched", "test_batched_scale", "test_batched_instances",
     "test_sensor", "test_heightmap", "test_segmentation", "test_physics_scene", "test_rendering_determinism",
-    "test_sky_textures", "test_texture_sets",
+    "test_sky_textures", "test_texture_sets", "test_blend_scripts_off",
 }
 #: single tests that render, in modules that otherwise do not
 BLENDER_TESTS = {
@@ -31,6 +31,8 @@ BLENDER_TESTS = {
     "test_bindables.py::test_the_blender_backend_has_a_setter_for_every_bindable_property",
     "test_first_hour.py::test_build_says_an_rgb_observation_is_sketched_in_grayscale",
     "test_pickle_episode.py::test_a_rendered_env_goes_on_with_its_frames_and_sensor_noise",
+    "test_specs_import_nothing.py::test_build_renders_a_package_model_without_importing_the_package",
+    "test_bundled_ports.py::test_building_half_cheetah_prints_nothing_on_stderr",
 }
 
 

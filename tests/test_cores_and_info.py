@@ -162,6 +162,13 @@ def test_info_survives_a_probe_that_crashes_or_hangs():
     assert "Blender: the Blender probe" in format_report(hung)
 
 
+def test_info_names_mujocos_version():
+    mujoco = pytest.importorskip("mujoco")
+    report = gather(command=[sys.executable, "-c", "pass"])
+    assert report["mujoco"] == mujoco.__version__ and f"MuJoCo {mujoco.__version__}" in format_report(report).splitlines()
+    assert "MuJoCo: not installed" in format_report(dict(report, mujoco=None))
+
+
 def test_info_says_why_batches_are_unavailable():
     report = {"visualenv": "0", "python": "3.11", "machine": "x86_64", "cores": {"usable": 2, "machine": 2},
               "blender": {"bpy": "5.0.1", "cycles": {}, "gpu_context": {"error": "none"},

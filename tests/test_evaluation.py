@@ -204,12 +204,15 @@ def test_a_replay_on_another_machine_is_compared_within_the_stated_tolerance():
 
 def test_machines_that_differ_in_what_decides_the_last_digits_are_named():
     from visualenv.train.reproducible import machine_record, unlike
+    from visualenv.versions import versions
 
     here = machine_record(True)
     other = "AVX2" if here["cpu_isa"] == "AVX512" else "AVX512"  # whichever ISA this CPU is not: the test holds on either
     assert unlike(here, here) == []
     assert unlike(dict(here, cpu_isa=other), here) == [f"cpu_isa {other} there, {here['cpu_isa']} here"]
     assert unlike(dict(here, cpu="another name"), here) == []  # the model name alone decides nothing
+    assert here["mujoco"] == versions().get("mujoco")  # physics steps differ between MuJoCo versions
+    assert unlike(dict(here, mujoco="2.3.7"), here) == [f"mujoco 2.3.7 there, {here['mujoco']} here"]
     assert unlike(None, dict(here, cpu_isa="AVX2")) == ["pinned False there, True here"]  # records before machines were kept
 
 

@@ -21,8 +21,12 @@ def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
                      if p.suffix in (".yaml", ".toml"))
     with zipfile.ZipFile(wheel) as archive:
         shipped = sorted(n[len("visualenv/specs/"):] for n in archive.namelist() if n.startswith("visualenv/specs/") and n.endswith((".yaml", ".toml")))
+        pinned = sorted(n for n in archive.namelist() if n.startswith("visualenv/specs/mujoco/assets/"))
         archive.extractall(tmp_path / "site")
     assert shipped == bundled
+    # the MJCF files the MuJoCo ports read, pinned, with Gymnasium's licence and where they come from
+    assets = ROOT / "specs" / "mujoco" / "assets"
+    assert pinned == sorted(f"visualenv/specs/mujoco/assets/{p.name}" for p in assets.iterdir() if p.is_file())
     # import the unpacked wheel, not the checkout, and look a spec up by id
     probe = "from visualenv.env.registration import resolve; print(resolve('Goalie-v0'))"
     out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env={"PYTHONPATH": str(tmp_path / "site")},

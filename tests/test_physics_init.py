@@ -14,7 +14,7 @@ import pytest
 from click.testing import CliRunner
 
 pytest.importorskip("mujoco")
-#: MuJoCo 3 deprecates an attribute of Gymnasium's half_cheetah.xml (settotalmass); MuJoCo's own warnings are Python warnings here
+#: these are Gymnasium's own files: its half_cheetah.xml has settotalmass, which MuJoCo 3 deprecates (MuJoCo's warnings are Python warnings here)
 pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. compiler attribute:RuntimeWarning")
 
 from visualenv.cli import main  # noqa: E402

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
-#: MuJoCo 3 deprecates an attribute of Gymnasium's half_cheetah.xml (settotalmass); MuJoCo's own warnings are Python warnings here
+#: Gymnasium's own HalfCheetah-v5 loads its XML, whose settotalmass MuJoCo 3 deprecates (the port reads the pinned copy, which has none)
 pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. compiler attribute:RuntimeWarning")
 gym = pytest.importorskip("gymnasium")
 

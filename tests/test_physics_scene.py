@@ -15,8 +15,6 @@ import numpy as np
 import pytest
 
 pytest.importorskip("mujoco")
-#: MuJoCo 3 deprecates an attribute of Gymnasium's half_cheetah.xml (settotalmass); MuJoCo's own warnings are Python warnings here
-pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. compiler attribute:RuntimeWarning")
 
 import visualenv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402

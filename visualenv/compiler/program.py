@@ -250,6 +250,8 @@ class _Compiler:
         geoms = {n: i for i, n in enumerate(model.names.ident["geom"])}
         contacts: dict[str, tuple[int, int]] = {}
         for key, pair in section.contacts.items():
+            if key in model.names.values:
+                self.error(("physics", "contacts", key), f"'{key}' is a name of the physics model: choose another", key=True)
             unknown = [(i, g) for i, g in enumerate(pair) if g not in geoms]
             for i, g in unknown:
                 self.error(("physics", "contacts", key, i), f"no geom '{g}' in the model" + did_you_mean(g, geoms).replace("names:", "geoms:"))
@@ -367,7 +369,8 @@ class _Compiler:
             groups.append(("actions.discrete", list(dict.fromkeys(k for a in spec.actions.discrete for k in a))))
         elif spec.actions is not None and spec.actions.continuous:
             groups.append(("actions.continuous", list(spec.actions.continuous)))
-        for group, names in groups:
+        # a contact is a name too (load_physics checks it against the model's own, which self.pnames holds with it)
+        for group, names in [*groups, ("physics.contacts", list(getattr(spec.physics, "contacts", {})))]:
             for n in names:
                 path: tuple = tuple(group.split(".")) + (n,)
                 if group == "actions.discrete":

@@ -11,6 +11,10 @@ are called ``<kind><index>``, e.g. ``actuator0``):
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
 * ``ctrl_<actuator>``; ``sim_time``.
 
+Two elements that come to one name (joints ``left-leg`` and ``left_leg``, a free
+joint ``a``'s ``qpos_a_x`` and a hinge ``a_x``; geoms, cameras and lights, which
+are also the drawn scene's objects; keyframes) are an error that names both.
+
 Each name maps to (array, flat index) once, here; a reader gathers many names
 with one numpy indexing per array (:mod:`visualenv.physics.simulation`).
 """
@@ -18,7 +22,6 @@ with one numpy indexing per array (:mod:`visualenv.physics.simulation`).
 from __future__ import annotations
 
 import importlib
-import importlib.util
 import re
 import warnings
 from dataclasses import dataclass, field
@@ -26,10 +29,9 @@ from pathlib import Path
 from typing import Any
 
 from visualenv.errors import VisualEnvError
+from visualenv.files import PACKAGE_PREFIX, package_file
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
-#: the prefix of a model path inside an installed Python package: ``package:<importable.package>/<path inside it>``
-PACKAGE_PREFIX = "package:"
 #: arrays a name can point into (attributes of MjData; ``time`` is a scalar)
 ARRAYS = ("qpos", "qvel", "xpos", "xquat", "site_xpos", "sensordata", "ctrl", "time")
 _FREE_QPOS = ("x", "y", "z", "qw", "qx", "qy", "qz")
@@ -65,22 +67,14 @@ def _warn(message: str) -> None:
 def resolve_model_path(text: str, base_dir: Path) -> Path:
     """The MJCF file a spec names: relative to the spec, absolute, or ``package:pkg.name/path/in/it.xml``.
 
-    The package form reads a file that an installed package ships (Gymnasium's
-    MuJoCo assets: ``package:gymnasium.envs.mujoco/assets/half_cheetah.xml``),
-    found where Python imports the package from, whatever the install path.
+    The package form reads a file that an installed package ships, found in the
+    package's folders on disk without importing it (:func:`visualenv.files.package_file`).
     """
     if text.startswith(PACKAGE_PREFIX):
-        rest = text[len(PACKAGE_PREFIX):]
-        package, _, inner = rest.partition("/")
-        if not package or not inner:
-            raise PhysicsError(f"'{text}': expected package:<package>/<path inside it>, e.g. package:gymnasium.envs.mujoco/assets/hopper.xml")
         try:
-            found = importlib.util.find_spec(package)
-        except (ImportError, ValueError):
-            found = None
-        if found is None or not found.submodule_search_locations:
-            raise PhysicsError(f"'{text}': no installed package '{package}'")
-        return Path(list(found.submodule_search_locations)[0]) / inner
+            return package_file(text)
+        except VisualEnvError as exc:
+            raise PhysicsError(str(exc)) from None
     path = Path(text).expanduser()
     return path if path.is_absolute() else base_dir / path
 
@@ -161,53 +155,98 @@ def load_model(path: Path) -> PhysicsModel:
     return PhysicsModel(path, model, name_tables(model))
 
 
-def _element_names(model: Any, kind: str, count: int) -> tuple[list[str], dict[str, int]]:
+#: element kinds whose names a spec uses as they are (contacts' geoms, reset.keyframe, cameras) and, for
+#: geoms, cameras and lights, as the names of the drawn scene's objects: each group's names must differ
+_NAMED_AS_THEY_ARE = (("geom", "camera", "light"), ("key",))
+_KIND_WORDS = {"key": "keyframe"}
+
+
+def _element_names(model: Any, kind: str, count: int) -> tuple[list[str], dict[str, int], list[str]]:
+    """Each element's identifier, MuJoCo's name -> id, and each element as an error names it (``joint 'left-leg'``)."""
     mujoco = mujoco_module()
     obj = getattr(mujoco.mjtObj, "mjOBJ_" + kind.upper())
     idents: list[str] = []
     by_name: dict[str, int] = {}
+    owners: list[str] = []
+    word = _KIND_WORDS.get(kind, kind)
     for i in range(count):
         raw = mujoco.mj_id2name(model, obj, i) or ""
         if raw:
             by_name[raw] = i
         idents.append(identifier(raw) if raw else f"{kind}{i}")
-    return idents, by_name
+        owners.append(f"{word} '{raw}'" if raw else f"the unnamed {word} {i}")
+    return idents, by_name, owners
+
+
+class _Names:
+    """The names being made, each with the element it reads; a name a second element makes is a clash, kept to report."""
+
+    def __init__(self) -> None:
+        self.values: dict[str, tuple[str, int]] = {}
+        self.owner: dict[str, str] = {}
+        self.clashes: dict[tuple[str, str], str] = {}  # (first element, second element) -> the first name they share
+
+    def add(self, name: str, target: tuple[str, int], owner: str) -> None:
+        first = self.owner.setdefault(name, owner)
+        if first == owner:
+            self.values[name] = target
+        else:
+            self.clashes.setdefault((first, owner), name)
 
 
 def name_tables(model: Any) -> NameTables:
-    """Every readable name of `model`, computed once."""
-    mujoco = mujoco_module()
-    values: dict[str, tuple[str, int]] = {}
+    """Every readable name of `model`, computed once; PhysicsError naming both when two elements make one name."""
     kinds = {"joint": model.njnt, "body": model.nbody, "geom": model.ngeom, "site": model.nsite, "sensor": model.nsensor,
              "actuator": model.nu, "key": model.nkey, "camera": model.ncam, "light": model.nlight}
     ident: dict[str, list[str]] = {}
     by_name: dict[str, dict[str, int]] = {}
+    owners: dict[str, list[str]] = {}
     for kind, count in kinds.items():
-        ident[kind], by_name[kind] = _element_names(model, kind, count)
-    free, ball = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
-    for j, name in enumerate(ident["joint"]):
-        qadr, vadr, jtype = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j]), int(model.jnt_type[j])
-        if jtype in (free, ball):
-            qparts, vparts = (_FREE_QPOS, _FREE_QVEL) if jtype == free else (_BALL_QPOS, _BALL_QVEL)
-            values.update({f"qpos_{name}_{p}": ("qpos", qadr + i) for i, p in enumerate(qparts)})
-            values.update({f"qvel_{name}_{p}": ("qvel", vadr + i) for i, p in enumerate(vparts)})
-        else:
-            values[f"qpos_{name}"] = ("qpos", qadr)
-            values[f"qvel_{name}"] = ("qvel", vadr)
+        ident[kind], by_name[kind], owners[kind] = _element_names(model, kind, count)
+    names = _Names()
+    _joint_values(model, names, ident["joint"], owners["joint"])
     for b, name in enumerate(ident["body"]):
         if b == 0:
             continue  # the world body never moves
-        values.update({f"body_{name}_{p}": ("xpos", 3 * b + i) for i, p in enumerate("xyz")})
-        values.update({f"body_{name}_{p}": ("xquat", 4 * b + i) for i, p in enumerate(("qw", "qx", "qy", "qz"))})
+        for i, p in enumerate("xyz"):
+            names.add(f"body_{name}_{p}", ("xpos", 3 * b + i), owners["body"][b])
+        for i, p in enumerate(("qw", "qx", "qy", "qz")):
+            names.add(f"body_{name}_{p}", ("xquat", 4 * b + i), owners["body"][b])
     for s, name in enumerate(ident["site"]):
-        values.update({f"site_{name}_{p}": ("site_xpos", 3 * s + i) for i, p in enumerate("xyz")})
+        for i, p in enumerate("xyz"):
+            names.add(f"site_{name}_{p}", ("site_xpos", 3 * s + i), owners["site"][s])
     for s, name in enumerate(ident["sensor"]):
         adr, dim = int(model.sensor_adr[s]), int(model.sensor_dim[s])
-        if dim == 1:
-            values[f"sensor_{name}"] = ("sensordata", adr)
-        else:
-            values.update({f"sensor_{name}_{i}": ("sensordata", adr + i) for i in range(dim)})
+        for i in range(dim):
+            names.add(f"sensor_{name}" if dim == 1 else f"sensor_{name}_{i}", ("sensordata", adr + i), owners["sensor"][s])
     for a, name in enumerate(ident["actuator"]):
-        values[f"ctrl_{name}"] = ("ctrl", a)
-    values["sim_time"] = ("time", 0)
-    return NameTables(values, by_name["joint"], by_name["body"], by_name["geom"], by_name["site"], by_name["actuator"], by_name["key"], ident)
+        names.add(f"ctrl_{name}", ("ctrl", a), owners["actuator"][a])
+    names.add("sim_time", ("time", 0), "the simulation time")
+    for group in _NAMED_AS_THEY_ARE:
+        seen = _Names()
+        for kind in group:
+            for i, name in enumerate(ident[kind]):
+                seen.add(name, (kind, i), owners[kind][i])
+        names.clashes.update(seen.clashes)
+    if names.clashes:
+        pairs = "; ".join(f"{first} and {second} are both '{name}'" for (first, second), name in names.clashes.items())
+        raise PhysicsError(f"two elements of the model have one name in visualenv: {pairs}. Rename one of each in the MJCF "
+                           "(a name keeps its letters, digits and '_'; any other character becomes '_')")
+    return NameTables(names.values, by_name["joint"], by_name["body"], by_name["geom"], by_name["site"], by_name["actuator"], by_name["key"], ident)
+
+
+def _joint_values(model: Any, names: _Names, idents: list[str], owners: list[str]) -> None:
+    """``qpos_<j>``/``qvel_<j>`` of hinge and slide joints; free and ball joints by component."""
+    mujoco = mujoco_module()
+    free, ball = int(mujoco.mjtJoint.mjJNT_FREE), int(mujoco.mjtJoint.mjJNT_BALL)
+    for j, name in enumerate(idents):
+        qadr, vadr, jtype = int(model.jnt_qposadr[j]), int(model.jnt_dofadr[j]), int(model.jnt_type[j])
+        if jtype not in (free, ball):
+            names.add(f"qpos_{name}", ("qpos", qadr), owners[j])
+            names.add(f"qvel_{name}", ("qvel", vadr), owners[j])
+            continue
+        qparts, vparts = (_FREE_QPOS, _FREE_QVEL) if jtype == free else (_BALL_QPOS, _BALL_QVEL)
+        for i, p in enumerate(qparts):
+            names.add(f"qpos_{name}_{p}", ("qpos", qadr + i), owners[j])
+        for i, p in enumerate(vparts):
+            names.add(f"qvel_{name}_{p}", ("qvel", vadr + i), owners[j])

@@ -298,7 +298,7 @@ class Physics(StrictModel):
     """MuJoCo physics: the MJCF model the env steps between the action and the reward (docs/physics.md)."""
 
     engine: Literal["mujoco"] = Field("mujoco", description="the physics engine")
-    model: str = Field(description="the MJCF file, relative to the spec, or package:<package>/<path> for a file an installed package ships")
+    model: str = Field(description="the MJCF file, relative to the spec, or package:<package>/<path> for a file an installed package ships (found on disk; the package is not imported)")
     frame_skip: int = Field(1, ge=1, le=100_000, description="physics steps per env step; dt in expressions is timestep * frame_skip")
     reset: PhysicsReset = Field(default_factory=PhysicsReset)
     contacts: dict[Name, Annotated[list[str], Field(min_length=2, max_length=2)]] = Field(

@@ -15,7 +15,7 @@ from typing import Any
 
 from visualenv.env.cores import usable_cores
 from visualenv.render.base import CYCLES_BACKENDS as BACKENDS
-from visualenv.versions import __version__
+from visualenv.versions import __version__, mujoco_version
 
 PROBE = [sys.executable, "-m", "visualenv.render.blender.probe"]
 PROBE_TIMEOUT = 120.0
@@ -25,7 +25,7 @@ WARM_TIMEOUT = 1800.0  # compiling Cycles' kernels from PTX took 356 s on an H10
 def gather(*, warm_gpu: bool = False, command: list[str] | None = None, timeout: float | None = None) -> dict[str, Any]:
     """Everything `info` prints, as a dict (``--json``)."""
     report: dict[str, Any] = {
-        "python": platform.python_version(), "visualenv": __version__, "machine": platform.machine(),
+        "python": platform.python_version(), "visualenv": __version__, "machine": platform.machine(), "mujoco": mujoco_version(),
         "cores": {"machine": os.cpu_count(), "usable": len(usable_cores())},
     }
     command = (command or PROBE) + (["--warm-gpu"] if warm_gpu else [])
@@ -47,7 +47,8 @@ def gather(*, warm_gpu: bool = False, command: list[str] | None = None, timeout:
 def format_report(report: dict[str, Any]) -> str:
     cores = report["cores"]
     lines = [f"visualenv {report['visualenv']}, Python {report['python']} ({report['machine']})",
-             f"cores: {cores['usable']} usable of {cores['machine']}"]
+             f"cores: {cores['usable']} usable of {cores['machine']}",
+             f"MuJoCo {report['mujoco']}" if report.get("mujoco") else "MuJoCo: not installed (physics specs need it: pip install 'visualenv[mujoco]')"]
     blender = report["blender"]
     if "error" in blender:
         return "\n".join(lines + [f"Blender: {blender['error']}"])

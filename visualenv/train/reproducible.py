@@ -35,7 +35,7 @@ from visualenv.versions import versions
 MKL_CBWR_BRANCH = 1  # mkl_cbwr_get's argument: the code branch in force
 MKL_CBWR_COMPATIBLE = 3  # the branch that runs the same code on every CPU
 #: the keys of a machine record that must agree for a replay to be exact
-LIKENESS_KEYS = ("cpu_isa", "torch", "blender", "numpy", "pinned")
+LIKENESS_KEYS = ("cpu_isa", "torch", "blender", "numpy", "mujoco", "pinned")
 
 
 def _mkl_service() -> Any:
@@ -96,7 +96,7 @@ def machine_record(pinned: bool) -> dict[str, Any]:
     torch = sys.modules.get("torch")
     record["torch"] = torch.__version__ if torch is not None else None
     known = versions()
-    record["blender"], record["numpy"] = known.get("blender"), known["numpy"]
+    record["blender"], record["numpy"], record["mujoco"] = known.get("blender"), known["numpy"], known.get("mujoco")
     return record
 
 

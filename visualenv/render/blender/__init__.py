@@ -8,9 +8,10 @@ Modules, one job each:
 * :mod:`.readback`: rendered pixels to numpy
 * :mod:`.devices`: Cycles devices, the GPU context, kernel caches (``visualenv info``)
 * :mod:`.blendfile`, :mod:`.describe`: a user's .blend read in a child process first
+* :mod:`.autorun`: scripts in a .blend never run (Blender's auto-run off, checked before every read)
 * :mod:`.renderer`: :class:`BlenderRenderer`, the :class:`~visualenv.render.base.Renderer` the env uses
 
-Importing this package imports ``bpy``.
+Importing this package imports ``bpy`` and turns Blender's auto-run of scripts in .blend files off.
 """
 
 import os
@@ -23,6 +24,9 @@ if "bpy" not in sys.modules:
     _marker = os.sep + "bpy" + os.sep
     sys.path[:] = [p for p in sys.path if not (_marker in p and os.sep + "scripts" in p)]
 
+from visualenv.render.blender.autorun import turn_autorun_off  # noqa: E402
 from visualenv.render.blender.renderer import BlenderRenderer  # noqa: E402
+
+turn_autorun_off()
 
 __all__ = ["BlenderRenderer"]

@@ -2,7 +2,7 @@
 
 Opening a user's file can crash Blender, so this module is the body of a reader process: it reads
 requests (one JSON line: ``{"path": ...}``) on stdin and answers each with one JSON line on the
-stdout it started with (Blender's own messages go to stderr). Scripts in the file never run.
+stdout it started with (Blender's own messages go to stderr). Scripts in the file never run (:mod:`.autorun`).
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ from typing import Any
 
 import bpy
 
+from visualenv.render.blender.autorun import turn_autorun_off
 from visualenv.render.blender.user_file import animated_fcurves, constraint_sets
 
 _R = 4  # decimals of the numbers reported
@@ -83,7 +84,8 @@ def _overrides(scene: Any) -> list[str]:
 
 
 def describe(path: str) -> dict[str, Any]:
-    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False, use_scripts=False)
+    turn_autorun_off()
+    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False, use_scripts=False)  # use_scripts=False: no registered text runs
     scenes = []
     for scene in bpy.data.scenes:
         r = scene.render

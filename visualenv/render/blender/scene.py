@@ -30,6 +30,7 @@ from mathutils import Matrix, Vector
 from visualenv.compat.blender import sort_faces
 from visualenv.render.blender.blendfile import BlendReadError
 from visualenv.render.blender import blendfile
+from visualenv.render.blender.autorun import turn_autorun_off
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
 from visualenv.render.blender.readback import quiet_stdout
@@ -233,6 +234,7 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str 
     if not blendfile.is_blend_file(path):
         raise SpecError([source.diagnostic(where, f"not a Blender file: {path} (a .blend saved by Blender is needed)")])
     _check_readable(path, source)
+    turn_autorun_off()  # the file's drivers come with its objects: they must find auto-run off when they first run
     try:
         with bpy.data.libraries.load(str(path), link=False) as (data_from, data_to):
             scene_names = list(data_from.scenes)
