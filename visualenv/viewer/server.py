@@ -19,12 +19,13 @@ import base64
 import io
 import json
 import math
+import socket
 import threading
 from typing import Any, Iterator
 
 from PIL import Image
 from werkzeug.exceptions import HTTPException, BadRequest, MethodNotAllowed, NotFound, UnsupportedMediaType
-from werkzeug.serving import BaseWSGIServer, WSGIRequestHandler, make_server
+from werkzeug.serving import BaseWSGIServer, WSGIRequestHandler, get_sockaddr, make_server, select_address_family
 from werkzeug.wrappers import Request, Response
 
 from visualenv.viewer.board import Board, Picture, Snapshot
@@ -48,21 +49,25 @@ class ViewerServer:
     """Serves a :class:`Board` on ``http://host:port/`` from a daemon thread until :meth:`stop`.
 
     `interactive` False serves a page that only watches (``render_mode="human"``): it has no controls and refuses inputs.
-    Port 0 takes any free port; :attr:`url` says which.
+    Port 0 takes any free port; :attr:`url` says which. A port that cannot be had raises OSError (Werkzeug would exit).
     """
 
     def __init__(self, board: Board, *, host: str = "127.0.0.1", port: int = 0, title: str = "visualenv", interactive: bool = True) -> None:
         self.board = board
         self.title = title
         self.interactive = interactive
-        self._server: BaseWSGIServer = make_server(host, port, self._wsgi, threaded=True, request_handler=_QuietHandler)
+        listener = _listen(host, port)
+        try:
+            self._server: BaseWSGIServer = make_server(host, port, self._wsgi, threaded=True, request_handler=_QuietHandler, fd=listener.fileno())
+        finally:
+            listener.close()  # the server holds its own duplicate of the socket
         self._thread: threading.Thread | None = None
 
     @property
     def url(self) -> str:
         host = self._server.host
         shown = f"[{host}]" if ":" in host else host
-        return f"http://{shown}:{self._server.server_port}/"
+        return f"http://{shown}:{self._server.port}/"
 
     def start(self) -> "ViewerServer":
         self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.2}, name="visualenv-viewer", daemon=True)
@@ -192,6 +197,20 @@ def png(picture: Picture) -> bytes:
     out = io.BytesIO()
     image.save(out, format="PNG", compress_level=1)
     return out.getvalue()
+
+
+def _listen(host: str, port: int) -> socket.socket:
+    """A socket listening on host:port, bound here so that a taken port is an OSError (Werkzeug prints and exits)."""
+    family = select_address_family(host, port)
+    listener = socket.socket(family, socket.SOCK_STREAM)
+    try:
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as http.server does: a port left in TIME_WAIT is free
+        listener.bind(get_sockaddr(host, port, family))
+        listener.listen(128)
+    except BaseException:
+        listener.close()
+        raise
+    return listener
 
 
 def is_local(host: str) -> bool:
