@@ -380,7 +380,7 @@ def test_an_agent_steps_without_keys(tmp_path, monkeypatch):
     session = Session(spec, Board(), agent=session_module.Agent(Rightwards(), "rightwards"), view=ViewOptions(None))
     session.rebuild()
     session.advance()
-    assert session.info["state"]["x"] == 1.0 and session.values()["agent"] == "rightwards" and session.values()["status"] == "running"
+    assert session.info["state"]["x"] == 1.0 and session.values()["mode"] == "agent: rightwards" and session.values()["status"] == "running"
     session.close()
 
 

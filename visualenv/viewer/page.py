@@ -15,7 +15,7 @@ import json
 
 #: the values shown in the table, in order, with their labels (a value the snapshot lacks is left out)
 FIELDS = (("env", "env"), ("step", "step"), ("episode", "episode"), ("seed", "seed"), ("reward", "reward"), ("return", "return"),
-          ("outcome", "outcome"), ("success", "success"), ("action", "action"), ("agent", "agent"), ("envs", "envs"))
+          ("outcome", "outcome"), ("success", "success"), ("action", "action"), ("envs", "envs"))
 
 _PAGE = """<!doctype html>
 <html lang="en">
@@ -77,9 +77,11 @@ const ARROWS = {ArrowLeft: "left", ArrowRight: "right", ArrowUp: "up", ArrowDown
 const $ = (id) => document.getElementById(id);
 let actionKeys = new Set(), held = new Set(), shownControls = "", latest = {};
 
-function send(message) {
+let sending = Promise.resolve();
+function send(message) {  // one after another: a key's release never overtakes its press
   if (!INTERACTIVE) return;
-  fetch("input", {method: "POST", headers: {"Content-Type": "application/json"}, body: JSON.stringify(message)});
+  const body = JSON.stringify(message);
+  sending = sending.then(() => fetch("input", {method: "POST", headers: {"Content-Type": "application/json"}, body: body})).catch(() => {});
 }
 function text(value) {
   if (value === null || value === undefined) return "";

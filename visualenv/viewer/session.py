@@ -68,6 +68,14 @@ def describe(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
+def shown_path(path: str | Path) -> str:
+    """A path as the page shows it: relative to the working folder where it lies inside it."""
+    try:
+        return str(Path(path).resolve().relative_to(Path.cwd()))
+    except ValueError:
+        return str(path)
+
+
 class Session:
     """One spec (or id) on the page: its env, the keys, the agent, the episode, and the files of a live edit."""
 
@@ -386,14 +394,12 @@ class Session:
         """What the page's tables, controls and status show."""
         info = self.info or {}
         values: dict[str, Any] = {
-            "title": self.title, "spec": str(self.path), "mode": f"agent: {self.agent.path}" if self.agent else "you play: keys below",
+            "title": self.title, "spec": shown_path(self.path), "mode": f"agent: {shown_path(self.agent.path)}" if self.agent else "you play: keys below",
             "step": info.get("steps", 0), "episode": self.episode, "seed": self.seed, "reward": self.reward, "return": self.ret,
             "outcome": info.get("outcome"), "success": info.get("is_success"), "action": self.action_text, "state": info.get("state", {}),
             "paused": self.paused, "speed": self.speed, "status": self._status(), "error": self.spec_error or self.run_error,
             "builds": self.builds, "controls": self.controls.page(self.sliders),
         }
-        if self.agent is not None:
-            values["agent"] = self.agent.path
         return plain(values)
 
     def _status(self) -> str:
