@@ -400,6 +400,13 @@ def test_view_refuses_an_unknown_spec_a_missing_model_and_a_taken_port():
     assert result.exit_code == 1 and f"cannot serve on 127.0.0.1:{port}" in result.output
 
 
+def test_a_batch_split_among_workers_refuses_human_mode():
+    from visualenv.env.multi_batch import MultiBatchVectorEnv
+
+    with pytest.raises(ValueError, match="render_mode='human' shows one batch: leave workers out"):
+        MultiBatchVectorEnv("VisualCartPole-v0", 4, 2, render_mode="human")
+
+
 def test_import_visualenv_loads_no_web_library():
     code = "import sys, visualenv, visualenv.cli; assert not {'werkzeug', 'visualenv.viewer.server'} & set(sys.modules), 'the viewer was imported'"
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
