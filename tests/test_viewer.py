@@ -37,11 +37,17 @@ def observation(viewer: ViewerProcess) -> np.ndarray:
         return np.asarray(Image.open(io.BytesIO(response.read())))
 
 
+def reset(viewer: ViewerProcess, seed: int) -> dict:
+    """The page's reset with `seed`, and the state once it is done."""
+    episode = viewer.state()["values"]["episode"]
+    viewer.send({"type": "reset", "seed": seed})
+    return viewer.wait_for(lambda s: s["values"]["episode"] > episode and s["values"]["step"] == 0, 60, "a reset")
+
+
 def test_keys_step_the_env_and_the_page_shows_each_observation(viewer):
     with urllib.request.urlopen(viewer.url, timeout=30) as response:
         assert b"EventSource" in response.read()
-    viewer.send({"type": "reset", "seed": 0})
-    state = viewer.wait_for(lambda s: s["values"]["step"] == 0 and s["values"]["seed"] == 0, 60, "a reset")
+    state = reset(viewer, seed=0)
     assert state["values"]["status"] == "waiting for a key"
     assert {k["text"]: k["keys"] for k in state["values"]["controls"]["keys"]} == {
         "action 0: force = -force_mag": ["ArrowLeft", "0"], "action 1: force = force_mag": ["ArrowRight", "1"]}
@@ -58,8 +64,7 @@ def test_keys_step_the_env_and_the_page_shows_each_observation(viewer):
 
 def test_a_saved_edit_rebuilds_the_env_and_a_broken_one_shows_its_located_error(viewer):
     spec: Path = viewer.spec
-    viewer.send({"type": "reset", "seed": 0})                    # a rebuild starts the episode of the same seed: the same state
-    builds = viewer.wait_for(lambda s: s["values"]["step"] == 0 and s["values"]["seed"] == 0, 60, "a reset")["values"]["builds"]
+    builds = reset(viewer, seed=0)["values"]["builds"]            # a rebuild starts the episode of the same seed: the same state
     before = observation(viewer)
     spec.write_text(CARTPOLE.replace(RED_CART, WHITE_CART))
     viewer.wait_for(lambda s: s["values"]["builds"] == builds + 1, 120, "a rebuild")

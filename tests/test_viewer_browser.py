@@ -60,9 +60,10 @@ def page(browser, cartpole):
     page = browser.new_page(viewport={"width": 1120, "height": 660})
     page.goto(cartpole.url)
     page.wait_for_selector(OBSERVATION)
+    episode = cartpole.state()["values"]["episode"]
     page.fill("#seed", "0")
     page.click("#reset")
-    cartpole.wait_for(lambda s: s["values"]["seed"] == 0 and s["values"]["step"] == 0 and s["values"]["episode"] > 1, 60, "a reset")
+    cartpole.wait_for(lambda s: s["values"]["episode"] > episode and s["values"]["seed"] == 0 and s["values"]["step"] == 0, 60, "a reset")
     wait_for_text(page, "#v-step", "0")
     yield page
     page.close()
