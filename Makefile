@@ -4,9 +4,9 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup demo test test-variants bench schema clean
+.PHONY: setup browser demo test test-variants bench schema clean
 
-setup: $(STAMP)
+setup: $(STAMP) browser
 
 $(STAMP): pyproject.toml
 	$(PYTHON) -m venv $(VENV)
@@ -16,6 +16,9 @@ $(STAMP): pyproject.toml
 	# ray: the RLlib backend (its tests run in `make test`); 1-2 minutes more than train and dev alone; mujoco: physics specs
 	$(PY) -m pip install -q -e ".[train,dev,ray,mujoco]"
 	touch $(STAMP)
+
+browser: $(STAMP)  ## the headless Chromium of the viewer's browser tests, with npm, into ~/.cache/visualenv (a note, no error, without node)
+	$(PY) tests/fixtures/chromium.py
 
 demo: setup  ## build a bundled spec and show its result
 	$(VENV)/bin/visualenv build specs/visual_cartpole.yaml

@@ -369,7 +369,7 @@ def test_render_gives_each_envs_own_view():
         batch.close()
         single.close()
     with pytest.raises(ValueError, match="render_mode must be one of"):
-        BatchedVectorEnv(loaded, 2, render_mode="human")
+        BatchedVectorEnv(loaded, 2, render_mode="ansi")  # "human" shows a grid: tests/test_viewer_human.py
     vec = gym.make_vec("visualenv/Goalie-v0", 2, vectorization_mode="vector_entry_point", render_mode="rgb_array")
     assert vec.render_mode == "rgb_array" and "rgb_array" in vec.metadata["render_modes"]   # (its 400x400 'quality' views take seconds)
     vec.close()

@@ -1,4 +1,4 @@
-"""The `visualenv` command: validate, build, inspect, init, preview, schema, train, play, eval, export-policy, bench, info,
+"""The `visualenv` command: validate, build, inspect, init, preview, schema, train, play, eval, view, export-policy, bench, info,
 compile-kernels.
 
 Bad input never shows a traceback: spec problems print as
@@ -509,6 +509,25 @@ def _write_results(results: dict, model_path: str, spec: str) -> Path:
     command = f"visualenv eval {spec} --model {model_path} --seed {results['eval_seed']} --episodes {results['episodes']}"
     path.write_text(json.dumps({**kept, **results, "evaluated": {"file": Path(model_path).name, "command": command}}, indent=2) + "\n")
     return path
+
+
+@main.command()
+@click.argument("spec")
+@click.option("--model", "model_path", help="an agent plays: a trained model (as `play` takes), or 'pretrained': the shipped agent; default: you play with the keys")
+@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
+@click.option("--port", type=click.IntRange(0, 65535), default=None, help="[default: 8765, or any free port where it is taken; 0: any free port]")
+@click.option("--host", default="127.0.0.1", show_default=True, help="the address to serve on (another than this machine's own: a warning)")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="seed of the first episode (the next ones count up)")
+@click.option("--view", "view_preset", type=click.Choice(["fast", "quality", "off"]), default="fast", show_default=True, help="the high-resolution view's preset")
+@click.option("--view-size", type=click.IntRange(16, 4096), default=320, show_default=True, help="longer side of the view in pixels")
+@_friendly
+def view(spec: str, model_path: str | None, algo: str, port: int | None, host: str, seed: int, view_preset: str, view_size: int) -> None:
+    """Show SPEC live on a local web page: play it with the keys or watch an agent; saving the spec rebuilds it (docs/viewer.md)."""
+    from visualenv.viewer.app import serve
+    from visualenv.viewer.session import ViewOptions
+
+    serve(spec, model=model_path, algo=algo, host=host, port=port, seed=seed, view=ViewOptions(None if view_preset == "off" else view_preset, view_size),
+          echo=lambda line: click.echo(line, err=line.startswith("warning")))
 
 
 @main.command("export-policy")

@@ -67,9 +67,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     the ended episode is in ``info["final_obs"]``, its info in
     ``info["final_info"]``, as SB3's VecEnv expects; only the reset envs are
     rendered a second time).
+
+    ``render_mode="human"`` shows a grid of the observations live on a local web page after every reset and step
+    (:mod:`visualenv.viewer.human`) and ``render()`` returns None.
     """
 
-    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 30}
+    metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array", "human"], "render_fps": 30}
 
     def __init__(
         self,
@@ -107,6 +110,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if render and observation is None:
             raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
         self.uses_camera = observation is not None and render is not False
+        if render_mode == "human" and not self.uses_camera:
+            raise ValueError("render_mode='human' shows a grid of the observations, and a state-only batch has none: "
+                             "use render_mode='rgb_array' for the views")
+        self._display: Any = None  # render_mode="human": the page the grid is shown on, opened by the first step shown
         scene = program.physics.scene if program.physics is not None else None
         moving = [c.name for c in scene.cameras if c.moves] if scene is not None else []
         if self.uses_camera and observation is not None and any(v.camera in moving for v in observation.views().values()):
@@ -174,7 +181,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._reset_lane(i, seed=s, options=options)
         self._autoreset[:] = False
         self._was_reset = True
-        return self._observe(), self._info(np.ones(self.num_envs, dtype=bool))
+        obs = self._observe()
+        if self.render_mode == "human":
+            self._show(obs)
+        return obs, self._info(np.ones(self.num_envs, dtype=bool))
 
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         if not self._was_reset:
@@ -210,6 +220,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             info["_final_obs"] = done
             info["final_info"] = final[1]
             info["_final_info"] = done
+        if self.render_mode == "human":
+            self._show(obs)
         return obs, rewards, terminated, truncated, info
 
     def render(self) -> tuple[np.ndarray, ...] | None:  # type: ignore[override]
@@ -222,17 +234,33 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode; make the batch with render_mode='rgb_array'")
             return None
+        if self.render_mode == "human":  # every step is already shown
+            return None
         if not self.uses_camera:
             raise gym.error.Error("a state-only batch (render=False) has no Blender scene to render a view of")
         self._pose_copies()
         return tuple(self.renderer.render_view_batch(self.binding_table()))
 
     def close_extras(self, **kwargs: Any) -> None:
+        if getattr(self, "_display", None) is not None:
+            self._display.close()
+            self._display = None
         if getattr(self, "_physics", None) is not None:
             self._physics.close()
         if getattr(self, "_renderer", None) is not None:
             self._renderer.close()
             self._renderer = None
+
+    def _show(self, obs: Any) -> None:
+        """render_mode="human": the observations as a grid (one per camera), and env 0's step, on the viewer's page."""
+        from visualenv.viewer.board import grid
+        from visualenv.viewer.human import HumanDisplay
+
+        if self._display is None:
+            self._display = HumanDisplay()
+        pictures = {key: grid(frames) for key, frames in obs.items()} if isinstance(obs, dict) else grid(obs)
+        values = {"envs": self.num_envs, "steps": int(self._steps[0]), "state": {n: float(v) for n, v in zip(self.program.state_names, self._state[:, 0])}}
+        self._display.show(self.program.spec.id, pictures, values)
 
     # -- the step -----------------------------------------------------------------------------------
 

@@ -35,7 +35,8 @@ def make(
         target: ``specs/visual_cartpole.yaml``, ``build/VisualCartPole-v0`` or ``VisualCartPole-v0``.
         render: False for the state-only env (observation = state vector, no
             Blender); default: render when the spec has an ``observation``.
-        render_mode: ``"rgb_array"`` to make ``env.render()`` return the high-resolution view.
+        render_mode: ``"rgb_array"`` to make ``env.render()`` return the high-resolution view; ``"human"`` to watch every
+            step on a local web page (docs/viewer.md).
         params: overrides of the spec's ``params``.
         frame_stack, grayscale, resize: image wrappers (see :mod:`visualenv.env.wrappers`).
         max_episode_steps: truncate episodes after this many steps instead of the spec's ``max_steps``

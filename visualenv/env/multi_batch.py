@@ -57,6 +57,9 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         self.sizes = batch_sizes(num_envs, workers)
         self.num_envs = int(num_envs)
         self.render_mode = kwargs.get("render_mode")
+        if self.render_mode not in (None, *self.metadata["render_modes"]):  # 'human' would open a page in each worker
+            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} with workers, got {self.render_mode!r} "
+                             "(render_mode='human' shows one batch: leave workers out)")
         self._check_spec(str(target), max(self.sizes), kwargs)  # a bad spec is reported here, located, before any worker starts
         self._pipes: list[Any] = []
         self.processes: list[Any] = []

@@ -66,13 +66,18 @@ class VisualEnv(gym.Env):
     the state). Where the episode cannot be carried over, the unpickled copy warns
     and asks for ``reset()``.
 
+    ## Render modes
+    ``"rgb_array"``: ``render()`` returns the high-resolution view (``render.view``). ``"human"``: every reset and
+    step is shown live on a local web page (:mod:`visualenv.viewer.human`; the URL is printed once) and ``render()``
+    returns None, as Gymnasium specifies.
+
     ## Renderer backend
     ``backend`` names the renderer class as ``module:attribute`` (default:
     Blender), loaded on first render; a test can plug in a fake renderer to
     check logic that does not depend on pixels.
     """
 
-    metadata = {"render_modes": ["rgb_array"], "render_fps": 30}
+    metadata = {"render_modes": ["rgb_array", "human"], "render_fps": 30}
 
     def __init__(
         self,
@@ -110,6 +115,7 @@ class VisualEnv(gym.Env):
         self._backend = backend
         self._renderer_options = RendererOptions.parse(renderer_options)
         self._renderer: Renderer | None = None
+        self._display: Any = None  # render_mode="human": the page this env's steps are shown on, opened by the first step shown
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
         #: a physics spec's own MuJoCo simulation; ``model`` and ``data`` are its MjModel and MjData, as in Gymnasium's MujocoEnv
@@ -185,7 +191,10 @@ class VisualEnv(gym.Env):
         self._success = False
         self._was_reset = True
         self._not_carried = None
-        return self._observe(), self._info(None)
+        obs, info = self._observe(), self._info(None)
+        if self.render_mode == "human":
+            self._show(None, info)
+        return obs, info
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """The action, the generated step (checked, not yet committed), the commit, the episode's end, the observation."""
@@ -202,17 +211,25 @@ class VisualEnv(gym.Env):
             obs = self._observe()
         except StepError as err:  # an actor binding of the new state faulted: nothing to render
             return self._fault_in_observation(err)
-        return obs, float(reward), terminated, truncated, self._info(name)
+        info = self._info(name)
+        if self.render_mode == "human":
+            self._show(float(reward), info)
+        return obs, float(reward), terminated, truncated, info
 
     def render(self) -> np.ndarray | None:  # type: ignore[override]
-        """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode."""
+        """The high-resolution RGB view (render_mode="rgb_array"); None without a render mode, and in "human" mode,
+        whose every step is already shown."""
         if self.render_mode is None:
             gym.logger.warn("render() called without render_mode; make the env with render_mode='rgb_array'")
             return None
-        self._pose()
-        return self.renderer.render_view(self._bind())
+        if self.render_mode == "human":
+            return None
+        return self._view()
 
     def close(self) -> None:
+        if self._display is not None:
+            self._display.close()
+            self._display = None
         if self._renderer is not None:
             self._renderer.close()
             self._renderer = None
@@ -395,6 +412,19 @@ class VisualEnv(gym.Env):
             data = self._sim.data
             self.renderer.set_physics_poses(data.xpos, data.xquat, data.cam_xpos, data.cam_xmat, data.light_xpos, data.light_xdir)
 
+    def _view(self) -> np.ndarray:
+        """The high-resolution view of the current state."""
+        self._pose()
+        return self.renderer.render_view(self._bind())
+
+    def _show(self, reward: float | None, info: dict[str, Any]) -> None:
+        """render_mode="human": the observation, the values and (while a page watches) the view on the viewer's page."""
+        if self._display is None:
+            from visualenv.viewer.human import HumanDisplay
+
+            self._display = HumanDisplay()
+        self._display.show(self.program.spec.id, self._last_obs if self.uses_camera else None, {"reward": reward, **info}, self._view)
+
     def _observe(self) -> Any:
         if self.uses_camera:
             self._pose()
@@ -421,6 +451,8 @@ class VisualEnv(gym.Env):
         """``on_fault: terminate``: the episode ends with no reward; ``obs`` is the last one that could be made."""
         info = self._info("error")
         info["error"] = str(err)
+        if self.render_mode == "human":
+            self._show(0.0, info)
         return obs, 0.0, True, False, info
 
     def _info(self, outcome: str | None) -> dict[str, Any]:

@@ -31,7 +31,7 @@ class MakeOptions(StrictModel):
     """The options of make() that are not render fields: the env kind, params and the image wrappers."""
 
     render: Optional[bool] = Field(None, description="False: the state-only env (no Blender)")
-    render_mode: Optional[Literal["rgb_array"]] = None
+    render_mode: Optional[Literal["rgb_array", "human"]] = None
     params: Optional[dict[Name, Union[bool, int, float, str]]] = Field(None, description="overrides of the spec's params")
     frame_stack: Optional[Annotated[int, Field(ge=1, le=64)]] = Field(None, description="stack this many frames")
     grayscale: bool = False

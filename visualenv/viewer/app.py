@@ -1,0 +1,74 @@
+"""`visualenv view SPEC_OR_ID`: serve the viewer's page and run its session until Ctrl-C (docs/viewer.md)."""
+
+from __future__ import annotations
+
+import signal
+from pathlib import Path
+from typing import Callable
+
+from visualenv.env.registration import read_header, resolve
+from visualenv.errors import VisualEnvError
+from visualenv.train.models import load_model, pretrained_model
+from visualenv.viewer.board import Board
+from visualenv.viewer.server import ViewerServer, is_local
+from visualenv.viewer.session import DEFAULT_VIEW, Agent, Session, ViewOptions
+
+#: `visualenv view`'s port when none is given (any free one where it is taken)
+DEFAULT_PORT = 8765
+PRETRAINED = "pretrained"
+
+
+def load_agent(path: Path, model: str, algo: str = "ppo") -> Agent:
+    """The agent of ``--model``: a model file or checkpoint folder, or 'pretrained', the shipped agent of the spec's id."""
+    if model == PRETRAINED:
+        env_id = read_header(path)[0]
+        if not env_id:
+            raise VisualEnvError(f"{path} has no top-level 'id': --model {PRETRAINED} names the shipped agent of an id")
+        file = str(pretrained_model(env_id))
+    elif not Path(model).exists():
+        raise VisualEnvError(f"--model {model}: no such file (or '{PRETRAINED}' for the shipped agent)")
+    else:
+        file = model
+    # TODO(lead): the safe-policies branch adds trust_pickle to load_model (an SB3 .zip unpickles code); pass the
+    # `view` command's --trust-pickle through here once it lands, as `play` and `eval` do.
+    return Agent(load_model(file, algo), file)
+
+
+def serve(target: str, *, model: str | None = None, algo: str = "ppo", host: str = "127.0.0.1", port: int | None = None, seed: int = 0,
+          view: ViewOptions = DEFAULT_VIEW, echo: Callable[[str], None] = print) -> None:
+    """Serve `target` (a spec file or an id) on ``http://host:port/`` until Ctrl-C, then stop cleanly.
+
+    A spec or model that cannot be found, or a port that cannot be had, raises VisualEnvError before anything is
+    served; a spec that does not build is served anyway, with its error on the page, so that saving a fix goes on.
+    """
+    path = resolve(target)
+    agent = load_agent(path, model, algo) if model else None
+    board = Board()
+    server = _server(board, host, port, path)
+    session = Session(path, board, agent=agent, seed=seed, view=view)
+    server.start()
+    try:
+        echo(f"visualenv view: {server.url} (Ctrl-C stops)")
+        if not is_local(host):
+            echo(f"warning: --host {host}: anyone who can reach {server.url} can drive the env and read the spec's errors; there is no password")
+        session.run()
+    except KeyboardInterrupt:
+        pass
+    finally:
+        previous = signal.signal(signal.SIGINT, signal.SIG_IGN)  # a second Ctrl-C does not cut the cleanup short
+        try:
+            server.stop()
+            session.close()
+        finally:
+            signal.signal(signal.SIGINT, previous)
+    echo("stopped")
+
+
+def _server(board: Board, host: str, port: int | None, path: Path) -> ViewerServer:
+    try:
+        return ViewerServer(board, host=host, port=DEFAULT_PORT if port is None else port, title=path.name)
+    except OSError as exc:
+        if port is None:  # the default port is taken (another viewer): any free one
+            return ViewerServer(board, host=host, port=0, title=path.name)
+        raise VisualEnvError(f"cannot serve on {host}:{port}: {exc.strerror or exc} (choose another --port; 0 takes any free one)") from None
+
