@@ -9,8 +9,14 @@ which both end there; the second episode's reset (the random stream continued) a
 
 from __future__ import annotations
 
+import hashlib
+import importlib
+import importlib.util
 import os
 import pickle
+import re
+from importlib import metadata
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -23,6 +29,30 @@ import visualenv  # noqa: E402
 from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
 
 ID = "DMC-cartpole-swingup-v0"
+ASSETS = Path(__file__).resolve().parents[1] / "specs" / "dmc" / "assets"
+
+
+def test_the_pinned_files_are_dm_controls_own() -> None:
+    """The copies are byte for byte dm_control's files (SOURCES.md's sha256) and compile to the model its loader builds."""
+    text = (ASSETS / "SOURCES.md").read_text(encoding="utf-8")
+    version = re.search(r"^dm_control (\S+) ", text, re.M)
+    assert version is not None and "Apache License" in (ASSETS / "LICENSE.dm_control").read_text(encoding="utf-8")
+    pinned = dict(re.findall(r"^\| `([\w./]+)` \| `([0-9a-f]{64})` \|", text, re.M))
+    assert sorted(pinned) == sorted(p.relative_to(ASSETS).as_posix() for p in ASSETS.rglob("*.xml"))
+    for name, sha in pinned.items():
+        assert hashlib.sha256((ASSETS / name).read_bytes()).hexdigest() == sha, name
+    if metadata.version("dm_control") != version.group(1):
+        pytest.skip(f"dm_control {metadata.version('dm_control')} is installed; the copies are of {version.group(1)}")
+    found = importlib.util.spec_from_file_location("vendor_dm_control", ASSETS / "vendor_dm_control.py")
+    assert found is not None and found.loader is not None
+    vendor = importlib.util.module_from_spec(found)
+    found.loader.exec_module(vendor)
+    theirs = Path(suite.__file__).parent
+    for name in pinned:
+        assert (theirs / name).read_bytes() == (ASSETS / name).read_bytes(), name
+    for name, module in vendor.MODELS.items():
+        xml, assets = importlib.import_module(module).get_model_and_assets()
+        assert vendor.binary(mujoco.MjModel.from_xml_path(str(ASSETS / name))) == vendor.binary(mujoco.MjModel.from_xml_string(xml, assets))
 
 
 def integration_state(data) -> np.ndarray:
