@@ -89,9 +89,15 @@ def legacy_stream(seed: int | None, fallback: np.random.Generator) -> np.random.
 
     (`fallback` is the env's Gymnasium generator, itself seeded from the OS when no seed was ever
     given, so an unseeded env still differs from run to run, and a pickled one carries both.)
+    A seed of 2**32 or more, which dm_control's RandomState cannot take (evaluation seeds can be
+    that large), seeds the stream from its 32-bit words instead: the same seed, the same stream.
     """
     if seed is None:
         seed = int(fallback.integers(LEGACY_SEED_LIMIT))
-    if not 0 <= seed < LEGACY_SEED_LIMIT:
-        raise ValueError(f"seed {seed} is out of range for dm_control's random stream (numpy's RandomState): 0 to {LEGACY_SEED_LIMIT - 1}")
-    return np.random.RandomState(seed)
+    if seed < LEGACY_SEED_LIMIT:
+        return np.random.RandomState(seed)
+    words = []
+    while seed:
+        words.append(seed % LEGACY_SEED_LIMIT)
+        seed //= LEGACY_SEED_LIMIT
+    return np.random.RandomState(np.array(words, dtype=np.uint32))
