@@ -51,6 +51,9 @@ class VisualEnv(gym.Env):
     Terminated or truncated by the first ending outcome whose ``when`` holds
     after the update (in spec order); truncated after ``max_steps`` steps
     (or ``max_episode_steps``, Gymnasium's TimeLimit, when given).
+    ``info`` has ``state`` (all variables), ``outcome`` (the name of the outcome
+    that ended the episode, ``"max_steps"``, or None), ``milestones`` and
+    ``is_success``.
 
     ## Action repeat
     With ``action_repeat`` k (the spec's, or the option's), one ``step()`` makes
@@ -58,9 +61,6 @@ class VisualEnv(gym.Env):
     their rewards summed, one observation (one render), stopping early at the
     episode's end. ``max_steps``, ``steps`` and ``info["steps"]`` count the
     spec's steps; ``max_episode_steps`` counts ``step()`` calls.
-    ``info`` has ``state`` (all variables), ``outcome`` (the name of the outcome
-    that ended the episode, ``"max_steps"``, or None), ``milestones`` and
-    ``is_success``.
 
     ## Runtime faults
     A non-finite state or reward, a division by zero or a math domain error
