@@ -13,8 +13,9 @@ $(STAMP): pyproject.toml
 	$(PY) -m pip install -q --upgrade pip
 	# torch first: 2.13.0 is a CPU build; any other version pulls gigabytes of CUDA packages
 	$(PY) -m pip install -q torch==2.13.0
-	# ray: the RLlib backend (its tests run in `make test`); 1-2 minutes more than train and dev alone; mujoco: physics specs
-	$(PY) -m pip install -q -e ".[train,dev,ray,mujoco]"
+	# ray: the RLlib backend (its tests run in `make test`); 1-2 minutes more than train and dev alone; mujoco: physics specs;
+	# dmc: dm_control, which the DeepMind Control parity tests step
+	$(PY) -m pip install -q -e ".[train,dev,ray,mujoco,dmc]"
 	touch $(STAMP)
 
 browser: $(STAMP)  ## the headless Chromium of the viewer's browser tests, with npm, into ~/.cache/visualenv (a note, no error, without node)

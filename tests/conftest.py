@@ -29,6 +29,7 @@ BLENDER_MODULES = {
     "test_build_and_preview",
     "test_capture",
     "test_determinism",
+    "test_dmc_pixels",
     "test_evaluation",
     "test_heightmap",
     "test_inspect_init",

@@ -32,7 +32,7 @@ from visualenv.spec.loader import load_spec  # noqa: E402
 ROOT = Path(__file__).resolve().parents[1]
 ASSETS = ROOT / "specs" / "mujoco" / "assets"
 PORTS = sorted((ROOT / "specs" / "mujoco").glob("*.yaml"))
-BUNDLED = sorted((ROOT / "specs").glob("*.yaml")) + PORTS
+BUNDLED = sorted((ROOT / "specs").glob("*.yaml")) + PORTS + sorted((ROOT / "specs" / "dmc").glob("*.yaml"))
 
 
 def vendoring() -> Any:

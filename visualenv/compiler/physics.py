@@ -40,6 +40,7 @@ class PhysicsPlan:
     reads: dict[str, list[str]] = field(default_factory=dict)  # read name -> physics names it gathers
     observe_size: int = 0  # values in the state-only observation
     scene: PhysicsScene | None = None  # what a renderer draws (made when the spec renders)
+    convention: str = "gymnasium"  # whose MuJoCo calls step and reset it (visualenv.physics.conventions)
 
     @property
     def dt(self) -> float:
@@ -49,7 +50,7 @@ class PhysicsPlan:
         """A fresh Simulation (its own MjModel copy and MjData) for one env."""
         from visualenv.physics.simulation import Simulation
 
-        return Simulation(self.model, self.frame_skip, self.contacts)
+        return Simulation(self.model, self.frame_skip, self.contacts, self.convention)
 
     def bind(self, env: dict[str, Any], sim: Any) -> None:
         """Put one env's reads, stepper and reset writer into a generated function's globals."""

@@ -266,7 +266,7 @@ class _Compiler:
                            + did_you_mean(section.reset.keyframe, keys).replace("names:", "keyframes:"))
         if "dt" in self.spec.model_fields_set:
             self.error(("dt",), "with physics, dt is the model's timestep times physics.frame_skip: leave 'dt' out", key=True)
-        self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts)
+        self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts, convention=section.convention)
         if self.spec.observation is not None or self.spec.render.view.camera:  # drawn: every geom must be drawable
             try:
                 self.plan.scene = phys.physics_scene(model)

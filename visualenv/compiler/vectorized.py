@@ -34,6 +34,7 @@ import numpy as np
 
 from visualenv.expr.codegen import FUNC_PREFIX, POW, FunctionBuilder
 from visualenv.expr.functions import FUNCTIONS
+from visualenv.expr.tolerance import tolerance_columns
 
 WHERE, ALL, ANY, NOT = "_vwhere", "_vall", "_vany", "_vnot"
 
@@ -82,7 +83,7 @@ NUMPY_FUNCTIONS: dict[str, Callable[..., Any]] = {
     "atan2": np.arctan2, "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh, "sqrt": np.sqrt, "exp": np.exp,
     "log": _log, "abs": np.abs, "min": _reduce(np.minimum), "max": _reduce(np.maximum), "clip": np.clip,
     "hypot": _hypot, "floor": np.floor, "ceil": np.ceil, "round": np.round, "sign": np.sign,
-    "radians": np.radians, "degrees": np.degrees,
+    "radians": np.radians, "degrees": np.degrees, "tolerance": tolerance_columns,
 }
 #: names whose presence in a generated function keeps it scalar (one env's generator or hook)
 _SCALAR_ONLY = {FUNC_PREFIX + n for n, f in FUNCTIONS.items() if f.random} | {"_python_dynamics", "_random"}

@@ -86,6 +86,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         renderer_options: RendererOptions | Mapping[str, Any] | None = None,
         backend: str = BATCH_BACKEND,
         max_episode_steps: int | None = None,
+        action_repeat: int | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
@@ -125,7 +126,11 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise ValueError(f"max_episode_steps must be an integer of at least 1, got {max_episode_steps!r}")
         #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
         self.max_episode_steps = program.spec.max_steps if max_episode_steps is None else int(max_episode_steps)
-        self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps) for _ in range(n)]
+        repeat = program.spec.action_repeat if action_repeat is None else action_repeat
+        if repeat != 1:  # the batch steps each env once per step (a later stage repeats actions in batches)
+            raise ValueError(f"{program.spec.id} repeats each action {repeat} times (action_repeat), which a batch does not do yet: "
+                             "make_vec(..., batched=True, action_repeat=1), or vectorization_mode='async'")
+        self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps, action_repeat=1) for _ in range(n)]
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
@@ -480,5 +485,5 @@ def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: An
     Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``,
     which passes the id's ``max_episode_steps`` (the spec's max_steps, or the one given to make_vec).
     """
-    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps") if k in kwargs}
+    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat") if k in kwargs}
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

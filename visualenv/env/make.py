@@ -27,6 +27,7 @@ def make(
     grayscale: bool = False,
     resize: tuple[int, int] | None = None,
     max_episode_steps: int | None = None,
+    action_repeat: int | None = None,
     **renderer_options: Any,
 ) -> gym.Env:
     """Make an env from a spec path, a build folder (``build/<Id>``) or an id.
@@ -41,6 +42,8 @@ def make(
         frame_stack, grayscale, resize: image wrappers (see :mod:`visualenv.env.wrappers`).
         max_episode_steps: truncate episodes after this many steps instead of the spec's ``max_steps``
             (``info["outcome"]`` says ``"max_steps"``); ``gymnasium.make(id, max_episode_steps=N)`` sets it too.
+        action_repeat: the spec's steps per ``step()`` with the same action, rewards summed, one observation
+            (dm_control's action repeat); default: the spec's ``action_repeat`` (``DMC-cartpole-swingup-v0``: 8).
         renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
 
     Every option is checked as the same value in a spec would be (``device="tpu"``,
@@ -51,13 +54,13 @@ def make(
     if max_episode_steps is None:
         max_episode_steps = _gymnasium_time_limit()
     check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize,
-                       max_episode_steps=max_episode_steps)
+                       max_episode_steps=max_episode_steps, action_repeat=action_repeat)
     options = RendererOptions.parse(renderer_options)
     path = resolve(target)
     unwrapped = VisualEnv(load_spec(path), render=render, render_mode=render_mode, params=params, renderer_options=options,
-                          max_episode_steps=max_episode_steps)
+                          max_episode_steps=max_episode_steps, action_repeat=action_repeat)
     given = {"render": render, "render_mode": render_mode, "params": params, "frame_stack": frame_stack, "grayscale": grayscale or None,
-             "resize": resize, **renderer_options}
+             "resize": resize, "action_repeat": action_repeat, **renderer_options}
     unwrapped.spec = EnvSpec(
         id=f"{NAMESPACE}/{unwrapped.program.spec.id}", entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT,
         max_episode_steps=unwrapped.max_episode_steps, kwargs={"target": str(path.resolve()), **{k: v for k, v in given.items() if v is not None}},

@@ -32,13 +32,14 @@ BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 SPECS_PATH_VARIABLE = "VISUALENV_SPECS_PATH"
 #: ids given to register() in this process, with their files
 _REGISTERED: dict[str, Path] = {}
-_TOP_LEVEL = re.compile(r"^(id|max_steps)\s*[:=]\s*(.*?)\s*$")
+_TOP_LEVEL = re.compile(r"^(id|max_steps|action_repeat)\s*[:=]\s*(.*?)\s*$")
 
 
 def spec_dirs() -> list[Path]:
     """Bundled specs, then folders listed in $VISUALENV_SPECS_PATH (os.pathsep separated)."""
     extra = [Path(p) for p in os.environ.get(SPECS_PATH_VARIABLE, "").split(os.pathsep) if p]
-    return [BUNDLED_DIR, BUNDLED_DIR / "mujoco", *extra]  # mujoco/: physics specs (Gymnasium's MuJoCo envs), apart until batches step them
+    # mujoco/: physics specs (Gymnasium's MuJoCo envs), apart until batches step them; dmc/: DeepMind Control's tasks
+    return [BUNDLED_DIR, BUNDLED_DIR / "mujoco", BUNDLED_DIR / "dmc", *extra]
 
 
 def spec_files(folder: Path) -> list[Path]:
@@ -78,24 +79,34 @@ def read_header(path: Path) -> tuple[str | None, int | None]:
 
     Only lines that start in column 0 count, and in TOML only those before the first table.
     """
-    env_id: str | None = None
-    max_steps: int | None = None
+    fields = _header_fields(path)
+    steps = fields.get("max_steps", "")
+    return fields.get("id") or None, int(steps) if steps.isdigit() else None
+
+
+def _header_fields(path: Path) -> dict[str, str]:
+    """The first value of each top-level field :data:`_TOP_LEVEL` names, as written (without quotes or a comment)."""
+    fields: dict[str, str] = {}
     try:
         text = path.read_text(encoding="utf-8", errors="replace")
     except OSError:
-        return None, None
+        return fields
     for line in text.splitlines():
         if path.suffix == ".toml" and line.startswith("["):
             break
         m = _TOP_LEVEL.match(line)
-        if not m:
-            continue
-        value = m.group(2).split("#", 1)[0].strip().strip("\"'")
-        if m.group(1) == "id" and env_id is None:
-            env_id = value or None
-        elif m.group(1) == "max_steps" and max_steps is None and value.isdigit():
-            max_steps = int(value)
-    return env_id, max_steps
+        if m:
+            fields.setdefault(m.group(1), m.group(2).split("#", 1)[0].strip().strip("\"'"))
+    return fields
+
+
+def time_limit(max_steps: int | None, action_repeat: int) -> int | None:
+    """The id's ``max_episode_steps`` (Gymnasium's TimeLimit): the spec's max_steps, or none for a spec that repeats actions.
+
+    A spec with ``action_repeat`` truncates its episodes itself after max_steps of its own steps,
+    whatever repeat ``make`` is given; a TimeLimit counted in ``step()`` calls could only be right for one.
+    """
+    return max_steps if action_repeat == 1 else None
 
 
 def _duplicate_id(env_id: str, files: list[Path]) -> SpecError:
@@ -166,8 +177,8 @@ def register_bundled() -> list[str]:
         if env_id in clashes:
             ids.append(_register_id(env_id, env_id, None))
             continue
-        max_steps = read_header(path)[1]
-        ids.append(_register_id(env_id, str(path), max_steps if max_steps is not None else default_steps))
+        max_steps, repeat = read_header(path)[1], _header_fields(path).get("action_repeat", "1")
+        ids.append(_register_id(env_id, str(path), time_limit(max_steps if max_steps is not None else default_steps, int(repeat) if repeat.isdigit() else 1)))
     return ids
 
 
@@ -191,7 +202,7 @@ def register(target: str | os.PathLike[str]) -> list[str]:
     else:
         files = [path]
     problems: list[Diagnostic] = []
-    specs: dict[str, tuple[Path, int]] = {}
+    specs: dict[str, tuple[Path, int | None]] = {}
     for file in files:
         try:
             spec = load_spec(file).spec
@@ -201,7 +212,7 @@ def register(target: str | os.PathLike[str]) -> list[str]:
         if spec.id in specs:
             problems += _duplicate_id(spec.id, [specs[spec.id][0], file]).diagnostics
             continue
-        specs[spec.id] = (file, spec.max_steps)
+        specs[spec.id] = (file, time_limit(spec.max_steps, spec.action_repeat))
     index = {**spec_index(), **_REGISTERED}
     for env_id, (file, _) in specs.items():
         known = _REGISTERED.get(env_id) or index.get(env_id)

@@ -15,6 +15,7 @@ from gymnasium.error import ResetNeeded
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
+from visualenv.physics.conventions import legacy_stream
 from visualenv.env.faults import FaultDiagnosis
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
@@ -54,6 +55,13 @@ class VisualEnv(gym.Env):
     that ended the episode, ``"max_steps"``, or None), ``milestones`` and
     ``is_success``.
 
+    ## Action repeat
+    With ``action_repeat`` k (the spec's, or the option's), one ``step()`` makes
+    k of the spec's steps with the same action, as dm_control's benchmarks do:
+    their rewards summed, one observation (one render), stopping early at the
+    episode's end. ``max_steps``, ``steps`` and ``info["steps"]`` count the
+    spec's steps; ``max_episode_steps`` counts ``step()`` calls.
+
     ## Runtime faults
     A non-finite state or reward, a division by zero or a math domain error
     raises :class:`~visualenv.errors.StepError` naming the expression, its
@@ -89,6 +97,7 @@ class VisualEnv(gym.Env):
         renderer_options: RendererOptions | Mapping[str, Any] | None = None,
         backend: str = BLENDER_BACKEND,
         max_episode_steps: int | None = None,
+        action_repeat: int | None = None,
     ) -> None:
         super().__init__()
         if isinstance(spec, Program) and not params:
@@ -97,11 +106,15 @@ class VisualEnv(gym.Env):
             loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
             program = compile_spec(loaded, params)
         self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options, "backend": backend,
-                           "max_episode_steps": max_episode_steps}
+                           "max_episode_steps": max_episode_steps, "action_repeat": action_repeat}
         self.program = program
         s = program.spec
-        #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
-        self.max_episode_steps: int = s.max_steps if max_episode_steps is None else int(max_episode_steps)
+        #: the spec's steps per step() (dm_control's action repeat), each with the same action
+        self.action_repeat: int = s.action_repeat if action_repeat is None else int(action_repeat)
+        #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
+        self._step_limit = s.max_steps if max_episode_steps is None else int(max_episode_steps) * self.action_repeat
+        #: episodes are truncated after this many step() calls: the spec's max_steps (over the action repeat), or Gymnasium's
+        self.max_episode_steps: int = -(-self._step_limit // self.action_repeat)
         if s.observation is None and not s.render.view.camera:  # no camera to render a view with: no render mode (check_env reads it)
             self.metadata = {**self.metadata, "render_modes": []}
             if render_mode is not None:
@@ -118,11 +131,13 @@ class VisualEnv(gym.Env):
         self._display: Any = None  # render_mode="human": the page this env's steps are shown on, opened by the first step shown
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
+        #: dm_control's task stream (a spec with ``physics.convention: dm_control``): RandomState(seed), continued across episodes
+        self._legacy_random: np.random.RandomState | None = None
         #: a physics spec's own MuJoCo simulation; ``model`` and ``data`` are its MjModel and MjData, as in Gymnasium's MujocoEnv
         self._sim = program.physics.simulation() if program.physics is not None else None
         self.model: Any = self._sim.model if self._sim is not None else None
         if program.physics is not None:  # videos play at the simulation's speed, as Gymnasium's MuJoCo envs say
-            self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / program.physics.dt)))}
+            self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / (program.physics.dt * self.action_repeat))))}
         self.data: Any = self._sim.data if self._sim is not None else None
         self._fns = program.functions(self._random, self._sim)
         self._faults = FaultDiagnosis(program)
@@ -164,7 +179,7 @@ class VisualEnv(gym.Env):
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
         super().reset(seed=seed)
-        self._random.generator = self.np_random
+        self._random.generator = self._reset_generator(seed)
         if self._has_sensor and (seed is not None or self._sensor_rng is None):
             self._sensor_rng = sensor_generator(self.np_random)
         if self._sim is not None:
@@ -201,12 +216,18 @@ class VisualEnv(gym.Env):
         if not self._was_reset:
             raise ResetNeeded(f"call reset() before step(): {self._not_carried or 'the state is set by reset'} (Gymnasium's order)")
         a = self._action(action)
-        try:
-            state, reward, outcome, fired = self._advance(a)
-        except (ArithmeticError, ValueError, StepError) as exc:
-            return self._fault_in_step(exc, a)
-        self._commit(state, outcome, fired)
-        terminated, truncated, name = self._ending(outcome)
+        total = 0.0
+        for _ in range(self.action_repeat):  # dm_control's action repeat: the rewards summed, one observation
+            try:
+                state, reward, outcome, fired = self._advance(a)
+            except (ArithmeticError, ValueError, StepError) as exc:
+                return self._fault_in_step(exc, a)
+            self._commit(state, outcome, fired)
+            total += reward
+            terminated, truncated, name = self._ending(outcome)
+            if terminated or truncated:
+                break
+        reward = total
         try:
             obs = self._observe()
         except StepError as err:  # an actor binding of the new state faulted: nothing to render
@@ -275,7 +296,7 @@ class VisualEnv(gym.Env):
         """(terminated, truncated, info["outcome"]): the ending outcome that held, else max_steps, else the episode goes on."""
         if outcome >= 0:
             return self._endings[outcome]
-        if self._steps >= self.max_episode_steps:
+        if self._steps >= self._step_limit:
             return _OUT_OF_STEPS
         return _GOES_ON
 
@@ -313,6 +334,19 @@ class VisualEnv(gym.Env):
         if len(a) != len(self.program.continuous):
             raise ValueError(f"action has {len(a)} values, expected {len(self.program.continuous)}: the action space is {self.action_space}")
         return a
+
+    def _reset_generator(self, seed: int | None) -> Any:
+        """The generator this episode's draws come from: Gymnasium's ``np_random``, or dm_control's stream.
+
+        A spec with ``physics.convention: dm_control`` draws as ``suite.load(..., task_kwargs={"random": seed})``
+        does: ``RandomState(seed)`` at a seeded reset, the same stream continued by the next resets.
+        """
+        physics = self.program.physics
+        if physics is None or physics.convention != "dm_control":
+            return self.np_random
+        if seed is not None or self._legacy_random is None:
+            self._legacy_random = legacy_stream(seed, self.np_random)
+        return self._legacy_random
 
     def _reset_options(self, options: dict[str, Any] | None) -> dict[str, float]:
         """The state values of ``options["state"]`` as floats; an unknown option or variable, or a value that is not a number, is an error."""
@@ -481,7 +515,7 @@ class VisualEnv(gym.Env):
         episode = {
             "state": self._state, "steps": self._steps, "fired": self._fired, "done": self._done, "success": self._success,
             "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
-            "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs,
+            "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs, "legacy_random": self._legacy_random,
             "physics": self._physics_state(),
         }
         return {"loaded": self.program.loaded, "args": self._init_args, "spec": self.spec, "episode": episode if self._was_reset else None}
@@ -505,7 +539,8 @@ class VisualEnv(gym.Env):
         self._state = tuple(episode["state"])
         self._steps, self._fired, self._done, self._success = episode["steps"], episode["fired"], episode["done"], episode["success"]
         self._np_random, self._np_random_seed = episode["np_random"], episode["np_random_seed"]
-        self._random.generator = self._np_random
+        self._legacy_random = episode.get("legacy_random")
+        self._random.generator = self._legacy_random if self._legacy_random is not None else self._np_random
         self._sensor_rng = episode["sensor_rng"]
         if episode["action_space_rng"] is not None:
             self.action_space._np_random = episode["action_space_rng"]

@@ -19,7 +19,8 @@ from dataclasses import dataclass, field
 from typing import Mapping
 
 from visualenv.errors import ExpressionError, did_you_mean
-from visualenv.expr.functions import CONSTANTS, FUNCTIONS
+from visualenv.expr.functions import CONSTANTS, FUNCTIONS, Function, Param
+from visualenv.expr.tolerance import SIGMOIDS, problem as tolerance_problem
 from visualenv.expr.types import BOOL, NUM, Type, vec
 
 MAX_LENGTH = 4000
@@ -285,6 +286,8 @@ class _Checker:
         if func is None:
             kind = "unknown function" if name not in self.names else "not a function:"
             raise self.fail(node.func, f"{kind} '{name}'" + did_you_mean(name, FUNCTIONS).replace("names:", "functions:"))
+        if func.params:
+            return self.call_with_params(node, func, depth)
         if node.keywords:
             raise self.fail(node, f"{name}() takes no keyword arguments")
         for arg in node.args:
@@ -316,6 +319,70 @@ class _Checker:
             self.random = True
             return ast.Call(ast.Name(name, ast.Load()), args, []), func.returns
         return self.fold(ast.Call(ast.Name(name, ast.Load()), args, [])), func.returns
+
+    def call_with_params(self, node: ast.Call, func: Function, depth: int) -> tuple[ast.expr, Type]:
+        """A function with named parameters (``tolerance``): arguments by position, then by keyword, the rest defaulted.
+
+        The checked call passes every parameter by position (a text choice as its index), so the
+        generated code, constant folding and the batch's numpy version see an ordinary call.
+        """
+        name, params = func.name, func.params
+        names = [p.name for p in params]
+        signature = f"{name}({', '.join(names)})"
+        if len(node.args) > len(params):
+            raise self.fail(node, f"{signature} takes at most {len(params)} arguments, got {len(node.args)}")
+        given: dict[str, ast.expr] = {}
+        for param, arg in zip(params, node.args):
+            if isinstance(arg, ast.Starred):
+                raise self.fail(arg, "'*' unpacking not allowed in expressions")
+            given[param.name] = arg
+        for kw in node.keywords:
+            if kw.arg is None:
+                raise self.fail(kw, "'**' unpacking not allowed in expressions")
+            if kw.arg not in names:
+                raise self.fail(kw, f"{name}() has no argument '{kw.arg}'" + did_you_mean(kw.arg, names).replace("names:", "arguments:"))
+            if kw.arg in given:
+                raise self.fail(kw, f"{name}() got two values for '{kw.arg}'")
+            given[kw.arg] = kw.value
+        args: list[ast.expr] = []
+        for param in params:
+            if param.name not in given:
+                if param.default is None:
+                    raise self.fail(node, f"{signature} needs '{param.name}'")
+                args.append(_default(param))
+                continue
+            arg = given[param.name]
+            if param.choices:
+                args.append(self.choice(arg, name, param))
+            else:
+                new, typ = self.visit(arg, depth)
+                self.need(arg, typ, param.type, f"'{param.name}' of {name}()")
+                args.append(new)
+        if name == "tolerance":
+            self.check_tolerance(node, args)
+        return self.fold(ast.Call(ast.Name(name, ast.Load()), args, [])), func.returns
+
+    def choice(self, arg: ast.expr, function: str, param: Param) -> ast.expr:
+        """A text argument, one of the parameter's choices, as its index (the only text an expression may hold)."""
+        options = ", ".join(f'"{c}"' for c in param.choices)
+        if not (isinstance(arg, ast.Constant) and isinstance(arg.value, str)):
+            raise self.fail(arg, f"'{param.name}' of {function}() is one of {options}, written in quotes")
+        if arg.value not in param.choices:
+            raise self.fail(arg, f"'{param.name}' of {function}() has no choice \"{arg.value}\""
+                            + did_you_mean(arg.value, param.choices).replace("names:", "choices:"))
+        return ast.Constant(float(param.choices.index(arg.value)))
+
+    def check_tolerance(self, node: ast.Call, args: list[ast.expr]) -> None:
+        """dm_control's refusals of constant arguments (bounds out of order, a negative margin, a value at the margin out of range), now."""
+        bounds, margin, sigmoid, value = args[1:]
+
+        def constant(tree: ast.expr, otherwise: float) -> float:
+            return float(tree.value) if isinstance(tree, ast.Constant) and isinstance(tree.value, float) else otherwise
+
+        lower, upper = (constant(e, f) for e, f in zip(bounds.elts, (-math.inf, math.inf))) if isinstance(bounds, ast.List) else (-math.inf, math.inf)
+        why = tolerance_problem(lower, upper, constant(margin, 1.0), SIGMOIDS[int(constant(sigmoid, 0))], constant(value, 0.5))
+        if why:
+            raise self.fail(node, why)
 
     def check_constant_arguments(self, node: ast.Call, name: str, args: list[ast.expr]) -> None:
         """Constant arguments that cannot work (a negative spread, bounds in the wrong order) fail now, not at run time."""
@@ -362,3 +429,12 @@ class _Checker:
         ):
             raise self.fail(node, "numeric overflow: the result is not finite")
         return ast.Constant(value)
+
+
+def _default(param: Param) -> ast.expr:
+    """A parameter's default as a checked tree: a number, a vector literal, or a choice's index."""
+    if param.choices:
+        return ast.Constant(float(param.choices.index(param.default)))
+    if isinstance(param.default, tuple):
+        return ast.List([ast.Constant(float(v)) for v in param.default], ast.Load())
+    return ast.Constant(float(param.default))

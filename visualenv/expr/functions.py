@@ -14,6 +14,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from visualenv.expr.tolerance import DEFAULT_VALUE_AT_MARGIN, SIGMOIDS, tolerance
 from visualenv.expr.types import NUM, Type, vec
 
 
@@ -50,6 +51,19 @@ def _max(*args: Any) -> float:
 
 
 @dataclass(frozen=True)
+class Param:
+    """A named parameter of a function that takes keyword arguments (``tolerance(x, margin=2)``).
+
+    ``choices``: the parameter is text in quotes, one of these; the checker passes its index on as a number.
+    """
+
+    name: str
+    type: Type = NUM
+    default: Any = None  # None: required; a number, a tuple (a vector literal) or, with choices, one of them
+    choices: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
 class Function:
     name: str
     impl: Callable[..., Any] | None  # None: bound per env (random draws)
@@ -59,6 +73,7 @@ class Function:
     returns: Type
     random: bool = False
     doc: str = ""
+    params: tuple[Param, ...] = ()  # set: the arguments are these, by position or keyword (each with its own type)
 
 
 def _f(name: str, impl: Callable[..., Any] | None, n: int | tuple[int, int | None], doc: str, *, arg: Type = NUM, returns: Type = NUM, random: bool = False) -> Function:
@@ -97,6 +112,10 @@ FUNCTIONS: dict[str, Function] = {
         _f("normal", None, 2, "normal(mean, std): a Gaussian random number", random=True),
         _f("randint", None, 2, "randint(low, high): a random integer in [low, high], both included", random=True),
         _f("choice", None, (1, None), "choice(a, b, ...) or choice([a, b, ...]): one of the values at random", random=True),
+        Function("tolerance", tolerance, 1, 5, NUM, NUM, doc="tolerance(x, bounds=[lower, upper], margin=0, sigmoid=\"gaussian\", "
+                 "value_at_margin=0.1): dm_control's soft indicator, 1 inside the bounds and falling off outside them",
+                 params=(Param("x"), Param("bounds", vec(2), (0.0, 0.0)), Param("margin", NUM, 0.0),
+                         Param("sigmoid", NUM, "gaussian", SIGMOIDS), Param("value_at_margin", NUM, DEFAULT_VALUE_AT_MARGIN))),
         _f("uniform_disk", None, 1, "uniform_disk(r): a point [x, y] uniform in the disk of radius r (pairs drawn in the square "
            "until one falls inside, as Gymnasium's Reacher draws its goal)", returns=vec(2), random=True),
     ]
@@ -108,7 +127,12 @@ CONSTANTS: dict[str, float] = {"pi": math.pi, "e": math.e, "inf": math.inf}
 
 
 class RandomSource:
-    """Random draws for expressions, reading the env's current seeded generator."""
+    """Random draws for expressions, reading the env's current seeded generator.
+
+    The generator is numpy's ``Generator`` (Gymnasium's ``np_random``), or a legacy
+    ``RandomState`` for a spec that follows dm_control (``physics.convention``), whose
+    tasks draw from one: ``uniform`` and ``normal`` are then ``RandomState``'s own calls.
+    """
 
     __slots__ = ("generator",)
 
@@ -122,6 +146,8 @@ class RandomSource:
         return float(self.generator.normal(mean, std))
 
     def randint(self, low: float, high: float) -> float:
+        if isinstance(self.generator, np.random.RandomState):
+            return float(self.generator.randint(int(low), int(high) + 1))
         return float(self.generator.integers(int(low), int(high), endpoint=True))
 
     def uniform_disk(self, radius: float) -> tuple[float, float]:
@@ -132,7 +158,8 @@ class RandomSource:
 
     def choice(self, *values: Any) -> float:
         options = values[0] if len(values) == 1 and isinstance(values[0], tuple) else values
-        return float(options[int(self.generator.integers(len(options)))])
+        draw = self.generator.randint if isinstance(self.generator, np.random.RandomState) else self.generator.integers
+        return float(options[int(draw(len(options)))])
 
 
 def bind_random(source: RandomSource) -> dict[str, Callable[..., Any]]:

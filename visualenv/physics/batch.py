@@ -3,7 +3,7 @@
 A batch of a physics spec runs the program's vectorised step (:mod:`visualenv.compiler.vectorized`)
 on columns: its reads of the model's names and its MuJoCo step are this module's. Each env keeps
 its own MjModel and MjData (those of its lane, so env i of a batch is env i alone); one call steps
-all of them (``frame_skip`` ``mj_step`` and ``mj_rnePostConstraint`` each), split over a thread
+all of them (``frame_skip`` physics steps each, as the spec's convention makes them), split over a thread
 pool where there are cores for it (MuJoCo releases the GIL while it steps). After the step every
 env's arrays that the program reads are copied into one (N, size) array per MjData field, so a
 read is one numpy indexing per field for the whole batch, and a step's reads before the MuJoCo
@@ -68,8 +68,7 @@ class BatchSimulation:
         self.blown = np.zeros(n, dtype=bool)
         #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
         self._last: dict[str, tuple[list[str], list[np.ndarray]]] = {}
-        mujoco = first.mujoco
-        self._mj_step, self._mj_post = mujoco.mj_step, mujoco.mj_rnePostConstraint
+        self._physics_step = first.physics_step  # the spec's convention's step (visualenv.physics.conventions)
         self._extra = "time" in self.values or bool(self.touching)  # copied by refresh(), not by the plain row copies
         #: per env, what its step touches: model, data, MuJoCo's warning counters, its ctrl, its row of controls, its copies
         self._lanes = [(sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
@@ -157,7 +156,7 @@ class BatchSimulation:
 
     def _run(self, envs: list[int]) -> list[int]:
         """Step `envs` one after another (a thread's share): controls, the steps, the copies; the envs MuJoCo warned about."""
-        step, post, frame_skip = self._mj_step, self._mj_post, self.frame_skip
+        step, frame_skip = self._physics_step, self.frame_skip
         w0, w1, w2, w3 = self._fatal
         lanes, refresh, extra = self._lanes, self.refresh, self._extra
         warned: list[int] = []
@@ -166,8 +165,7 @@ class BatchSimulation:
             c = counters.tolist()
             before = c[w0] + c[w1] + c[w2] + c[w3]
             ctrl[:] = ctrl_row
-            step(model, data, nstep=frame_skip)
-            post(model, data)
+            step(model, data, frame_skip)
             c = counters.tolist()
             if c[w0] + c[w1] + c[w2] + c[w3] != before:
                 warned.append(i)

@@ -8,6 +8,8 @@ are called ``<kind><index>``, e.g. ``actuator0``):
   ``qvel_<j>_x/_y/_z/_wx/_wy/_wz``; ball joints ``qpos_<j>_qw..._qz`` and
   ``qvel_<j>_wx/_wy/_wz``;
 * ``body_<b>_x/_y/_z`` (world position) and ``body_<b>_qw/_qx/_qy/_qz`` (world orientation);
+  ``body_<b>_xx ... _zz``: its rotation matrix (MuJoCo's ``xmat``, row then column: ``_xz`` is
+  the world x of the body's z axis), as dm_control's ``named.data.xmat[b, 'xz']`` reads it;
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
 * ``ctrl_<actuator>``; ``sim_time``.
 
@@ -33,11 +35,13 @@ from visualenv.files import PACKAGE_PREFIX, package_file
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
 #: arrays a name can point into (attributes of MjData; ``time`` is a scalar)
-ARRAYS = ("qpos", "qvel", "xpos", "xquat", "site_xpos", "sensordata", "ctrl", "time")
+ARRAYS = ("qpos", "qvel", "xpos", "xquat", "xmat", "site_xpos", "sensordata", "ctrl", "time")
 _FREE_QPOS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 _FREE_QVEL = ("x", "y", "z", "wx", "wy", "wz")
 _BALL_QPOS = ("qw", "qx", "qy", "qz")
 _BALL_QVEL = ("wx", "wy", "wz")
+#: a body's rotation matrix entries, in MuJoCo's xmat order (row: world axis, column: body axis)
+_XMAT = ("xx", "xy", "xz", "yx", "yy", "yz", "zx", "zy", "zz")
 
 
 class PhysicsError(VisualEnvError):
@@ -134,7 +138,7 @@ class PhysicsModel:
     def listing(self) -> dict[str, list[str]]:
         """The names by kind, for ``visualenv inspect`` and the starter spec."""
         groups: dict[str, list[str]] = {"joint positions": self.qpos_names(), "joint velocities": self.qvel_names()}
-        for title, array in (("bodies", "xpos"), ("body orientations", "xquat"), ("sites", "site_xpos"), ("sensors", "sensordata"), ("actuator controls", "ctrl")):
+        for title, array in (("bodies", "xpos"), ("body orientations", "xquat"), ("body rotation matrices", "xmat"), ("sites", "site_xpos"), ("sensors", "sensordata"), ("actuator controls", "ctrl")):
             groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
         groups["geoms (for contacts)"] = list(self.names.ident["geom"])
         groups["keyframes"] = list(self.names.ident["key"])
@@ -205,13 +209,7 @@ def name_tables(model: Any) -> NameTables:
         ident[kind], by_name[kind], owners[kind] = _element_names(model, kind, count)
     names = _Names()
     _joint_values(model, names, ident["joint"], owners["joint"])
-    for b, name in enumerate(ident["body"]):
-        if b == 0:
-            continue  # the world body never moves
-        for i, p in enumerate("xyz"):
-            names.add(f"body_{name}_{p}", ("xpos", 3 * b + i), owners["body"][b])
-        for i, p in enumerate(("qw", "qx", "qy", "qz")):
-            names.add(f"body_{name}_{p}", ("xquat", 4 * b + i), owners["body"][b])
+    _body_values(names, ident["body"], owners["body"])
     for s, name in enumerate(ident["site"]):
         for i, p in enumerate("xyz"):
             names.add(f"site_{name}_{p}", ("site_xpos", 3 * s + i), owners["site"][s])
@@ -250,3 +248,16 @@ def _joint_values(model: Any, names: _Names, idents: list[str], owners: list[str
             names.add(f"qpos_{name}_{p}", ("qpos", qadr + i), owners[j])
         for i, p in enumerate(vparts):
             names.add(f"qvel_{name}_{p}", ("qvel", vadr + i), owners[j])
+
+
+def _body_values(names: _Names, idents: list[str], owners: list[str]) -> None:
+    """``body_<b>_x/_y/_z`` (xpos), ``_qw..._qz`` (xquat) and ``_xx..._zz`` (xmat) of every body but the world."""
+    for b, name in enumerate(idents):
+        if b == 0:
+            continue  # the world body never moves
+        for i, p in enumerate("xyz"):
+            names.add(f"body_{name}_{p}", ("xpos", 3 * b + i), owners[b])
+        for i, p in enumerate(("qw", "qx", "qy", "qz")):
+            names.add(f"body_{name}_{p}", ("xquat", 4 * b + i), owners[b])
+        for i, p in enumerate(_XMAT):
+            names.add(f"body_{name}_{p}", ("xmat", 9 * b + i), owners[b])

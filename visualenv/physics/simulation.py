@@ -2,8 +2,9 @@
 
 Stepping follows Gymnasium's MujocoEnv exactly (``ctrl[:] = action``,
 ``mj_step(nstep=frame_skip)``, then ``mj_rnePostConstraint``; a reset is
-``mj_resetData``, the new qpos and qvel, then ``mj_forward``), so a spec that
-writes Gymnasium's reward and reset draws reproduces its env to the last bit.
+``mj_resetData``, the new qpos and qvel, then ``mj_forward``), or dm_control's
+Physics (:mod:`visualenv.physics.conventions`), so a spec that writes the
+library's reward and reset draws reproduces its env to the last bit.
 Named values are gathered by readers made once per list of names: one numpy
 indexing per array, never a Python lookup per name on the hot path.
 """
@@ -17,6 +18,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 
 import numpy as np
 
+from visualenv.physics.conventions import forward_function, reset_data, step_function
 from visualenv.physics.model import PhysicsModel, mujoco_module
 
 
@@ -41,8 +43,12 @@ def touching(data: Any, pair: tuple[int, int]) -> bool:
 class Simulation:
     """An env's MjModel (its own copy, so randomising one env's model leaves the others alone) and MjData."""
 
-    def __init__(self, physics: PhysicsModel, frame_skip: int, contacts: dict[str, tuple[int, int]] | None = None) -> None:
+    def __init__(self, physics: PhysicsModel, frame_skip: int, contacts: dict[str, tuple[int, int]] | None = None,
+                 convention: str = "gymnasium") -> None:
         self.mujoco = mujoco_module()
+        #: whose MuJoCo calls the steps and resets make (:mod:`visualenv.physics.conventions`)
+        self.convention = convention
+        self.physics_step = step_function(convention, self.mujoco)
         self.physics = physics
         self.model = copy.copy(physics.model)
         self.data = self.mujoco.MjData(self.model)
@@ -58,20 +64,17 @@ class Simulation:
     # -- reset and step -----------------------------------------------------------------------------
 
     def reset(self, keyframe: int | None = None) -> None:
-        """``mj_resetData``, or the keyframe's state; the spec's reset values are written after (:meth:`set_state`)."""
-        if keyframe is None:
-            self.mujoco.mj_resetData(self.model, self.data)
-        else:
-            self.mujoco.mj_resetDataKeyframe(self.model, self.data, keyframe)
+        """``mj_resetData``, or the keyframe's state (then dm_control's forward); the spec's reset values are written after (:meth:`set_state`)."""
+        reset_data(self.convention, self.mujoco, self.model, self.data, keyframe)
 
     def writer(self, names: Sequence[str]) -> Callable[[Sequence[float]], None]:
-        """set_state(values): write qpos/qvel `names` (in order), then ``mj_forward``, as Gymnasium's set_state does."""
+        """set_state(values): write qpos/qvel `names` (in order), then ``mj_forward`` (as Gymnasium's set_state; dm_control's after_reset)."""
         table = self.physics.names.values
         qpos_at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == "qpos"]
         qvel_at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == "qvel"]
         qpos_src, qpos_dst = (np.array([p for p, _ in qpos_at], int), np.array([q for _, q in qpos_at], int))
         qvel_src, qvel_dst = (np.array([p for p, _ in qvel_at], int), np.array([q for _, q in qvel_at], int))
-        data, model, forward = self.data, self.model, self.mujoco.mj_forward
+        data, model, forward = self.data, self.model, forward_function(self.convention, self.mujoco)
 
         def set_state(values: Sequence[float]) -> None:
             given = np.asarray(values, dtype=np.float64)
@@ -89,7 +92,7 @@ class Simulation:
         table = self.physics.names.values
         where = np.array([table[n][1] for n in controls], int)
         ctrl = np.zeros(self.model.nu)
-        data, model, step, post, n = self.data, self.model, self.mujoco.mj_step, self.mujoco.mj_rnePostConstraint, self.frame_skip
+        data, model, step, n = self.data, self.model, self.physics_step, self.frame_skip
         warnings, fatal = self._warnings, self._fatal.tolist()
         qpos, qvel = data.qpos, data.qvel
 
@@ -102,8 +105,7 @@ class Simulation:
             data.ctrl[:] = ctrl
             counts = warnings.tolist()  # eight numbers: cheaper as a list than as numpy reductions
             before = sum(counts[i] for i in fatal)
-            step(model, data, nstep=n)
-            post(model, data)
+            step(model, data, n)
             counts = warnings.tolist()
             # MuJoCo resets the state on a bad qacc and warns; a NaN from the last substep shows in qpos or qvel
             if sum(counts[i] for i in fatal) != before or not math.isfinite(qpos.sum() + qvel.sum()):

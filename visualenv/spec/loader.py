@@ -26,7 +26,7 @@ from visualenv.spec.yaml_pitfalls import COMMA_HINT, split_at_comma
 _OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
 #: what the patterns of the models mean, in words
 _PATTERNS = {
-    r"^[A-Za-z][A-Za-z0-9_.]*-v\d+$": "an id such as 'MyEnv-v0' (a letter, then letters, digits, '_' or '.', then '-v' and a version number)",
+    r"^[A-Za-z][A-Za-z0-9_.-]*-v\d+$": "an id such as 'MyEnv-v0' (a letter, then letters, digits, '_', '.' or '-', then '-v' and a version number)",
     r"^[A-Za-z_][A-Za-z0-9_]*$": "a name made of letters, digits and '_', not starting with a digit",
     r"^[^\x00-\x1f\x7f]+$": "a Blender name (any text without control characters, e.g. 'Cube.001')",
     r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$": "'module:function', e.g. 'mypackage.dynamics:step'",

@@ -300,6 +300,10 @@ class Physics(StrictModel):
     engine: Literal["mujoco"] = Field("mujoco", description="the physics engine")
     model: str = Field(description="the MJCF file, relative to the spec, or package:<package>/<path> for a file an installed package ships (found on disk; the package is not imported)")
     frame_skip: int = Field(1, ge=1, le=100_000, description="physics steps per env step; dt in expressions is timestep * frame_skip")
+    convention: Literal["gymnasium", "dm_control"] = Field("gymnasium", description=(
+        "whose MuJoCo calls the env makes: Gymnasium's MujocoEnv (mj_step, then mj_rnePostConstraint; draws from np_random) or "
+        "dm_control's Physics (its legacy step ending in mj_step1, forwards with actuation disabled at reset; draws from "
+        "RandomState(seed), continued across episodes), so the library's env is reproduced to the bit (docs/dmc.md)"))
     reset: PhysicsReset = Field(default_factory=PhysicsReset)
     contacts: dict[Name, Annotated[list[str], Field(min_length=2, max_length=2)]] = Field(
         default_factory=dict, description="name: [geom, geom]: a condition, true while the two geoms touch")
@@ -436,7 +440,7 @@ class Spec(StrictModel):
 
     model_config = ConfigDict(extra="forbid", frozen=True, strict=True, json_schema_extra={"$id": "https://visualenv.dev/schema/spec.json"})
 
-    id: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_.]*-v\d+$", description="environment id, e.g. VisualCartPole-v0")
+    id: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_.-]*-v\d+$", description="environment id, e.g. VisualCartPole-v0")
     description: str = ""
     scene: Scene = Field(default_factory=Scene)
     params: dict[Name, Union[bool, int, float, str]] = Field(
@@ -453,6 +457,9 @@ class Spec(StrictModel):
     reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")
     outcomes: dict[Name, Outcome] = Field(default_factory=dict, description="named rules checked in order; the first ending one ends the episode")
     max_steps: int = Field(1000, ge=1, le=100_000_000, description="episodes are truncated after this many steps")
+    action_repeat: int = Field(1, ge=1, le=10_000, description=(
+        "steps the spec makes per env.step() with the same action (dm_control's action repeat): their rewards summed, one "
+        "observation; max_steps, steps and dt count the spec's own steps; make(action_repeat=k) overrides it"))
     dt: float = Field(1.0, gt=0, description="seconds per step, available as 'dt' in expressions")
     on_fault: Literal["raise", "terminate"] = Field(
         "raise", description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']"

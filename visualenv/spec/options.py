@@ -38,6 +38,8 @@ class MakeOptions(StrictModel):
     resize: Optional[tuple[_Pixels, _Pixels]] = Field(None, description="(width, height) of the observation")
     max_episode_steps: Optional[Annotated[int, Field(ge=1, le=100_000_000)]] = Field(
         None, description="Gymnasium's name: episodes are truncated after this many steps, in place of the spec's max_steps")
+    action_repeat: Optional[Annotated[int, Field(ge=1, le=10_000)]] = Field(
+        None, description="the spec's steps per step() with the same action, rewards summed (in place of the spec's action_repeat)")
 
 
 def check_make_options(**options: Any) -> None:
