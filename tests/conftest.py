@@ -36,6 +36,7 @@ BLENDER_MODULES = {
     "test_make_options",
     "test_parallel",
     "test_physics_scene",
+    "test_quiet_exit",
     "test_render_blender",
     "test_rendering_determinism",
     "test_rllib",

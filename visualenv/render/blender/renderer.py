@@ -18,6 +18,7 @@ from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, Rendere
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
+from visualenv.render.blender.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
@@ -98,6 +99,7 @@ class BlenderRenderer(Renderer):
             raise
         self._ids = tracker.new()
         self._closed = False
+        track(self)  # closed at exit if the script leaves it open (at_exit.py: a quiet exit)
 
     # -- construction -------------------------------------------------------------------------------
 
