@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import re
 from pathlib import Path
 
 import gymnasium as gym
@@ -315,6 +316,8 @@ def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
     log = run / "monitor" / "batch.monitor.csv"
     before = log.read_text().splitlines()
     assert len(before) > 2  # the header lines and at least one episode
+    assert '"env_id": "visualenv/VisualCartPole-v0"' in before[0]
+    assert re.search(r"^eval at \d+ steps: mean return .* over 1 episodes, success [01]/1$", result.output, re.M), result.output
     resumed = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--resume", str(run), "--steps", "128", "--no-progress"])
     assert resumed.exit_code == 0, resumed.output
     after = log.read_text().splitlines()

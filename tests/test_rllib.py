@@ -263,6 +263,7 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     with np.load(run / "evaluations.npz") as first:
         evaluated = first["timesteps"].tolist()
     assert evaluated
+    assert f"eval at {evaluated[0]} steps: mean return " in output  # --no-progress: a line per evaluation
 
     played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"])
     assert played.exit_code == 0 and "episode 0: return" in played.output, played.output

@@ -292,6 +292,10 @@ def test_state_only_training_runs_without_warnings(tmp_path):
     assert not [w for w in caught if "not of the same type" in str(w.message)]
     run = next((tmp_path / "Goalie-v0").iterdir())
     assert json.loads((run / "config.json").read_text())["config"]["render"] is False
+    # --no-progress: one line per evaluation (a log file shows the run's course); the monitor files name the env
+    lines = re.findall(r"^eval at (\d+) steps: mean return -?\d+\.\d\d \+- \d+\.\d\d over 2 episodes, success \d/2$", result.output, re.M)
+    assert [int(s) for s in lines] == [128, 256], result.output
+    assert '"env_id": "visualenv/Goalie-v0"' in (run / "monitor" / "0.monitor.csv").read_text().splitlines()[0]
 
 
 def test_play_random_policy():

@@ -36,6 +36,14 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
     return vec
 
 
+def _env_id(target: str) -> str:
+    """The id a monitor file names, as ``gymnasium.make`` knows the env (``visualenv/<spec id>``), as SB3's Monitor writes it."""
+    from visualenv.env.registration import NAMESPACE, read_header, resolve
+
+    spec_id = read_header(resolve(target))[0]
+    return f"{NAMESPACE}/{spec_id}" if spec_id else str(target)
+
+
 def _make_monitored(target: str, kwargs: dict[str, Any], cores: Share | None, seed: int, monitor_file: str | None,
                     append: bool = False) -> gym.Env:
     from stable_baselines3.common.monitor import Monitor
@@ -73,7 +81,7 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     vec = VecMonitor(vec)
     if monitor_dir:
         # VecMonitor's own writer always starts the file afresh: a resumed run would lose its earlier episodes
-        vec.results_writer = ResultsWriter(os.path.join(monitor_dir, "batch"), header={"t_start": vec.t_start, "env_id": "None"},
+        vec.results_writer = ResultsWriter(os.path.join(monitor_dir, "batch"), header={"t_start": vec.t_start, "env_id": _env_id(target)},
                                            override_existing=not monitor_append)
     if frame_stack and frame_stack > 1 and kwargs.get("render") is not False:
         vec = VecFrameStack(vec, n_stack=frame_stack)

@@ -375,3 +375,12 @@ def sample_differences(results: dict[str, Any], recorded: dict[str, Any]) -> lis
 def replays_prefix(results: dict[str, Any], recorded: dict[str, Any]) -> bool:
     """Whether `results` (fewer episodes, the same seed) can be checked against results.json's per-episode records."""
     return 0 < results.get("episodes", 0) < recorded.get("episodes", 0) and len(recorded.get("per_episode", {}).get("returns", [])) == recorded["episodes"]
+
+
+def evaluation_line(steps: int, returns: Any, successes: Any = None) -> str:
+    """One periodic evaluation as a line of text (``train --no-progress`` prints it: a log file shows the run's course)."""
+    values = np.asarray(returns, dtype=np.float64)
+    line = f"eval at {steps} steps: mean return {values.mean():.2f} +- {values.std():.2f} over {values.size} episodes"
+    if successes is not None and len(successes):
+        line += f", success {int(np.sum(successes))}/{len(successes)}"
+    return line

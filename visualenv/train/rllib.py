@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.train.evaluation import FINAL_EPISODES
+from visualenv.train.evaluation import FINAL_EPISODES, evaluation_line
 
 BACKEND = "rllib"
 PROGRESS_COLUMNS = ("time/total_timesteps", "time/iterations", "time/fps", "time/time_elapsed", "rollout/ep_rew_mean",
@@ -293,6 +293,8 @@ def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: An
                 returns, lengths, successes = _episodes(RLlibPolicy(algo.get_module()), eval_env, config.eval_episodes)
                 improved = float(np.mean(returns)) > evaluations.best
                 evaluations.add(steps, returns, lengths, successes)
+                if not config.progress:
+                    print(evaluation_line(steps, returns, successes), flush=True)
                 if improved:
                     save_checkpoint(algo, run_dir / "best_model", steps)
                 save_checkpoint(algo, latest, steps)

@@ -37,7 +37,8 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from visualenv.env.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
-from visualenv.train.evaluation import FINAL_EPISODES, final_evaluation, final_seed, make_eval_env, selection_record, selection_seed
+from visualenv.train.evaluation import (FINAL_EPISODES, evaluation_line, final_evaluation, final_seed, make_eval_env, selection_record,
+                                        selection_seed)
 from visualenv.train.models import algorithm_class, load_model
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
@@ -210,7 +211,8 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest
     per_env = max(1, config.eval_every // config.envs)
     callbacks = [
         _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
-                       best_model_save_path=str(run_dir), deterministic=True, verbose=0),
+                       best_model_save_path=str(run_dir), deterministic=True, verbose=0,
+                       callback_after_eval=None if config.progress else _EvalLine()),
         _LatestCheckpoint(latest, every=per_env),
         _PhaseThreads(),
         stopper,
@@ -349,6 +351,17 @@ class _ResumableEval(EvalCallback):
                 self.evaluations_successes = earlier["successes"].tolist()
         if self.evaluations_results:
             self.best_mean_reward = float(max(np.mean(r) for r in self.evaluations_results))
+
+
+class _EvalLine(BaseCallback):
+    """Without the progress bar, one line per evaluation on stdout: its steps, mean return and successes."""
+
+    def _on_step(self) -> bool:
+        parent = self.parent
+        if isinstance(parent, EvalCallback) and parent.evaluations_results:
+            successes = parent.evaluations_successes[-1] if len(parent.evaluations_successes) == len(parent.evaluations_results) else None
+            print(evaluation_line(parent.evaluations_timesteps[-1], parent.evaluations_results[-1], successes), flush=True)
+        return True
 
 
 class _LatestCheckpoint(BaseCallback):
