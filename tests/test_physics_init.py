@@ -60,7 +60,7 @@ def test_an_init_spec_renders_the_model(tmp_path: Path) -> None:
     env = VisualEnv(out)
     try:
         obs, _ = env.reset(seed=0)
-        # the hopper (light material) stands in the middle of the frame, framed by the starter camera
+        # the hopper (light material) stands in the middle of the frame of its own `track` camera, which the starter observes through
         middle, edge = obs[4:20, 9:15].astype(int).sum(axis=2), obs[4:20, :3].astype(int).sum(axis=2)
         assert obs.shape == (24, 24, 3) and np.abs(middle - edge.mean()).max() > 60
     finally:
@@ -77,3 +77,34 @@ def test_a_bad_model_is_a_clear_error(tmp_path: Path, text: str, expected: str) 
     for command in (["inspect", str(bad)], ["init", str(bad), "-o", str(tmp_path / "s.yaml")]):
         result = CliRunner().invoke(main, command)
         assert result.exit_code != 0 and expected in result.output and "Traceback" not in result.output, result.output
+
+
+CAMERAS = """\
+<mujoco>
+  <worldbody>
+    <light pos="0 0 3"/>
+    <body name="box" pos="0 0 0.5"><freejoint/><geom type="box" size="0.1 0.1 0.1"/></body>
+    <camera name="side" pos="0 -2 0.5" xyaxes="1 0 0 0 0 1"/>
+    <camera name="top" pos="0 0 3"/>
+  </worldbody>
+</mujoco>
+"""
+
+
+def test_init_observes_through_the_models_first_camera(tmp_path: Path) -> None:
+    """A model with cameras: the starter spec observes through the first, says so, and adds no camera of its own."""
+    (tmp_path / "m.xml").write_text(CAMERAS, encoding="utf-8")
+    out = tmp_path / "spec.yaml"
+    result = CliRunner().invoke(main, ["init", str(tmp_path / "m.xml"), "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    text = out.read_text(encoding="utf-8")
+    assert "observation: {camera: side, resolution: [84, 84], color: rgb}" in text
+    assert "# the model's first camera, side (" in text and "its others: top" in text
+    assert "Camera:" not in text and "perspective" not in text
+    env = VisualEnv(out, render=False)  # compiles: the camera is the model's
+    assert env.program.spec.observation.camera == "side"
+    env.close()
+    (tmp_path / "bare.xml").write_text(CAMERAS.replace('<camera name="side" pos="0 -2 0.5" xyaxes="1 0 0 0 0 1"/>', "")
+                                       .replace('<camera name="top" pos="0 0 3"/>', ""), encoding="utf-8")
+    CliRunner().invoke(main, ["init", str(tmp_path / "bare.xml"), "-o", str(tmp_path / "bare.yaml")])
+    assert "observation: {camera: Camera," in (tmp_path / "bare.yaml").read_text(encoding="utf-8")  # no camera in the model: the starter's own

@@ -1,9 +1,10 @@
 """`visualenv inspect model.xml` and `visualenv init model.xml`: an MJCF model's names, and a starter spec over it.
 
 The names are those expressions read (:mod:`visualenv.physics.model`); the
-starter spec drives every actuator (the default actions), frames the model with
-a camera of its own, lists the names as comments and has a placeholder reward,
-so it builds and steps as written.
+starter spec drives every actuator (the default actions), observes through the
+model's first camera (or, in a model without one, a camera of its own that frames
+the model), lists the names as comments and has a placeholder reward, so it
+builds and steps as written.
 """
 
 from __future__ import annotations
@@ -22,6 +23,8 @@ from visualenv.physics.model import PhysicsModel, load_model, mujoco_module
 MJCF_SUFFIXES = (".xml", ".mjcf")
 #: horizontal field of view of the starter camera's 35 mm lens on a 36 mm sensor
 _HALF_FOV = math.atan(18 / 35)
+#: names YAML reads as something else than a string unquoted (a camera called `on` would be `true`)
+_YAML_WORDS = {"null", "true", "false", "yes", "no", "on", "off", "y", "n"}
 
 
 def is_mjcf(path: Path) -> bool:
@@ -76,11 +79,23 @@ def framing(physics: PhysicsModel) -> tuple[list[float], list[float]]:
     return [round(float(v), 3) for v in eye], [round(float(v), 3) for v in centre]
 
 
+def _observation(physics: PhysicsModel) -> list[str]:
+    """The starter's observation: through the model's first camera where it has one, else a camera of the spec's own framing it."""
+    cameras = [f"'{c}'" if c.lower() in _YAML_WORDS else c for c in physics.names.ident["camera"]]
+    if cameras:
+        others = f"; its others: {', '.join(cameras[1:])}" if len(cameras) > 1 else ""
+        return [f"# the model's first camera, {cameras[0]} (observation.camera takes any of the model's cameras by name{others})",
+                f"observation: {{camera: {cameras[0]}, resolution: [84, 84], color: rgb}}"]
+    eye, target = framing(physics)
+    return ["scene:", "  objects:  # the model has no camera: one that frames the model at its reset pose",
+            f"    Camera: {{camera: perspective, lens: 35, location: {eye}, look_at: {target}}}",
+            "observation: {camera: Camera, resolution: [84, 84], color: rgb}"]
+
+
 def mjcf_starter_spec(path: Path, spec_path: Path) -> str:
     """A spec over the MJCF at `path` that builds and steps as written."""
     physics = load_model(path)
     model_ref = os.path.relpath(path.resolve(), spec_path.resolve().parent).replace(os.sep, "/")
-    eye, target = framing(physics)
     actuators = [f"ctrl_{a}" for a in physics.actuator_names()]
     out = [f"# A starter spec for {path.name}, written by `visualenv init`: it builds and steps as it is.",
            "# Replace the placeholder reward, add outcomes and reset noise; docs/physics.md is the reference.",
@@ -96,8 +111,6 @@ def mjcf_starter_spec(path: Path, spec_path: Path) -> str:
         out.append(f"# actions: not declared, so one Box dimension per actuator in its ctrlrange: {', '.join(actuators)}")
     else:
         out += ["actions:  # the model has no actuators: one action that does nothing", "  discrete: [{}]"]
-    out += ["", "scene:", "  objects:  # a camera that frames the model at its reset pose",
-            f"    Camera: {{camera: perspective, lens: 35, location: {eye}, look_at: {target}}}",
-            "observation: {camera: Camera, resolution: [84, 84], color: rgb}", "",
+    out += ["", *_observation(physics), "",
             "reward: 0.0  # placeholder, e.g. a body's height: body_<name>_z", "max_steps: 1000", ""]
     return "\n".join(out)
