@@ -56,25 +56,36 @@ class Checked:
 
 
 def parse(text: str | float | int | bool) -> ast.expr:
-    """Parse expression text (numbers and booleans are accepted as themselves)."""
+    """Parse expression text (numbers and booleans are accepted as themselves).
+
+    An error's offset is a character of `text` as given: a value written over several lines
+    (a YAML block) is parsed with its line breaks as spaces, so that a place in it is a place in
+    `text`, and the file's map of the value (:mod:`visualenv.spec.text_places`) names the line.
+    """
+    return _parse(text)[0]
+
+
+def _parse(text: str | float | int | bool) -> tuple[ast.expr, str, int]:
+    """The tree, the text it was parsed from (one line, stripped) and how many characters of `text` precede it."""
     if isinstance(text, bool):
-        return ast.Constant(text)
+        return ast.Constant(text), "", 0
     if isinstance(text, (int, float)):
-        return ast.Constant(_number(text, 0))
+        return ast.Constant(_number(text, 0)), "", 0
     if not isinstance(text, str):
         raise ExpressionError(f"expected a number or an expression, got {type(text).__name__}")
     if not text.strip():
         raise ExpressionError("empty expression")
     if len(text) > MAX_LENGTH:
         raise ExpressionError(f"expression is too long ({len(text)} characters, at most {MAX_LENGTH})")
-    if "\n" in text.strip() or "\r" in text:
-        text = " ".join(text.split())
+    flat = text.replace("\r", " ").replace("\n", " ")  # as long as the text: an offset in it is one in the text
+    lead = len(flat) - len(flat.lstrip())
+    parsed = flat.strip()
     try:
         with warnings.catch_warnings():  # e.g. "invalid escape sequence" in a text the checker rejects anyway
             warnings.simplefilter("ignore")
-            module = ast.parse(text.strip(), mode="eval")
+            module = ast.parse(parsed, mode="eval")
     except SyntaxError as exc:
-        offset = (exc.offset or 1) - 1
+        offset = lead + (exc.offset or 1) - 1
         raise ExpressionError(f"syntax error: {exc.msg}", offset) from None
     except UnicodeError:  # e.g. a lone surrogate: ast.parse cannot encode the text
         raise ExpressionError("the expression contains characters that are not valid text") from None
@@ -82,7 +93,7 @@ def parse(text: str | float | int | bool) -> ast.expr:
         raise ExpressionError(f"syntax error: {exc}") from None
     except (RecursionError, MemoryError):
         raise ExpressionError("expression is too deeply nested") from None
-    return module.body
+    return module.body, parsed, lead
 
 
 def check(text: str | float | int | bool, names: Mapping[str, Type], *, constants: Mapping[str, float] | None = None,
@@ -92,17 +103,20 @@ def check(text: str | float | int | bool, names: Mapping[str, Type], *, constant
     `constants` (params) are substituted and folded. `expect` is the type the
     context needs (NUM for a reward, BOOL for a condition, a vector for a location).
     """
-    tree = parse(text)
+    tree, parsed, lead = _parse(text)
     if _tree_depth(tree) > MAX_TREE_DEPTH:
         raise ExpressionError(f"expression is too long: more than {MAX_TREE_DEPTH} operations chained one after another; "
                               "split it into named parts with dynamics.let")
     checker = _Checker(names, {**CONSTANTS, **(constants or {})}, allow_random)
     try:
         new_tree, typ = checker.visit(tree, 0)
+        if expect is not None and not _fits(typ, expect):
+            raise ExpressionError(f"expected {expect}, got {typ}", getattr(tree, "col_offset", 0))
     except RecursionError:
         raise ExpressionError("expression is too deeply nested") from None
-    if expect is not None and not _fits(typ, expect):
-        raise ExpressionError(f"expected {expect}, got {typ}", getattr(tree, "col_offset", 0))
+    except ExpressionError as exc:  # the node's offset counts UTF-8 bytes of the parsed text: as characters of `text`
+        exc.offset = lead + len(parsed.encode("utf-8")[:exc.offset].decode("utf-8", "ignore"))
+        raise
     checked = Checked(text if isinstance(text, str) else repr(text), new_tree, typ, checker.used, checker.random)
     if isinstance(new_tree, ast.Constant):
         checked.constant = new_tree.value  # type: ignore[assignment]  # the checker only lets numbers and booleans through

@@ -20,6 +20,7 @@ from typing import Any, NoReturn
 import yaml
 
 from visualenv.errors import Diagnostic, SpecError
+from visualenv.spec.text_places import Places, toml_places, yaml_places
 from visualenv.spec.yaml_pitfalls import COMMA_HINT, EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, opens_and_closes
 
 #: where a value sits in the spec: keys and list indexes from the top
@@ -33,6 +34,8 @@ class Position:
     #: for single-line string scalars: how many characters precede the text
     #: (1 for a quoted scalar), so an expression column can be added to it.
     text_offset: int | None = None
+    #: for multi-line strings: the line and column of each of the value's characters (text_places.py)
+    places: Places | None = None
 
 
 @dataclass
@@ -62,6 +65,8 @@ class SourceMap:
         column = pos.column if pos else None
         if pos and column_offset is not None and pos.text_offset is not None and tuple(path) in self.values:
             column = pos.column + pos.text_offset + column_offset
+        elif pos and column_offset is not None and pos.places and tuple(path) in self.values:  # a multi-line value: its own line
+            line, column = pos.places[min(max(column_offset, 0), len(pos.places) - 1)]
         return Diagnostic(self.file, line, column, format_path(path), self._with_comma_hint(tuple(path), message))
 
     def _with_comma_hint(self, path: SpecPath, message: str) -> str:
@@ -246,14 +251,21 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
         return out
     if isinstance(node, yaml.SequenceNode):
         return [_convert(item, path + (i,), smap, problems, count) for i, item in enumerate(node.value)]
+    return _convert_scalar(node, path, smap, problems)
+
+
+def _convert_scalar(node: yaml.ScalarNode, path: SpecPath, smap: SourceMap, problems: list[Diagnostic]) -> Any:
     if node.style is None and node.value.lower() in YAML11_BOOLEANS and node.tag == "tag:yaml.org,2002:bool":
         problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), boolean_word(node.value)))
         return None
     try:
-        return _scalar(node)
+        value = _scalar(node)
     except ValueError as exc:  # e.g. an integer with more digits than Python converts
         problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"cannot read this value: {_short(exc)}"))
         return None
+    if isinstance(value, str) and smap.values[path].text_offset is None:  # a multi-line string: where each character is
+        smap.values[path].places = yaml_places(node, value)
+    return value
 
 
 def _split(node: yaml.CollectionNode) -> bool:
@@ -351,7 +363,20 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
             is_string = km.end() < len(line) and line[km.end()] in "\"'"
             single = is_string and not line[km.end():].startswith(('"""', "'''"))
             smap.values.setdefault(full, Position(lineno, value_col, 1 if single else None))
+    for path, pos in smap.values.items():  # multi-line strings: where each character is
+        value = _toml_value(data, path) if pos.text_offset is None else None
+        if isinstance(value, str):
+            pos.places = toml_places(text, pos.line, pos.column, value)
     return data, smap
+
+
+def _toml_value(data: Any, path: SpecPath) -> Any:
+    for part in path:
+        try:
+            data = data[part]
+        except (KeyError, IndexError, TypeError):
+            return None
+    return data
 
 
 def _toml_syntax_error(exc: Exception, text: str, name: str) -> NoReturn:
