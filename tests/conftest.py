@@ -58,6 +58,8 @@ BLENDER_TESTS = {
     "test_pickle_episode.py::test_a_rendered_env_goes_on_with_its_frames_and_sensor_noise",
     "test_specs_import_nothing.py::test_build_renders_a_package_model_without_importing_the_package",
     "test_bundled_ports.py::test_building_half_cheetah_prints_nothing_on_stderr",
+    "test_physics_mocap.py::test_the_goal_is_drawn_where_its_mocap_pose_puts_it_alone_and_in_a_batch",
+    "test_physics_sites.py::test_a_red_site_in_view_shows_red_pixels_alone_and_in_a_batch_and_draw_sites_false_hides_it",
 }
 
 

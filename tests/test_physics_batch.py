@@ -102,8 +102,8 @@ def test_a_batch_steps_every_simulation_at_once_and_each_env_equals_one_env(monk
     own_steps = []
     stepper = simulation.Simulation.stepper
 
-    def counted(self: simulation.Simulation, controls: list[str]) -> object:
-        advance = stepper(self, controls)
+    def counted(self: simulation.Simulation, controls: list[str], moved: list[str]) -> object:
+        advance = stepper(self, controls, moved)
         return lambda values: (own_steps.append(1), advance(values))
 
     monkeypatch.setattr(simulation.Simulation, "stepper", counted)  # the batch's lanes count their own MuJoCo steps

@@ -15,10 +15,12 @@ import ast
 from dataclasses import dataclass, field
 from typing import Any
 
+from visualenv.errors import did_you_mean
 from visualenv.expr import BOOL, NUM, Type
 from visualenv.expr.codegen import local, name, tuple_of
-from visualenv.physics.model import PhysicsError, PhysicsModel, load_model, resolve_model_path
+from visualenv.physics.model import SETTABLE, PhysicsError, PhysicsModel, load_model, resolve_model_path
 from visualenv.physics.scene import PhysicsScene, physics_scene
+from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import Physics
 
 #: the generated functions' globals that call into one env's simulation (bound by Program.functions)
@@ -36,6 +38,7 @@ class PhysicsPlan:
     keyframe: int | None
     contacts: dict[str, tuple[int, int]]
     controls: list[str] = field(default_factory=list)  # inputs that drive actuators (ctrl_<actuator>), in input order
+    moved: list[str] = field(default_factory=list)  # mocap names dynamics.update sets, written before each MuJoCo step
     reset_targets: list[str] = field(default_factory=list)  # qpos/qvel names the reset writes, in order
     reads: dict[str, list[str]] = field(default_factory=dict)  # read name -> physics names it gathers
     observe_size: int = 0  # values in the state-only observation
@@ -56,14 +59,14 @@ class PhysicsPlan:
         """Put one env's reads, stepper and reset writer into a generated function's globals."""
         for key, names in self.reads.items():
             env[READ_PREFIX + key] = sim.reader(names, key)
-        env[ADVANCE] = sim.stepper(self.controls)
+        env[ADVANCE] = sim.stepper(self.controls, self.moved)
         env[WRITE_RESET] = sim.writer(self.reset_targets)
 
     def batch(self, sims: list[Any], workers: int | None = None) -> Any:
         """The envs' simulations stepped and read together (:class:`~visualenv.physics.batch.BatchSimulation`)."""
         from visualenv.physics.batch import BatchSimulation
 
-        return BatchSimulation(sims, self.reads, self.controls, workers)
+        return BatchSimulation(sims, self.reads, self.controls, workers, self.moved)
 
     def bind_batch(self, env: dict[str, Any], batch: Any) -> None:
         """Put a batch's column reads and its MuJoCo step into a vectorised function's globals."""
@@ -98,7 +101,68 @@ def call_statement(function: str, values: list[str]) -> ast.stmt:
     return ast.Expr(ast.Call(name(function), [tuple_of([name(local(v)) for v in values])], []))
 
 
+def advance_statement(plan: PhysicsPlan) -> ast.stmt:
+    """``_phys_advance((_v_ctrl_a, ..., _new_mocap_b_x, ...))``: the controls, then the mocap poses dynamics.update set."""
+    values: list[ast.expr] = [name(local(c)) for c in plan.controls]
+    values += [name("_new_" + m) for m in plan.moved]
+    return ast.Expr(ast.Call(name(ADVANCE), [tuple_of(values)], []))
+
+
+def settable(model: PhysicsModel) -> set[str]:
+    """The names a spec writes to the model: joint values (qpos_/qvel_, in physics.reset.values) and mocap poses (there and
+    in dynamics.update)."""
+    return {n for n, (array, _) in model.names.values.items() if array in SETTABLE}
+
+
+def model_object_problem(plan: PhysicsPlan, obj_name: str, prop: str, declared: set[str]) -> str | None:
+    """Why an actor cannot bind `prop` on `obj_name`, an object of the model; None if it can (or it is no model object).
+
+    A pose (location, rotation, scale, look_at) cannot be bound on an object that stands for a body of the model (its geom,
+    an object named as the body, the body's ``body:<name>`` frame) nor on the model's cameras and lights: MuJoCo poses
+    them, so a binding would move the picture and not the physics. A ``body:`` frame takes no binding at all (its geoms do).
+    """
+    idents = plan.model.names.ident
+    bodies = {b: i for i, b in enumerate(idents["body"]) if i}  # the world body never moves: no object stands for it
+    frame = obj_name.startswith("body:") and obj_name not in declared
+    if frame and obj_name[5:] not in bodies:
+        return f"no body '{obj_name[5:]}' in the MuJoCo model for '{obj_name}'" + did_you_mean(obj_name[5:], bodies).replace("names:", "bodies:")
+    if not BINDABLES[prop].moves:
+        if not frame:
+            return None
+        drawn = [g.name for g in plan.scene.geoms if g.body == bodies[obj_name[5:]]] if plan.scene is not None else []
+        return (f"'{obj_name}' is the frame of the MuJoCo body '{obj_name[5:]}': bind its geoms by their names instead"
+                + (f" ({', '.join(drawn)})" if drawn else ""))
+    geoms = [g.name for g in plan.scene.geoms] if plan.scene is not None else idents["geom"]
+    body = bodies.get(obj_name[5:] if frame else obj_name) if frame or obj_name in bodies else None
+    if body is None and obj_name in geoms and obj_name not in declared:
+        body = int(plan.model.model.geom_bodyid[idents["geom"].index(obj_name)])
+    if body is None:
+        if obj_name in declared or obj_name not in [*idents["camera"], *idents["light"]]:
+            return None
+        return (f"'{obj_name}' is a {'camera' if obj_name in idents['camera'] else 'light'} of the MuJoCo model, which MuJoCo poses "
+                f"every step: binding its {prop} would fight MuJoCo's pose. Move the body it hangs on, or use an object of the spec's own")
+    what = f"the MuJoCo body '{idents['body'][body]}'" if body else "the MuJoCo model's world body (static geoms)"
+    return (f"'{obj_name}' stands for {what}: binding its {prop} would move the picture and not the physics. "
+            f"{how_to_move(plan.model, body)}")
+
+
+def how_to_move(physics: PhysicsModel, body: int) -> str:
+    """How a spec moves `body`: its mocap pose, its joints' values, or what to change in the MJCF."""
+    model, ident = physics.model, physics.names.ident["body"][body]
+    if body and int(model.body_mocapid[body]) >= 0:
+        return (f"It is a mocap body: set mocap_{ident}_x, _y, _z (and _qw, _qx, _qy, _qz) in physics.reset.values or "
+                "dynamics.update")
+    joints = [physics.names.ident["joint"][j] for j in range(model.njnt) if int(model.jnt_bodyid[j]) == body]
+    if joints:
+        names = [n for n in physics.qpos_names() if any(n == f"qpos_{j}" or n.startswith(f"qpos_{j}_") for j in joints)]
+        return f"Its joints move it: set {', '.join(names)} in physics.reset.values, or drive them through actuators"
+    where = f"make '{ident}' a mocap body" if body else "put the geoms in a body of their own that is a mocap body"
+    return (f"To move a body that has no joint, {where} (<body name=\"{ident if body else 'target'}\" mocap=\"true\">, a child of "
+            "worldbody) and set its mocap_<body>_x, _y, _z in physics.reset.values or dynamics.update; or give it a joint")
+
+
 #: the read of the model before its step: the only one a batch's replay of one env's step takes from the batch
 BEFORE = "before"
 
-__all__ = ["ADVANCE", "BEFORE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "load", "physics_scene", "read_statement", "call_statement", "scope"]
+__all__ = ["ADVANCE", "BEFORE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "advance_statement", "call_statement", "how_to_move", "load",
+           "model_object_problem", "physics_scene", "read_statement", "scope", "settable"]

@@ -27,6 +27,7 @@ from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, functi
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.compiler.vectorized import vectorizable, vectorize
 from visualenv.compiler import physics as phys
+from visualenv.compiler.python_hook import checked_dynamics
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
@@ -36,35 +37,6 @@ from visualenv.spec.models import CameraObject, EmptyObject, LightObject, MeshOb
 #: names every expression may read besides the spec's own (not all in every context)
 BUILTIN_NAMES = ("steps", "max_steps", "dt", "action")
 _RESERVED = set(FUNCTIONS) | set(CONSTANTS) | set(BUILTIN_NAMES) | set(keyword.kwlist) | {"True", "False", "None"}
-
-def checked_dynamics(func: Callable[..., Any], state_names: list[str]) -> Callable[..., Mapping[str, float]]:
-    """The Python hook, its answer checked: a dict of numbers for state variables (missing ones keep their value).
-
-    Anything else, or an exception in the hook, is a ValueError, which the env
-    reports as a fault located at ``dynamics.python`` with the step's values.
-    """
-    known = set(state_names)
-
-    def call(state: dict, inputs: dict, params: dict, rng: Any) -> dict[str, float]:
-        try:
-            out = func(state, inputs, params, rng)
-        except Exception as exc:  # noqa: BLE001 - the user's code: any failure becomes a located fault
-            raise ValueError(f"the function raised {type(exc).__name__}: {exc}") from exc
-        if not isinstance(out, Mapping):
-            raise ValueError(f"the function returned {type(out).__name__}, expected a dict of new state values (state: {', '.join(state_names)})")
-        unknown = [str(k) for k in out if k not in known]
-        if unknown:
-            raise ValueError(f"the function returned {', '.join(map(repr, unknown))}, which is not state" + did_you_mean(unknown[0], state_names).replace("names:", "state:"))
-        new = {}
-        for key, value in out.items():
-            try:
-                new[key] = float(value)
-            except (TypeError, ValueError):
-                raise ValueError(f"the function returned {key}={value!r}, expected a number") from None
-        return new
-
-    return call
-
 
 #: the expression type of each kind of binding value (BINDABLES' ``value``); a colour's size (3 or 4) is checked apart
 VALUE_TYPES: dict[str, Type] = {"vector": vec(3), "scale": vec(3), "color": vec(0), "number": NUM, "condition": BOOL}
@@ -269,7 +241,7 @@ class _Compiler:
         self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts, convention=section.convention)
         if self.spec.observation is not None or self.spec.render.view.camera:  # drawn: every geom must be drawable
             try:
-                self.plan.scene = phys.physics_scene(model)
+                self.plan.scene = phys.physics_scene(model, section.draw_sites)
             except phys.PhysicsError as exc:
                 self.error(("physics", "model"), str(exc))
         self.pnames = phys.scope(model, section.contacts)
@@ -298,19 +270,20 @@ class _Compiler:
         scope: dict[str, Type] = dict(self.pnames)
         start, before = len(fb.body), set(self.used)
         self.used = set()
-        writable = {n for n in self.pnames if n.startswith(("qpos_", "qvel_")) and self.plan.model.names.values[n][0] in ("qpos", "qvel")}
+        writable = phys.settable(self.plan.model)  # joint values and mocap poses
         targets: list[str] = []
         for key, value in self.spec.physics.reset.values.items():
             path = ("physics", "reset", "values", key)
             parts = [p.strip() for p in key.split(",")]
             bad = [p for p in parts if not p.isidentifier()]
             if bad:
-                self.error(path, f"'{bad[0]}' is not a name: a key is a qpos_/qvel_ name, several separated by commas, or a new name", key=True)
+                self.error(path, f"'{bad[0]}' is not a name: a key is a qpos_/qvel_/mocap_ name, several separated by commas, or a new name", key=True)
                 continue
-            if len(parts) > 1 or parts[0].startswith(("qpos_", "qvel_")):
+            if len(parts) > 1 or parts[0].startswith(("qpos_", "qvel_", "mocap_")):
                 unknown = [p for p in parts if p not in writable]
                 if unknown:
-                    self.error(path, f"no joint value '{unknown[0]}' to set" + did_you_mean(unknown[0], sorted(writable)), key=True)
+                    what = "joint value or mocap pose" if self.plan.model.mocap_names() else "joint value"
+                    self.error(path, f"no {what} '{unknown[0]}' to set" + did_you_mean(unknown[0], sorted(writable)), key=True)
                     continue
             checked = self.expr(path, value, scope, expect=NUM if len(parts) == 1 else vec(len(parts)))
             if checked is None:
@@ -392,9 +365,10 @@ class _Compiler:
                     self.error(path, f"no actuator '{n[5:]}' in the model for '{n}'" + did_you_mean(n, controls).replace("names:", "controls:"), key=True)
         if "max_steps" in spec.outcomes:
             self.error(("outcomes", "max_steps"), "'max_steps' is what info['outcome'] says when an episode reaches max_steps: choose another name", key=True)
+        moved = self.plan.model.mocap_names() if self.plan is not None else []  # a mocap pose is set there too
         for n in spec.dynamics.update:
-            if n not in spec.state:
-                self.error(("dynamics", "update", n), f"'{n}' is not a state variable" + did_you_mean(n, spec.state).replace("names:", "state:"), key=True)
+            if n not in spec.state and n not in moved:
+                self.error(("dynamics", "update", n), f"'{n}' is not a state variable" + (" or a mocap pose" if moved else "") + did_you_mean(n, [*spec.state, *moved]).replace("names:", "state and mocap poses:" if moved else "state:"), key=True)
 
     def resolve_params(self) -> dict[str, float | bool]:
         params: dict[str, float | bool] = {}
@@ -512,7 +486,7 @@ class _Compiler:
             self.step_update(fb, scope, commit=self.plan is None)
         if self.plan is not None:  # the model's values before the step, for let and update; then the step; then the values after it
             self.physics_reads(fb, "before", start, self.used, set(state_names) | set(input_names))
-            fb.add(phys.call_statement(phys.ADVANCE, self.plan.controls), Site("physics", f"{self.spec.physics.model if self.spec.physics else ''}: the MuJoCo step"))
+            fb.add(phys.advance_statement(self.plan), Site("physics", f"{self.spec.physics.model if self.spec.physics else ''}: the MuJoCo step"))
             self.commit_update(fb)
             after_at = len(fb.body)
         self.used |= before
@@ -571,14 +545,16 @@ class _Compiler:
         spec = self.spec
         new_names = []
         for n, value in spec.dynamics.update.items():
-            if n not in spec.state:
+            if n not in spec.state and n not in self.pnames:  # a mocap pose (check_names refused the rest) is set in the MuJoCo step
                 continue
             path = ("dynamics", "update", n)
             checked = self.expr(path, value, scope, expect=NUM)
             if checked:
                 fb.assign("_new_" + n, lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
                 new_names.append(n)
-        self.updated = new_names
+        self.updated = [n for n in new_names if n in spec.state]
+        if self.plan is not None:
+            self.plan.moved = [n for n in new_names if n not in spec.state]
         if commit:
             self.commit_update(fb)
 
@@ -658,8 +634,8 @@ class _Compiler:
         if obj_name == WORLD_ACTOR and obj_name not in declared:
             return True  # the world: the spec's, the file's, or the default one
         model_objects = self.physics_objects()
-        if obj_name in model_objects and obj_name not in declared:
-            return True  # a geom, light or camera of the MuJoCo model (e.g. a colour drawn at reset: domain randomisation)
+        if (obj_name in model_objects or obj_name.startswith("body:")) and obj_name not in declared:
+            return True  # a geom, light or camera of the MuJoCo model (e.g. a colour drawn at reset: domain randomisation), a body
         if self.spec.scene.file is None and obj_name not in declared:
             known = [*declared, *model_objects]
             self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, known).replace("names:", "objects:"), key=True)
@@ -671,6 +647,9 @@ class _Compiler:
         """One binding: its object's type checked, its values assigned one line each (so a fault names it), its target recorded."""
         _, obj_name, prop = path
         obj = self.spec.scene.objects.get(obj_name)
+        if self.plan is not None and (why := phys.model_object_problem(self.plan, obj_name, prop, set(self.spec.scene.objects))):
+            self.error(path, why, key=True)  # MuJoCo poses the model's objects: a pose binding would leave the physics behind
+            return
         if obj is None and obj_name in self.physics_objects():
             problem = type_problem(prop, obj_name, self.physics_objects()[obj_name])
             if problem:

@@ -46,7 +46,7 @@ class BatchSimulation:
     """The simulations of a batch's envs (one per env, in env order), stepped and read together."""
 
     def __init__(self, sims: Sequence[Simulation], reads: Mapping[str, Sequence[str]], controls: Sequence[str],
-                 workers: int | None = None) -> None:
+                 workers: int | None = None, moved: Sequence[str] = ()) -> None:
         self.sims = list(sims)
         first = self.sims[0]
         self.num_envs = n = len(self.sims)
@@ -60,6 +60,9 @@ class BatchSimulation:
         self._copies = [self._copies_of(i) for i in range(n)]
         self._ctrl_at = np.array([table[c][1] for c in controls], dtype=int)
         self._ctrl = np.zeros((n, first.model.nu))
+        #: the mocap poses dynamics.update sets (after the controls in advance()'s columns), written into each env before its step
+        self._moved = np.zeros((n, len(moved)))
+        self._movers = [sim.scatter(moved) for sim in self.sims] if moved else None
         warning = first.mujoco.mjtWarning
         self._fatal = [int(getattr(warning, w)) for w in _FATAL_WARNINGS]
         #: the envs the next :meth:`advance` steps (a batch leaves out those it resets instead)
@@ -136,10 +139,17 @@ class BatchSimulation:
         n = self.num_envs
         ctrl = self._ctrl
         ctrl[:] = 0.0
-        if self._ctrl_at.size:
-            ctrl[:, self._ctrl_at] = np.column_stack([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in controls])
+        columns = [np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in controls]
+        count = self._ctrl_at.size
+        if count:
+            ctrl[:, self._ctrl_at] = np.column_stack(columns[:count])
         self.blown[:] = False
         active = self.active.tolist()
+        if self._movers is not None:  # an env whose mocap pose is not finite is not stepped: alone, it raises before its step
+            self._moved[:] = np.column_stack(columns[count:])
+            finite = np.isfinite(self._moved).all(axis=1)
+            self.blown[[i for i in active if not finite[i]]] = True
+            active = [i for i in active if finite[i]]
         if self._pool is None or len(active) < 2 * self.workers:
             warned = self._run(active)
         else:
@@ -158,13 +168,15 @@ class BatchSimulation:
         """Step `envs` one after another (a thread's share): controls, the steps, the copies; the envs MuJoCo warned about."""
         step, frame_skip = self._physics_step, self.frame_skip
         w0, w1, w2, w3 = self._fatal
-        lanes, refresh, extra = self._lanes, self.refresh, self._extra
+        lanes, refresh, extra, movers = self._lanes, self.refresh, self._extra, self._movers
         warned: list[int] = []
         for i in envs:
             model, data, counters, ctrl, ctrl_row, copies = lanes[i]
             c = counters.tolist()
             before = c[w0] + c[w1] + c[w2] + c[w3]
             ctrl[:] = ctrl_row
+            if movers is not None:
+                movers[i](self._moved[i])
             step(model, data, frame_skip)
             c = counters.tolist()
             if c[w0] + c[w1] + c[w2] + c[w3] != before:

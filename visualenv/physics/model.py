@@ -10,6 +10,8 @@ are called ``<kind><index>``, e.g. ``actuator0``):
 * ``body_<b>_x/_y/_z`` (world position) and ``body_<b>_qw/_qx/_qy/_qz`` (world orientation);
   ``body_<b>_xx ... _zz``: its rotation matrix (MuJoCo's ``xmat``, row then column: ``_xz`` is
   the world x of the body's z axis), as dm_control's ``named.data.xmat[b, 'xz']`` reads it;
+* ``mocap_<b>_x/_y/_z`` and ``mocap_<b>_qw/_qx/_qy/_qz`` for a mocap body (``<body mocap="true">``): MuJoCo's
+  ``mocap_pos`` and ``mocap_quat``, which the spec sets (:data:`SETTABLE`) to move a body that has no joint;
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
 * ``ctrl_<actuator>``; ``sim_time``.
 
@@ -35,7 +37,11 @@ from visualenv.files import PACKAGE_PREFIX, package_file
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
 #: arrays a name can point into (attributes of MjData; ``time`` is a scalar)
-ARRAYS = ("qpos", "qvel", "xpos", "xquat", "xmat", "site_xpos", "sensordata", "ctrl", "time")
+ARRAYS = ("qpos", "qvel", "xpos", "xquat", "xmat", "site_xpos", "sensordata", "ctrl", "time", "mocap_pos", "mocap_quat")
+#: the arrays a spec writes: joint values at reset, mocap poses at reset and in ``dynamics.update``
+SETTABLE = ("qpos", "qvel", "mocap_pos", "mocap_quat")
+#: the arrays of a mocap body's pose, which ``dynamics.update`` also writes (before each MuJoCo step)
+MOCAP = ("mocap_pos", "mocap_quat")
 _FREE_QPOS = ("x", "y", "z", "qw", "qx", "qy", "qz")
 _FREE_QVEL = ("x", "y", "z", "wx", "wy", "wz")
 _BALL_QPOS = ("qw", "qx", "qy", "qz")
@@ -135,11 +141,16 @@ class PhysicsModel:
         """Every qvel name in qvel order."""
         return sorted((n for n, (a, _) in self.names.values.items() if a == "qvel"), key=lambda n: self.names.values[n][1])
 
+    def mocap_names(self) -> list[str]:
+        """Every mocap body's pose names (``mocap_<b>_x ... _qz``), in body order: what ``dynamics.update`` may set."""
+        return [n for n, (a, _) in self.names.values.items() if a in MOCAP]
+
     def listing(self) -> dict[str, list[str]]:
         """The names by kind, for ``visualenv inspect`` and the starter spec."""
         groups: dict[str, list[str]] = {"joint positions": self.qpos_names(), "joint velocities": self.qvel_names()}
         for title, array in (("bodies", "xpos"), ("body orientations", "xquat"), ("body rotation matrices", "xmat"), ("sites", "site_xpos"), ("sensors", "sensordata"), ("actuator controls", "ctrl")):
             groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
+        groups["mocap bodies (set in physics.reset.values and dynamics.update)"] = self.mocap_names()
         groups["geoms (for contacts)"] = list(self.names.ident["geom"])
         groups["keyframes"] = list(self.names.ident["key"])
         groups["time"] = ["sim_time"]
@@ -210,6 +221,8 @@ def name_tables(model: Any) -> NameTables:
     names = _Names()
     _joint_values(model, names, ident["joint"], owners["joint"])
     _body_values(names, ident["body"], owners["body"])
+    for b, name in enumerate(ident["body"]):
+        _mocap_values(names, name, int(model.body_mocapid[b]), owners["body"][b])
     for s, name in enumerate(ident["site"]):
         for i, p in enumerate("xyz"):
             names.add(f"site_{name}_{p}", ("site_xpos", 3 * s + i), owners["site"][s])
@@ -231,6 +244,16 @@ def name_tables(model: Any) -> NameTables:
         raise PhysicsError(f"two elements of the model have one name in visualenv: {pairs}. Rename one of each in the MJCF "
                            "(a name keeps its letters, digits and '_'; any other character becomes '_')")
     return NameTables(names.values, by_name["joint"], by_name["body"], by_name["geom"], by_name["site"], by_name["actuator"], by_name["key"], ident)
+
+
+def _mocap_values(names: _Names, body: str, mocap: int, owner: str) -> None:
+    """A mocap body's ``mocap_<b>_x/_y/_z`` and ``mocap_<b>_qw/_qx/_qy/_qz`` (the pose the spec sets); none for other bodies."""
+    if mocap < 0:
+        return
+    for i, p in enumerate("xyz"):
+        names.add(f"mocap_{body}_{p}", ("mocap_pos", 3 * mocap + i), owner)
+    for i, p in enumerate(("qw", "qx", "qy", "qz")):
+        names.add(f"mocap_{body}_{p}", ("mocap_quat", 4 * mocap + i), owner)
 
 
 def _joint_values(model: Any, names: _Names, idents: list[str], owners: list[str]) -> None:

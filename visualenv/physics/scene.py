@@ -3,9 +3,10 @@
 Made once from the compiled MjModel (and its pose after ``mj_forward`` at qpos0),
 so a renderer builds its objects without knowing MuJoCo: each body is a frame
 whose world pose arrives as arrays every step (``xpos``, ``xquat``); each geom a
-shape fixed in its body's frame. Geoms in groups MuJoCo's viewer hides by
-default (3 and up) are left out; a height field (or any type a renderer cannot
-draw) is a :class:`~visualenv.physics.model.PhysicsError` naming the geom. A
+shape fixed in its body's frame, and so is each site (named ``site:<name>``).
+Geoms and sites in groups MuJoCo's viewer hides by default (3 and up) are left
+out; a height field (or any type a renderer cannot draw) is a
+:class:`~visualenv.physics.model.PhysicsError` naming the geom. A
 geom's 2-D or cube texture comes as pixels with the numbers MuJoCo's renderer
 maps it by (:mod:`visualenv.physics.texcoords`); the model's skybox comes as the
 equirectangular image a renderer shows behind the model.
@@ -82,10 +83,13 @@ class PhysicsScene:
     #: the model's skybox as an equirectangular image (h, w, 4), bottom row first, z up (texcoords.cube_to_equirect):
     #: what MuJoCo draws behind the model and lights nothing with; None without a skybox texture
     sky: np.ndarray | None = None
+    #: the visible sites, drawn as MuJoCo's viewer draws them (:func:`visible_sites`), each named ``site:<name>``
+    sites: tuple[GeomShape, ...] = ()
 
 
-def physics_scene(physics: PhysicsModel) -> PhysicsScene:
-    """The scene of `physics`: refuses a visible height field (not drawn yet), names every geom and camera."""
+def physics_scene(physics: PhysicsModel, draw_sites: bool = True) -> PhysicsScene:
+    """The scene of `physics`: refuses a visible height field (not drawn yet), names every geom and camera; its visible
+    sites unless `draw_sites` is false."""
     mujoco = mujoco_module()
     model = physics.model
     data = mujoco.MjData(model)
@@ -112,7 +116,26 @@ def physics_scene(physics: PhysicsModel) -> PhysicsScene:
                     for i in range(model.ncam))
     skyboxes = [t for t in range(model.ntex) if int(model.tex_type[t]) == 2]  # mjTEXTURE_SKYBOX
     sky = cube_to_equirect(_pixels(model, skyboxes[0])) if skyboxes else None
-    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky)
+    sites = visible_sites(physics) if draw_sites else ()
+    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky, sites)
+
+
+def visible_sites(physics: PhysicsModel) -> tuple[GeomShape, ...]:
+    """The sites MuJoCo's viewer draws by default: groups 0 to 2 (``mjvOption.sitegroup``), not fully transparent; each a
+    shape fixed in its body's frame, of its type, size and rgba (a material's colour where the rgba is MuJoCo's default)."""
+    model = physics.model
+    out = []
+    for i, ident in enumerate(physics.names.ident["site"]):
+        kind = GEOM_KINDS.get(int(model.site_type[i]))
+        rgba = tuple(float(v) for v in model.site_rgba[i])
+        if int(model.site_group[i]) >= VISIBLE_GROUPS or rgba[3] == 0.0 or kind not in ("sphere", "capsule", "ellipsoid", "cylinder", "box"):
+            continue
+        mat = int(model.site_matid[i])
+        if mat >= 0 and np.allclose(rgba, _DEFAULT_RGBA):
+            rgba = tuple(float(v) for v in model.mat_rgba[mat])
+        out.append(GeomShape(f"site:{ident}", kind, int(model.site_bodyid[i]), tuple(float(v) for v in model.site_size[i]),  # type: ignore[arg-type]
+                             tuple(map(float, model.site_pos[i])), tuple(map(float, model.site_quat[i])), rgba))  # type: ignore[arg-type]
+    return tuple(out)
 
 
 def _quat(mujoco: Any, mat: np.ndarray) -> tuple[float, ...]:

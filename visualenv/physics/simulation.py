@@ -19,7 +19,7 @@ from typing import Any, Callable, Iterator, Mapping, Sequence
 import numpy as np
 
 from visualenv.physics.conventions import forward_function, reset_data, step_function
-from visualenv.physics.model import PhysicsModel, mujoco_module
+from visualenv.physics.model import SETTABLE, PhysicsModel, mujoco_module
 
 
 class PhysicsFault(ValueError):
@@ -68,12 +68,9 @@ class Simulation:
         reset_data(self.convention, self.mujoco, self.model, self.data, keyframe)
 
     def writer(self, names: Sequence[str]) -> Callable[[Sequence[float]], None]:
-        """set_state(values): write qpos/qvel `names` (in order), then ``mj_forward`` (as Gymnasium's set_state; dm_control's after_reset)."""
-        table = self.physics.names.values
-        qpos_at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == "qpos"]
-        qvel_at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == "qvel"]
-        qpos_src, qpos_dst = (np.array([p for p, _ in qpos_at], int), np.array([q for _, q in qpos_at], int))
-        qvel_src, qvel_dst = (np.array([p for p, _ in qvel_at], int), np.array([q for _, q in qvel_at], int))
+        """set_state(values): write qpos/qvel and mocap `names` (in order), then ``mj_forward`` (as Gymnasium's set_state;
+        dm_control's after_reset)."""
+        write = self.scatter(names)
         data, model, forward = self.data, self.model, forward_function(self.convention, self.mujoco)
 
         def set_state(values: Sequence[float]) -> None:
@@ -81,22 +78,48 @@ class Simulation:
             if not np.isfinite(given).all():
                 bad = [f"{n}={v!r}" for n, v in zip(names, given) if not math.isfinite(v)]
                 raise PhysicsFault(f"a reset value is not finite: {', '.join(bad)}")
-            data.qpos[qpos_dst] = given[qpos_src]
-            data.qvel[qvel_dst] = given[qvel_src]
+            write(given)
             forward(model, data)
 
         return set_state
 
-    def stepper(self, controls: Sequence[str]) -> Callable[[Sequence[float]], None]:
-        """advance(values): actuator controls for `controls` (``ctrl_<actuator>`` names; others 0), then frame_skip steps."""
+    def scatter(self, names: Sequence[str]) -> Callable[[np.ndarray], None]:
+        """write(values): `names`' values (settable: joint values, mocap poses) into the MjData arrays, one indexing per array."""
+        table = self.physics.names.values
+        plan = []
+        for array in SETTABLE:
+            at = [(i, table[n][1]) for i, n in enumerate(names) if table[n][0] == array]
+            if at:
+                view = getattr(self.data, array).reshape(-1)  # a view: MjData's arrays are contiguous
+                plan.append((view, np.array([q for _, q in at], int), np.array([p for p, _ in at], int)))
+
+        def write(values: np.ndarray) -> None:
+            for view, dst, src in plan:
+                view[dst] = values[src]
+
+        return write
+
+    def stepper(self, controls: Sequence[str], moved: Sequence[str] = ()) -> Callable[[Sequence[float]], None]:
+        """advance(values): actuator controls for `controls` (``ctrl_<actuator>`` names; others 0) and, after them in
+        `values`, the mocap poses `moved` (``mocap_<body>_...``, set before the step as ctrl is), then frame_skip steps."""
         table = self.physics.names.values
         where = np.array([table[n][1] for n in controls], int)
         ctrl = np.zeros(self.model.nu)
+        count = len(controls)
+        move = self.scatter(moved) if moved else None
         data, model, step, n = self.data, self.model, self.physics_step, self.frame_skip
         warnings, fatal = self._warnings, self._fatal.tolist()
         qpos, qvel = data.qpos, data.qvel
 
         def advance(values: Sequence[float]) -> None:
+            if move is not None:
+                given = np.asarray(values, dtype=np.float64)
+                if not np.isfinite(given[count:]).all():
+                    bad = [f"{m}={v!r}" for m, v in zip(moved, given[count:]) if not math.isfinite(v)]
+                    raise PhysicsFault(f"a mocap pose set in dynamics.update is not finite: {', '.join(bad)}")
+                if self._replay is None:
+                    move(given[count:])
+                values = given[:count].tolist()
             if self._replay is not None:  # a batch stepped this env already: only its fault is left to raise
                 if self._replay_blown:
                     raise PhysicsFault(self.blown_up())

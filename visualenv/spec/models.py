@@ -264,7 +264,7 @@ class Actions(StrictModel):
 
 class Dynamics(StrictModel):
     let: dict[Name, Expr] = Field(default_factory=dict, description="derived quantities, computed in order from the old state")
-    update: dict[Name, Expr] = Field(default_factory=dict, description="new state values; all right-hand sides read the old state")
+    update: dict[Name, Expr] = Field(default_factory=dict, description="new state values (and, with physics, mocap poses mocap_<body>_...); all right-hand sides read the old state")
     python: str | None = Field(
         None,
         pattern=r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$",
@@ -289,7 +289,7 @@ class PhysicsReset(StrictModel):
 
     keyframe: str | None = Field(None, description="start from this named keyframe of the model instead of its qpos0")
     values: dict[str, Expr] = Field(default_factory=dict, description=(
-        "evaluated in order after the reset: a key 'qpos_<joint>' or 'qvel_<joint>' sets that value, 'qpos_a, qpos_b' sets "
+        "evaluated in order after the reset: a key 'qpos_<joint>', 'qvel_<joint>' or 'mocap_<body>_x' (_y, _z, _qw...) sets that value, 'qpos_a, qpos_b' sets "
         "several from a vector, any other name is a temporary later entries can read; an entry reads the model's reset values "
         "by the same names (e.g. qpos_hinge: qpos_hinge + uniform(-0.01, 0.01)); draws happen in this order"))
 
@@ -309,6 +309,7 @@ class Physics(StrictModel):
         default_factory=dict, description="name: [geom, geom]: a condition, true while the two geoms touch")
     observe: Annotated[list[Expr], Field(min_length=1)] | None = Field(
         None, description="the state-only observation (float64), one number per entry; default: every qpos, then every qvel, then the observed state")
+    draw_sites: bool = Field(True, description="draw the model's sites as MuJoCo's viewer does (groups 0 to 2, their rgba and size); false: not drawn")
 
 
 # -- actors, observation, rendering --------------------------------------------------------------

@@ -7,7 +7,8 @@ Cameras take ``cam_xpos`` and ``cam_xmat`` as MuJoCo computes them, so fixed,
 ``track`` and ``trackcom`` cameras move as in MuJoCo. A textured geom's mesh
 gets a UV map with MuJoCo's texture coordinates (:mod:`visualenv.physics.texcoords`)
 and its material reads the texture's pixels, times the geom's colour. Geoms keep their MuJoCo
-names (objects a spec can refer to); bodies are ``body:<name>``.
+names (objects a spec can refer to); bodies are ``body:<name>``; the visible sites are drawn as
+geoms of their shape, ``site:<name>``.
 """
 
 from __future__ import annotations
@@ -106,7 +107,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     for body in own:
         empty_of(body)
     images: dict[int, Any] = {}  # by MuJoCo texture: geoms sharing a texture share its image
-    for geom in scene_data.geoms:
+    for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
         if geom.body in own:
             continue
         obj = _geom_object(geom, base_dir=base_dir, source=source, images=images)
