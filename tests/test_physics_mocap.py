@@ -72,6 +72,7 @@ def test_inspect_lists_the_mocap_names(tmp_path: Path) -> None:
     assert result.exit_code == 0, result.output
     line = next(t for t in result.output.splitlines() if t.startswith("mocap bodies"))
     assert line.endswith(": mocap_goal_x, mocap_goal_y, mocap_goal_z, mocap_goal_qw, mocap_goal_qx, mocap_goal_qy, mocap_goal_qz"), line
+    assert "drawn sites" not in result.output  # the model has none
 
 
 def test_a_mocap_goal_set_at_reset_and_moved_by_the_update_moves_in_the_physics(tmp_path: Path) -> None:
@@ -187,4 +188,20 @@ def test_the_goal_is_drawn_where_its_mocap_pose_puts_it_alone_and_in_a_batch(tmp
         assert not np.array_equal(red(moved_tiles[0]), red(moved_tiles[1]))  # env 1 drew its goal elsewhere
     finally:
         batch.close()
+        env.close()
+
+
+def test_the_pusher_example_places_its_goal_each_episode_and_drifts_it() -> None:
+    """examples/mujoco_pusher (linked from docs/physics.md): a new goal per episode, moved by dynamics.update."""
+    example = Path(__file__).resolve().parents[1] / "examples" / "mujoco_pusher" / "pusher.yaml"
+    env = VisualEnv(example, render=False, params={"drift": 0.5})
+    try:
+        goals = []
+        for seed in (0, 1):
+            env.reset(seed=seed)
+            goals.append(env.data.mocap_pos[0].copy())
+        assert not np.array_equal(goals[0], goals[1]) and all(np.hypot(*g[:2]) <= 0.6 for g in goals)
+        env.step(np.zeros(2))
+        assert env.data.mocap_pos[0][1] == pytest.approx(goals[1][1] + 0.5 * 0.05)  # drift * dt
+    finally:
         env.close()

@@ -72,6 +72,18 @@ def test_the_scene_holds_the_visible_sites_with_their_shapes(tmp_path: Path) -> 
     assert off.physics.scene.sites == ()
 
 
+def test_inspect_lists_the_sites_it_draws(tmp_path: Path) -> None:
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+
+    write(tmp_path)
+    result = CliRunner().invoke(main, ["inspect", str(tmp_path / "sites.xml")])
+    assert result.exit_code == 0, result.output
+    line = next(t for t in result.output.splitlines() if t.startswith("drawn sites"))
+    assert "target (sphere)" in line and "post (cylinder)" in line and "hidden" not in line and "clear" not in line, line
+
+
 def red(image: np.ndarray) -> np.ndarray:
     r, g, b = (image[..., i].astype(int) for i in range(3))
     return (r > 80) & (r > g + 50) & (r > b + 50)

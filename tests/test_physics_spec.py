@@ -149,6 +149,26 @@ def test_contacts_and_discrete_controls(tmp_path: Path) -> None:
     assert terminated and reward == 1.0 and env.data.ctrl[0] == -1.0 and 20 < steps < 100
 
 
+def test_a_contact_read_in_let_is_the_one_before_the_step(tmp_path: Path) -> None:
+    """docs/physics.md: let reads the contact the previous step found, reward the one this step found: each landing pays once."""
+    path = write(tmp_path, spec_with("""\
+      contacts: {on_floor: [floor, ball_geom]}
+    dynamics:
+      let: {was: "1 if on_floor else 0"}
+    actions: {discrete: [{}]}
+    reward: "1 if on_floor and was == 0 else 0"
+    max_steps: 150
+    """))
+    env = VisualEnv(path, render=False)
+    env.reset(seed=0)
+    touching, rewards = [False], []
+    for _ in range(150):
+        rewards.append(env.step(0)[1])
+        touching.append(env.data.ncon > 0)  # the ball and the floor: the model's only contact pair
+    landings = [float(now and not before) for before, now in zip(touching, touching[1:])]
+    assert rewards == landings and 1 <= sum(rewards) < sum(touching)  # each landing pays once, not every step on the floor
+
+
 # -- errors ----------------------------------------------------------------------------------------------
 
 

@@ -18,6 +18,7 @@ from pathlib import Path
 import numpy as np
 
 from visualenv.physics.model import PhysicsModel, load_model, mujoco_module
+from visualenv.physics.scene import visible_sites
 
 #: what `init` and `inspect` take for an MJCF file (anything else is a .blend)
 MJCF_SUFFIXES = (".xml", ".mjcf")
@@ -47,6 +48,9 @@ def mjcf_report(path: Path) -> str:
     drawn = [f"{idents['geom'][g]} ({kinds.get(int(m.geom_type[g]), '?')})" for g in range(m.ngeom) if int(m.geom_group[g]) < 3]
     hidden = [idents["geom"][g] for g in range(m.ngeom) if int(m.geom_group[g]) >= 3]
     lines.append("drawn geoms: " + (", ".join(drawn) or "none") + (f"; hidden (group >= 3): {', '.join(hidden)}" if hidden else ""))
+    if m.nsite:
+        sites = [f"{s.name[5:]} ({s.kind})" for s in visible_sites(physics)]
+        lines.append("drawn sites (physics.draw_sites): " + (", ".join(sites) or "none") + " (groups 0 to 2, not transparent)")
     if "hfield" in " ".join(drawn) or "sdf" in " ".join(drawn):
         lines.append("  a height field or SDF cannot be drawn yet: a rendered spec over this model is refused (hide it in group 3)")
     lines.append("cameras (observation.camera): " + (", ".join(idents["camera"]) or "none: the spec adds its own"))
