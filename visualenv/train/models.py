@@ -64,9 +64,11 @@ def load_model(model_path: str | Path, algo: str = "ppo", *, trust_pickle: bool 
 
 def pickle_refusal(path: Path) -> str:
     """Why a file that is not a policy file is not loaded, and what to do about it."""
-    kind = ("an RLlib checkpoint folder" if path.is_dir() else "a torch pickle" if path.suffix in (".pt", ".pth")
-            else "an SB3 model" if path.suffix == ".zip" else f"not a policy file ({WEIGHTS} with its .json)")
-    return (f"{path} is {kind}: a pickle-based file, and loading it can run any code it holds. If you trust where it came from, "
+    kind = ("an RLlib checkpoint folder: a pickle-based file" if path.is_dir() else
+            f"a torch {path.suffix} file: a pickle-based file" if path.suffix in (".pt", ".pth") else
+            "an SB3 model: a pickle-based file" if path.suffix == ".zip" else
+            f"not a policy file ({WEIGHTS} with its .json), so it would load as a pickle-based file")
+    return (f"{path} is {kind}, and loading it can run any code it holds. If you trust where it came from, "
             f"pass --trust-pickle (Python: trust_pickle=True), or convert it once: `visualenv export-policy --trust-pickle {path} "
             f"OUT{WEIGHTS}`, then use OUT{WEIGHTS} (docs/security.md)")
 
