@@ -156,6 +156,12 @@ def test_weights_that_do_not_fit_and_missing_halves_are_clear_errors(tmp_path):
         load_model(tmp_path / "a.safetensors")
     with pytest.raises(PolicyFileError, match=r"b.json does not exist"):
         load_model(tmp_path / "b.safetensors")
+    (tmp_path / "a.safetensors").unlink()
+    with pytest.raises(PolicyFileError, match=r"a.safetensors does not exist"):
+        load_model(tmp_path / "a.json")
+    (tmp_path / "config.json").write_text('{"config": {}}')  # a run's config.json passed by mistake
+    with pytest.raises(PolicyFileError, match='config.json: not a policy file of visualenv'):
+        load_model(tmp_path / "config.json")
 
 
 def test_a_custom_class_cannot_be_exported_as_data(tmp_path):

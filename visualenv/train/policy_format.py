@@ -187,9 +187,9 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     if pair is None:
         raise PolicyFileError(f"{path}: not a policy file (expected a name ending in {WEIGHTS} or {META})")
     weights_path, meta_path = pair
-    for part in pair:
-        if not part.is_file():
-            raise PolicyFileError(f"{path}: a policy file is {weights_path.name} with {meta_path.name} beside it, and {part} does not exist")
+    missing = f"{path}: a policy file is {weights_path.name} with {meta_path.name} beside it, and " + "{} does not exist"
+    if not meta_path.is_file():
+        raise PolicyFileError(missing.format(meta_path))
     try:
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, ValueError) as exc:
@@ -198,6 +198,8 @@ def read_meta(path: str | Path) -> dict[str, Any]:
         raise PolicyFileError(f"{meta_path}: not a policy file of visualenv (no \"format\": \"{FORMAT}\")")
     if meta.get("format_version") != FORMAT_VERSION:
         raise PolicyFileError(f"{meta_path}: format_version {meta.get('format_version')!r}; this visualenv reads version {FORMAT_VERSION}")
+    if not weights_path.is_file():
+        raise PolicyFileError(missing.format(weights_path))
     return meta
 
 
