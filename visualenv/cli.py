@@ -27,8 +27,8 @@ ALGORITHMS = ("ppo", "a2c", "dqn", "sac")
 EXIT_INVALID = 2
 PRETRAINED = "pretrained"  # --model's name for the shipped agent
 RANDOM = "random"  # eval --model's name for uniform random actions (the baseline)
-MODEL_HELP = ("a policy file (policy.safetensors with its policy.json, as export-policy and train write), or 'pretrained': the shipped "
-              "agent (results/<Id>/policy.safetensors); a .zip, .pt or RLlib checkpoint folder only with --trust-pickle")
+MODEL_HELP = ("a policy file (policy.safetensors with its policy.json, as export-policy and train write) or 'pretrained' (the shipped "
+              "agent, results/<Id>/policy.safetensors){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle")
 trust_pickle_option = click.option(
     "--trust-pickle", is_flag=True,
     help="also load pickle-based models (SB3 .zip, torch .pt/.pth, RLlib checkpoint folders): unpickling runs whatever code the file "
@@ -403,7 +403,7 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
 
 @main.command()
 @click.argument("spec")
-@click.option("--model", "model_path", help=MODEL_HELP + "; default: random actions")
+@click.option("--model", "model_path", help=MODEL_HELP.format("") + "  [default: random actions]")
 @trust_pickle_option
 @click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
@@ -433,7 +433,7 @@ def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episo
 
 @main.command("eval")
 @click.argument("spec")
-@click.option("--model", "model_path", required=True, help=MODEL_HELP + ", or 'random': uniform random actions, the baseline")
+@click.option("--model", "model_path", required=True, help=MODEL_HELP.format(", or 'random' (uniform random actions, the baseline)"))
 @trust_pickle_option
 @click.option("--algo", type=click.Choice(ALGORITHMS), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 100]")
