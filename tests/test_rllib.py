@@ -252,7 +252,8 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     assert process.returncode == 0, output
     run = progress.parents[1]
     for name in ["config.json", "results.json", "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png",
-                 "plots/success.png", "plots/fps.png", "best_model", "final_model", "checkpoints/latest"]:
+                 "plots/success.png", "plots/fps.png", "best_model", "final_model", "checkpoints/latest",
+                 "best_model.safetensors", "best_model.json", "final_model.safetensors", "final_model.json"]:
         assert (run / name).exists(), name
     results = json.loads((run / "results.json").read_text())
     assert results["stopped_early"] is True and results["episodes"] == 2 and 64 <= results["steps"] < 100000
@@ -265,15 +266,24 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     assert evaluated
     assert f"eval at {evaluated[0]} steps: mean return " in output  # --no-progress: a line per evaluation
 
-    played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"])
+    assert results["model"] == "best_model.safetensors"  # the final evaluation read the policy file train wrote: no pickle
+    played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model.safetensors"), "--episodes", "1"])
     assert played.exit_code == 0 and "episode 0: return" in played.output, played.output
     replayed = CliRunner().invoke(main, ["eval", spec, "--model", str(run / results["model"])])  # the final evaluation again
     assert replayed.exit_code == 0 and "reproduces its run's results.json" in replayed.output, replayed.output
-    exported = CliRunner().invoke(main, ["export-policy", str(run / "best_model"), str(tmp_path / "policy")])  # how results/ ships one
-    assert exported.exit_code == 0 and "float16 weights" in exported.output, exported.output
+    refused = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"])  # the checkpoint: a pickle
+    assert refused.exit_code == 1 and "is an RLlib checkpoint folder: a pickle-based file" in refused.output, refused.output
+    exported = CliRunner().invoke(main, ["export-policy", "--trust-pickle", str(run / "best_model"), str(tmp_path / "policy.safetensors")])
+    assert exported.exit_code == 0 and "float16 weights" in exported.output, exported.output  # how results/ ships one
     from visualenv.train.models import load_model
 
-    full, small = load_model(str(run / "best_model")), load_model(str(tmp_path / "policy"))
+    full, small = load_model(run / "best_model", trust_pickle=True), load_model(tmp_path / "policy.safetensors")
+    ours = load_model(run / "best_model.safetensors")  # train's float32 policy file: the policy the checkpoint holds, exactly
+    import torch
+
+    scaled = {"obs": torch.as_tensor(np.random.default_rng(1).random((8, *full.observation_space.shape), dtype=np.float32))}
+    with torch.no_grad():
+        assert torch.equal(full.module.forward_inference(scaled)["action_dist_inputs"], ours.module.forward_inference(scaled)["action_dist_inputs"])
     frames = np.random.default_rng(0).integers(0, 256, (8, *full.observation_space.shape), dtype=np.uint8)
     assert (full.predict(frames)[0] == small.predict(frames)[0]).mean() >= 0.75  # float16 weights: near-ties may flip
 

@@ -1,4 +1,4 @@
-"""The shipped agents (results/<Id>/policy.pt) still play the episodes their results.json reports, which beat random.
+"""The shipped agents (results/<Id>/policy.safetensors with policy.json) still play the episodes their results.json reports, which beat random.
 
 The guard that a change to rendering, the specs or the wrappers did not silently change
 what the trained agents see: each agent replays the first episodes of its final evaluation
@@ -117,6 +117,7 @@ def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_
 def test_each_shipped_policy_is_small(env_id):
     """Shipped policies are float16 files of at most 6 MB: the repository stays clonable as agents are added."""
     assert pretrained_model(env_id).stat().st_size <= 6_000_000
+    assert pretrained_model(env_id).with_suffix(".json").stat().st_size <= 10_000
 
 
 def test_play_shows_the_shipped_agent_what_training_showed_it():
@@ -127,9 +128,10 @@ def test_play_shows_the_shipped_agent_what_training_showed_it():
 
 
 def test_the_rllib_agent_reproduces_the_first_episodes_of_its_results_json(tmp_path):
-    """results/Goalie-v0-rllib/best_model, trained with --backend rllib, ships only its policy: eval and play load it as they load a run's."""
+    """results/Goalie-v0-rllib/policy.safetensors, trained with --backend rllib, ships only its policy as data: eval and play
+    load it as they load a run's, without RLlib's checkpoint pickles."""
     pytest.importorskip("ray.rllib", reason="the [ray] extra is not installed")
-    model = REPO / "results" / "Goalie-v0-rllib" / "best_model"
+    model = REPO / "results" / "Goalie-v0-rllib" / "policy.safetensors"
     out = tmp_path / "eval.json"
     result = _eval_in_a_fresh_process("Goalie-v0", str(model), out)
     assert result.returncode == 0, result.stdout + result.stderr

@@ -30,11 +30,12 @@ def run_dir(tmp_path_factory):
 
 
 def test_train_writes_a_complete_run_folder(run_dir):
-    for name in ["config.json", "results.json", "best_model.zip", "final_model.zip", "checkpoints/latest.zip",
-                 "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png", "plots/success.png", "plots/fps.png"]:
+    for name in ["config.json", "results.json", "best_model.zip", "final_model.zip", "checkpoints/latest.zip", "best_model.safetensors",
+                 "best_model.json", "final_model.safetensors", "final_model.json", "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png", "plots/success.png", "plots/fps.png"]:
         assert (run_dir / name).is_file(), name
     results = json.loads((run_dir / "results.json").read_text())
     assert results["episodes"] == 2 and results["steps"] >= 256
+    assert results["model"] == "best_model.safetensors"  # the final evaluation read the policy file: no pickle
     assert -10 <= results["mean_reward"] <= 10 and 0 <= results["success_rate"] <= 1
     assert 15 <= results["mean_length"] <= 60  # Goalie episodes end when the ball crosses (~21 steps)
     config = json.loads((run_dir / "config.json").read_text())
@@ -58,7 +59,7 @@ def test_eval_replays_the_runs_final_evaluation(run_dir, tmp_path):
     recorded = json.loads((run_dir / "results.json").read_text())
     assert recorded["eval_seed"] == final_seed(0)  # the run's seed 0 in the final evaluation's band
     out = tmp_path / "eval.json"
-    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "-o", str(out)])
+    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run_dir / "best_model.safetensors"), "-o", str(out)])
     assert result.exit_code == 0, result.output
     assert f"2 deterministic episodes, the first reset with seed {final_seed(0)}" in result.output  # the run's count and seed by default
     assert "(bootstrap)" in result.output and "(Wilson)" in result.output and "reproduces its run's results.json" in result.output
@@ -75,7 +76,7 @@ def test_eval_that_differs_on_a_like_machine_says_why_it_can(run_dir, tmp_path):
     recorded = json.loads((copy / "results.json").read_text())
     recorded["mean_reward"] += 1.0
     (copy / "results.json").write_text(json.dumps(recorded))
-    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(copy / "best_model.zip")])
+    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(copy / "best_model.safetensors")])
     assert result.exit_code == 0, result.output
     assert "differs from its run's results.json: mean_reward" in result.output
     assert "Cycles' pixels vary across processes in their last bits" in result.output, result.output
@@ -84,8 +85,9 @@ def test_eval_that_differs_on_a_like_machine_says_why_it_can(run_dir, tmp_path):
 def test_eval_of_a_model_alone_and_its_refusals(run_dir, tmp_path):
     import shutil
 
-    alone = tmp_path / "goalie.zip"  # no config.json beside it: the frame stack comes from the model
-    shutil.copy(run_dir / "best_model.zip", alone)
+    alone = tmp_path / "goalie.safetensors"  # no config.json beside it: the frame stack comes from the model
+    shutil.copy(run_dir / "best_model.safetensors", alone)
+    shutil.copy(run_dir / "best_model.json", alone.with_suffix(".json"))
     result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(alone), "--episodes", "3", "--seed", "5"])
     assert result.exit_code == 0, result.output
     assert "3 deterministic episodes, the first reset with seed 5" in result.output and "results.json" not in result.output
@@ -93,7 +95,7 @@ def test_eval_of_a_model_alone_and_its_refusals(run_dir, tmp_path):
     assert missing.exit_code == 2 and "none.zip: no such file (or 'pretrained' for the shipped agent)" in missing.output
     other_env = CliRunner().invoke(main, ["eval", "Hover2D-v0", "--model", str(alone)])
     assert other_env.exit_code == 1 and "was trained on observations (4, 100, 100) and actions Discrete(2)" in other_env.output
-    unwritable = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(alone), "-o", str(alone / "eval.json")])
+    unwritable = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(alone), "-o", str(alone.with_suffix(".json") / "eval.json")])
     assert unwritable.exit_code == 2 and "cannot write" in unwritable.output
     not_shipped = CliRunner().invoke(main, ["play", multi_camera_cartpole(tmp_path, "[48, 48]"), "--model", "pretrained"])
     assert not_shipped.exit_code == 1 and "no shipped model for MultiCart-v0" in not_shipped.output
@@ -164,9 +166,10 @@ def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir,
 
 
 def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
+    """The run's own zip, a pickle, plays when trusted (--trust-pickle)."""
     gif = tmp_path / "play.gif"
-    result = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "--episodes", "1", "--record", str(gif),
-                                       "--view", "fast", "--view-size", "200"])
+    result = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "best_model.zip"), "--trust-pickle", "--episodes", "1",
+                                       "--record", str(gif), "--view", "fast", "--view-size", "200"])
     assert result.exit_code == 0, result.output
     episode = re.search(r"episode 0: return (-?\d+\.\d\d), length (\d+), (success|no success) \((\w+)\)", result.output)
     assert episode, result.output
@@ -179,29 +182,30 @@ def test_play_with_the_trained_model_records_a_gif(run_dir, tmp_path):
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
 
 
-def test_a_policy_file_plays_like_its_model_and_loads_in_sb3(run_dir, tmp_path):
+def test_a_policy_file_plays_like_its_model(run_dir, tmp_path):
     """export-policy keeps the policy (half precision) and drops the optimizer: the shipped agents' format."""
     import torch
+    from safetensors import safe_open
     from stable_baselines3 import PPO
-    from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
-    policy_file = tmp_path / "policy.pt"
-    exported = CliRunner().invoke(main, ["export-policy", str(run_dir / "best_model.zip"), str(policy_file)])
+    from visualenv.train.models import load_model
+
+    policy_file = tmp_path / "policy.safetensors"
+    exported = CliRunner().invoke(main, ["export-policy", "--trust-pickle", str(run_dir / "best_model.zip"), str(policy_file)])
     assert exported.exit_code == 0, exported.output
-    saved = torch.load(policy_file, weights_only=False)
-    assert set(saved) == {"state_dict", "data", "policy_class"}  # no optimizer state
-    assert {v.dtype for v in saved["state_dict"].values()} == {torch.float16}
+    with safe_open(str(policy_file), "pt") as f:  # the weights alone: no optimizer state
+        assert {f.get_tensor(name).dtype for name in f.keys()} == {torch.float16} and not [n for n in f.keys() if "optimizer" in n]
+    meta = json.loads(policy_file.with_suffix(".json").read_text())
+    assert meta["algorithm"] == "ppo" and meta["frame_stack"] == 4 and meta["spec"]["id"] == "Goalie-v0"  # from the run's config.json
     assert policy_file.stat().st_size < (run_dir / "best_model.zip").stat().st_size / 1.5
-    import zipfile
-
-    with zipfile.ZipFile(policy_file) as archive:  # torch.save's archive, its weights deflated (torch.load reads them)
-        assert {e.compress_type for e in archive.infolist()} == {zipfile.ZIP_DEFLATED}
     model = PPO.load(run_dir / "best_model.zip", device="cpu")
-    policy = ActorCriticCnnPolicy.load(str(policy_file), device="cpu")  # SB3 directly: the documented recipe
+    policy = load_model(policy_file)
     obs = torch.as_tensor(np.random.default_rng(0).integers(0, 256, (16, *model.observation_space.shape)), dtype=torch.float32)
     with torch.no_grad():
         want = torch.cat([model.policy.get_distribution(obs).distribution.probs, model.policy.predict_values(obs)], 1)
         got = torch.cat([policy.get_distribution(obs).distribution.probs, policy.predict_values(obs)], 1)
+        exact = load_model(run_dir / "best_model.safetensors")  # train's own policy file: float32, the zip's policy exactly
+        assert torch.equal(want, torch.cat([exact.get_distribution(obs).distribution.probs, exact.predict_values(obs)], 1))
     assert want[:, -1].std() > 1e-3  # the values differ between observations: the comparison below is not of constants
     assert torch.allclose(want, got, atol=1e-2, rtol=1e-2)
     webp = tmp_path / "play.webp"
@@ -212,11 +216,11 @@ def test_a_policy_file_plays_like_its_model_and_loads_in_sb3(run_dir, tmp_path):
     assert frames.ndim == 4 and frames.shape[0] >= 10 and frames.shape[1:3] == (200, 200 + 4 + 200)
     assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 0.5
     not_a_policy = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(run_dir / "config.json"), "--episodes", "1"])
-    assert not_a_policy.exit_code != 0
+    assert not_a_policy.exit_code == 1 and "not a policy file of visualenv" in not_a_policy.output
 
 
 def test_play_refuses_what_it_cannot_do_before_playing(run_dir, tmp_path):
-    model = str(run_dir / "best_model.zip")
+    model = str(run_dir / "best_model.safetensors")
     wrong_format = CliRunner().invoke(main, ["play", "Goalie-v0", "--episodes", "1", "--record", str(tmp_path / "play.avi")])
     assert wrong_format.exit_code == 2 and "expected a file ending in .gif or .webp or .mp4" in wrong_format.output
     other_env = CliRunner().invoke(main, ["play", "Hover2D-v0", "--model", model, "--episodes", "1"])
@@ -224,9 +228,11 @@ def test_play_refuses_what_it_cannot_do_before_playing(run_dir, tmp_path):
     assert "actions Discrete(4)" in other_env.output  # Hover2D's four pulses
     junk = tmp_path / "junk.zip"
     junk.write_text("not a model")
-    not_a_model = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(junk), "--episodes", "1"])
+    refused = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(junk), "--episodes", "1"])
+    assert refused.exit_code == 1 and f"{junk} is an SB3 model: a pickle-based file" in refused.output
+    not_a_model = CliRunner().invoke(main, ["play", "Goalie-v0", "--model", str(junk), "--episodes", "1", "--trust-pickle"])
     assert not_a_model.exit_code == 1 and f"cannot load {junk} as a PPO model" in not_a_model.output
-    for result in (other_env, not_a_model):
+    for result in (other_env, refused, not_a_model):
         assert isinstance(result.exception, SystemExit)  # an error line and an exit code, not an escaped exception
 
 
@@ -261,7 +267,7 @@ def test_multi_camera_specs_train_and_play(tmp_path):
     assert type(model.policy).__name__ == "MultiInputActorCriticPolicy"
     assert {k: s.shape for k, s in model.observation_space.spaces.items()} == {"front": (4, 64, 64), "side": (12, 40, 40)}
     gif = tmp_path / "play.gif"
-    played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model.zip"), "--episodes", "1", "--record", str(gif),
+    played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model.safetensors"), "--episodes", "1", "--record", str(gif),
                                        "--view", "fast", "--view-size", "64"])
     assert played.exit_code == 0, played.output
     frame = iio.imread(gif)[0]
@@ -354,5 +360,5 @@ def test_sac_trains_a_continuous_action_env(tmp_path):
     run = next((tmp_path / "LunarLanding-v0").iterdir())
     assert json.loads((run / "config.json").read_text())["config"]["algo"] == "sac"
     assert json.loads((run / "results.json").read_text())["episodes"] == 2
-    evaluated = CliRunner().invoke(main, ["eval", "LunarLanding-v0", "--model", str(run / "best_model.zip"), "--episodes", "2"])
+    evaluated = CliRunner().invoke(main, ["eval", "LunarLanding-v0", "--model", str(run / "best_model.safetensors"), "--episodes", "2"])
     assert evaluated.exit_code == 0 and "reproduces" in evaluated.output, evaluated.output

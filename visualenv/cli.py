@@ -27,6 +27,12 @@ ALGORITHMS = ("ppo", "a2c", "dqn", "sac")
 EXIT_INVALID = 2
 PRETRAINED = "pretrained"  # --model's name for the shipped agent
 RANDOM = "random"  # eval --model's name for uniform random actions (the baseline)
+MODEL_HELP = ("a policy file (policy.safetensors with its policy.json, as export-policy and train write) or 'pretrained' (the shipped "
+              "agent, results/<Id>/policy.safetensors){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle")
+trust_pickle_option = click.option(
+    "--trust-pickle", is_flag=True,
+    help="also load pickle-based models (SB3 .zip, torch .pt/.pth, RLlib checkpoint folders): unpickling runs whatever code the file "
+         "holds, so only for files you trust (docs/security.md)")
 
 
 def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -198,7 +204,7 @@ def _video_path(value: str | None) -> str | None:
 
 
 def _model_file(spec: str, value: str) -> str:
-    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/policy.pt)."""
+    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/policy.safetensors)."""
     if value == PRETRAINED:
         from visualenv.train.models import pretrained_model
         from visualenv.env.registration import resolve
@@ -397,7 +403,8 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
 
 @main.command()
 @click.argument("spec")
-@click.option("--model", "model_path", help="a trained model (.zip, a policy file .pt, or a checkpoint folder of --backend rllib), or 'pretrained': the shipped agent (results/<Id>/policy.pt); default: random actions")
+@click.option("--model", "model_path", help=MODEL_HELP.format("") + "  [default: random actions]")
+@trust_pickle_option
 @click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
 @click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
@@ -407,15 +414,15 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
               help="render preset of the recorded view (default: the spec's; 'fast' records in seconds)")
 @click.option("--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels")
 @_friendly
-def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int, record: str | None, view_preset: str | None,
-         view_size: int | None) -> None:
+def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episodes: int, seed: int, record: str | None,
+         view_preset: str | None, view_size: int | None) -> None:
     """Run episodes with a random or trained policy; print returns, lengths and success."""
     from visualenv.train.play import play as run_play
 
     if model_path is not None:
         model_path = _model_file(spec, model_path)
     results = run_play(spec, model_path=model_path, algo=algo, episodes=episodes, seed=seed, record=record,
-                       view_preset=view_preset, view_size=view_size)
+                       view_preset=view_preset, view_size=view_size, trust_pickle=trust_pickle)
     for i, ep in enumerate(results):
         click.echo(f"episode {i}: return {ep.ret:.2f}, length {ep.length}, {'success' if ep.success else 'no success'} ({ep.outcome})")
     rate = sum(ep.success for ep in results) / len(results)
@@ -426,9 +433,8 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 
 @main.command("eval")
 @click.argument("spec")
-@click.option("--model", "model_path", required=True,
-              help="a trained model (.zip, a policy file .pt, or a checkpoint folder of --backend rllib), 'pretrained': the shipped agent "
-                   "(results/<Id>/policy.pt), or 'random': uniform random actions, the baseline")
+@click.option("--model", "model_path", required=True, help=MODEL_HELP.format(", or 'random' (uniform random actions, the baseline)"))
+@trust_pickle_option
 @click.option("--algo", type=click.Choice(ALGORITHMS), default=None, help="the model's algorithm  [default: its run's (config.json), else ppo]")
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 100]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
@@ -437,8 +443,8 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--write-results", is_flag=True,
               help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made")
 @_friendly
-def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None,
-                 write_results: bool) -> None:
+def eval_command(spec: str, model_path: str, trust_pickle: bool, algo: str | None, episodes: int | None, seed: int | None,
+                 json_out: str | None, write_results: bool) -> None:
     """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
 
     The intervals are a percentile bootstrap of the mean (return, length) and Wilson's
@@ -458,7 +464,7 @@ def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | N
         click.echo(f"uniform random actions (the baseline): {results['episodes']} episodes, the first reset with seed {results['eval_seed']}")
     else:
         model_path = _model_file(spec, model_path)
-        results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed)
+        results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed, trust_pickle=trust_pickle)
         click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}")
     purpose = seed_purpose(results["eval_seed"])
     if purpose in ("training", "selection"):
@@ -520,41 +526,39 @@ def _write_results(results: dict, model_path: str, spec: str) -> Path:
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="seed of the first episode (the next ones count up)")
 @click.option("--view", "view_preset", type=click.Choice(["fast", "quality", "off"]), default="fast", show_default=True, help="the high-resolution view's preset")
 @click.option("--view-size", type=click.IntRange(16, 4096), default=320, show_default=True, help="longer side of the view in pixels")
+@trust_pickle_option
 @_friendly
-def view(spec: str, model_path: str | None, algo: str, port: int | None, host: str, seed: int, view_preset: str, view_size: int) -> None:
+def view(spec: str, model_path: str | None, algo: str, port: int | None, host: str, seed: int, view_preset: str, view_size: int,
+         trust_pickle: bool) -> None:
     """Show SPEC live on a local web page: play it with the keys or watch an agent; saving the spec rebuilds it (docs/viewer.md)."""
     from visualenv.viewer.app import serve
     from visualenv.viewer.session import ViewOptions
 
     serve(spec, model=model_path, algo=algo, host=host, port=port, seed=seed, view=ViewOptions(None if view_preset == "off" else view_preset, view_size),
-          echo=lambda line: click.echo(line, err=line.startswith("warning")))
+          echo=lambda line: click.echo(line, err=line.startswith("warning")), trust_pickle=trust_pickle)
 
 
 @main.command("export-policy")
 @click.argument("model", type=click.Path(exists=True))
-@click.argument("out", type=click.Path())
-@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
+@click.argument("out", type=click.Path(dir_okay=False))
+@trust_pickle_option
+@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True, help="the algorithm of an SB3 .zip")
 @click.option("--float32", "full", is_flag=True, help="keep float32 weights (default: float16, half the size)")
 @_friendly
-def export_policy(model: str, out: str, algo: str, full: bool) -> None:
-    """Write the policy of a trained model without the optimizer's state: what the shipped agents in results/ are.
+def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: bool) -> None:
+    """Write the policy of a trained model as a policy file: OUT.safetensors (its weights) and OUT.json (what builds the
+    network), without the optimizer's state; what the shipped agents in results/ are.
 
-    An SB3 model (.zip) becomes a policy file (OUT ending in .pt), which `play`, `eval` and `--model`
-    take like the .zip and SB3 loads with its policy class's ``load`` (``ActorCriticCnnPolicy.load(OUT)``).
-    An RLlib checkpoint folder becomes a checkpoint folder OUT holding its RLModule only.
+    MODEL: an SB3 .zip, a torch .pt or an RLlib checkpoint folder (with --trust-pickle: loading them runs whatever code
+    they hold), or a policy file. `play`, `eval` and `--model` then load OUT without unpickling anything (docs/security.md).
     """
-    from visualenv.train.models import POLICY_SUFFIXES, load_model, save_policy, save_rllib_policy
+    from visualenv.train.models import export_policy as write
+    from visualenv.train.policy_format import WEIGHTS
 
-    if Path(model).is_dir():
-        folder = save_rllib_policy(model, out, half=not full)
-        size = sum(f.stat().st_size for f in folder.rglob("*") if f.is_file())
-        click.echo(f"wrote {folder} ({size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights)")
-        return
-    if Path(out).suffix not in POLICY_SUFFIXES:
-        raise click.BadParameter(f"expected a file ending in {' or '.join(POLICY_SUFFIXES)}", param_hint="OUT")
-    _check_writable(out, "OUT")
-    path = save_policy(load_model(model, algo), out, half=not full)
-    click.echo(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights)")
+    if Path(out).suffix != WEIGHTS:
+        raise click.BadParameter(f"expected a file ending in {WEIGHTS} (its .json is written beside it)", param_hint="OUT")
+    path = write(model, out, algo=algo, half=not full, trust_pickle=trust_pickle)
+    click.echo(f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights) and {path.with_suffix('.json').name}")
 
 
 def _check_writable(path: str, option: str) -> None:

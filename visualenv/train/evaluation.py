@@ -283,12 +283,12 @@ def evaluate_random(spec: str, *, episodes: int | None = None, seed: int | None 
 
 
 def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None, episodes: int | None = None,
-                   seed: int | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
+                   seed: int | None = None, trust_pickle: bool = False) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
 
     Unset arguments take the run's values (config.json and results.json beside the model),
     else PPO, 100 episodes and :data:`FRESH_SEED`; the run's final evaluation is replayed when the
-    seed is the run's.
+    seed is the run's. `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.models.load_model`).
     """
     from gymnasium import spaces
 
@@ -301,7 +301,7 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
         seed = recorded.seed if recorded else FRESH_SEED
     replayed = recorded if recorded is not None and seed == recorded.seed else None
     pin_mkl()  # before the model is built: its initialisation calls MKL, which then keeps its mode
-    model = load_model(str(model_path), algo or (recorded.algo if recorded else "ppo"))
+    model = load_model(str(model_path), algo or (recorded.algo if recorded else "ppo"), trust_pickle=trust_pickle)
     space = model.observation_space
     render = recorded.render if recorded else not (isinstance(space, spaces.Box) and len(space.shape) == 1)
     spec_path = str(resolve(spec))

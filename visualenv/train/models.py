@@ -1,30 +1,36 @@
-"""Trained models: load an SB3 model, a policy file or an RLlib checkpoint; save a policy; fit an env to a model.
+"""Trained models: load a policy file, or (trusted) an SB3 model or RLlib checkpoint; save a policy file; fit an env to a model.
 
 Every kind loads into an object with SB3's ``predict``, ``observation_space`` and
 ``action_space``, which is all that ``play`` and the evaluations use.
 
-A *policy file* (``.pt``) is an SB3 policy without its algorithm: the weights
-(half precision by default, about a third of the size of the ``.zip``, which
-also holds the optimizer's state) and the policy's constructor arguments, in the
-format of SB3's own ``BasePolicy.save``, so SB3 loads it directly::
+A *policy file* is data: ``policy.safetensors`` (the weights) with ``policy.json``
+(what builds the network), read without unpickling anything
+(:mod:`visualenv.train.policy_format`). It is what `visualenv export-policy` and
+`visualenv train` write and what the shipped agents are.
 
-    from stable_baselines3.common.policies import ActorCriticCnnPolicy
-    policy = ActorCriticCnnPolicy.load("results/Goalie-v0/policy.pt")   # policy.predict(obs, deterministic=True)
+SB3's ``.zip``, a torch ``.pt``/``.pth`` and an RLlib checkpoint folder are
+pickle-based: unpickling runs whatever code the file holds. They load only with
+``trust_pickle=True`` (``--trust-pickle``); without it, loading one is an error that
+says how to convert it once (docs/security.md).
 """
 
 from __future__ import annotations
 
-import io
-from importlib import import_module
+import json
 from pathlib import Path
 from typing import Any
 
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.errors import VisualEnvError
+from visualenv.train.policy_format import WEIGHTS, is_policy_file, read_meta, read_policy, write_policy
 
-POLICY_SUFFIXES = (".pt", ".pth")
-#: the shipped agents live in the source checkout: results/<Id>/policy.pt
+#: the shipped agents live in the source checkout: results/<Id>/policy.safetensors with its policy.json
 RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"
+SHIPPED_POLICY = "policy" + WEIGHTS
+
+
+class PickleRefused(VisualEnvError):
+    """A pickle-based model file, loaded without trust_pickle: loading it could run code."""
 
 
 def algorithm_class(name: str) -> Any:
@@ -37,112 +43,136 @@ def algorithm_class(name: str) -> Any:
     return classes[name]
 
 
-def load_model(model_path: str, algo: str = "ppo") -> Any:
-    """An SB3 model (.zip), a policy file (.pt) or the policy of an RLlib checkpoint folder (`train --backend rllib`)."""
-    if Path(model_path).is_dir():
-        return _load_rllib(model_path)
-    if Path(model_path).suffix in POLICY_SUFFIXES:
-        return load_policy(model_path)
+def load_model(model_path: str | Path, algo: str = "ppo", *, trust_pickle: bool = False) -> Any:
+    """A policy file (policy.safetensors + policy.json); with `trust_pickle`, also an SB3 model (.zip), a torch policy
+    file (.pt, .pth) or the policy of an RLlib checkpoint folder (`train --backend rllib`), whose unpickling runs any
+    code they hold."""
+    path = Path(model_path)
+    if is_policy_file(path):
+        return read_policy(path)
+    if not trust_pickle:
+        raise PickleRefused(pickle_refusal(path))
+    if path.is_dir():
+        return _load_rllib(path)
+    if path.suffix in (".pt", ".pth"):
+        return _load_torch_policy(path)
     try:
-        return algorithm_class(algo).load(model_path, device="cpu")
+        return algorithm_class(algo).load(path, device="cpu")
     except Exception as exc:  # SB3 raises whatever its unpickling met: report it, whatever it is
-        raise VisualEnvError(f"cannot load {model_path} as a {algo.upper()} model: {exc}") from None
+        raise VisualEnvError(f"cannot load {path} as a {algo.upper()} model: {exc}") from None
 
 
-def _load_rllib(model_path: str) -> Any:
+def pickle_refusal(path: Path) -> str:
+    """Why a file that is not a policy file is not loaded, and what to do about it."""
+    kind = ("an RLlib checkpoint folder: a pickle-based file" if path.is_dir() else
+            f"a torch {path.suffix} file: a pickle-based file" if path.suffix in (".pt", ".pth") else
+            "an SB3 model: a pickle-based file" if path.suffix == ".zip" else
+            f"not a policy file ({WEIGHTS} with its .json), so it would load as a pickle-based file")
+    return (f"{path} is {kind}, and loading it can run any code it holds. If you trust where it came from, "
+            f"pass --trust-pickle (Python: trust_pickle=True), or convert it once: `visualenv export-policy --trust-pickle {path} "
+            f"OUT{WEIGHTS}`, then use OUT{WEIGHTS} (docs/security.md)")
+
+
+def _load_rllib(path: Path) -> Any:
     try:
         from visualenv.train.rllib_setup import RLlibPolicy, is_checkpoint
     except ImportError as exc:
-        raise VisualEnvError(f"{model_path} is a folder: an RLlib checkpoint needs Ray RLlib (pip install 'visualenv[ray]'; {exc})") from None
-    if not is_checkpoint(model_path):
-        raise VisualEnvError(f"{model_path} is not a checkpoint of `visualenv train --backend rllib` (no {Path('learner_group', 'learner', 'rl_module')})")
+        raise VisualEnvError(f"{path} is a folder: an RLlib checkpoint needs Ray RLlib (pip install 'visualenv[ray]'; {exc})") from None
+    if not is_checkpoint(path):
+        raise VisualEnvError(f"{path} is not a checkpoint of `visualenv train --backend rllib` (no {Path('learner_group', 'learner', 'rl_module')})")
     try:
-        return RLlibPolicy.load(model_path)
+        return RLlibPolicy.load(path)
     except Exception as exc:  # RLlib raises whatever its unpickling met
-        raise VisualEnvError(f"cannot load {model_path} as an RLlib checkpoint: {exc}") from None
+        raise VisualEnvError(f"cannot load {path} as an RLlib checkpoint: {exc}") from None
 
 
-def save_policy(model: Any, path: str | Path, *, half: bool = True) -> Path:
-    """The policy of an SB3 model as a policy file (SB3's ``BasePolicy.save`` format; `half`: float16 weights), its
-    large weights packed (:mod:`visualenv.train.packed`: the same numbers in 8 % less space)."""
-    import copy
-
+def _load_torch_policy(path: Path) -> Any:
+    """A policy saved by SB3's ``BasePolicy.save`` (or an earlier visualenv's export): a pickle, trusted by the caller."""
     import torch
 
-    from visualenv.train.packed import packed_state
-
-    policy = model.policy if hasattr(model, "policy") else model
-    # converted as a module, so the feature extractor that SB3 lists three times (shared by both heads) is stored once
-    weights = packed_state((copy.deepcopy(policy).half() if half else policy).state_dict())
-    kind = type(policy)
-    path = Path(path)
-    buffer = io.BytesIO()
-    torch.save({"state_dict": weights, "data": policy._get_constructor_parameters(),
-                "policy_class": f"{kind.__module__}:{kind.__qualname__}"}, buffer, pickle_protocol=4)  # bytes as they are
-    deflate_zip(buffer.getvalue(), path)
-    return path
-
-
-def deflate_zip(archive: bytes, path: Path) -> None:
-    """Write torch.save's zip archive to `path` with its entries deflated: the same tensors, which torch.load (and so
-    SB3's ``BasePolicy.load``) reads as they are, in 11 % less space (a float16 policy: 5.68 -> 5.05 MB)."""
-    import zipfile
-
-    with zipfile.ZipFile(io.BytesIO(archive)) as source, zipfile.ZipFile(path, "w", compression=zipfile.ZIP_DEFLATED, compresslevel=9) as out:
-        for entry in source.infolist():
-            out.writestr(entry.filename, source.read(entry))
-
-
-def save_rllib_policy(checkpoint: str | Path, out: str | Path, *, half: bool = True) -> Path:
-    """The policy of an RLlib checkpoint folder (its RLModule, without the learner's optimizer) as a checkpoint folder
-    that :func:`load_model` and RLlib's ``RLModule.from_checkpoint`` read; `half`: float16 weights. Its pickles are
-    written again with their large arrays packed (:mod:`visualenv.train.packed`), which RLlib unpickles as they were."""
-    import pickle
-    import shutil
-
-    import numpy as np
-
-    from visualenv.train import packed
-    from visualenv.train.rllib_setup import MODULE_DIR
-
-    source, target = Path(checkpoint) / MODULE_DIR, Path(out) / MODULE_DIR
-    if not source.is_dir():
-        raise VisualEnvError(f"{checkpoint} is not a checkpoint of `visualenv train --backend rllib` (no {MODULE_DIR})")
-    shutil.copytree(source, target, dirs_exist_ok=True)
-    steps = Path(checkpoint) / "visualenv.json"  # the steps the checkpoint had trained
-    if steps.is_file():
-        shutil.copy2(steps, Path(out) / steps.name)
-    for name in ("module_state.pkl", "class_and_ctor_args.pkl"):
-        if not (target / name).is_file():
-            continue
-        with (target / name).open("rb") as f:
-            content = pickle.load(f)  # RLlib's own checkpoint files, which RLlib unpickles the same way
-        if half and name == "module_state.pkl":
-            content = type(content)((k, v.astype(np.float16) if getattr(v, "dtype", None) == np.float32 else v)
-                                    for k, v in content.items())
-        with (target / name).open("wb") as f:
-            packed.dump(content, f)
-    return Path(out)
-
-
-def load_policy(path: str | Path) -> Any:
-    """A policy file written by :func:`save_policy`, in float32 on the CPU."""
-    import torch
+    from visualenv.train.policy_kinds import sb3_policies
 
     try:
         saved = torch.load(path, map_location="cpu", weights_only=False)
-        module, _, name = saved["policy_class"].partition(":")
-        policy = getattr(import_module(module), name)(**saved["data"])
+        kind = saved.get("policy_class", "").replace(":", ".") if isinstance(saved, dict) else ""
+        policy = sb3_policies()[kind](**saved["data"]) if kind in sb3_policies() else None
+        if policy is None:
+            raise ValueError(f"it names no SB3 policy class visualenv knows ({kind or 'none'}): load it with its class's load()")
         policy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in saved["state_dict"].items()})
     except Exception as exc:  # a file of another kind: say so, whatever torch or SB3 raised
-        raise VisualEnvError(f"cannot load {path} as a policy file of `visualenv export-policy`: {type(exc).__name__}: {exc}") from None
+        raise VisualEnvError(f"cannot load {path} as a policy file: {type(exc).__name__}: {exc}") from None
     policy.set_training_mode(False)
     return policy
 
 
+def save_policy(model: Any, out: str | Path, *, half: bool = True, algorithm: str | None = None, run_dir: Path | None = None) -> Path:
+    """The policy of an SB3 model (or an SB3 policy) as a policy file OUT.safetensors + OUT.json (`half`: float16 weights).
+
+    `run_dir`: the run folder whose config.json names the algorithm, the env and the frame stack."""
+    policy = model.policy if hasattr(model, "policy") else model
+    record = run_record(run_dir)
+    record["algorithm"] = algorithm or _algorithm_name(model) or record["algorithm"]
+    weights, _ = write_policy(out, policy, backend="sb3", half=half, **record)
+    return weights
+
+
+def save_rllib_module(module: Any, out: str | Path, *, half: bool = True, run_dir: Path | None = None) -> Path:
+    """An RLlib RLModule (an RLlibPolicy's, or a training algorithm's) as a policy file OUT.safetensors + OUT.json."""
+    module = getattr(module, "module", module)
+    weights, _ = write_policy(out, module, backend="rllib", half=half, **{**run_record(run_dir), "algorithm": "ppo"})
+    return weights
+
+
+def export_policy(model_path: str | Path, out: str | Path, *, algo: str = "ppo", half: bool = True, trust_pickle: bool = False) -> Path:
+    """`visualenv export-policy`: any model :func:`load_model` takes, as a policy file, with what the run beside it
+    records (its config.json); a policy file exported again keeps what it knew."""
+    source = Path(model_path)
+    model = load_model(source, algo, trust_pickle=trust_pickle)
+    if hasattr(model, "module"):  # an RLlib policy
+        weights = save_rllib_module(model, out, half=half, run_dir=source.parent)
+    else:
+        weights = save_policy(model, out, half=half, algorithm=algo if source.suffix == ".zip" else None, run_dir=source.parent)
+    if is_policy_file(source):
+        carried, meta_path = read_meta(source), weights.with_suffix(".json")
+        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        meta.update({k: carried.get(k) for k in ("algorithm", "frame_stack", "spec") if meta.get(k) is None})
+        meta_path.write_text(json.dumps(meta, indent=2, allow_nan=False) + "\n", encoding="utf-8")
+    return weights
+
+
+def _algorithm_name(model: Any) -> str | None:
+    name = type(model).__name__.lower()
+    return name if name in ("ppo", "a2c", "dqn", "sac") else None
+
+
+def run_record(run_dir: Path | None) -> dict[str, Any]:
+    """What a run folder's config.json says of a policy it trained: the algorithm, the frame stack, the spec's id and
+    the sha256 of its spec file (as `visualenv build` records it); None for what it does not say."""
+    import hashlib
+
+    from visualenv.env.registration import resolve
+    from visualenv.spec.loader import load_spec
+
+    record: dict[str, Any] = {"algorithm": None, "frame_stack": None, "spec": None}
+    try:
+        config = json.loads((Path(run_dir) / "config.json").read_text())["config"] if run_dir else None
+    except (OSError, ValueError, KeyError, TypeError):
+        config = None
+    if not isinstance(config, dict) or "spec" not in config:
+        return record
+    record["algorithm"] = config.get("algo")
+    record["frame_stack"] = int(config.get("frame_stack", 1)) if config.get("render", True) else 0
+    try:
+        source = resolve(str(config["spec"]))
+        record["spec"] = {"id": load_spec(source).spec.id, "sha256": hashlib.sha256(Path(source).read_bytes()).hexdigest()}
+    except (VisualEnvError, OSError):
+        pass  # a spec that moved or no longer loads: the file says nothing of it rather than something wrong
+    return record
+
+
 def pretrained_model(env_id: str) -> Path:
-    """The shipped agent of a bundled env: results/<Id>/policy.pt in the source checkout."""
-    path = RESULTS_DIR / env_id / "policy.pt"
+    """The shipped agent of a bundled env: results/<Id>/policy.safetensors (with its policy.json) in the source checkout."""
+    path = RESULTS_DIR / env_id / SHIPPED_POLICY
     if not path.is_file():
         raise VisualEnvError(f"no shipped model for {env_id}: {path} does not exist "
                              "(the shipped models come with a checkout of the repository; train one with `visualenv train`)")

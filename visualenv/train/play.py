@@ -56,12 +56,14 @@ def check_recording(path: str | Path) -> None:
 
 def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episodes: int = 3, seed: int = 0,
          record: str | None = None, fps: int = 15, max_frames: int = 2000, view_preset: str | None = None,
-         view_size: int | None = None) -> list[Episode]:
-    """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation."""
+         view_size: int | None = None, trust_pickle: bool = False) -> list[Episode]:
+    """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation.
+
+    `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.models.load_model`)."""
     if record:
         check_recording(record)
     pin_mkl()  # before the model is built (its initialisation calls MKL): the actions eval's episodes had
-    model = load_model(model_path, algo) if model_path else None
+    model = load_model(model_path, algo, trust_pickle=trust_pickle) if model_path else None
     env = _play_env(spec, model, model_path, view_preset, view_size)
     env.action_space.seed(seed)
     frames: list[np.ndarray] | None = [] if record else None

@@ -2,8 +2,10 @@
 
 The run folder has the layout :mod:`visualenv.train.sb3` describes, with RLlib
 checkpoint folders in place of SB3's zip files: ``best_model/``,
-``final_model/`` and ``checkpoints/latest/`` (each a full Algorithm checkpoint;
-``visualenv play --model`` takes any of them). ``logs/progress.csv`` uses SB3's
+``final_model/`` and ``checkpoints/latest/`` (each a full Algorithm checkpoint,
+pickles that ``--resume`` reads back from the run's own folder), and the policies of
+the first two as policy files, ``best_model.safetensors`` and ``final_model.safetensors``
+(each with its ``.json``), which ``eval`` and ``play`` load without unpickling. ``logs/progress.csv`` uses SB3's
 column names, ``evaluations.npz`` EvalCallback's arrays, and the plots and
 ``results.json`` are drawn and computed by the same code as the SB3 backend's
 (:func:`visualenv.train.plots.training_plots`, :func:`visualenv.train.evaluation.final_evaluation`).
@@ -215,7 +217,8 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     from visualenv.train.plots import training_plots
     from visualenv.train.sb3 import record_run
     from visualenv.env.registration import resolve
-    from visualenv.train.rllib_setup import RLlibPolicy, check_address
+    from visualenv.train.models import load_model
+    from visualenv.train.rllib_setup import check_address
     from visualenv.env.cores import usable_cores
     from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_record, selection_seed
 
@@ -236,9 +239,9 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
                 results = _train_loop(config, run_dir, algo, eval_env, stop, steps)
             finally:
                 algo.stop()
-        best = run_dir / "best_model"
-        model = best if best.exists() else run_dir / "final_model"
-        results.update(final_evaluation(RLlibPolicy.load(model), eval_env, config.final_eval_episodes, final_seed(config.seed)))
+        best = run_dir / "best_model.safetensors"
+        model = best if best.exists() else run_dir / "final_model.safetensors"
+        results.update(final_evaluation(load_model(model), eval_env, config.final_eval_episodes, final_seed(config.seed)))
     finally:
         eval_env.close()
     results["model"] = model.name
@@ -269,6 +272,7 @@ def _restore(algo: Any, run_dir: Path) -> int:
 def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: Any, stop: _StopRequest, steps: int) -> dict[str, Any]:
     from tqdm import tqdm
 
+    from visualenv.train.models import save_rllib_module
     from visualenv.train.rllib_setup import RLlibPolicy
 
     evaluations = _Evaluations(run_dir / "evaluations.npz")
@@ -297,9 +301,11 @@ def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: An
                     print(evaluation_line(steps, returns, successes), flush=True)
                 if improved:
                     save_checkpoint(algo, run_dir / "best_model", steps)
+                    save_rllib_module(algo.get_module(), run_dir / "best_model.safetensors", half=False, run_dir=run_dir)
                 save_checkpoint(algo, latest, steps)
     if stop.requested:
         print(f"stopped early at {steps} steps", file=sys.stderr)
     save_checkpoint(algo, latest, steps)
     save_checkpoint(algo, run_dir / "final_model", steps)
+    save_rllib_module(algo.get_module(), run_dir / "final_model.safetensors", half=False, run_dir=run_dir)
     return {"steps": steps, "wall_time_s": round(time.perf_counter() - started, 1), "stopped_early": stop.requested}

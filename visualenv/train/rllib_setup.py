@@ -20,6 +20,8 @@ from __future__ import annotations
 
 import inspect
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from pathlib import Path
 from typing import Any
 
@@ -259,18 +261,12 @@ class RLlibPolicy:
 
     @classmethod
     def load(cls, checkpoint: str | Path) -> "RLlibPolicy":
-        """The policy of an Algorithm checkpoint folder (``best_model``, ``checkpoints/latest``, ...)."""
-        import logging
-
+        """The policy of an Algorithm checkpoint folder (``best_model``, ``checkpoints/latest``, ...): its pickles are
+        unpickled, so only for a checkpoint the caller trusts."""
         from ray.rllib.core.rl_module.rl_module import RLModule
 
-        rllib_log = logging.getLogger("ray._common.deprecation")
-        level = rllib_log.level
-        rllib_log.setLevel(logging.ERROR)  # RLlib warns about its own deprecated constructor while loading its own checkpoint
-        try:
+        with quiet_deprecations():
             return cls(RLModule.from_checkpoint(str(Path(checkpoint).resolve() / MODULE_DIR)))
-        finally:
-            rllib_log.setLevel(level)
 
     def predict(self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True) -> tuple[np.ndarray, None]:
         """Actions for a batch of observations (or one), as SB3's ``predict``; `state` and `episode_start` are unused."""
@@ -288,6 +284,20 @@ class RLlibPolicy:
         dist = self.module.get_inference_action_dist_cls().from_logits(inputs)
         actions = (dist.to_deterministic().sample() if deterministic else dist.sample()).numpy()
         return (actions[0] if single else actions), None
+
+
+@contextmanager
+def quiet_deprecations() -> Iterator[None]:
+    """RLlib's deprecation warnings silenced: it warns about its own deprecated constructor while building its own modules."""
+    import logging
+
+    rllib_log = logging.getLogger("ray._common.deprecation")
+    level = rllib_log.level
+    rllib_log.setLevel(logging.ERROR)
+    try:
+        yield
+    finally:
+        rllib_log.setLevel(level)
 
 
 def is_checkpoint(path: str | Path) -> bool:
@@ -319,4 +329,4 @@ def check_address(address: str | None) -> None:
 
 
 __all__ = ["RLlibPolicy", "ScaledImage", "VisualEnvCallbacks", "check_address", "check_observation", "conv_filters", "is_checkpoint",
-           "make_rllib_env", "model_config", "ppo_config", "register"]
+           "make_rllib_env", "model_config", "ppo_config", "quiet_deprecations", "register"]

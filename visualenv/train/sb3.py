@@ -7,9 +7,11 @@ A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes:
 * ``monitor/``        per-episode returns and lengths of the training envs
 * ``evaluations.npz`` periodic evaluation results (SB3's EvalCallback)
 * ``best_model.zip``  the model with the best evaluation reward
-* ``checkpoints/latest.zip`` the newest model, for ``--resume``
+* ``best_model.safetensors`` and ``final_model.safetensors`` (each with its ``.json``): the best and the final policy
+                      as policy files, which ``eval`` and ``play`` load without unpickling (float32 weights)
+* ``checkpoints/latest.zip`` the newest model, for ``--resume`` (SB3's zip: a pickle, read back only from the run's own folder)
 * ``plots/``          the paper's figures: rewards, episode lengths, samples per second
-* ``results.json``    the best model's final evaluation on fresh seeds (reward, length, success rate) and the
+* ``results.json``    the best policy file's final evaluation on fresh seeds (reward, length, success rate) and the
                       periodic evaluation that selected it (see :mod:`visualenv.train.evaluation`)
 
 Stopping a run early (Ctrl-C, or ``kill`` with SIGTERM) ends training at the next
@@ -39,7 +41,7 @@ from visualenv.env.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.train.evaluation import (FINAL_EPISODES, evaluation_line, final_evaluation, final_seed, make_eval_env, selection_record,
                                         selection_seed)
-from visualenv.train.models import algorithm_class, load_model
+from visualenv.train.models import algorithm_class, load_model, save_policy
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
 SET_BY_TRAIN = ("policy", "env", "seed", "verbose", "tensorboard_log", "_init_setup_model")  # not hyperparameters
@@ -226,16 +228,19 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest
         model.learn(total_timesteps=max(0, config.steps - done), callback=CallbackList(callbacks), reset_num_timesteps=not resume)
     model.save(latest)
     model.save(run_dir / "final_model.zip")
+    save_policy(model, run_dir / "final_model.safetensors", half=False, algorithm=config.algo, run_dir=run_dir)
 
 
 def _finish(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest: Path, *, wall: float, stopped_early: bool) -> dict[str, Any]:
-    """The best model's final evaluation (closing the eval env), results.json and the plots."""
+    """The best model as a policy file, its final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
 
-    best = run_dir / "best_model.zip"
-    evaluated = best if best.exists() else latest
+    best, evaluated = run_dir / "best_model.zip", run_dir / "final_model.safetensors"
     try:
-        results = final_evaluation(load_model(str(evaluated), config.algo), eval_env, config.final_eval_episodes, final_seed(config.seed))
+        if best.exists():  # EvalCallback's zip, of this run's own folder: trusted, as --resume trusts its checkpoint
+            evaluated = save_policy(load_model(best, config.algo, trust_pickle=True), run_dir / "best_model.safetensors", half=False,
+                                    algorithm=config.algo, run_dir=run_dir)
+        results = final_evaluation(load_model(evaluated), eval_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         eval_env.close()
     results.update({"selection": selection_record(run_dir, selection_seed(config.seed)), "steps": int(model.num_timesteps),

@@ -18,8 +18,9 @@ DEFAULT_PORT = 8765
 PRETRAINED = "pretrained"
 
 
-def load_agent(path: Path, model: str, algo: str = "ppo") -> Agent:
-    """The agent of ``--model``: a model file or checkpoint folder, or 'pretrained', the shipped agent of the spec's id."""
+def load_agent(path: Path, model: str, algo: str = "ppo", *, trust_pickle: bool = False) -> Agent:
+    """The agent of ``--model``: a policy file, 'pretrained' (the shipped agent of the spec's id), or with `trust_pickle`
+    a pickle-based model (an SB3 .zip, a torch .pt, an RLlib checkpoint folder), as `play` loads them."""
     if model == PRETRAINED:
         env_id = read_header(path)[0]
         if not env_id:
@@ -29,20 +30,18 @@ def load_agent(path: Path, model: str, algo: str = "ppo") -> Agent:
         raise VisualEnvError(f"--model {model}: no such file (or '{PRETRAINED}' for the shipped agent)")
     else:
         file = model
-    # TODO(lead): the safe-policies branch adds trust_pickle to load_model (an SB3 .zip unpickles code); pass the
-    # `view` command's --trust-pickle through here once it lands, as `play` and `eval` do.
-    return Agent(load_model(file, algo), file)
+    return Agent(load_model(file, algo, trust_pickle=trust_pickle), file)
 
 
 def serve(target: str, *, model: str | None = None, algo: str = "ppo", host: str = "127.0.0.1", port: int | None = None, seed: int = 0,
-          view: ViewOptions = DEFAULT_VIEW, echo: Callable[[str], None] = print) -> None:
+          view: ViewOptions = DEFAULT_VIEW, echo: Callable[[str], None] = print, trust_pickle: bool = False) -> None:
     """Serve `target` (a spec file or an id) on ``http://host:port/`` until Ctrl-C, then stop cleanly.
 
     A spec or model that cannot be found, or a port that cannot be had, raises VisualEnvError before anything is
     served; a spec that does not build is served anyway, with its error on the page, so that saving a fix goes on.
     """
     path = resolve(target)
-    agent = load_agent(path, model, algo) if model else None
+    agent = load_agent(path, model, algo, trust_pickle=trust_pickle) if model else None
     board = Board()
     server = _server(board, host, port, path)
     session = Session(path, board, agent=agent, seed=seed, view=view)
