@@ -23,7 +23,7 @@ BLENDER_MODULES = {
     "test_inspect_init", "test_parallel", "test_render_blender", "test_rllib", "test_train_play", "test_shipped_models",
     "test_api_strict", "test_make_options", "test_batched", "test_batched_scale", "test_batched_instances",
     "test_sensor", "test_heightmap", "test_segmentation", "test_physics_scene",
-    "test_sky_textures", "test_texture_sets",
+    "test_sky_textures", "test_texture_sets", "test_compat_blender",
 }
 #: single tests that render, in modules that otherwise do not
 BLENDER_TESTS = {

@@ -208,8 +208,8 @@ def apply_config(scene: Any, config: EngineConfig, previous: EngineConfig | None
     def changed(field: str) -> bool:
         return previous is None or getattr(previous, field) != getattr(config, field)
 
-    if changed("engine"):
-        scene.render.engine = ENGINE_IDS[config.engine]
+    if changed("engine") and scene.render.engine != ENGINE_IDS[config.engine]:
+        scene.render.engine = ENGINE_IDS[config.engine]  # any setting of it frees every scene's persistent Cycles data
     c = scene.cycles
     if changed("samples"):
         c.samples = config.samples
