@@ -29,6 +29,7 @@ from typing import Any
 
 import bpy
 
+from visualenv.compat.blender import use_cached_kernels
 from visualenv.render.blender.devices import compile_notice, detect_gpu, kernel_facts
 from visualenv.spec.models import RenderSettings
 
@@ -105,6 +106,7 @@ def _compile_notice_once(backend: str) -> None:
     if "compile" in _warned:
         return
     _warned.add("compile")
+    use_cached_kernels()  # what `visualenv compile-kernels` compiled ahead, before Cycles loads its kernels
     notice = compile_notice(kernel_facts(backend))
     if notice:
         print(notice, file=sys.stderr, flush=True)
