@@ -13,8 +13,8 @@ naming the part, when bpy moves.
 - C stdio flushed (Blender prints with ``printf``);
 - Cycles' CUDA kernels compiled ahead into a cache outside site-packages, and Cycles pointed at it.
 
-Importing this module imports neither bpy nor numpy's users: the kernel cache serves ``visualenv compile-kernels``
-without loading Blender.
+Importing this module does not import bpy (its functions do, where they need it): the kernel cache serves
+``visualenv compile-kernels`` without loading Blender.
 """
 
 from __future__ import annotations
