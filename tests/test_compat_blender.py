@@ -224,25 +224,29 @@ def test_blender_keeps_a_removed_scenes_last_frame_until_its_name_renders_again(
         assert freed > 25, figures
 
 
-def test_renderers_reuse_the_names_of_closed_scenes(tmp_path):
+def test_renderers_reuse_the_names_of_closed_scenes():
     """Part: render results, one per scene name: a closed env's scene name is the next env's."""
+    import gc
+
     import visualenv
 
-    first = visualenv.make("VisualCartPole-v0")
-    first.reset(seed=0)
-    name = first.unwrapped.renderer.scene.name
-    second = visualenv.make("VisualCartPole-v0")
-    second.reset(seed=0)
-    other = second.unwrapped.renderer.scene.name
-    first.close()
-    third = visualenv.make("VisualCartPole-v0")
-    third.reset(seed=0)
+    gc.collect()  # an earlier test's env collected meanwhile (a vector env closes itself then) would free a name
+    gc.disable()
+    envs = []
     try:
-        assert name.startswith("visualenv-scene-") and other != name
-        assert third.unwrapped.renderer.scene.name == name
+        for _ in range(2):
+            envs.append(visualenv.make("VisualCartPole-v0"))
+            envs[-1].reset(seed=0)
+        first, second = (env.unwrapped.renderer.scene.name for env in envs)
+        envs.pop(0).close()
+        envs.append(visualenv.make("VisualCartPole-v0"))
+        envs[-1].reset(seed=0)
+        assert first.startswith("visualenv-scene-") and second != first
+        assert envs[-1].unwrapped.renderer.scene.name == first
     finally:
-        second.close()
-        third.close()
+        gc.enable()
+        for env in envs:
+            env.close()
 
 
 HOOK = """
