@@ -28,6 +28,7 @@ BLENDER_MODULES = {
     "test_blend_scripts_off",
     "test_build_and_preview",
     "test_capture",
+    "test_compat_blender",
     "test_determinism",
     "test_dmc_pixels",
     "test_evaluation",

@@ -194,7 +194,8 @@ def test_a_batch_past_the_image_limit_renders_in_several_calls(monkeypatch):
 
 def test_a_batch_larger_than_one_image_renders_every_tile():
     """441 envs at 100x100 would be a 2,100 x 2,100 image, which Cycles' in-memory result returned black: two calls instead."""
-    from visualenv.render.blender.batched import MAX_IMAGE_PIXELS, envs_per_call, grid_shape
+    from visualenv.render.blender.batched import MAX_IMAGE_PIXELS, envs_per_call
+    from visualenv.render.blender.tiles_camera import grid_shape
 
     per_call = envs_per_call(441, 100, 100)
     assert per_call < 441 and np.prod(grid_shape(per_call)) * 100 * 100 <= MAX_IMAGE_PIXELS

@@ -76,11 +76,11 @@ def test_reading_before_a_render_filled_it_is_an_error():
 
 def test_luma_tables_are_exact_for_all_256_cubed_colours():
     """The float32 shortcut behind grayscale(): every (R, G, B) byte triple, against integer arithmetic."""
-    from visualenv.render.blender.capture import _LUMA, _SRGB
+    from visualenv.render.blender.capture import LUMA_TABLES, SRGB_TABLE
 
     # one table entry per byte value (the first 16-bit level that encodes to it)
-    first_level = np.searchsorted(_SRGB, np.arange(256))
-    red, green, blue = (table[first_level] for table in _LUMA)
+    first_level = np.searchsorted(SRGB_TABLE, np.arange(256))
+    red, green, blue = (table[first_level] for table in LUMA_TABLES)
     shortcut = ((red[:, None, None] + green[None, :, None]) + blue[None, None, :]) * np.float32(0.001)
     r, g, b = np.ogrid[:256, :256, :256]
     assert np.array_equal(shortcut.astype(np.uint8), ((299 * r + 587 * g + 114 * b + 500) // 1000).astype(np.uint8))

@@ -671,13 +671,15 @@ def info(as_json: bool, warm_gpu: bool) -> None:
 @main.command("compile-kernels")
 @click.option("--arch", "archs", multiple=True, help="CUDA architecture such as sm_90 (repeatable; default: this machine's NVIDIA GPUs)")
 @click.option("--ptxas", type=click.Path(dir_okay=False), default=None, help="the CUDA toolkit's ptxas (default: PATH, $CUDA_HOME, /usr/local/cuda)")
-@click.option("--force", is_flag=True, help="compile even where bpy already has a binary for the architecture")
+@click.option("--force", is_flag=True, help="compile again where the kernel cache already holds the architecture's binary")
 @_friendly
 def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> None:
-    """Compile Cycles' CUDA kernels into bpy for GPUs it ships no binary for (H100, H200: sm_90), once, so that a machine
-    that starts bare renders its first GPU frame in seconds rather than minutes. Needs the CUDA toolkit's ptxas, no GPU."""
+    """Compile Cycles' CUDA kernels for GPUs bpy ships no binary for (H100, H200: sm_90) into visualenv's kernel cache
+    ($XDG_CACHE_HOME/visualenv/cycles), once, so that a machine that starts with that cache renders its first GPU frame
+    in seconds rather than minutes. Needs the CUDA toolkit's ptxas, no GPU; bpy's own files stay as installed."""
     import time
 
+    from visualenv.compat.blender import cached_kernels
     from visualenv.render.blender.cuda_kernels import compile_cuda_kernels, find_ptxas
     from visualenv.render.blender.devices import nvidia_archs, shipped_cuda_archs
 
@@ -685,10 +687,14 @@ def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> N
     if not archs:
         raise click.UsageError("no NVIDIA GPU found here (nvidia-smi): name the architecture, e.g. --arch sm_90")
     shipped = shipped_cuda_archs()
+    cached = cached_kernels()
     tool = find_ptxas(ptxas)
     for arch in archs:
-        if arch in shipped and not force:
-            click.echo(f"{arch}: bpy already has its binary (--force compiles it again)")
+        if arch in shipped:
+            click.echo(f"{arch}: bpy already has its binary")
+            continue
+        if arch in cached and not force:
+            click.echo(f"{arch}: already compiled, {cached[arch]} (--force compiles it again)")
             continue
         click.echo(f"{arch}: compiling Cycles' kernels with {tool} (minutes: 433 s of one core for sm_90)...")
         started = time.perf_counter()

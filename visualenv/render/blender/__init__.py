@@ -14,15 +14,9 @@ Modules, one job each:
 Importing this package imports ``bpy`` and turns Blender's auto-run of scripts in .blend files off.
 """
 
-import os
-import sys
+from visualenv.compat.blender import drop_inherited_script_paths
 
-if "bpy" not in sys.modules:
-    # A process spawned by one that already imported bpy inherits Blender's script
-    # folders on sys.path; their `bpy` package would shadow the real module
-    # ("No module named '_bpy'"). bpy adds them again itself on import.
-    _marker = os.sep + "bpy" + os.sep
-    sys.path[:] = [p for p in sys.path if not (_marker in p and os.sep + "scripts" in p)]
+drop_inherited_script_paths()  # before anything imports bpy
 
 from visualenv.render.blender.autorun import turn_autorun_off  # noqa: E402
 from visualenv.render.blender.renderer import BlenderRenderer  # noqa: E402

@@ -6,38 +6,39 @@ so no camera reaches another copy. Meshes and empties whose world matrices
 numpy can compute (moving or not) are drawn as Geometry Nodes instances, one
 instancer per mesh posed for every env from the binding values (and a MuJoCo
 model's body poses) in one call (:mod:`instances`); cameras that do not move
-are not copied. What remains
-(lights, moving cameras, objects with constraints, animation or a bound
-texture, and their parents) is copied N - 1 times as linked duplicates (the
-copies share meshes and materials), copy k under an anchor empty at k's grid
-place, its bindings written copy by copy. Sun lights
-and the world are directional: one of each serves every copy, so they are not
-copied, except a sun bound to the state: each copy has its own, which lights and
-shadows only that copy's objects (Cycles' light linking; at most 63 envs).
+are not copied. What remains (lights, moving cameras, objects with constraints,
+animation or a bound texture, and their parents) is copied N - 1 times as linked
+duplicates, copy k under an anchor empty at k's grid place, its bindings written
+copy by copy (:mod:`copies`, which also gives a sun bound to the state one sun a
+copy, light-linked to its copy: at most 63 envs).
 
 One render makes one image of ``cols x rows`` tiles, tile k being env k's
-observation. A Cycles custom camera (an OSL camera shader, :data:`TILES_OSL`)
-sits at the observation camera's pose and sends the rays of tile k from the
-camera's pose shifted to copy k, with the spec camera's lens. A camera bound to
-the state moves its copy instead: the anchor of copy k is shifted so that the
-camera lands on the shared pose. A camera the state turns (a bound rotation, a
-look_at) gets a shader with every env's own rotation (:func:`turning_source`):
-tile k's rays are turned by copy k's camera rotation, while the copies only
-translate. Turning the copies instead would turn them against the shared world,
-suns and Cycles' sampling directions (with shared noise every pixel samples the
-world light in one direction, in world space: a turned copy got another
-"shadow" of the world). A camera the state zooms (lens) or scales is refused.
+observation, through a Cycles custom camera at the observation camera's pose
+(:mod:`tiles_camera`). A camera bound to the state moves its copy instead: the
+anchor of copy k is shifted so that the camera lands on the shared pose. A
+camera the state turns (a bound rotation, a look_at) gets a shader with every
+env's own rotation: tile k's rays are turned by copy k's camera rotation, while
+the copies only translate. Turning the copies instead would turn them against
+the shared world, suns and Cycles' sampling directions (with shared noise every
+pixel samples the world light in one direction, in world space: a turned copy
+got another "shadow" of the world). A camera the state zooms (lens) or scales is
+refused.
+
+This module schedules the render calls: an image holds at most
+:data:`MAX_IMAGE_PIXELS` (a larger batch is rendered in parts of whole rows of
+copies), and envs an autoreset just reset are rendered alone where that costs
+less than every tile again (:func:`alone_limit`). It extends
+:class:`BlenderRenderer` through its construction and render hooks
+(``_setup``, ``_setter``, ``_render``).
 """
 
 from __future__ import annotations
 
 import math
 import os
-import sys
 from dataclasses import replace
 from typing import Any, Sequence
 
-import bpy
 import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
@@ -47,9 +48,10 @@ from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS
                                            sun_world_error, turning_error, world_error)
 from visualenv.render.blender.allocator import LARGE_IMAGE_PIXELS, keep_freed_memory, release_freed_memory
 from visualenv.render.blender.instances import InstancedCopies, removable
-from visualenv.render.blender.materials import SKYBOX
-from visualenv.render.blender.renderer import BlenderRenderer, _View, _with_ancestors, is_world, write_bindings
-from visualenv.render.blender.scene import BuiltScene, aim
+from visualenv.render.blender.copies import Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, make_copy, one_colour
+from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
+from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make_tiles_camera, tile, tiles_text
+from visualenv.render.blender.scene import BuiltScene, with_ancestors
 from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
 
@@ -80,111 +82,12 @@ def alone_limit(num_envs: int, device: str, threads: int) -> float:
     return min(per_root * math.sqrt(num_envs), num_envs - ALONE_OVERHEAD_TILES)
 
 
-#: the tiles shader, written once for both cameras: @NAME@ and the parts a turning camera adds (@ROTATIONS@, its
-#: parameters; @TABLE@, them as one array; @TURN@, the turn of the ray's position and direction by env's rotation)
-_TILES_TEMPLATE = r"""
-// visualenv: one tile of the image per env. Tile k (row-major from the top left) looks
-// from the camera's pose shifted by k's place on the grid of copies@TURNED@.
-shader @NAME@(
-    int cols = 1, int count = 1, int first = 0, int ortho = 0,
-    float half_w = 0.5, float half_h = 0.5, float shift_x = 0, float shift_y = 0,
-    float ax = 0, float ay = 0, float az = 0, float bx = 0, float by = 0, float bz = 0,
-    int grid = 1,
-@ROTATIONS@    output point position = 0, output vector direction = 0, output color throughput = 1)
-{
-@TABLE@    point r = camera_shader_raster_position();
-    int rows = (count + cols - 1) / cols;
-    float fx = r[0] * cols;
-    float fy = (1.0 - r[1]) * rows;
-    int c = clamp((int)floor(fx), 0, cols - 1);
-    int t = clamp((int)floor(fy), 0, rows - 1);
-    int k = t * cols + c;
-    if (k >= count) {
-        throughput = 0;
-    } else {
-        int env = first + k;
-        float u = (fx - c) * 2.0 - 1.0;
-        float v = 1.0 - (fy - t) * 2.0;
-        vector offset = (env % grid) * vector(ax, ay, az) + (env / grid) * vector(bx, by, bz);
-        float x = u * half_w + shift_x;
-        float y = v * half_h + shift_y;
-        vector p = ortho ? vector(x, y, 0) : vector(0, 0, 0);
-        vector d = ortho ? vector(0, 0, 1) : normalize(vector(x, y, 1.0));
-@TURN@        position = point(offset[0] + p[0], offset[1] + p[1], offset[2] + p[2]);
-        direction = d;
-    }
-}
-"""
-
-_TURN = """        int i = 4 * clamp(env, 0, @LAST@);
-        float w = R[i];
-        vector q = vector(R[i + 1], R[i + 2], R[i + 3]);
-        p = p + 2.0 * w * cross(q, p) + 2.0 * cross(q, cross(q, p));
-        d = d + 2.0 * w * cross(q, d) + 2.0 * cross(q, cross(q, d));
-"""
-
-#: the tiles shader of a camera that does not turn
-TILES_OSL = (_TILES_TEMPLATE.replace("@NAME@", "visualenv_tiles").replace("@TURNED@", "")
-             .replace("@ROTATIONS@", "").replace("@TABLE@", "").replace("@TURN@", ""))
-
-TURNING_NAME = "visualenv_tiles_turning"
-
-
-def turning_source(num_envs: int) -> str:
-    """The tiles shader for a camera the state turns: as :data:`TILES_OSL`, and each env's rays are turned by its
-    own camera's rotation relative to this camera's, in Cycles' camera space: a unit quaternion an env (r<k>_0 its
-    w, r<k>_1..3 its x, y, z), every rotation starting as the identity. A change of rotations compiles the shader
-    again, and four parameters an env compile faster than nine (a 3x3 matrix): 84 against 213 ms a change at 256
-    envs."""
-    names = [f"r{k}_{i}" for k in range(num_envs) for i in range(4)]
-    rotations = "".join(f"    float r{k}_{i} = {1 if i == 0 else 0},\n" for k in range(num_envs) for i in range(4))
-    return (_TILES_TEMPLATE.replace("@NAME@", TURNING_NAME).replace("@TURNED@", " and turned by the env's own camera rotation")
-            .replace("@ROTATIONS@", rotations).replace("@TABLE@", f"    float R[{4 * num_envs}] = {{{', '.join(names)}}};\n")
-            .replace("@TURN@", _TURN.replace("@LAST@", str(num_envs - 1))))
-
-
-def _osl_modules_on_path() -> None:
-    """Blender's ``oslquery`` (which compiling a camera shader needs) sits in bpy's own site-packages, not on sys.path."""
-    local = bpy.utils.resource_path("LOCAL")
-    version = f"python{sys.version_info.major}.{sys.version_info.minor}"
-    for lib in ("lib", "lib64"):
-        path = f"{local}/python/{lib}/{version}/site-packages"
-        if path not in sys.path:
-            sys.path.append(path)
-
-
-def grid_shape(count: int) -> tuple[int, int]:
-    """(cols, rows) of the most square grid holding `count` tiles."""
-    cols = math.ceil(math.sqrt(count))
-    return cols, math.ceil(count / cols)
-
-
 def envs_per_call(count: int, width: int, height: int) -> int:
     """The most envs one render call takes: their grid's image must stay within MAX_IMAGE_PIXELS."""
     n = max(1, min(count, MAX_IMAGE_PIXELS // (width * height)))
     while n > 1 and math.prod(grid_shape(n)) * width * height > MAX_IMAGE_PIXELS:
         n -= 1
     return n
-
-
-def tile(image: np.ndarray, count: int, height: int, width: int) -> np.ndarray:
-    """(count, height, width, C): the tiles of `image` in row-major order from the top left."""
-    cols = image.shape[1] // width
-    rows = image.shape[0] // height
-    tiles = image.reshape(rows, height, cols, width, -1).swapaxes(1, 2).reshape(rows * cols, height, width, -1)
-    return tiles[:count]
-
-
-class _Copy:
-    """One env's objects: its anchor, its binding setters and what they last wrote."""
-
-    def __init__(self, anchor: Any, objects: dict[str, Any]) -> None:
-        self.anchor = anchor  # None: nothing of this env is copied (its objects are instances), as with a camera that does not move
-        self.objects = objects
-        self.setters: list = []
-        self.aimed: list = []
-        self.targets: dict[str, Any] = {}
-        self.last: tuple | None = None
 
 
 class BatchedBlenderRenderer(BlenderRenderer):
@@ -208,7 +111,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if engine != "cycles":
             raise ValueError(engine_message(engine))
         self.num_envs = num_envs
-        _osl_modules_on_path()
         # Cycles draws each pixel's random numbers from its place in the image, so tile k would carry other
         # noise than env k alone; with shared noise a tile equals the env's own render (noise="shared")
         plan = replace(plan, settings=plan.settings.model_copy(update={"noise": "shared"}))
@@ -223,24 +125,25 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._refuse_turning_cameras()
         scene = built.scene
         self._layer.update()  # matrix_world of every object, read below
-        self._spacing = self._copy_spacing(built)
+        self._spacing = copy_spacing(scene, max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0))
         self._cols = self._grid_columns()
         # suns are directional: one serves every copy, unless bound to the state: then each copy has its own, lighting
         # only that copy's objects (Cycles' light linking)
         self._own_suns = {built.objects[t.object].as_pointer() for t in self.plan.bindings
-                          if t.object in built.objects and _is_sun(built.objects[t.object])}
-        copied = [o for o in scene.objects if (not _is_sun(o) or o.as_pointer() in self._own_suns) and not _hidden(o)]
+                          if t.object in built.objects and is_sun(built.objects[t.object])}
+        copied = [o for o in scene.objects if (not is_sun(o) or o.as_pointer() in self._own_suns) and not hidden(o)]
         if self._own_suns and self.num_envs > MAX_OWN_SUNS:  # a .blend file's sun (the spec's were refused at build)
-            name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
+            name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
             raise sun_error(self.plan, name, self.num_envs)
-        if self._own_suns and self.num_envs > 1 and not _one_colour(scene.world):  # a .blend file's world (the spec's: at build)
-            name = next(t.object for t in self.plan.bindings if t.object in built.objects and _is_sun(built.objects[t.object]))
+        if self._own_suns and self.num_envs > 1 and not one_colour(scene.world):  # a .blend file's world (the spec's: at build)
+            name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
             raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._removed = self._removable(copied)
         self._copy_poses: list[tuple[int, Any]] | None = None  # the pose writers of the copies (None: no poses handed yet)
         self._body_poses: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))  # every env's xpos and xquat
-        self._copies = [self._make_copy(k, built, copied, places) for k in range(self.num_envs)]
+        self._copies = [make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_suns=self._own_suns)
+                        for k in range(self.num_envs)]
         for copy in self._copies:
             self._objects, self._last = copy.objects, None
             copy.setters = [s for s in self._compile_bindings() if s[2] is not _instanced]
@@ -252,8 +155,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         if max(envs_per_call(self.num_envs, v.width, v.height) * v.width * v.height for v in self._views) >= LARGE_IMAGE_PIXELS:
             keep_freed_memory()  # a call's buffers (hundreds of MB) reused, not faulted in again each call
-        self._tiled_view_camera: tuple[_View, Any, bool] | None = None  # the view camera's, built at the first view
-        self._alone: dict[int, _View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
+        self._tiled_view_camera: tuple[View, Any, bool] | None = None  # the view camera's, built at the first view
+        self._alone: dict[int, View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
         #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
         self.shader_updates = 0
         self._anchors_moved = False
@@ -310,7 +213,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             bound.setdefault(target.object, set()).add(target.property)
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         camera = objects[camera_name]
-        for obj in _with_ancestors(camera):
+        for obj in with_ancestors(camera):
             props = bound.get(names.get(obj.as_pointer(), ""), set())
             turning = (props & set(UNFOLLOWED)) | (props & {"lens"} if obj == camera else set())
             if turning or obj.constraints:
@@ -326,7 +229,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         spec = self.plan.scene.objects.get(camera_name)
         aimed = isinstance(spec, CameraObject) and spec.look_at is not None
         props = {t.property for t in self.plan.bindings
-                 if t.object in {names.get(o.as_pointer(), "") for o in _with_ancestors(objects[camera_name])}}
+                 if t.object in {names.get(o.as_pointer(), "") for o in with_ancestors(objects[camera_name])}}
         return bool(props & set(TURNS) or (aimed and props & {"location"}))
 
     def _grid_columns(self) -> int:
@@ -335,104 +238,21 @@ class BatchedBlenderRenderer(BlenderRenderer):
         per_call = min((envs_per_call(self.num_envs, v.width, v.height) for v in self._views), default=self.num_envs)
         return grid_shape(self.num_envs if per_call >= self.num_envs else per_call)[0]
 
-    def _copy_spacing(self, built: BuiltScene) -> float:
-        """How far apart copies stand: farther than any camera sees, plus the scene's size."""
-        reach = max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0)
-        size = 0.0
-        for obj in built.scene.objects:
-            if _is_sun(obj):
-                continue
-            corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box] or [obj.matrix_world.translation]
-            size = max(size, *(c.length for c in corners))
-        return float(reach + 2 * size + 10.0)
-
-    def _make_copy(self, k: int, built: BuiltScene, originals: list[Any], places: dict[int, Matrix]) -> _Copy:
-        """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at k's grid place.
-
-        An object whose parent is not copied with it hangs from the anchor at its own world place (`places`).
-        Objects drawn as instances are not copied: a copy with nothing else to copy has no anchor (None) and no objects of its own.
-        """
-        scene = built.scene
-        if k and all(o.as_pointer() in self._removed for o in originals):
-            return _Copy(None, dict(built.objects))
-        collection = bpy.data.collections.new(f"{scene.name}-env{k}")
-        scene.collection.children.link(collection)
-        anchor = bpy.data.objects.new(f"{scene.name}-anchor{k}", None)
-        collection.objects.link(anchor)
-        anchor.location = self._offset(k)
-        if k == 0:
-            mapping = {o.as_pointer(): o for o in originals}
-        else:
-            mapping = {}
-            for original in originals:
-                if original.as_pointer() in self._removed:
-                    continue  # drawn by its instancer
-                duplicate = original.copy()
-                if original.as_pointer() in self._own_suns:
-                    duplicate.data = original.data.copy()  # its own strength and colour
-                collection.objects.link(duplicate)
-                mapping[original.as_pointer()] = duplicate
-            for duplicate in mapping.values():
-                _remap_references(duplicate, mapping)
-        for original in originals:
-            obj = mapping.get(original.as_pointer())
-            if obj is None:
-                continue
-            if original.parent is None or original.parent.as_pointer() not in mapping:
-                obj.parent = anchor
-                obj.matrix_parent_inverse = Matrix.Identity(4)
-                obj.matrix_basis = places[original.as_pointer()]
-        if self._own_suns:
-            self._link_suns(k, scene, originals, mapping)
-        objects = {name: mapping.get(obj.as_pointer(), obj) for name, obj in built.objects.items()}
-        return _Copy(anchor, objects)
-
-    def _link_suns(self, k: int, scene: Any, originals: list[Any], mapping: dict[int, Any]) -> None:
-        """Copy k's own suns light and shadow only copy k's objects (a receiver and blocker collection of them)."""
-        receivers = bpy.data.collections.new(f"{scene.name}-lit{k}")
-        suns = []
-        for original in originals:
-            obj = mapping[original.as_pointer()]
-            if original.as_pointer() in self._own_suns:
-                suns.append(obj)
-            else:
-                receivers.objects.link(obj)
-        for sun in suns:
-            sun.light_linking.receiver_collection = receivers
-            sun.light_linking.blocker_collection = receivers
-
     def _offset(self, k: int) -> Vector:
-        return Vector(((k % self._cols) * self._spacing, (k // self._cols) * self._spacing, 0.0))
+        return grid_offset(k, self._cols, self._spacing)
 
-    def _tiled_view(self, view: _View) -> tuple[_View, Any, bool]:
+    def _tiled_view(self, view: View) -> tuple[View, Any, bool]:
         """The custom camera that renders `view` for every env, and whether its camera moves with the state."""
-        scene, source = self._scene, view.camera
-        data = bpy.data.cameras.new(f"{scene.name}-{view.key}-tiles")
-        data.type = "CUSTOM"
-        data.custom_mode = "INTERNAL"
-        data.custom_shader = self._shader_text(source)
-        data.clip_start, data.clip_end = source.data.clip_start, source.data.clip_end
-        camera = bpy.data.objects.new(f"{scene.name}-{view.key}-tiles", data)
-        scene.collection.objects.link(camera)
-        self._own(camera, data)
-        pose = source.matrix_world.normalized()
-        camera.matrix_world = pose
-        _compile(camera)
-        params = data.cycles_custom
-        half_w, half_h, shift_x, shift_y, ortho = _lens(source.data, view.width, view.height)
-        # world offsets of one grid column and row, in Cycles' camera space (x right, y up, z forward)
-        to_camera = Matrix.Diagonal((1.0, 1.0, -1.0)) @ pose.to_3x3().inverted()
-        a = to_camera @ Vector((self._spacing, 0.0, 0.0))
-        b = to_camera @ Vector((0.0, self._spacing, 0.0))
-        for key, value in dict(cols=self._cols, grid=self._cols, ortho=int(ortho), half_w=half_w, half_h=half_h, shift_x=shift_x,
-                               shift_y=shift_y, ax=a.x, ay=a.y, az=a.z, bx=b.x, by=b.y, bz=b.z).items():
-            params[key] = value
-        tiled = _View(view.key, camera, view.width, view.height, view.color, view.depth_range, view.config)
-        return tiled, pose.translation.copy(), self._camera_moves(source)
+        name = f"{self._scene.name}-{view.key}-tiles"
+        camera = make_tiles_camera(self._scene, name, view.camera, self._shader_text(view.camera), view.width, view.height,
+                                   self._spacing, self._cols)
+        self._own(camera, camera.data)
+        tiled = View(view.key, camera, view.width, view.height, view.color, view.depth_range, view.config)
+        return tiled, view.camera.matrix_world.normalized().translation.copy(), self._camera_moves(view.camera)
 
     def _camera_moves(self, camera: Any) -> bool:
         """Whether a binding moves the camera (or an ancestor): then the copies' anchors follow it every step."""
-        chain = {o.as_pointer() for o in _with_ancestors(camera)}
+        chain = {o.as_pointer() for o in with_ancestors(camera)}
         carriers = {name for name, obj in self._objects.items() if obj.as_pointer() in chain}
         return any(t.object in carriers and BINDABLES[t.property].moves for t in self.plan.bindings)
 
@@ -534,10 +354,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if self._instances is not None:
             self._instances.write(self._table, self._offsets, self._body_poses if self._copy_poses is not None else None)
 
-    def _apply_copy(self, copy: _Copy, values: tuple) -> None:
+    def _apply_copy(self, copy: Copy, values: tuple) -> None:
         if values != copy.last:
             write_bindings(values, copy.last, self._size, copy.setters, [], copy.targets)
-            _aim_copy(copy)
+            aim_copy(copy)
             copy.last = values
 
     def _place_copies(self, reference: Vector, moving_camera: Any) -> None:
@@ -552,7 +372,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
                     copy.anchor.location = offset
             self._anchors_moved = False
 
-    def _render_tiles(self, view: _View) -> np.ndarray:
+    def _render_tiles(self, view: View) -> np.ndarray:
         """All envs' tiles of one camera: one render call per image of at most MAX_IMAGE_PIXELS.
 
         A batch past one image is rendered in parts of whole rows of the grid of copies, each
@@ -572,16 +392,16 @@ class BatchedBlenderRenderer(BlenderRenderer):
             count = min(per_call, self.num_envs - first)
             cols, rows = grid_shape(count)
             self._set_shown(view.camera, first, count, cols)
-            big = _View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
+            big = View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
             parts.append(tile(self._render(big), count, view.height, view.width))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
-    def _render_rows(self, view: _View, rows: int) -> np.ndarray:
+    def _render_rows(self, view: View, rows: int) -> np.ndarray:
         """The tiles in parts of `rows` rows of copies: one camera showing the first part, moved down the grid for the others."""
         count = rows * self._cols
         self._set_shown(view.camera, 0, count, self._cols)
         base = view.camera.matrix_world.copy()
-        big = _View(view.key, view.camera, self._cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
+        big = View(view.key, view.camera, self._cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
         parts = []
         try:
             for p, first in enumerate(range(0, self.num_envs, count)):
@@ -632,7 +452,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _shader_text(self, source: Any) -> Any:
         """The tiles shader of a camera: with every env's own ray rotation if the state turns it."""
         name = next(n for n, o in self._objects.items() if o == source)
-        return _tiles_text(self.num_envs if self._turns(name) else 0)
+        return tiles_text(self.num_envs if self._turns(name) else 0)
 
     def _aim_rays(self, tiles: Any, source: Any) -> None:
         """Turn each env's rays by its camera's rotation relative to the tiles camera (a turning camera only).
@@ -666,7 +486,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._rays[tiles.as_pointer()] = values
 
     @staticmethod
-    def _camera_pose(copy: _Copy, name: str) -> Matrix:
+    def _camera_pose(copy: Copy, name: str) -> Matrix:
         """The world pose of a copy's camera, up to its anchor's translation (as evaluated, if it hangs under other objects)."""
         camera = copy.objects[name]
         return camera.matrix_basis if camera.parent == copy.anchor else camera.matrix_world
@@ -707,122 +527,5 @@ def _rotation(matrix: Matrix) -> np.ndarray:
     return rotation / np.linalg.norm(rotation, axis=0)
 
 
-def _aim_copy(copy: _Copy) -> None:
-    """Aim a copy's aimed objects at their targets in the copy's own frame (a look_at point is where it is in one env):
-    the anchor's place, a grid offset, must not turn them. Aimed with the anchor at the origin (it only translates), the
-    rotations are those of one env to the bit, where aiming at the offset target rounds at the offset's magnitude."""
-    if not copy.aimed:
-        return
-    place = copy.anchor.matrix_basis.copy()
-    copy.anchor.matrix_basis = Matrix.Identity(4)
-    try:
-        for obj, name in copy.aimed:
-            aim(obj, copy.targets[name])
-    finally:
-        copy.anchor.matrix_basis = place
-
-
-def _one_colour(world: Any) -> bool:
-    """Whether a world lights in one colour from every direction: no texture node (an image or a procedural sky) in
-    its shader, but a model's skybox (seen by camera rays only)."""
-    tree = getattr(world, "node_tree", None) if world is not None else None
-    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") and node.name != SKYBOX for node in tree.nodes)
-
-
 def _instanced(values: tuple) -> None:
     """The setter of a binding on an object drawn as instances: nothing to write per copy (dropped from the copies' setters)."""
-
-
-def _is_sun(obj: Any) -> bool:
-    return bool(obj.type == "LIGHT" and obj.data.type == "SUN")
-
-
-def _hidden(obj: Any) -> bool:
-    """An object no render shows: hidden itself, or in hidden collections only."""
-    return bool(obj.users_collection) and all(c.hide_render for c in obj.users_collection)
-
-
-def _remap_references(obj: Any, mapping: dict[int, Any]) -> None:
-    """Point a duplicate's parent, constraint targets and modifier objects at the duplicates of its own copy."""
-    def swap(value: Any) -> Any:
-        return mapping.get(value.as_pointer(), value) if value is not None else None
-
-    obj.parent = swap(obj.parent) if obj.parent is not None else None
-    for constraint in obj.constraints:
-        if hasattr(constraint, "target"):
-            constraint.target = swap(constraint.target)
-    for modifier in obj.modifiers:
-        for attribute in ("object", "offset_object", "mirror_object", "target"):
-            if hasattr(modifier, attribute) and isinstance(getattr(modifier, attribute), bpy.types.Object):
-                setattr(modifier, attribute, swap(getattr(modifier, attribute)))
-
-
-def _lens(data: Any, width: int, height: int) -> tuple[float, float, float, float, bool]:
-    """(half width, half height, shift x, shift y, orthographic) of a camera's view of a width x height image.
-
-    Perspective: tangents of the half angles (at distance 1); orthographic: half sizes.
-    Follows Blender's sensor fit: 'AUTO' fits the larger image side to the sensor width.
-    """
-    ortho = data.type == "ORTHO"
-    if data.type not in ("PERSP", "ORTHO"):
-        raise ValueError(f"a batch renders perspective and orthographic cameras, not {data.type.lower()} ones")
-    fit = data.sensor_fit
-    horizontal = fit == "HORIZONTAL" or (fit == "AUTO" and width >= height)
-    if ortho:
-        size = data.ortho_scale / 2
-    else:
-        sensor = data.sensor_height if fit == "VERTICAL" else data.sensor_width
-        size = sensor / 2 / data.lens
-    if horizontal:
-        half_w, half_h = size, size * height / width
-    else:
-        half_h, half_w = size, size * width / height
-    larger = 2 * max(half_w, half_h)
-    return half_w, half_h, data.shift_x * larger, data.shift_y * larger, ortho
-
-
-def tiles_camera_check() -> dict[str, Any]:
-    """Compile the batch's custom camera on a throwaway camera and render one 16x16 frame through it (``visualenv info``).
-
-    Raises what a batch would raise when this Blender cannot (no OSL, no ``oslquery``).
-    """
-    _osl_modules_on_path()
-    data = bpy.data.cameras.new("visualenv-tiles-probe")
-    camera = bpy.data.objects.new("visualenv-tiles-probe", data)
-    scene = bpy.data.scenes.new("visualenv-tiles-probe")
-    try:
-        scene.collection.objects.link(camera)
-        scene.camera = camera
-        scene.render.engine = "CYCLES"
-        scene.render.resolution_x = scene.render.resolution_y = 16
-        scene.cycles.samples = 1
-        data.type, data.custom_mode, data.custom_shader = "CUSTOM", "INTERNAL", _tiles_text()
-        _compile(camera)
-        bpy.ops.render.render(scene=scene.name)
-        return {"available": True}
-    finally:
-        bpy.data.scenes.remove(scene)
-        bpy.data.objects.remove(camera)
-        bpy.data.cameras.remove(data)
-
-
-def _tiles_text(turning: int = 0) -> Any:
-    """The tiles shader's text: TILES_OSL, or for a camera that turns, :func:`turning_source` for `turning` envs."""
-    name = f"{TURNING_NAME}{turning}.osl" if turning else "visualenv_tiles.osl"
-    source = turning_source(turning) if turning else TILES_OSL
-    text = bpy.data.texts.get(name)
-    if text is None or text.as_string() != source:
-        text = text or bpy.data.texts.new(name)
-        text.clear()
-        text.write(source)
-    return text
-
-
-def _compile(camera: Any) -> None:
-    """Compile the custom camera's shader (Cycles does it in an operator on the active object)."""
-    import cycles.osl  # Blender's Cycles add-on
-
-    messages: list[str] = []
-    ok = cycles.osl.update_custom_camera_shader(camera.data, lambda kind, message: messages.append(message))
-    if not ok:
-        raise RuntimeError("Cycles could not compile the batch's custom camera shader: " + "; ".join(messages))

@@ -7,7 +7,7 @@ which costs about as much as the render itself at 100x100 (``visualenv bench --r
 against the default; docs/performance.md).
 
 A render engine, however, can read its own result while it renders. This
-module wraps Cycles' ``RenderEngine.render`` so that, when a renderer has armed
+module wraps Cycles' ``RenderEngine.render`` (:func:`~visualenv.compat.blender.wrap_cycles_render`) so that, when a renderer has armed
 a :class:`Capture`, the engine's Combined pass (linear, scene-referred RGBA) is
 copied with ``foreach_get`` before Blender moves on (its conversion's cost per size and thread count:
 ``benchmarks/capture_conversion.py``). The wrapper
@@ -26,6 +26,7 @@ from typing import Any, Callable
 
 import numpy as np
 
+from visualenv.compat.blender import wrap_cycles_render
 from visualenv.errors import RenderError
 from visualenv.render.pixels import LUMA_601
 
@@ -37,29 +38,17 @@ _installed: bool | None = None
 
 
 def install() -> bool:
-    """Wrap Cycles' render method once; False when Cycles is not available in this Blender."""
+    """Have Cycles' render method copy the armed capture's pass, once; False when Cycles is not available in this Blender."""
     global _installed
-    if _installed is not None:
-        return _installed
-    try:
-        import cycles  # Blender's bundled add-on, importable once bpy is
+    if _installed is None:
+        _installed = wrap_cycles_render(_copy_to_armed)
+    return _installed
 
-        engine_class = cycles.CyclesRender
-    except (ImportError, AttributeError):
-        _installed = False
-        return False
-    if not getattr(engine_class.render, "_visualenv_capture", False):
-        original = engine_class.render
 
-        def render(self: Any, depsgraph: Any) -> None:
-            original(self, depsgraph)
-            if _armed is not None:
-                _armed._copy_from(self.get_result())
-
-        render._visualenv_capture = True  # type: ignore[attr-defined]
-        engine_class.render = render
-    _installed = True
-    return True
+def _copy_to_armed(engine: Any) -> None:
+    """At the end of each Cycles render: the Combined pass into the capture a renderer armed, if any."""
+    if _armed is not None:
+        _armed._copy_from(engine.get_result())
 
 
 class Capture:
@@ -152,15 +141,15 @@ class Capture:
 
     def rgb(self) -> np.ndarray:
         """(H, W, 3) sRGB bytes, as Blender's 'Standard' view transform writes them."""
-        return self._convert(3, lambda rows: np.take(_SRGB, self._quantised(65535, rows)[:, :, :3]))
+        return self._convert(3, lambda rows: np.take(SRGB_TABLE, self._quantised(65535, rows)[:, :, :3]))
 
     def grayscale(self) -> np.ndarray:
         """(H, W, 1) BT.601 luma of the sRGB bytes: the same bytes as ``to_grayscale(rgb())``, in one pass."""
         def rows_to_bytes(rows: slice) -> np.ndarray:
             levels = self._quantised(65535, rows)
-            luma = np.take(_LUMA[0], levels[:, :, 0])
-            luma += np.take(_LUMA[1], levels[:, :, 1])
-            luma += np.take(_LUMA[2], levels[:, :, 2])
+            luma = np.take(LUMA_TABLES[0], levels[:, :, 0])
+            luma += np.take(LUMA_TABLES[1], levels[:, :, 1])
+            luma += np.take(LUMA_TABLES[2], levels[:, :, 2])
             luma *= np.float32(0.001)
             return luma.astype(np.uint8)[:, :, None]
         return self._convert(1, rows_to_bytes)
@@ -190,7 +179,7 @@ def _srgb_table(size: int = 65536) -> np.ndarray:
 #: sRGB bytes for linear values quantised to 16 bits: a table lookup is faster than evaluating
 #: the power function per pixel (``visualenv bench``'s time outside the render call shows the
 #: conversion), and agrees with it except at exact rounding ties
-_SRGB = _srgb_table()
+SRGB_TABLE = _srgb_table()
 
 
 def _luma_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -200,9 +189,10 @@ def _luma_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     exactly: the sum is an integer plus 0.5, at least 0.0005 from the next integer after scaling,
     far beyond float32's rounding error at these magnitudes.
     """
-    tables = [_SRGB.astype(np.float32) * np.float32(weight) for weight in LUMA_601]
+    tables = [SRGB_TABLE.astype(np.float32) * np.float32(weight) for weight in LUMA_601]
     tables[0] += np.float32(500.5)
     return tables[0], tables[1], tables[2]
 
 
-_LUMA = _luma_tables()
+#: the BT.601 luma tables :meth:`Capture.grayscale` sums (:func:`_luma_tables`)
+LUMA_TABLES = _luma_tables()

@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from visualenv.compat.blender import cached_kernels, cycles_addon, use_cached_kernels
 from visualenv.render.base import CYCLES_BACKENDS as BACKENDS
 
 NVIDIA = ("CUDA", "OPTIX")
@@ -32,7 +33,7 @@ class KernelFacts:
     """What decides whether the first GPU render compiles kernels (gathered by :func:`kernel_facts`)."""
 
     backend: str
-    shipped_archs: tuple[str, ...]  # CUDA architectures with a binary in bpy (e.g. 'sm_75')
+    shipped_archs: tuple[str, ...]  # CUDA architectures with a binary in bpy or compiled ahead (compile-kernels), e.g. 'sm_75'
     gpu_archs: tuple[str, ...]  # this machine's NVIDIA GPUs (e.g. 'sm_90'); empty if unknown
     caches: tuple[tuple[str, bool], ...]  # (folder, whether it holds anything)
 
@@ -61,16 +62,12 @@ def compile_notice(facts: KernelFacts) -> str | None:
 
 def cycles_lib() -> Path | None:
     """bpy's folder of Cycles kernel binaries (found without importing bpy)."""
-    import importlib.util
-
-    spec = importlib.util.find_spec("bpy")
-    if spec is None or spec.origin is None:
-        return None
-    found = sorted(Path(spec.origin).resolve().parent.glob("*/scripts/addons_core/cycles/lib"))
-    return found[0] if found else None
+    addon = cycles_addon()
+    return addon / "lib" if addon is not None else None
 
 
 def shipped_cuda_archs(lib: Path | None = None) -> tuple[str, ...]:
+    """The CUDA architectures bpy ships a binary for (``kernel_sm_XY.cubin.zst``)."""
     lib = lib or cycles_lib()
     if lib is None:
         return ()
@@ -97,7 +94,9 @@ def kernel_caches() -> tuple[tuple[str, bool], ...]:
 
 
 def kernel_facts(backend: str) -> KernelFacts:
-    return KernelFacts(backend, shipped_cuda_archs(), nvidia_archs() if backend in NVIDIA else (), kernel_caches())
+    """What decides whether the first render on `backend` compiles kernels: binaries shipped or compiled ahead, GPUs, caches."""
+    archs = tuple(sorted({*shipped_cuda_archs(), *cached_kernels()}))
+    return KernelFacts(backend, archs, nvidia_archs() if backend in NVIDIA else (), kernel_caches())
 
 
 _gpu_cache: str | None | bool = False  # False: not probed yet
@@ -183,6 +182,7 @@ def warm_gpu() -> dict[str, Any]:
     backend = detect_gpu()
     if backend is None:
         return {"warmed": False, "reason": "no Cycles GPU device"}
+    use_cached_kernels()
     notice = compile_notice(kernel_facts(backend))
     if notice:
         print(notice, file=sys.stderr, flush=True)

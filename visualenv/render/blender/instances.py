@@ -18,8 +18,9 @@ rotation are its row of every env's ``xpos`` and ``xquat``, handed over as two
 ``(N, nbody, ...)`` arrays, so a batch's pose writing is a few numpy
 operations and one ``foreach_set`` per geom, whatever N. The matrices are
 composed in float32 as Blender composes an object's (its quaternion normalised
-in float32, ``mul_m4_m4m4``'s order of sums, the anchor's place included), so
-an instance stands exactly where the copied object stood: the same pixels.
+in float32, ``mul_m4_m4m4``'s order of sums, the anchor's place included:
+:mod:`visualenv.compat.blender`), so an instance stands exactly where the
+copied object stood: the same pixels.
 
 An env's visibility is its point's selection (a hidden instance is left out),
 and a bound colour an instance attribute that the mesh's own materials read
@@ -54,8 +55,10 @@ from typing import Any, Callable, Collection, Iterable, Mapping, Sequence
 import bpy
 import numpy as np
 
+from visualenv.compat.blender import basis_matrices, check_bpy, mul_m4_m4m4, quat_to_mat3
 from visualenv.render.base import BindingTarget
 from visualenv.render.blender.materials import color_sockets
+from visualenv.render.blender.scene import with_ancestors
 
 #: the bindable properties the instanced path computes; any other binding keeps its object a copy
 COMPUTED = frozenset({"location", "rotation", "scale", "visible", "color"})
@@ -118,7 +121,7 @@ def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects:
     copied_ptrs = {o.as_pointer() for o in copied}
 
     def dynamic(obj: Any) -> bool:
-        return any(o.as_pointer() in bound for o in _chain(obj))
+        return any(o.as_pointer() in bound for o in with_ancestors(obj))
 
     candidates = {o.as_pointer(): o for o in copied if _computable(o, bound, aimed_ptrs, posed)
                   or (o.type == "CAMERA" and not dynamic(o) and o.as_pointer() not in aimed_ptrs)}
@@ -130,13 +133,6 @@ def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects:
                 del candidates[ptr]
                 changed = True
     return set(candidates)
-
-
-def _chain(obj: Any, anchor: Any = None) -> Iterable[Any]:
-    """The object and its ancestors, up to (not including) `anchor`."""
-    while obj is not None and obj != anchor:
-        yield obj
-        obj = obj.parent
 
 
 @dataclass
@@ -177,6 +173,7 @@ class InstancedCopies:
                  realize_static: bool = False) -> None:
         """`bodies`: the MuJoCo body index of each object (by pointer) that takes a body's pose (:meth:`write`'s `poses`).
         `realize_static`: whether the anchors stay where they are built, so static meshes may be realized."""
+        check_bpy("copy of Blender's matrix arithmetic")
         self.num_envs = num_envs
         self._realize_static = realize_static
         bodies = bodies or {}
@@ -190,7 +187,7 @@ class InstancedCopies:
         self.size = start
         order: list[Any] = []  # every removed object and its ancestors, parents first
         for obj in originals:
-            for o in reversed(list(_chain(obj, anchor))):
+            for o in reversed(list(with_ancestors(obj, anchor))):
                 if o not in order:
                     order.append(o)
         self._index = index = {o.as_pointer(): i for i, o in enumerate(order)}  # node of each object, by pointer
@@ -223,7 +220,7 @@ class InstancedCopies:
 
     def _instancer(self, collection: Any, obj: Any, node: int, anchor: Any) -> _Instancer:
         """A mesh of N points under a Geometry Nodes modifier that instances `obj` on each, posed by its transform attribute."""
-        chain = list(_chain(obj, anchor))
+        chain = list(with_ancestors(obj, anchor))
         visible = [self._nodes[node].slices["visible"]] if "visible" in self._nodes[node].slices else []
         color = self._nodes[node].slices.get("color")
         for ancestor in chain[1:]:
@@ -271,7 +268,7 @@ class InstancedCopies:
                 node.world = None
         bases: dict[int, np.ndarray] = {}
         if poses is not None and self._posed:  # every body's basis for every env: a few numpy operations for all of them
-            rotations = _quaternion_matrices(poses[1][:, self._pose_columns].reshape(-1, 4)).reshape(n, len(self._posed), 3, 3)
+            rotations = quat_to_mat3(poses[1][:, self._pose_columns].reshape(-1, 4)).reshape(n, len(self._posed), 3, 3)
             locations = poses[0][:, self._pose_columns].astype(np.float32)
             for j, i in enumerate(self._posed):
                 basis = np.zeros((n, 4, 4), dtype=np.float32)
@@ -292,7 +289,7 @@ class InstancedCopies:
                 world[:, :3, 3] += anchors
             else:
                 parent = anchors if node.parent is None else worlds[node.parent]
-                world = _mul(parent if node.parent_inverse is None else _mul(parent, node.parent_inverse), basis)
+                world = mul_m4_m4m4(parent if node.parent_inverse is None else mul_m4_m4m4(parent, node.parent_inverse), basis)
             worlds.append(world)
             if node.static:
                 node.world = world
@@ -325,53 +322,18 @@ def _matrix(m: Any) -> np.ndarray:
     return np.array([list(row) for row in m], dtype=np.float32)
 
 
-def _mul(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """``a @ b`` of 4x4 float32 matrices (stacks broadcast), summed as Blender's ``mul_m4_m4m4`` sums (its SSE order):
-    each world matrix rounds as Blender's own would, so an instance stands where the copied object stood, to the bit."""
-    terms = a[..., :, :, None] * b[..., None, :, :]  # [..., i, k, j] = a[i, k] * b[k, j]
-    return (terms[..., 0, :] + terms[..., 1, :]) + (terms[..., 2, :] + terms[..., 3, :])
-
-
 def _basis(node: _Node, values: np.ndarray, n: int) -> np.ndarray:
-    """Each env's ``matrix_basis`` of the node: translation @ rotation (Euler XYZ or quaternion) @ scale, ``(N, 4, 4)``.
-    In float32 from float32 values, as Blender computes it from an object's (float32) properties (``BKE_object_to_mat4``)."""
+    """Each env's ``matrix_basis`` of the node, ``(N, 4, 4)``, from its fixed properties and its bindings' values
+    (float32, as Blender keeps an object's properties), composed as Blender composes it (:func:`basis_matrices`)."""
     def column(prop: str, fixed: np.ndarray) -> np.ndarray:
         part = node.slices.get(prop)
         if part is None:
             return np.broadcast_to(fixed.astype(np.float32), (n, fixed.size))
         return np.broadcast_to(values[:, part].astype(np.float32), (n, 3))  # a scale of one value scales every axis
 
-    out = np.zeros((n, 4, 4), dtype=np.float32)
-    if node.rotation.size == 4:  # quaternion mode: nothing binds its rotation (_computable)
-        out[:, :3, :3] = _quaternion_matrices(node.rotation[None])
-    else:  # Blender's eulO_to_mat3 for XYZ: in double from the float angles
-        angles = column("rotation", node.rotation).astype(np.float64)
-        ci, cj, ch = np.cos(angles).T
-        si, sj, sh = np.sin(angles).T
-        cc, cs, sc, ss = ci * ch, ci * sh, si * ch, si * sh
-        out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = cj * ch, sj * sc - cs, sj * cc + ss
-        out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = cj * sh, sj * ss + cc, sj * cs - sc
-        out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -sj, cj * si, cj * ci
-    out[:, :3, :3] *= column("scale", node.scale)[:, None, :]
-    out[:, :3, 3] = column("location", node.location)
-    out[:, 3, 3] = 1.0
-    return out
-
-
-def _quaternion_matrices(quats: np.ndarray) -> np.ndarray:
-    """Rotation matrices ``(M, 3, 3)`` of quaternions ``(M, 4)`` (w, x, y, z, MuJoCo's and Blender's order) as Blender
-    makes them from an object's float32 quaternion: normalised in float32, then its ``quat_to_mat3`` in double."""
-    q = quats.astype(np.float32)
-    dot = ((q[:, 0] * q[:, 0] + q[:, 1] * q[:, 1]) + q[:, 2] * q[:, 2]) + q[:, 3] * q[:, 3]
-    length = np.sqrt(dot)
-    q = q * (np.float32(1.0) / np.where(length == 0, np.float32(1.0), length))[:, None]
-    q0, q1, q2, q3 = (np.sqrt(2.0) * q.astype(np.float64)).T
-    qda, qdb, qdc, qaa, qab, qac, qbb, qbc, qcc = q0 * q1, q0 * q2, q0 * q3, q1 * q1, q1 * q2, q1 * q3, q2 * q2, q2 * q3, q3 * q3
-    out = np.empty((len(q), 3, 3))
-    out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = 1.0 - qbb - qcc, -qdc + qab, qdb + qac
-    out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = qdc + qab, 1.0 - qaa - qcc, -qda + qbc
-    out[:, 2, 0], out[:, 2, 1], out[:, 2, 2] = -qdb + qac, qda + qbc, 1.0 - qaa - qbb
-    return out.astype(np.float32)
+    # quaternion mode: nothing binds its rotation (_computable)
+    rotation = node.rotation[None] if node.rotation.size == 4 else column("rotation", node.rotation)
+    return basis_matrices(column("location", node.location), rotation, column("scale", node.scale))
 
 
 def _realizable(obj: Any, num_envs: int) -> bool:

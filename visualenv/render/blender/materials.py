@@ -36,8 +36,8 @@ def _principled(material: Any) -> Any:
     return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None) if material.node_tree else None
 
 
-def _ensure_nodes(mat: Any) -> None:
-    """Blender 5.0 gives every new material a node tree; older versions need use_nodes."""
+def ensure_node_tree(mat: Any) -> None:
+    """Give a new material its node tree: Blender 5.0 gives every new material one; older versions need use_nodes."""
     if mat.node_tree is None:  # pragma: no cover - Blender < 5
         mat.use_nodes = True
 
@@ -47,7 +47,7 @@ def make_material(
 ) -> Any:
     """A new material for `spec`; `path` locates the material in the spec (for errors)."""
     mat = track(bpy.data.materials.new(name))
-    _ensure_nodes(mat)
+    ensure_node_tree(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     bsdf = _principled(mat)
     if bsdf is None:
@@ -243,7 +243,7 @@ def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir:
     """
     world = track(bpy.data.worlds.new(name))
     tint = rgba(spec.tint())
-    _background(world, tint, spec.strength)
+    set_background(world, tint, spec.strength)
     if spec.image is None:
         return world
     assert base_dir is not None and source is not None, "an image sky is read relative to the spec"
@@ -334,7 +334,8 @@ def world_writer(world: Any, prop: str) -> Callable[[Sequence[float]], None] | s
     return f"the world takes 'strength', 'rotation' and 'color', not '{prop}'"
 
 
-def _background(world: Any, color: tuple, strength: float) -> None:
+def set_background(world: Any, color: tuple, strength: float) -> None:
+    """Light the world in one colour: its Background node (made, in place of its nodes, if it has none) and its viewport colour."""
     nodes = world.node_tree.nodes
     bg = next((n for n in nodes if n.type == "BACKGROUND"), None)
     if bg is None:
@@ -350,7 +351,7 @@ def _background(world: Any, color: tuple, strength: float) -> None:
 def depth_world(name: str, track: Callable[[Any], Any]) -> Any:
     """White background: a ray that hits nothing is as far as it gets (255)."""
     world = track(bpy.data.worlds.new(name))
-    _background(world, (1.0, 1.0, 1.0, 1.0), 1.0)
+    set_background(world, (1.0, 1.0, 1.0, 1.0), 1.0)
     return world
 
 
@@ -364,7 +365,7 @@ def depth_material(name: str, track: Callable[[Any], Any], *, along_ray: bool = 
     Data node measures from the scene camera alone).
     """
     mat = track(bpy.data.materials.new(name))
-    _ensure_nodes(mat)
+    ensure_node_tree(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")

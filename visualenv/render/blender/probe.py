@@ -12,7 +12,7 @@ import json
 import sys
 from typing import Any
 
-from visualenv.render.blender.batched import tiles_camera_check
+from visualenv.render.blender.tiles_camera import tiles_camera_check
 from visualenv.render.blender.devices import NVIDIA, cycles_devices, gpu_context, kernel_caches, kernel_facts, kernels_to_compile, warm_gpu
 
 

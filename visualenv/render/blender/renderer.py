@@ -6,12 +6,13 @@ import contextlib
 import itertools
 import math
 from dataclasses import dataclass
-from typing import Any, Callable, Iterator, Sequence
+from typing import Any, Callable, Sequence
 
 import bpy
 import numpy as np
 from mathutils import Vector
 
+from visualenv.compat.blender import release_render_result
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, in_file_order
 from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
@@ -22,7 +23,7 @@ from visualenv.render.blender.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
-from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, release_render_result, remove_ids
+from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, Material
@@ -31,7 +32,9 @@ _instances = itertools.count()
 
 
 @dataclass(frozen=True)
-class _View:
+class View:
+    """One camera's render: the camera, its image size, what its pixels hold and the engine settings it renders with."""
+
     key: str
     camera: Any  # bpy Object
     width: int
@@ -147,7 +150,7 @@ class BlenderRenderer(Renderer):
         r.use_file_extension = False
         r.filepath = self._output.path
         self._views = [
-            _View(key, built.objects[v.camera], v.resolution[0], v.resolution[1], v.color, (float(v.depth_range[0]), float(v.depth_range[1])),
+            View(key, built.objects[v.camera], v.resolution[0], v.resolution[1], v.color, (float(v.depth_range[0]), float(v.depth_range[1])),
                   cfg.depth_config(self.obs_config) if v.color == "depth" else SEGMENTATION_CONFIG if v.color == "segmentation" else self.obs_config)
             for key, v in plan.views.items()
         ]
@@ -157,7 +160,7 @@ class BlenderRenderer(Renderer):
         self._view = None
         if view_camera is not None:
             w, h = plan.settings.view.resolution
-            self._view = _View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
+            self._view = View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
         self._overrides: dict[str, tuple[Any, Any]] = {}  # material and world override by render mode
         if any(v.color == "depth" for v in self._views):
             mat, self._set_depth_range, self._set_depth_forward = depth_material(f"{scene.name}-depth", lambda d: d, along_ray=self.DEPTH_ALONG_RAY)
@@ -219,7 +222,7 @@ class BlenderRenderer(Renderer):
         # aimed objects to re-aim after the setters ran: those that move, or whose parents move, or whose target does
         aimed = set(targets) | {t.object for t in plan.bindings if t.property == "look_at"}
         moved = {objects[t.object].as_pointer() for t in plan.bindings if BINDABLES[t.property].moves and not is_world(t.object, objects)}
-        self._aimed = [(objects[name], name) for name in sorted(aimed) if any(o.as_pointer() in moved for o in _with_ancestors(objects[name]))]
+        self._aimed = [(objects[name], name) for name in sorted(aimed) if any(o.as_pointer() in moved for o in with_ancestors(objects[name]))]
         self._targets = targets
         return setters
 
@@ -233,7 +236,7 @@ class BlenderRenderer(Renderer):
             return self._color_setter(name, obj)
         if prop == "texture":
             return self._texture_setter(name, obj)
-        return _SETTERS[prop](obj)
+        return SETTERS[prop](obj)
 
     def _own_material(self, mesh_obj: Any, slot: Any) -> Any:
         """The object's own copy of the slot's material, made once per binding pass (a colour and a texture share it)."""
@@ -347,7 +350,7 @@ class BlenderRenderer(Renderer):
         self.apply(values)
         return self._render(self._view)
 
-    def _render(self, view: _View) -> np.ndarray:
+    def _render(self, view: View) -> np.ndarray:
         scene = self._scene
         if self._camera is not view.camera:
             scene.camera = view.camera
@@ -387,12 +390,12 @@ class BlenderRenderer(Renderer):
             return None
         return self._active_capture.linear()
 
-    def _read_capture(self, view: _View, capture: Capture) -> np.ndarray:
+    def _read_capture(self, view: View, capture: Capture) -> np.ndarray:
         if view.color in ("depth", "segmentation"):
             return capture.raw()
         return capture.rgb() if view.color == "rgb" else capture.grayscale()
 
-    def _read_file(self, view: _View) -> np.ndarray:
+    def _read_file(self, view: View) -> np.ndarray:
         rgb = read_bmp(self._output.path)
         if view.color in ("depth", "segmentation"):
             return first_channel(rgb)
@@ -447,7 +450,7 @@ class BlenderRenderer(Renderer):
         self._overrides = {}
         self._views = []
         scene_ids, self._ids = self._ids, []
-        with contextlib.suppress(ReferenceError, AttributeError, RuntimeError):
+        with contextlib.suppress(ReferenceError, AttributeError, RuntimeError), quiet_stdout():
             # Frees the render engine Cycles keeps for this scene and the last frame Blender
             # keeps for its name, which would otherwise outlive the scene.
             release_render_result(self._scene)
@@ -474,12 +477,6 @@ def write_bindings(values: tuple, last: tuple | None, size: int, setters: list[t
 def is_world(name: str, objects: Any) -> bool:
     """Whether an actor of this name binds the world: it is called World and no object is."""
     return name == WORLD_ACTOR and name not in objects
-
-
-def _with_ancestors(obj: Any) -> Iterator[Any]:
-    while obj is not None:
-        yield obj
-        obj = obj.parent
 
 
 def _set_location(obj: Any) -> Callable[[tuple], None]:
@@ -530,7 +527,8 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 #: setters of the bindable properties that need only the object; look_at and color need the renderer's state
 #: (BlenderRenderer._setter). Together they cover visualenv.spec.bindables.BINDABLES (tests/test_bindables.py checks).
 SETTERS_WITH_STATE = ("look_at", "color", "texture")
-_SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
+#: the setter maker of each bindable property that needs only the object
+SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
     "location": _set_location, "rotation": _set_rotation, "scale": _set_scale,
     "visible": _set_visible, "strength": _set_strength, "lens": _set_lens,
 }

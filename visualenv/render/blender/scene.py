@@ -15,31 +15,27 @@ from __future__ import annotations
 
 import ctypes
 import functools
-import itertools
 import math
 import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import bmesh
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.compat.blender import sort_faces
+from visualenv.compat.blender import reusable_scene_name, sort_faces
 from visualenv.render.blender.blendfile import BlendReadError
 from visualenv.render.blender import blendfile
 from visualenv.render.blender.autorun import turn_autorun_off
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
-from visualenv.render.blender.readback import quiet_stdout
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
 from visualenv.spec.source import SourceMap
-
-_scene_counter = itertools.count()
 
 #: bpy.data collections whose new datablocks a renderer owns
 ID_COLLECTIONS = (
@@ -88,31 +84,6 @@ def remove_ids(ids: list[Any]) -> None:
     release_freed_memory()
 
 
-#: the side of the frame :func:`release_render_result` renders in place of a scene's last one
-RELEASE_SIZE = 4
-
-
-def release_render_result(scene: Any) -> None:
-    """Render the scene once more at 4x4 pixels, with nothing in it, before it is removed.
-
-    Why: Blender keeps one render per scene name, holding its last frame's buffers, and
-    does not free it when the scene is removed. Each env made and closed in one process
-    left its last frame behind (a 400x400 view or a batch's tiles image: 2.6 MB), the
-    memory growth that ``malloc_trim`` could not return. The next render of a scene
-    frees the previous frame, so a 4x4 frame of an empty scene is what stays instead.
-    """
-    for obj in scene.objects:  # nothing to synchronise: the frame is never read
-        obj.hide_render = True
-    scene.render.use_persistent_data = False  # frees the engine Cycles kept for this scene
-    scene.render.resolution_x = scene.render.resolution_y = RELEASE_SIZE
-    scene.render.resolution_percentage = 100
-    if scene.render.engine == "CYCLES":
-        scene.cycles.samples = 1
-        scene.cycles.use_denoising = False
-    with quiet_stdout():
-        bpy.ops.render.render(scene=scene.name)
-
-
 #: glibc's mallopt parameter for the size from which an allocation gets its own mapping, and the size set here
 M_MMAP_THRESHOLD, MMAP_THRESHOLD = -3, 256 * 1024
 
@@ -123,7 +94,7 @@ def release_freed_memory() -> None:
     Why: glibc keeps freed memory in the arenas of Blender's render threads, so each env or batch made
     and closed in one process left its RSS higher: twenty 16-env Goalie batches (100x100) made and closed
     in one process grew it by 68 MB. With this and :func:`returnable_large_buffers`, 7-40 MB; the rest
-    was the scenes' last frames (:func:`release_render_result`): with those released, 0.7-1.5 MB.
+    was the scenes' last frames (:func:`visualenv.compat.blender.release_render_result`): with those released, 0.7-1.5 MB.
     """
     libc = _glibc()
     if libc is not None:
@@ -182,8 +153,9 @@ def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) 
 def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
     if spec.file:
         scene, objects = load_blend(spec.file, base_dir=base_dir, source=source, scene_name=spec.file_scene)
+        scene.name = reusable_scene_name()
     else:
-        scene, objects = bpy.data.scenes.new(f"{prefix}-{next(_scene_counter)}"), {}
+        scene, objects = bpy.data.scenes.new(reusable_scene_name()), {}
     collection = bpy.data.collections.new(f"{prefix}-objects")
     scene.collection.children.link(collection)
     built = BuiltScene(scene, collection, objects)
@@ -349,6 +321,13 @@ def aim(obj: Any, target: Any) -> None:
         return
     world = direction.to_track_quat("-Z", "Y")
     obj.rotation_euler = (parent.to_quaternion().inverted() @ world).to_euler("XYZ")
+
+
+def with_ancestors(obj: Any, stop: Any = None) -> Iterator[Any]:
+    """The object, its parent, its parent's parent... up to (not including) `stop`, or to the root."""
+    while obj is not None and obj != stop:
+        yield obj
+        obj = obj.parent
 
 
 def _parent_frame(obj: Any) -> Matrix:

@@ -24,7 +24,7 @@ import bpy
 
 from visualenv.errors import SpecError
 from visualenv.render.base import RenderPlan
-from visualenv.render.blender.materials import _background, _ensure_nodes
+from visualenv.render.blender.materials import ensure_node_tree, set_background
 from visualenv.render.blender.scene import BuiltScene
 from visualenv.render.blender.settings import EngineConfig
 from visualenv.spec.models import MeshObject, PrimitiveObject
@@ -70,7 +70,7 @@ def assign_ids(built: BuiltScene, plan: RenderPlan) -> dict[str, int]:
 def segmentation_material(name: str, track: Callable[[Any], Any]) -> Any:
     """An emission material of ``pass_index / 255``: the override of a segmentation render."""
     mat = track(bpy.data.materials.new(name))
-    _ensure_nodes(mat)
+    ensure_node_tree(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     nodes.clear()
     out = nodes.new("ShaderNodeOutputMaterial")
@@ -90,7 +90,7 @@ def segmentation_material(name: str, track: Callable[[Any], Any]) -> Any:
 def segmentation_world(name: str, track: Callable[[Any], Any]) -> Any:
     """Black, strength 0: a ray that hits nothing is id 0."""
     world = track(bpy.data.worlds.new(name))
-    _background(world, (0.0, 0.0, 0.0, 1.0), 0.0)
+    set_background(world, (0.0, 0.0, 0.0, 1.0), 0.0)
     return world
 
 

@@ -29,6 +29,7 @@ from typing import Any
 
 import bpy
 
+from visualenv.compat.blender import use_cached_kernels
 from visualenv.render.blender.devices import compile_notice, detect_gpu, kernel_facts
 from visualenv.spec.models import RenderSettings
 
@@ -105,6 +106,7 @@ def _compile_notice_once(backend: str) -> None:
     if "compile" in _warned:
         return
     _warned.add("compile")
+    use_cached_kernels()  # what `visualenv compile-kernels` compiled ahead, before Cycles loads its kernels
     notice = compile_notice(kernel_facts(backend))
     if notice:
         print(notice, file=sys.stderr, flush=True)
@@ -208,8 +210,8 @@ def apply_config(scene: Any, config: EngineConfig, previous: EngineConfig | None
     def changed(field: str) -> bool:
         return previous is None or getattr(previous, field) != getattr(config, field)
 
-    if changed("engine"):
-        scene.render.engine = ENGINE_IDS[config.engine]
+    if changed("engine") and scene.render.engine != ENGINE_IDS[config.engine]:
+        scene.render.engine = ENGINE_IDS[config.engine]  # any setting of it frees every scene's persistent Cycles data
     c = scene.cycles
     if changed("samples"):
         c.samples = config.samples

@@ -1,0 +1,151 @@
+"""The batch's copies of the scene: env k's objects under an anchor at k's place on a grid of copies.
+
+Copy k holds linked duplicates (sharing meshes and materials) of what the batch cannot draw as instances
+(:mod:`instances`), under an anchor empty at k's grid place, farther from the next copy than any camera sees
+(:func:`copy_spacing`). Sun lights are directional: one serves every copy, except a sun bound to the state:
+each copy has its own, which lights and shadows only that copy's objects (Cycles' light linking, :func:`link_suns`).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import bpy
+from mathutils import Matrix, Vector
+
+from visualenv.render.blender.materials import SKYBOX
+from visualenv.render.blender.scene import BuiltScene, aim
+
+
+class Copy:
+    """One env's objects: its anchor, its binding setters and what they last wrote."""
+
+    def __init__(self, anchor: Any, objects: dict[str, Any]) -> None:
+        self.anchor = anchor  # None: nothing of this env is copied (its objects are instances), as with a camera that does not move
+        self.objects = objects
+        self.setters: list = []
+        self.aimed: list = []
+        self.targets: dict[str, Any] = {}
+        self.last: tuple | None = None
+
+
+def grid_offset(k: int, cols: int, spacing: float) -> Vector:
+    """Where copy k's anchor stands: column ``k % cols``, row ``k // cols`` of a grid `spacing` apart."""
+    return Vector(((k % cols) * spacing, (k // cols) * spacing, 0.0))
+
+
+def copy_spacing(scene: Any, reach: float) -> float:
+    """How far apart copies stand: farther than any camera sees (`reach`, the cameras' farthest clip), plus the scene's size."""
+    size = 0.0
+    for obj in scene.objects:
+        if is_sun(obj):
+            continue
+        corners = [obj.matrix_world @ Vector(c) for c in obj.bound_box] or [obj.matrix_world.translation]
+        size = max(size, *(c.length for c in corners))
+    return float(reach + 2 * size + 10.0)
+
+
+def make_copy(k: int, built: BuiltScene, originals: list[Any], places: dict[int, Matrix], offset: Vector, *,
+              removed: set[int], own_suns: set[int]) -> Copy:
+    """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at `offset`, k's grid place.
+
+    An object whose parent is not copied with it hangs from the anchor at its own world place (`places`).
+    Objects drawn as instances (pointers in `removed`) are not copied: a copy with nothing else to copy has no anchor
+    (None) and no objects of its own. A sun of each copy's own (in `own_suns`) gets its own light data and lights
+    only its copy (:func:`link_suns`).
+    """
+    scene = built.scene
+    if k and all(o.as_pointer() in removed for o in originals):
+        return Copy(None, dict(built.objects))
+    collection = bpy.data.collections.new(f"{scene.name}-env{k}")
+    scene.collection.children.link(collection)
+    anchor = bpy.data.objects.new(f"{scene.name}-anchor{k}", None)
+    collection.objects.link(anchor)
+    anchor.location = offset
+    if k == 0:
+        mapping = {o.as_pointer(): o for o in originals}
+    else:
+        mapping = {}
+        for original in originals:
+            if original.as_pointer() in removed:
+                continue  # drawn by its instancer
+            duplicate = original.copy()
+            if original.as_pointer() in own_suns:
+                duplicate.data = original.data.copy()  # its own strength and colour
+            collection.objects.link(duplicate)
+            mapping[original.as_pointer()] = duplicate
+        for duplicate in mapping.values():
+            remap_references(duplicate, mapping)
+    for original in originals:
+        obj = mapping.get(original.as_pointer())
+        if obj is None:
+            continue
+        if original.parent is None or original.parent.as_pointer() not in mapping:
+            obj.parent = anchor
+            obj.matrix_parent_inverse = Matrix.Identity(4)
+            obj.matrix_basis = places[original.as_pointer()]
+    if own_suns:
+        link_suns(k, scene, originals, mapping, own_suns)
+    objects = {name: mapping.get(obj.as_pointer(), obj) for name, obj in built.objects.items()}
+    return Copy(anchor, objects)
+
+def link_suns(k: int, scene: Any, originals: list[Any], mapping: dict[int, Any], own_suns: set[int]) -> None:
+    """Copy k's own suns light and shadow only copy k's objects (a receiver and blocker collection of them)."""
+    receivers = bpy.data.collections.new(f"{scene.name}-lit{k}")
+    suns = []
+    for original in originals:
+        obj = mapping[original.as_pointer()]
+        if original.as_pointer() in own_suns:
+            suns.append(obj)
+        else:
+            receivers.objects.link(obj)
+    for sun in suns:
+        sun.light_linking.receiver_collection = receivers
+        sun.light_linking.blocker_collection = receivers
+
+
+def aim_copy(copy: Copy) -> None:
+    """Aim a copy's aimed objects at their targets in the copy's own frame (a look_at point is where it is in one env):
+    the anchor's place, a grid offset, must not turn them. Aimed with the anchor at the origin (it only translates), the
+    rotations are those of one env to the bit, where aiming at the offset target rounds at the offset's magnitude."""
+    if not copy.aimed:
+        return
+    place = copy.anchor.matrix_basis.copy()
+    copy.anchor.matrix_basis = Matrix.Identity(4)
+    try:
+        for obj, name in copy.aimed:
+            aim(obj, copy.targets[name])
+    finally:
+        copy.anchor.matrix_basis = place
+
+
+def one_colour(world: Any) -> bool:
+    """Whether a world lights in one colour from every direction: no texture node (an image or a procedural sky) in
+    its shader, but a model's skybox (seen by camera rays only)."""
+    tree = getattr(world, "node_tree", None) if world is not None else None
+    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") and node.name != SKYBOX for node in tree.nodes)
+
+
+def is_sun(obj: Any) -> bool:
+    """A sun light: directional, so one serves every copy unless the state binds it."""
+    return bool(obj.type == "LIGHT" and obj.data.type == "SUN")
+
+
+def hidden(obj: Any) -> bool:
+    """An object no render shows: hidden itself, or in hidden collections only."""
+    return bool(obj.users_collection) and all(c.hide_render for c in obj.users_collection)
+
+
+def remap_references(obj: Any, mapping: dict[int, Any]) -> None:
+    """Point a duplicate's parent, constraint targets and modifier objects at the duplicates of its own copy."""
+    def swap(value: Any) -> Any:
+        return mapping.get(value.as_pointer(), value) if value is not None else None
+
+    obj.parent = swap(obj.parent) if obj.parent is not None else None
+    for constraint in obj.constraints:
+        if hasattr(constraint, "target"):
+            constraint.target = swap(constraint.target)
+    for modifier in obj.modifiers:
+        for attribute in ("object", "offset_object", "mirror_object", "target"):
+            if hasattr(modifier, attribute) and isinstance(getattr(modifier, attribute), bpy.types.Object):
+                setattr(modifier, attribute, swap(getattr(modifier, attribute)))
