@@ -18,6 +18,7 @@ import click
 from click.core import ParameterSource
 import numpy as np
 
+from visualenv.compat.glibc import apply_policy
 from visualenv.errors import ConfigError, SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
@@ -56,6 +57,7 @@ def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
 @click.version_option(package_name="visualenv")
 def main() -> None:
     """Compile declarative specs into Gymnasium environments rendered by Blender."""
+    apply_policy()  # a process visualenv owns: freed memory kept for the next render call (visualenv.compat.glibc)
 
 
 @main.command()

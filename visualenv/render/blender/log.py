@@ -12,13 +12,14 @@ printed back unchanged).
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import io
 import os
 import sys
 import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
+
+from visualenv.compat.glibc import flush_c_streams
 
 #: at most this many of Blender's lines are kept with an error
 MAX_LINES = 20
@@ -35,8 +36,7 @@ def _flush_all() -> None:
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(AttributeError, ValueError, OSError):
             stream.flush()
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        ctypes.CDLL(None).fflush(None)  # C stdio buffers (Blender's printf)
+    flush_c_streams()  # C stdio buffers (Blender's printf)
 
 
 @contextlib.contextmanager
