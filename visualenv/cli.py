@@ -19,6 +19,7 @@ from click.core import ParameterSource
 import numpy as np
 
 from visualenv.compat.glibc import apply_policy
+from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError, SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
@@ -409,6 +410,7 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
               help="render preset of the recorded view (default: the spec's; 'fast' records in seconds)")
 @click.option("--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels")
 @_friendly
+@compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int, record: str | None, view_preset: str | None,
          view_size: int | None) -> None:
     """Run episodes with a random or trained policy; print returns, lengths and success."""
@@ -439,6 +441,7 @@ def play(spec: str, model_path: str | None, algo: str, episodes: int, seed: int,
 @click.option("--write-results", is_flag=True,
               help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made")
 @_friendly
+@compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def eval_command(spec: str, model_path: str, algo: str | None, episodes: int | None, seed: int | None, json_out: str | None,
                  write_results: bool) -> None:
     """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
