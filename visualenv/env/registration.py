@@ -8,9 +8,9 @@ are an error naming both, never one of them silently winning.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
-import re
 from pathlib import Path
 
 import gymnasium as gym
@@ -18,6 +18,7 @@ import gymnasium as gym
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.spec.loader import load_spec
 from visualenv.spec.models import Spec
+from visualenv.spec.source import Position, load_document, read_top_level
 
 NAMESPACE = "visualenv"
 SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
@@ -32,7 +33,6 @@ BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 SPECS_PATH_VARIABLE = "VISUALENV_SPECS_PATH"
 #: ids given to register() in this process, with their files
 _REGISTERED: dict[str, Path] = {}
-_TOP_LEVEL = re.compile(r"^(id|max_steps)\s*[:=]\s*(.*?)\s*$")
 
 
 def spec_dirs() -> list[Path]:
@@ -74,46 +74,41 @@ def _same(a: Path, b: Path) -> bool:
 
 
 def read_header(path: Path) -> tuple[str | None, int | None]:
-    """The top-level ``id`` and ``max_steps`` of a spec file, read line by line (fast: every spec is read on import).
-
-    Only lines that start in column 0 count, and in TOML only those before the first table.
-    """
-    env_id: str | None = None
-    max_steps: int | None = None
+    """The top-level ``id`` and ``max_steps`` of a spec file, without validating it (every spec is read on import):
+    read by the spec layer's own parsers (:func:`visualenv.spec.source.read_top_level`); None for either when absent or
+    not an id or a step count, which loading the spec then reports. Kept per file version: ids are looked up often."""
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        stat = path.stat()
     except OSError:
         return None, None
-    for line in text.splitlines():
-        if path.suffix == ".toml" and line.startswith("["):
-            break
-        m = _TOP_LEVEL.match(line)
-        if not m:
-            continue
-        value = m.group(2).split("#", 1)[0].strip().strip("\"'")
-        if m.group(1) == "id" and env_id is None:
-            env_id = value or None
-        elif m.group(1) == "max_steps" and max_steps is None and value.isdigit():
-            max_steps = int(value)
-    return env_id, max_steps
+    return _header(str(path), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=4096)
+def _header(path: str, mtime_ns: int, size: int) -> tuple[str | None, int | None]:
+    values = read_top_level(path, ("id", "max_steps"))
+    env_id, max_steps = values.get("id"), values.get("max_steps")
+    return (env_id if isinstance(env_id, str) and env_id else None,
+            max_steps if isinstance(max_steps, int) and not isinstance(max_steps, bool) and max_steps > 0 else None)
 
 
 def _duplicate_id(env_id: str, files: list[Path]) -> SpecError:
-    """Two or more files defining one id: named, each at its `id` line."""
+    """Two or more files defining one id: named, each at its `id` (as the loader locates it)."""
     first, *others = files
     problems = []
     for path in others:
-        line = next((i for i, text in enumerate(_lines(path), start=1) if _TOP_LEVEL.match(text) and text.startswith("id")), None)
-        problems.append(Diagnostic(str(path), line, 1 if line else None, "id",
+        where = _id_position(path)
+        problems.append(Diagnostic(str(path), where.line if where else None, where.column if where else None, "id",
                                    f"the id '{env_id}' is also defined by {first}: give one of the two specs another id (e.g. a new -vN)"))
     return SpecError(problems)
 
 
-def _lines(path: Path) -> list[str]:
+def _id_position(path: Path) -> Position | None:
+    """Where the file's `id` key is written (None if the file does not load): an error's location, so read in full."""
     try:
-        return path.read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
-        return []
+        return load_document(path)[1].keys.get(("id",))
+    except SpecError:
+        return None
 
 
 def resolve(target: str | os.PathLike[str]) -> Path:
