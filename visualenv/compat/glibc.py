@@ -96,8 +96,8 @@ def release_free_memory() -> None:
     """Hand the heaps' free memory back to the system (``malloc_trim``); changes no setting.
 
     Why: glibc keeps what Blender's render threads free in their arenas, so each env or batch made and closed in
-    one process left it larger (twenty 16-env Goalie batches grew it by 68 MB; 20 MB with this, and about 1 MB once
-    Blender's last frames were released as well). Called when a renderer removes its scene.
+    one process left it larger (twenty 16-env Goalie batches grew it by 68 MB, 20 MB with this; with Blender's last
+    frames released as well, -6.1 MB: ``benchmarks/env_rounds.py batch 22``). Called when a renderer removes its scene.
     """
     libc = _glibc()
     if libc is not None:
