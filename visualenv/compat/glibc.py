@@ -27,7 +27,6 @@ from __future__ import annotations
 import ctypes
 import functools
 import os
-import platform
 from typing import Any
 
 #: the oldest glibc whose ``glibc.malloc`` tunables match the ``mallopt`` parameters used here
@@ -44,15 +43,11 @@ _applied: bool | None = None
 
 def version() -> tuple[int, int] | None:
     """The glibc this process runs on, as (major, minor); None for another C library."""
-    if platform.system() != "Linux":
-        return None
-    name, text = platform.libc_ver()
-    if name != "glibc":
-        return None
     try:
+        name, text = os.confstr("CS_GNU_LIBC_VERSION").split()  # type: ignore[union-attr]  # "glibc 2.36": the C library loaded
         major, minor = text.split(".")[:2]
-        return int(major), int(minor)
-    except ValueError:
+        return (int(major), int(minor)) if name == "glibc" else None
+    except (AttributeError, ValueError, OSError):  # not glibc (macOS, musl, Windows)
         return None
 
 
