@@ -80,3 +80,27 @@ torch.randn(64, 64) @ torch.randn(64, 64)
 print(mkl.pin())
 """)
     assert late == "False"  # MKL took its mode at its first product: the record says unpinned
+
+
+@pytest.mark.parametrize("command, target", [(["eval", "LunarLanding-v0", "--model", "random", "--episodes", "1"], "evaluate_random"),
+                                             (["play", "LunarLanding-v0", "--episodes", "1"], "play")])
+def test_eval_and_play_run_with_the_variable_set_and_leave_it_as_it_was(command, target, monkeypatch):
+    """The documented route for the processes visualenv starts: the command's work runs with MKL_CBWR=COMPATIBLE (what
+    it loads and starts sees it), and the variable is put back once the command is done."""
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+    from visualenv.errors import VisualEnvError
+    from visualenv.train import evaluation, play
+
+    seen = []
+
+    def record(*args, **kwargs):
+        seen.append(os.environ.get(mkl.VARIABLE))
+        raise VisualEnvError("stopped here")
+
+    monkeypatch.setattr(evaluation if target == "evaluate_random" else play, target, record)
+    monkeypatch.delenv(mkl.VARIABLE, raising=False)
+    result = CliRunner().invoke(main, command)
+    assert "stopped here" in result.output and seen == [mkl.COMPATIBLE], (result.output, seen)
+    assert mkl.VARIABLE not in os.environ
