@@ -148,20 +148,37 @@ def test_a_policy_acts_on_one_torch_thread_without_onednn_and_torch_is_restored(
 
 
 PINNED_FORWARD = """
-import numpy as np, torch
-from stable_baselines3.common.torch_layers import NatureCNN
-from gymnasium import spaces
-from visualenv.train.reproducible import pin_mkl, pinned_inference
-pin_mkl()  # as eval and play do before they load a model, whose construction calls MKL (orthogonal init)
-net = torch.nn.Sequential(NatureCNN(spaces.Box(0, 255, (4, 100, 100), 'uint8'), 512), torch.nn.Linear(512, 2))
-rng = np.random.default_rng(0)  # weights as a policy file brings them: torch's own init draws by the CPU's vector code
-with torch.no_grad():
-    for p in net.parameters():
-        p.copy_(torch.from_numpy(rng.normal(0, 0.05, tuple(p.shape))))
-x = torch.from_numpy(rng.random((1, 4, 100, 100), dtype=np.float32))
-with pinned_inference() as pinned, torch.no_grad():
-    print(pinned, [v.hex() for v in net(x).double().flatten().tolist()])
+import contextlib, sys
+from visualenv.compat import mkl
+# "variable": as `visualenv eval` and `play` pin, MKL_CBWR set before torch loads; "service": as a process visualenv
+# did not start is pinned, by MKL's service call before the model is built (its orthogonal init calls MKL)
+with mkl.compatible_mode() if sys.argv[1] == "variable" else contextlib.nullcontext():
+    import numpy as np, torch
+    from stable_baselines3.common.torch_layers import NatureCNN
+    from gymnasium import spaces
+    from visualenv.train.reproducible import pinned_inference
+    mkl.pin()
+    net = torch.nn.Sequential(NatureCNN(spaces.Box(0, 255, (4, 100, 100), 'uint8'), 512), torch.nn.Linear(512, 2))
+    rng = np.random.default_rng(0)  # weights as a policy file brings them: torch's own init draws by the CPU's vector code
+    with torch.no_grad():
+        for p in net.parameters():
+            p.copy_(torch.from_numpy(rng.normal(0, 0.05, tuple(p.shape))))
+    x = torch.from_numpy(rng.random((1, 4, 100, 100), dtype=np.float32))
+    with pinned_inference() as pinned, torch.no_grad():
+        print(pinned, [v.hex() for v in net(x).double().flatten().tolist()])
 """
+
+
+def pinned_forward(extra: dict, route: str = "service") -> str:
+    """The pinned CNN's output bits in a fresh process, with `extra` in its environment, pinned by `route`."""
+    import os
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k not in ("ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY", "MKL_CBWR")}
+    run = subprocess.run([sys.executable, "-c", PINNED_FORWARD, route], env={**env, **extra}, capture_output=True, text=True, timeout=120)
+    assert run.returncode == 0, run.stderr
+    return run.stdout.strip()
 
 
 @pytest.mark.parametrize("dispatch", [{"ONEDNN_MAX_CPU_ISA": "SSE41"}, {"ATEN_CPU_CAPABILITY": "default"}, {"ONEDNN_MAX_CPU_ISA": "AVX2"}])
@@ -169,19 +186,18 @@ def test_pinned_inference_gives_the_same_bits_whatever_kernels_the_cpu_offers(di
     """The vector code oneDNN and ATen pick (AVX-512, AVX2, SSE) must not reach a pinned policy's actions: the same
     CNN forward pass, run with each dispatch forced, gives the same bits as with none forced."""
     pytest.importorskip("stable_baselines3")
-    import os
-    import subprocess
-    import sys
-
-    def forward(extra: dict) -> str:
-        env = {k: v for k, v in os.environ.items() if k not in ("ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY", "MKL_CBWR")}
-        run = subprocess.run([sys.executable, "-c", PINNED_FORWARD], env={**env, **extra}, capture_output=True, text=True, timeout=120)
-        assert run.returncode == 0, run.stderr
-        return run.stdout.strip()
-
-    plain = forward({})
+    plain = pinned_forward({})
     assert plain.startswith("True ")  # MKL was pinned: nothing had called it yet
-    assert forward(dispatch) == plain
+    assert pinned_forward(dispatch) == plain
+
+
+def test_the_variable_pins_as_the_service_call_does():
+    """`visualenv eval` and `play` pin MKL by MKL_CBWR, set before torch loads (visualenv.compat.mkl): the same bits as
+    the service call's pinning, with a dispatch forced as well."""
+    pytest.importorskip("stable_baselines3")
+    by_variable = pinned_forward({}, "variable")
+    assert by_variable.startswith("True ")
+    assert by_variable == pinned_forward({}, "service") == pinned_forward({"ONEDNN_MAX_CPU_ISA": "SSE41"}, "variable")
 
 
 def test_a_replay_on_another_machine_is_compared_within_the_stated_tolerance():

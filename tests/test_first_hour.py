@@ -132,6 +132,10 @@ def test_the_header_reader_finds_the_top_level_id_and_max_steps_in_yaml_and_toml
     assert registration.read_header(toml_spec) == ("Toml-v0", 30)
     (tmp_path / "c.yaml").write_bytes(b"id: Bytes-v0\n\xff\xfe\n")  # not UTF-8: still read, never a crash on import
     assert registration.read_header(tmp_path / "c.yaml") == ("Bytes-v0", None)
+    (tmp_path / "d.toml").write_text('id = "Broken-v0"\nmax_steps = 9\n[state.x]\ninit = = 0\n')  # what precedes an error is read
+    assert registration.read_header(tmp_path / "d.toml") == ("Broken-v0", 9)
+    (tmp_path / "e.yaml").write_text("id: [Listed-v0]\nmax_steps: true\n")  # neither an id nor a step count
+    assert registration.read_header(tmp_path / "e.yaml") == (None, None)
 
 
 def test_an_unknown_id_says_how_to_register_one():

@@ -18,6 +18,8 @@ import click
 from click.core import ParameterSource
 import numpy as np
 
+from visualenv.compat.glibc import apply_policy
+from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError, SpecError, VisualEnvError
 from visualenv.render.base import READBACKS
 
@@ -62,6 +64,7 @@ def _friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
 @click.version_option(package_name="visualenv")
 def main() -> None:
     """Compile declarative specs into Gymnasium environments rendered by Blender."""
+    apply_policy()  # a process visualenv owns: freed memory kept for the next render call (visualenv.compat.glibc)
 
 
 @main.command()
@@ -414,6 +417,7 @@ def _report(results: dict[str, Any], run_dir: Path) -> None:
               help="render preset of the recorded view (default: the spec's; 'fast' records in seconds)")
 @click.option("--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels")
 @_friendly
+@compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episodes: int, seed: int, record: str | None,
          view_preset: str | None, view_size: int | None) -> None:
     """Run episodes with a random or trained policy; print returns, lengths and success."""
@@ -443,6 +447,7 @@ def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episo
 @click.option("--write-results", is_flag=True,
               help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made")
 @_friendly
+@compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def eval_command(spec: str, model_path: str, trust_pickle: bool, algo: str | None, episodes: int | None, seed: int | None,
                  json_out: str | None, write_results: bool) -> None:
     """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.

@@ -1,2 +1,21 @@
-"""Every use of a dependency's internals or workaround of its behaviour, one module per dependency, each gated on the
-versions it was checked against (and tested to fail loudly when the dependency moves)."""
+"""Every use of a dependency's internals or undocumented behaviour, in one place.
+
+visualenv leans on its dependencies beyond their documented API in a few spots: the C library's allocator,
+MKL's reproducibility mode inside torch, Gymnasium's ``make``, Blender's and Cycles' private calls. Spread
+through the code, such workarounds contradict each other and break silently when a dependency moves; here
+each is found, named and checked. The rule:
+
+* one module per dependency (:mod:`~visualenv.compat.glibc`, :mod:`~visualenv.compat.mkl`,
+  :mod:`~visualenv.compat.gymnasium`, :mod:`~visualenv.compat.blender`), and nothing outside this package
+  reaches a dependency's internals (``tests/test_compat.py`` searches the package for ``ctypes``,
+  ``mallopt``, ``malloc_trim``, frame inspection and MKL's service calls);
+* each module says which versions it was checked against and uses its workaround only on those (elsewhere
+  the documented behaviour, or nothing, with the difference said);
+* each has a test that fails loudly when its dependency moves (a version outside those checked, a symbol or a
+  behaviour gone), so that an upgrade is a decision, not a surprise;
+* the documented mechanism wins wherever one exists (an environment variable, an attribute Gymnasium sets);
+  a workaround says why the documented way cannot do its job.
+
+Nothing here changes a user's process merely because an env was made, stepped or closed: process-wide
+settings are applied by the processes visualenv owns (its CLI commands and the worker processes it starts).
+"""

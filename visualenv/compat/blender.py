@@ -10,7 +10,6 @@ naming the part, when bpy moves.
 - Cycles' render method wrapped, so that its result is copied while the engine still holds it (:mod:`capture`);
 - the arithmetic of Blender's object matrices, to the bit (its SSE order of sums), for numpy-posed instances;
 - Blender's render results, one per scene name, never freed with the scene: scene names reused, a tiny last frame;
-- C stdio flushed (Blender prints with ``printf``);
 - a BMesh's faces put in one order (bmesh's UV sphere lists them in a per-process order, which moved the last bits of
   every sphere's shading from one process to the next);
 - Cycles' CUDA kernels compiled ahead into a cache outside site-packages, and Cycles pointed at it.
@@ -21,8 +20,6 @@ Importing this module does not import bpy (its functions do, where they need it)
 
 from __future__ import annotations
 
-import ctypes
-import contextlib
 import hashlib
 import importlib.metadata
 import importlib.util
@@ -240,15 +237,6 @@ def release_render_result(scene: Any) -> None:
         scene.cycles.samples = 1
         scene.cycles.use_denoising = False
     bpy.ops.render.render(scene=scene.name)
-
-
-# -- C stdio --------------------------------------------------------------------------------------------------------
-
-
-def flush_c_stdio() -> None:
-    """Flush the C library's stdio buffers: Blender and its importers print with ``printf``, which Python's flush does not reach."""
-    with contextlib.suppress(OSError, AttributeError, TypeError):
-        ctypes.CDLL(None).fflush(None)
 
 
 # -- Cycles' CUDA kernels -------------------------------------------------------------------------------------------

@@ -3,12 +3,12 @@
 from __future__ import annotations
 
 import os
-import sys
 from typing import Any
 
 import gymnasium as gym
 from gymnasium.envs.registration import EnvSpec
 
+from visualenv.compat.gymnasium import make_time_limit
 from visualenv.env.registration import ENTRY_POINT, NAMESPACE, VECTOR_ENTRY_POINT, resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.env.wrappers import wrap_observation
@@ -52,7 +52,7 @@ def make(
     (``env.spec.make(render_mode=...)``, as ``check_env`` does).
     """
     if max_episode_steps is None:
-        max_episode_steps = _gymnasium_time_limit()
+        max_episode_steps = make_time_limit()  # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
     check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize,
                        max_episode_steps=max_episode_steps, action_repeat=action_repeat)
     options = RendererOptions.parse(renderer_options)
@@ -67,18 +67,3 @@ def make(
     )
     return wrap_observation(unwrapped, grayscale=grayscale, resize=resize, frame_stack=frame_stack)
 
-
-def _gymnasium_time_limit() -> int | None:
-    """The ``max_episode_steps`` of the TimeLimit wrapper that ``gymnasium.make``, when it is the caller, puts around the env.
-
-    Gymnasium truncates in that wrapper, outside the env, where ``info["outcome"]`` cannot be set, and passes
-    ``max_episode_steps`` to no entry point; the env truncates at the same step itself and says ``"max_steps"``.
-    Read from gymnasium.make's own frame; any other caller (or another Gymnasium's make) gives None.
-    """
-    frame = sys._getframe(2)  # _gymnasium_time_limit <- make <- its caller
-    if frame.f_code is not gym.envs.registration.make.__code__:
-        return None
-    steps = frame.f_locals.get("max_episode_steps")
-    if steps is None:
-        steps = getattr(frame.f_locals.get("env_spec"), "max_episode_steps", None)
-    return steps if isinstance(steps, int) and not isinstance(steps, bool) and steps > 0 else None

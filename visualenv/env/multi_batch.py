@@ -23,6 +23,7 @@ import numpy as np
 from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
+from visualenv.compat.glibc import apply_policy
 from visualenv.env.cores import Share, confine, render_threads, worker_cores
 from visualenv.errors import VisualEnvError, WorkerError
 
@@ -259,6 +260,7 @@ def _picklable(exc: BaseException) -> BaseException:
 
 def _worker(pipe: Any, target: str, size: int, options: dict[str, Any], share: Share | None) -> None:
     """A worker: confined to its cores before Blender starts, then serving its batch's calls until told to close."""
+    apply_policy()  # a process visualenv started: freed memory kept for the next render call
     if share is not None:
         confine(share)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group; the parent decides how to stop

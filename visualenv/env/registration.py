@@ -8,9 +8,9 @@ are an error naming both, never one of them silently winning.
 
 from __future__ import annotations
 
+import functools
 import json
 import os
-import re
 from pathlib import Path
 
 import gymnasium as gym
@@ -18,6 +18,7 @@ import gymnasium as gym
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.spec.loader import load_spec
 from visualenv.spec.models import Spec
+from visualenv.spec.source import Position, load_document, read_top_level
 
 NAMESPACE = "visualenv"
 SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
@@ -32,7 +33,6 @@ BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 SPECS_PATH_VARIABLE = "VISUALENV_SPECS_PATH"
 #: ids given to register() in this process, with their files
 _REGISTERED: dict[str, Path] = {}
-_TOP_LEVEL = re.compile(r"^(id|max_steps|action_repeat)\s*[:=]\s*(.*?)\s*$")
 
 
 def spec_dirs() -> list[Path]:
@@ -75,29 +75,35 @@ def _same(a: Path, b: Path) -> bool:
 
 
 def read_header(path: Path) -> tuple[str | None, int | None]:
-    """The top-level ``id`` and ``max_steps`` of a spec file, read line by line (fast: every spec is read on import).
-
-    Only lines that start in column 0 count, and in TOML only those before the first table.
-    """
-    fields = _header_fields(path)
-    steps = fields.get("max_steps", "")
-    return fields.get("id") or None, int(steps) if steps.isdigit() else None
+    """The top-level ``id`` and ``max_steps`` of a spec file, without validating it (every spec is read on import):
+    read by the spec layer's own parsers (:func:`visualenv.spec.source.read_top_level`); None for either when absent or
+    not an id or a step count, which loading the spec then reports. Kept per file version: ids are looked up often."""
+    return _header_values(path)[:2]
 
 
-def _header_fields(path: Path) -> dict[str, str]:
-    """The first value of each top-level field :data:`_TOP_LEVEL` names, as written (without quotes or a comment)."""
-    fields: dict[str, str] = {}
+def read_action_repeat(path: Path) -> int:
+    """The top-level ``action_repeat`` of a spec file (1 where absent or not a count, which loading then reports)."""
+    return _header_values(path)[2]
+
+
+def _header_values(path: Path) -> tuple[str | None, int | None, int]:
     try:
-        text = path.read_text(encoding="utf-8", errors="replace")
+        stat = path.stat()
     except OSError:
-        return fields
-    for line in text.splitlines():
-        if path.suffix == ".toml" and line.startswith("["):
-            break
-        m = _TOP_LEVEL.match(line)
-        if m:
-            fields.setdefault(m.group(1), m.group(2).split("#", 1)[0].strip().strip("\"'"))
-    return fields
+        return None, None, 1
+    return _header(str(path), stat.st_mtime_ns, stat.st_size)
+
+
+@functools.lru_cache(maxsize=4096)
+def _header(path: str, mtime_ns: int, size: int) -> tuple[str | None, int | None, int]:
+    values = read_top_level(path, ("id", "max_steps", "action_repeat"))
+    env_id, max_steps, repeat = values.get("id"), values.get("max_steps"), values.get("action_repeat")
+    return (env_id if isinstance(env_id, str) and env_id else None,
+            max_steps if _count(max_steps) else None, repeat if _count(repeat) else 1)  # type: ignore[return-value]
+
+
+def _count(value: object) -> bool:
+    return isinstance(value, int) and not isinstance(value, bool) and value > 0
 
 
 def time_limit(max_steps: int | None, action_repeat: int) -> int | None:
@@ -110,21 +116,22 @@ def time_limit(max_steps: int | None, action_repeat: int) -> int | None:
 
 
 def _duplicate_id(env_id: str, files: list[Path]) -> SpecError:
-    """Two or more files defining one id: named, each at its `id` line."""
+    """Two or more files defining one id: named, each at its `id` (as the loader locates it)."""
     first, *others = files
     problems = []
     for path in others:
-        line = next((i for i, text in enumerate(_lines(path), start=1) if _TOP_LEVEL.match(text) and text.startswith("id")), None)
-        problems.append(Diagnostic(str(path), line, 1 if line else None, "id",
+        where = _id_position(path)
+        problems.append(Diagnostic(str(path), where.line if where else None, where.column if where else None, "id",
                                    f"the id '{env_id}' is also defined by {first}: give one of the two specs another id (e.g. a new -vN)"))
     return SpecError(problems)
 
 
-def _lines(path: Path) -> list[str]:
+def _id_position(path: Path) -> Position | None:
+    """Where the file's `id` key is written (None if the file does not load): an error's location, so read in full."""
     try:
-        return path.read_text(encoding="utf-8", errors="replace").splitlines()
-    except OSError:
-        return []
+        return load_document(path)[1].keys.get(("id",))
+    except SpecError:
+        return None
 
 
 def resolve(target: str | os.PathLike[str]) -> Path:
@@ -177,8 +184,8 @@ def register_bundled() -> list[str]:
         if env_id in clashes:
             ids.append(_register_id(env_id, env_id, None))
             continue
-        max_steps, repeat = read_header(path)[1], _header_fields(path).get("action_repeat", "1")
-        ids.append(_register_id(env_id, str(path), time_limit(max_steps if max_steps is not None else default_steps, int(repeat) if repeat.isdigit() else 1)))
+        max_steps = read_header(path)[1]
+        ids.append(_register_id(env_id, str(path), time_limit(max_steps if max_steps is not None else default_steps, read_action_repeat(path))))
     return ids
 
 

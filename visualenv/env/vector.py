@@ -21,6 +21,7 @@ from typing import Any, Callable
 import gymnasium as gym
 from gymnasium.vector.async_vector_env import AsyncState, AsyncVectorEnv
 
+from visualenv.compat.glibc import apply_policy
 from visualenv.env.cores import Share, confine, render_threads, worker_cores
 from visualenv.errors import WorkerError
 
@@ -40,6 +41,7 @@ def make_in_worker(target: str, kwargs: dict[str, Any], cores: Share | None = No
                    wrapper_class: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
     """One env made by :func:`visualenv.make`; in a worker process, confined to `cores` and deaf to Ctrl-C."""
     if multiprocessing.parent_process() is not None:  # in a worker (Gymnasium also calls this in the parent, for the spaces)
+        apply_policy()  # a process visualenv started: freed memory kept for the next render call
         if cores is not None:
             confine(cores)
         # Ctrl-C reaches the whole process group, and the parent decides how to stop.

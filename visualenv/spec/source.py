@@ -304,6 +304,80 @@ def _construct_scalar_value(node: yaml.ScalarNode) -> Any:
 _PositionLoader.construct_scalar_value = staticmethod(_construct_scalar_value)  # type: ignore[attr-defined]
 
 
+
+# -- the top-level values alone ------------------------------------------------------------------
+
+
+def read_top_level(path: str | Path, keys: tuple[str, ...]) -> dict[str, Any]:
+    """The top-level scalar values of `keys` in a spec file, read without positions or validation (registration's
+    ids and ``max_steps``: every known spec is read when visualenv is imported).
+
+    The same parsers and scalar rules as :func:`load_document` (YAML resolved and constructed as there; TOML by
+    tomllib), with YAML's events read by libyaml where PyYAML has it, up to the keys sought. What precedes a syntax
+    error is kept; a file that cannot be read gives {}. Errors are :func:`load_document`'s to report, with positions.
+    """
+    try:
+        text = Path(path).read_text(encoding="utf-8", errors="replace")
+    except OSError:
+        return {}
+    if Path(path).suffix.lower() == ".toml":
+        return _toml_top_level(text.removeprefix("\ufeff"), keys)
+    return _yaml_top_level(text, keys)
+
+
+#: YAML's event parser: libyaml's where PyYAML was built with it (several times faster than the pure-Python one)
+_EVENT_LOADER: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+def _yaml_top_level(text: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    found: dict[str, Any] = {}
+    depth, is_key, key = 0, True, None
+    try:
+        for event in yaml.parse(text, Loader=_EVENT_LOADER):
+            if isinstance(event, yaml.CollectionEndEvent):
+                depth -= 1
+            elif isinstance(event, yaml.DocumentEndEvent):
+                break
+            elif isinstance(event, yaml.NodeEvent):
+                if depth == 0 and not isinstance(event, yaml.MappingStartEvent):
+                    break  # not a mapping
+                if depth == 1:
+                    if is_key:
+                        key = event.value if isinstance(event, yaml.ScalarEvent) else None
+                    elif isinstance(event, yaml.ScalarEvent) and key in keys and key not in found:
+                        found[key] = _event_value(event)
+                        if len(found) == len(keys):
+                            break
+                    is_key = not is_key
+                depth += isinstance(event, yaml.CollectionStartEvent)
+    except yaml.YAMLError:
+        pass
+    return found
+
+
+def _event_value(event: yaml.ScalarEvent) -> Any:
+    """A scalar event's value as :func:`load_document` reads it (None for a tag it refuses)."""
+    loader = _PositionLoader("")
+    tag = event.tag if event.tag not in (None, "!") else loader.resolve(yaml.ScalarNode, event.value, event.implicit)
+    if tag not in _PLAIN_TAGS:
+        return None
+    return _scalar(yaml.ScalarNode(tag, event.value, style=event.style))
+
+
+def _toml_top_level(text: str, keys: tuple[str, ...]) -> dict[str, Any]:
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as exc:  # what precedes the error's line, which holds the top-level keys if it is below them
+        m = re.search(r"\(at line (\d+)", str(exc))
+        try:
+            data = tomllib.loads("\n".join(text.splitlines()[: int(m.group(1)) - 1])) if m else {}
+        except tomllib.TOMLDecodeError:
+            data = {}
+    except (ValueError, RecursionError):
+        data = {}
+    return {key: data[key] for key in keys if key in data and not isinstance(data[key], (dict, list))}
+
+
 # -- TOML -------------------------------------------------------------------------------------
 
 _TABLE = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")

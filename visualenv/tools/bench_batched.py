@@ -22,6 +22,8 @@ from typing import Any
 
 import numpy as np
 
+from visualenv.compat.glibc import apply_policy
+
 
 def _median_ms(times: list[float]) -> float:
     return 1000 * float(np.median(times)) if times else 0.0
@@ -90,6 +92,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
 
 
 def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, device: str | None, queue: Any) -> None:
+    apply_policy()  # a process visualenv started: freed memory kept for the next render call (visualenv.compat.glibc)
     try:
         queue.put(measure_batch(spec, n, steps, seed, autoreset, device=device))
     except BaseException as exc:  # noqa: BLE001 - reported by the parent, which goes on with the next size

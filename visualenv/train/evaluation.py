@@ -28,9 +28,10 @@ from typing import Any
 
 import numpy as np
 
+from visualenv.compat import mkl
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.train.models import load_model, stacked_like
-from visualenv.train.reproducible import machine_record, pin_mkl, pinned_inference
+from visualenv.train.reproducible import machine_record, pinned_inference
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
 MAX_TRAIN_SEED = 2**31 - 1  # `train --seed`: with up to 2**31 envs, training seeds stay in band 0
@@ -300,7 +301,7 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
     if seed is None:
         seed = recorded.seed if recorded else FRESH_SEED
     replayed = recorded if recorded is not None and seed == recorded.seed else None
-    pin_mkl()  # before the model is built: its initialisation calls MKL, which then keeps its mode
+    mkl.pin()  # before the model is built: its initialisation calls MKL, which then keeps its mode
     model = load_model(str(model_path), algo or (recorded.algo if recorded else "ppo"), trust_pickle=trust_pickle)
     space = model.observation_space
     render = recorded.render if recorded else not (isinstance(space, spaces.Box) and len(space.shape) == 1)

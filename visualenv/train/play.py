@@ -13,7 +13,8 @@ from visualenv.render.images import side_by_side
 from visualenv.errors import VisualEnvError
 from visualenv.env.wrappers import FrameStack
 from visualenv.train.models import load_model, stacked_like
-from visualenv.train.reproducible import pin_mkl, pinned_inference
+from visualenv.compat import mkl
+from visualenv.train.reproducible import pinned_inference
 
 VIDEO_FORMATS = (".gif", ".webp", ".mp4")
 WEBP_QUALITY = 70  # lossy animated WebP: a few hundred kB where a GIF of path-traced frames takes megabytes
@@ -62,7 +63,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
     `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.models.load_model`)."""
     if record:
         check_recording(record)
-    pin_mkl()  # before the model is built (its initialisation calls MKL): the actions eval's episodes had
+    mkl.pin()  # before the model is built (its initialisation calls MKL): the actions eval's episodes had
     model = load_model(model_path, algo, trust_pickle=trust_pickle) if model_path else None
     env = _play_env(spec, model, model_path, view_preset, view_size)
     env.action_space.seed(seed)

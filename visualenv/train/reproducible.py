@@ -13,7 +13,9 @@ Measured on the development machine: the same returns, to the last bit, under
 
 MKL takes its mode once, before its first call in a process: a process that
 already trained (a run's own final evaluation) cannot be pinned afterwards, and
-its record says so. ``visualenv eval`` runs in a fresh process and always is.
+its record says so. ``visualenv eval`` and ``play`` set ``MKL_CBWR=COMPATIBLE``
+before torch loads, so they are always pinned (:mod:`visualenv.compat.mkl`, which also pins
+a process visualenv did not start).
 
 What pinning cannot reach is the renderer: Cycles and Embree pick their kernels
 by CPU too. :func:`machine_record` notes what an evaluation ran on, and
@@ -23,48 +25,17 @@ compared with a tolerance (:mod:`visualenv.train.evaluation`) instead of bit for
 
 from __future__ import annotations
 
-import ctypes
 import platform
 import sys
 from contextlib import contextmanager
 from pathlib import Path
 from typing import Any, Iterator
 
+from visualenv.compat import mkl
 from visualenv.versions import versions
 
-MKL_CBWR_BRANCH = 1  # mkl_cbwr_get's argument: the code branch in force
-MKL_CBWR_COMPATIBLE = 3  # the branch that runs the same code on every CPU
 #: the keys of a machine record that must agree for a replay to be exact
 LIKENESS_KEYS = ("cpu_isa", "torch", "blender", "numpy", "mujoco", "pinned")
-
-
-def _mkl_service() -> Any:
-    """MKL's service functions inside torch's CPU library (linked in statically), or None where they are not there."""
-    try:
-        import torch
-
-        lib = ctypes.CDLL(str(Path(torch.__file__).parent / "lib" / "libtorch_cpu.so"))
-        lib.mkl_serv_cbwr_get.restype = lib.mkl_serv_cbwr_set.restype = ctypes.c_int
-        return lib
-    except (ImportError, OSError, AttributeError):
-        return None
-
-
-def pin_mkl() -> bool:
-    """Put MKL in its COMPATIBLE mode if it has not run yet in this process; whether it is in that mode now.
-
-    Call it before a model is built: SB3's orthogonal initialisation already calls MKL.
-
-    ``mkl_cbwr_set`` (MKL's service call, as ``MKL_CBWR=COMPATIBLE`` in the environment
-    would do at start) rather than the variable: set here it would reach every process
-    started later, training included, where the mode costs speed for nothing.
-    """
-    lib = _mkl_service()
-    if lib is None:
-        return False
-    if lib.mkl_serv_cbwr_get(MKL_CBWR_BRANCH) == MKL_CBWR_COMPATIBLE:
-        return True
-    return bool(lib.mkl_serv_cbwr_set(MKL_CBWR_COMPATIBLE) == 0)
 
 
 @contextmanager
@@ -84,7 +55,7 @@ def pinned_inference() -> Iterator[bool]:
     torch.set_num_threads(1)
     torch.backends.mkldnn.enabled = False
     try:
-        yield pin_mkl()
+        yield mkl.pin()
     finally:
         torch.set_num_threads(threads)
         torch.backends.mkldnn.enabled = onednn

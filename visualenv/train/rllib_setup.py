@@ -30,6 +30,7 @@ import numpy as np
 from gymnasium import spaces
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
+from visualenv.compat.glibc import apply_policy
 from visualenv.errors import ConfigError, did_you_mean
 
 ENV_PREFIX = "visualenv-rllib:"
@@ -80,6 +81,8 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
     from visualenv.env.make import make
     from visualenv.env.wrappers import VectorFrameStack
 
+    if getattr(env_config, "worker_index", 0) > 0:  # a remote EnvRunner: a process Ray started for the run's envs
+        apply_policy()  # freed memory kept for the next render call (visualenv.compat.glibc)
     spec, batched, n = env_config["spec"], env_config.get("batched", False), int(env_config.get("num_envs", 1))
     if not env_config.get("render", True):
         return BatchedVectorEnv(spec, n, render=False) if batched else make(spec, render=False)

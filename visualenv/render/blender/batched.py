@@ -46,7 +46,6 @@ from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
-from visualenv.render.blender.allocator import LARGE_IMAGE_PIXELS, keep_freed_memory, release_freed_memory
 from visualenv.render.blender.instances import InstancedCopies, removable
 from visualenv.render.blender.copies import Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, make_copy, one_colour
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
@@ -153,8 +152,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._offsets = np.array([tuple(self._offset(k)) for k in range(self.num_envs)])  # each copy's anchor, as its instances see it
         self._instances = self._instance(copied)
         self._tiled_views = [self._tiled_view(view) for view in self._views]
-        if max(envs_per_call(self.num_envs, v.width, v.height) * v.width * v.height for v in self._views) >= LARGE_IMAGE_PIXELS:
-            keep_freed_memory()  # a call's buffers (hundreds of MB) reused, not faulted in again each call
         self._tiled_view_camera: tuple[View, Any, bool] | None = None  # the view camera's, built at the first view
         self._alone: dict[int, View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
         #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
@@ -518,7 +515,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._copies = []
         self._instances = None
         super().close()
-        release_freed_memory()  # what its render calls kept for reuse
 
 
 def _rotation(matrix: Matrix) -> np.ndarray:

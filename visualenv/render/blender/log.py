@@ -19,7 +19,7 @@ import tempfile
 from collections.abc import Iterator
 from dataclasses import dataclass, field
 
-from visualenv.compat.blender import flush_c_stdio
+from visualenv.compat.glibc import flush_c_streams
 
 #: at most this many of Blender's lines are kept with an error
 MAX_LINES = 20
@@ -36,7 +36,7 @@ def _flush_all() -> None:
     for stream in (sys.stdout, sys.stderr):
         with contextlib.suppress(AttributeError, ValueError, OSError):
             stream.flush()
-    flush_c_stdio()  # Blender's printf
+    flush_c_streams()  # C stdio buffers (Blender's printf)
 
 
 @contextlib.contextmanager

@@ -13,8 +13,6 @@ objects themselves.
 
 from __future__ import annotations
 
-import ctypes
-import functools
 import math
 import warnings
 from dataclasses import dataclass, field
@@ -27,6 +25,7 @@ import numpy as np
 from mathutils import Matrix, Vector
 
 from visualenv.compat.blender import reusable_scene_name, sort_faces
+from visualenv.compat.glibc import release_free_memory
 from visualenv.render.blender.blendfile import BlendReadError
 from visualenv.render.blender import blendfile
 from visualenv.render.blender.autorun import turn_autorun_off
@@ -81,50 +80,9 @@ def remove_ids(ids: list[Any]) -> None:
             bpy.data.scenes.remove(scene)
     if others:
         bpy.data.batch_remove(others)
-    release_freed_memory()
+    release_free_memory()  # what the scene's renders freed into the render threads' arenas
 
 
-#: glibc's mallopt parameter for the size from which an allocation gets its own mapping, and the size set here
-M_MMAP_THRESHOLD, MMAP_THRESHOLD = -3, 256 * 1024
-
-
-def release_freed_memory() -> None:
-    """Hand the memory a removed scene freed back to the system (glibc's ``malloc_trim``; elsewhere nothing).
-
-    Why: glibc keeps freed memory in the arenas of Blender's render threads, so each env or batch made
-    and closed in one process left its RSS higher: twenty 16-env Goalie batches (100x100) made and closed
-    in one process grew it by 68 MB. With this and :func:`returnable_large_buffers`, 7-40 MB; the rest
-    was the scenes' last frames (:func:`visualenv.compat.blender.release_render_result`): with those released, 0.7-1.5 MB.
-    """
-    libc = _glibc()
-    if libc is not None:
-        libc.malloc_trim(0)
-
-
-def returnable_large_buffers() -> None:
-    """Once per process: allocations of 256 KiB or more (render buffers) get their own mapping, returned when freed.
-
-    glibc raises that threshold each time such a buffer is freed (up to 32 MiB), after which render
-    buffers come from the arenas and stay in the process's memory once freed; a fixed threshold keeps them returnable.
-    """
-    global _threshold_set
-    libc = _glibc()
-    if libc is not None and not _threshold_set:
-        libc.mallopt(M_MMAP_THRESHOLD, MMAP_THRESHOLD)
-        _threshold_set = True
-
-
-_threshold_set = False
-
-
-@functools.cache
-def _glibc() -> Any:
-    try:
-        libc = ctypes.CDLL("libc.so.6")
-        libc.malloc_trim, libc.mallopt  # noqa: B018 - both exist in glibc only
-        return libc
-    except (OSError, AttributeError):  # not glibc (macOS, Windows, musl)
-        return None
 
 
 @dataclass
@@ -140,7 +98,6 @@ def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) 
     What Blender prints meanwhile (importer timings, its own read errors) is
     dropped when the build succeeds and follows the error, marked, when it fails.
     """
-    returnable_large_buffers()
     with blender_output() as output:
         try:
             return _build_scene(spec, base_dir=base_dir, source=source, prefix=prefix)
