@@ -22,7 +22,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from visualenv.physics.simulation import _FATAL_WARNINGS, Simulation, touching
+from visualenv.physics.simulation import FATAL_WARNINGS, Simulation, touching
 
 #: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)
 THREADS_VARIABLE = "VISUALENV_PHYSICS_THREADS"
@@ -64,7 +64,7 @@ class BatchSimulation:
         self._moved = np.zeros((n, len(moved)))
         self._movers = [sim.scatter(moved) for sim in self.sims] if moved else None
         warning = first.mujoco.mjtWarning
-        self._fatal = [int(getattr(warning, w)) for w in _FATAL_WARNINGS]
+        self._fatal = [int(getattr(warning, w)) for w in FATAL_WARNINGS]
         #: the envs the next :meth:`advance` steps (a batch leaves out those it resets instead)
         self.active = np.arange(n)
         #: the envs whose last step blew up (MuJoCo's warning or a non-finite qpos/qvel)

@@ -27,7 +27,7 @@ class PhysicsFault(ValueError):
 
 
 #: MuJoCo warnings that mean the simulation is no longer trustworthy (MuJoCo resets the state on a bad qacc and goes on)
-_FATAL_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
+FATAL_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
 
 
 def touching(data: Any, pair: tuple[int, int]) -> bool:
@@ -55,7 +55,7 @@ class Simulation:
         self.frame_skip = frame_skip
         self.contacts = dict(contacts or {})
         warnings = self.mujoco.mjtWarning
-        self._fatal = np.array([int(getattr(warnings, w)) for w in _FATAL_WARNINGS])
+        self._fatal = np.array([int(getattr(warnings, w)) for w in FATAL_WARNINGS])
         self._warnings = self.data.warning.number  # a live view of MuJoCo's warning counters
         #: while a batch replays this env's step (:meth:`replaying`): the values its reads had before the step, by read
         self._replay: Mapping[str, tuple] | None = None
@@ -139,7 +139,7 @@ class Simulation:
     def blown_up(self) -> str:
         """What went wrong, in MuJoCo's words and numbers: the warnings raised and the non-finite values."""
         parts = []
-        for w in _FATAL_WARNINGS:
+        for w in FATAL_WARNINGS:
             index = int(getattr(self.mujoco.mjtWarning, w))
             info = self.data.warning[index]
             if info.number:
