@@ -1,0 +1,104 @@
+"""The `visualenv` command group and what its commands share: the error handling that keeps tracebacks from users
+(spec problems as ``file:line:column: field: message`` lines, exit status 2; other errors one line, status 1), the
+options and names several commands take."""
+
+from __future__ import annotations
+
+import functools
+import sys
+from pathlib import Path
+from typing import Any, Callable
+
+import click
+
+from visualenv.compat.glibc import apply_policy
+from visualenv.errors import SpecError, VisualEnvError
+
+#: the SB3 algorithms `train` and `play` take (training.algorithm_class maps them to classes)
+ALGORITHMS = ("ppo", "a2c", "dqn", "sac")
+
+
+EXIT_INVALID = 2
+
+
+PRETRAINED = "pretrained"  # --model's name for the shipped agent
+
+
+RANDOM = "random"  # eval --model's name for uniform random actions (the baseline)
+
+
+MODEL_HELP = ("a policy file (policy.safetensors with its policy.json, as export-policy and train write) or 'pretrained' (the shipped "
+              "agent, results/<Id>/policy.safetensors){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle")
+
+
+trust_pickle_option = click.option(
+    "--trust-pickle", is_flag=True,
+    help="also load pickle-based models (SB3 .zip, torch .pt/.pth, RLlib checkpoint folders): unpickling runs whatever code the file "
+         "holds, so only for files you trust (docs/security.md)")
+
+
+def friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
+    """Turn visualenv's own errors into messages and exit codes."""
+
+    @functools.wraps(fn)
+    def wrapper(*args: Any, **kwargs: Any) -> Any:
+        try:
+            return fn(*args, **kwargs)
+        except SpecError as exc:
+            for diagnostic in exc.diagnostics:
+                click.echo(str(diagnostic), err=True)
+            for note in exc.notes:
+                click.echo(note, err=True)
+            sys.exit(EXIT_INVALID)
+        except VisualEnvError as exc:
+            click.echo(f"error: {exc}", err=True)
+            sys.exit(1)
+        except KeyboardInterrupt:
+            click.echo("interrupted", err=True)
+            sys.exit(130)
+
+    return wrapper
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(package_name="visualenv")
+def main() -> None:
+    """Compile declarative specs into Gymnasium environments rendered by Blender."""
+    apply_policy()  # a process visualenv owns: freed memory kept for the next render call (visualenv.compat.glibc)
+
+
+def model_file(spec: str, value: str) -> str:
+    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/policy.safetensors)."""
+    if value == PRETRAINED:
+        from visualenv.train.models import pretrained_model
+        from visualenv.env.registration import resolve
+        from visualenv.spec.loader import load_spec
+
+        return str(pretrained_model(load_spec(resolve(spec)).spec.id))
+    if not Path(value).exists():  # a file, or an RLlib checkpoint folder: load_model tells which it is not
+        raise click.BadParameter(f"{value}: no such file (or '{PRETRAINED}' for the shipped agent)", param_hint="--model")
+    return value
+
+
+def check_writable(path: str, option: str) -> None:
+    """A figure file that cannot be written is refused now, not after minutes of measuring (its folder is made)."""
+    from visualenv.files import make_dir
+
+    try:
+        make_dir(Path(path).parent)
+        Path(path).touch()
+    except (OSError, VisualEnvError) as exc:
+        raise click.BadParameter(f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option) from None
+
+
+def worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
+    """--workers: one count, or a comma-separated list of counts (scaling); --batched: a list of batch sizes."""
+    try:
+        counts = tuple(int(part) for part in value.split(","))
+    except ValueError:
+        counts = ()
+    least = 1 if option == "--batched" else 0
+    if not counts or any(c < least for c in counts) or (len(counts) > 1 and min(counts) < 1):
+        what = "batch sizes" if option == "--batched" else "a number of workers"
+        raise click.BadParameter(f"expected {what} or a list such as 1,2,4,8, got {value!r}", param_hint=option)
+    return counts
