@@ -13,9 +13,14 @@ and both versions compute the same thing:
 * the function table is swapped for numpy's (``sin`` -> ``np.sin``, ...).
 
 Both branches of a conditional are evaluated for every env, so an expression
-the scalar code would never reach may divide by zero: numpy's warnings are off
-while a batch steps, and an env whose result is not finite is stepped again by
-the scalar function, which gives the same value or the located fault.
+the scalar code would never reach may divide by zero, and an expression it does
+reach may raise where numpy's gives a number (``clip(1 / x, -1, 1)`` at x = 0 is
+ZeroDivisionError in Python, 1.0 in numpy). So a batch runs these functions
+under :func:`float_errors` (numpy's warnings off, its floating-point errors
+recorded): after a step in which numpy reported one, or whose result for an env
+is not finite, the scalar function steps those envs again (every env, when
+numpy reported an error: it cannot say whose), which gives the same value or the
+located fault.
 
 Random draws (``uniform``...) and ``dynamics.python`` read one env's generator
 or call one env's hook: a step that uses them is not vectorised
@@ -25,10 +30,11 @@ or call one env's hook: a step that uses them is not vectorised
 from __future__ import annotations
 
 import ast
+import contextlib
 import copy
 import functools
 import math
-from typing import Any, Callable
+from typing import Any, Callable, Iterator
 
 import numpy as np
 
@@ -86,6 +92,15 @@ NUMPY_FUNCTIONS: dict[str, Callable[..., Any]] = {
 }
 #: names whose presence in a generated function keeps it scalar (one env's generator or hook)
 _SCALAR_ONLY = {FUNC_PREFIX + n for n, f in FUNCTIONS.items() if f.random} | {"_python_dynamics", "_random"}
+
+
+@contextlib.contextmanager
+def float_errors() -> Iterator[list[str]]:
+    """While inside, numpy warns of nothing and lists each floating-point error it meets (division by zero,
+    overflow, invalid operation; not underflow, which Python floats ignore too): empty if the code met none."""
+    met: list[str] = []
+    with np.errstate(all="call", under="ignore", call=lambda kind, flag: met.append(kind)):
+        yield met
 
 
 def vector_globals() -> dict[str, Any]:
