@@ -26,6 +26,9 @@ from visualenv.errors import StepError
 from visualenv.spec import load_spec_text
 from visualenv.spec.loader import LoadedSpec, load_spec
 
+#: a NaN action reaches MuJoCo in a batch, which steps every env's simulation at once (the env's lane then faults as one env)
+pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
+
 SPECS = Path(__file__).parents[1] / "specs"
 BUNDLED = sorted(SPECS.glob("*.yaml")) + sorted((SPECS / "mujoco").glob("*.yaml"))
 N = 4
@@ -95,7 +98,41 @@ outcomes:
 max_steps: 60
 """
 
-HOSTILE = {"overflow": OVERFLOW, "hook": HOOK, "division": DIVISION}
+#: a MuJoCo slide whose step divides by zero, or floors a NaN action, before the MuJoCo step (which the batch takes for all at once)
+SLIDE_MODEL = """\
+<mujoco model="slide">
+  <option timestep="0.01"/>
+  <worldbody>
+    <body name="cart">
+      <joint name="slide" type="slide" axis="1 0 0"/>
+      <geom name="block" type="box" size="0.1 0.1 0.1" mass="1"/>
+    </body>
+  </worldbody>
+  <actuator><motor name="push" joint="slide" gear="20"/></actuator>
+</mujoco>
+"""
+SLIDE = """\
+id: Slide-v0
+physics:
+  model: slide.xml
+  frame_skip: 2
+  reset: {values: {qvel_slide: 'uniform(-1, 1)'}}
+actions:
+  continuous: {ctrl_push: {low: -1, high: 1}}
+dynamics: {let: {inv: 'clip(1 / round(qvel_slide * 4), -1, 1)', notch: 'floor(ctrl_push * 2)'}}
+reward: inv + 0 * notch
+outcomes:
+  far: {when: abs(qpos_slide) > 1, end: terminate}
+max_steps: 30
+"""
+
+HOSTILE = {"overflow": OVERFLOW, "hook": HOOK, "division": DIVISION, "physics": SLIDE}
+
+
+def hostile(case: str, on_fault: str, folder: Path) -> LoadedSpec:
+    """A hostile spec with ``on_fault`` set, read as if from `folder` (where the physics one finds its model)."""
+    (folder / "slide.xml").write_text(SLIDE_MODEL, encoding="utf-8")
+    return with_fault_policy(load_spec_text(HOSTILE[case], name=f"{case}.yaml", base_dir=folder), on_fault)
 
 
 def with_fault_policy(loaded: LoadedSpec, on_fault: str) -> LoadedSpec:
@@ -123,9 +160,10 @@ def assert_same_info(batch_info: dict[str, Any], single_info: dict[str, Any], wh
         assert batch_info[key] == value, f"{where}: info[{key!r}] {batch_info[key]!r} != {value!r}"
 
 
-def run_both(loaded: LoadedSpec, actions: Callable[[int], np.ndarray], steps: int, mode: AutoresetMode = AutoresetMode.NEXT_STEP) -> dict[str, int]:
-    """Step a batch of N and N single envs with the same actions; count what happened (episodes ended, faults)."""
+def differential(loaded: LoadedSpec, steps: int, nan_rate: float = 0.0, mode: AutoresetMode = AutoresetMode.NEXT_STEP) -> dict[str, int]:
+    """Step a batch of N and N single envs with the same random actions; count what happened (episodes ended, faults)."""
     batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode)
+    actions = random_actions(batch.action_space, SEED, nan_rate)
     singles = [VisualEnv(loaded, render=False) for _ in range(N)]
     names = batch.program.state_names
     counts = {"ended": 0, "errors": 0, "raised": 0}
@@ -196,12 +234,6 @@ def random_actions(batch_space: Any, seed: int, nan_rate: float = 0.0) -> Callab
     return at
 
 
-def differential(loaded: LoadedSpec, steps: int, nan_rate: float = 0.0, mode: AutoresetMode = AutoresetMode.NEXT_STEP) -> dict[str, int]:
-    space = BatchedVectorEnv(loaded, N, render=False).action_space
-    return run_both(loaded, random_actions(space, SEED, nan_rate), steps, mode)
-
-
-@pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 @pytest.mark.parametrize("spec", BUNDLED, ids=lambda p: p.stem)
 def test_every_bundled_spec_runs_the_same_episodes_in_one_env_and_in_a_batch(spec: Path) -> None:
     loaded = load_spec(spec)
@@ -217,23 +249,20 @@ def test_episodes_end_alike_with_either_autoreset(mode: AutoresetMode) -> None:
 
 
 @pytest.mark.parametrize("case", HOSTILE)
-def test_a_fault_raised_in_a_batch_is_its_envs_fault_named_by_its_index(case: str) -> None:
-    loaded = with_fault_policy(load_spec_text(HOSTILE[case], name=f"{case}.yaml", base_dir=Path(__file__).parents[1]), "raise")
-    assert differential(loaded, 300)["raised"] == 1
+def test_a_fault_raised_in_a_batch_is_its_envs_fault_named_by_its_index(case: str, tmp_path: Path) -> None:
+    assert differential(hostile(case, "raise", tmp_path), 300, nan_rate=0.03)["raised"] == 1
 
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP], ids=lambda m: m.name)
 @pytest.mark.parametrize("case", HOSTILE)
-def test_a_fault_that_terminates_ends_the_same_episode_in_a_batch(case: str, mode: AutoresetMode) -> None:
-    loaded = with_fault_policy(load_spec_text(HOSTILE[case], name=f"{case}.yaml", base_dir=Path(__file__).parents[1]), "terminate")
-    counts = differential(loaded, 300, mode=mode)
+def test_a_fault_that_terminates_ends_the_same_episode_in_a_batch(case: str, mode: AutoresetMode, tmp_path: Path) -> None:
+    counts = differential(hostile(case, "terminate", tmp_path), 300, nan_rate=0.03, mode=mode)
     assert counts["errors"] >= 2 and counts["raised"] == 0, counts
 
 
 NAN_TARGETS = ["features", *(p for p in BUNDLED if "continuous" in p.read_text() or p.parent.name == "mujoco")]
 
 
-@pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 @pytest.mark.parametrize("on_fault", ["raise", "terminate"])
 @pytest.mark.parametrize("spec", NAN_TARGETS, ids=lambda s: getattr(s, "stem", s))
 def test_a_nan_action_is_the_same_fault_in_one_env_and_in_a_batch(spec: Any, on_fault: str) -> None:

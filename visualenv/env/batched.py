@@ -245,11 +245,13 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         alone = stepping.copy()
         step = self._batch.step
         if step is not None:
-            if self._physics is not None:
-                self._physics.active = np.flatnonzero(stepping)
+            unfinite = ~np.isfinite(actions).all(axis=1) if self.program.discrete is None else None
             columns = tuple(self._state)
             action = tuple(actions.T.astype(np.float64)) if self.program.discrete is None else actions
             with float_errors() as errors:
+                if self._physics is not None:
+                    self._physics.active = np.flatnonzero(stepping)
+                    self._physics.watch(errors, unfinite if unfinite is not None and unfinite.any() else None)
                 state, reward, outcome, fired = step(columns, action, self._steps, self._fired)
             n = self.num_envs
             state = np.array([np.broadcast_to(v, (n,)) for v in state]) if state else self._state.copy()
@@ -259,8 +261,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             unfit = self.rules.unfit(state, reward) | bool(errors)
             if self._physics is not None:
                 unfit |= self._physics.blown
-            if self.program.discrete is None:
-                unfit |= ~np.isfinite(actions).all(axis=1)
+            if unfinite is not None:
+                unfit |= unfinite
             ok = stepping & ~unfit
             alone = stepping & unfit
             self._state[:, ok] = state[:, ok]
@@ -275,12 +277,18 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
                 self._replay_lane(int(i), actions[i], rewards, terminated, truncated)
             else:
                 self._step_lane(int(i), actions[i], rewards, terminated, truncated)
+        if self._physics is not None:
+            self._physics.kept.clear()
 
     def _replay_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i's step, whose MuJoCo step the batch took, run again by its lane: its result or its located fault, as env i alone."""
-        physics = self._physics
-        with self.lanes[i].simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
-            self._step_lane(i, action, rewards, terminated, truncated)
+        physics, simulation = self._physics, self.lanes[i].simulation
+        try:
+            with simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
+                self._step_lane(i, action, rewards, terminated, truncated)
+        finally:
+            if not simulation.replay_stepped:  # it faulted before its MuJoCo step: alone, its data was not stepped
+                physics.put_back(i)
 
     def _step_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i stepped by its lane: the scalar step, with its checks and faults."""

@@ -25,7 +25,7 @@ class PhysicsFault(ValueError):
 
 
 #: MuJoCo warnings that mean the simulation is no longer trustworthy (MuJoCo resets the state on a bad qacc and goes on)
-_FATAL_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
+FATAL_WARNINGS = ("mjWARN_BADQPOS", "mjWARN_BADQVEL", "mjWARN_BADQACC", "mjWARN_BADCTRL")
 
 
 def touching(data: Any, pair: tuple[int, int]) -> bool:
@@ -49,11 +49,13 @@ class Simulation:
         self.frame_skip = frame_skip
         self.contacts = dict(contacts or {})
         warnings = self.mujoco.mjtWarning
-        self._fatal = np.array([int(getattr(warnings, w)) for w in _FATAL_WARNINGS])
+        self._fatal = np.array([int(getattr(warnings, w)) for w in FATAL_WARNINGS])
         self._warnings = self.data.warning.number  # a live view of MuJoCo's warning counters
         #: while a batch replays this env's step (:meth:`replaying`): the values its reads had before the step, by read
         self._replay: Mapping[str, tuple] | None = None
         self._replay_blown = False
+        #: whether the last replayed step reached its MuJoCo step (False: it faulted before, and one env's data was not stepped)
+        self.replay_stepped = False
 
     # -- reset and step -----------------------------------------------------------------------------
 
@@ -95,6 +97,7 @@ class Simulation:
 
         def advance(values: Sequence[float]) -> None:
             if self._replay is not None:  # a batch stepped this env already: only its fault is left to raise
+                self.replay_stepped = True
                 if self._replay_blown:
                     raise PhysicsFault(self.blown_up())
                 return
@@ -114,7 +117,7 @@ class Simulation:
     def blown_up(self) -> str:
         """What went wrong, in MuJoCo's words and numbers: the warnings raised and the non-finite values."""
         parts = []
-        for w in _FATAL_WARNINGS:
+        for w in FATAL_WARNINGS:
             index = int(getattr(self.mujoco.mjtWarning, w))
             info = self.data.warning[index]
             if info.number:
@@ -170,7 +173,7 @@ class Simulation:
         MuJoCo step is not taken again (or raises the blow-up, when `blown`), and reads after it
         see the stepped data: the step's result, or its located fault, is exactly this env's alone.
         """
-        self._replay, self._replay_blown = reads, blown
+        self._replay, self._replay_blown, self.replay_stepped = reads, blown, False
         try:
             yield
         finally:
