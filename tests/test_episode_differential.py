@@ -20,9 +20,12 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
+from visualenv.compiler.vector_functions import float_errors, vector_functions
 from visualenv.env.batched import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import StepError
+from visualenv.expr.codegen import power
+from visualenv.expr.functions import FUNCTIONS
 from visualenv.spec import load_spec_text
 from visualenv.spec.loader import LoadedSpec, load_spec
 
@@ -71,6 +74,24 @@ outcomes:
   halfway: {when: abs(x) > 1.5, reward: 1, end: none, success: true}
   away: {when: abs(x) > 3, reward: -5}
 max_steps: 40
+"""
+
+#: every function of the language whose numpy loop may differ from Python's math in the last bit (SIMD versions)
+CURVES = """\
+id: Curves-v0
+state:
+  x: {init: "uniform(-0.9, 0.9)"}
+  y: {init: "uniform(-0.9, 0.9)"}
+actions:
+  continuous: {push: {low: -1, high: 1}}
+dynamics:
+  update:
+    x: "clip(x + 0.1 * tan(push) + 0.01 * atan2(y, x) - 0.05 * tanh(x) + 0.01 * log(2 + y, 3), -1, 1)"
+    y: "clip(0.9 * y + 0.1 * sinh(push) + 0.01 * asin(x) + 0.01 * acos(y) - 0.01 * atan(y) + 0.001 * exp(x), -1, 1)"
+reward: "exp(-abs(x)) + log(1 + y * y) + 0.1 * cosh(x) + sin(x) * cos(y)"
+outcomes:
+  edge: {when: abs(x) > 0.99, end: terminate}
+max_steps: 50
 """
 
 #: the user's Python dynamics raises once the walk passes the wall
@@ -126,7 +147,7 @@ outcomes:
 max_steps: 30
 """
 
-HOSTILE = {"overflow": OVERFLOW, "hook": HOOK, "division": DIVISION, "physics": SLIDE}
+HOSTILE = {"overflow": OVERFLOW, "hook": HOOK, "division": DIVISION, "physics": SLIDE, "curves": CURVES}
 
 
 def hostile(case: str, on_fault: str, folder: Path) -> LoadedSpec:
@@ -242,6 +263,12 @@ def test_every_bundled_spec_runs_the_same_episodes_in_one_env_and_in_a_batch(spe
     assert counts["raised"] == 0 and counts["errors"] == 0
 
 
+def test_every_function_of_the_language_gives_one_envs_value_in_a_batch() -> None:
+    """tan, exp, atan2...: numpy's loops may differ from Python's math in the last bit (AVX-512's); a batch computes Python's."""
+    counts = differential(load_spec_text(CURVES, name="curves.yaml"), 300)
+    assert counts["ended"] > N and counts["errors"] == 0
+
+
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP], ids=lambda m: m.name)
 def test_episodes_end_alike_with_either_autoreset(mode: AutoresetMode) -> None:
     counts = differential(load_spec_text(FEATURES, name="features.yaml"), 200, mode=mode)
@@ -307,3 +334,28 @@ def test_a_fault_in_a_worker_names_its_env_in_the_whole_vector_env(tmp_path: Pat
         assert str(raised.value) == f"env 3: {alone.value}" and raised.value.env == 3
     finally:
         vec.close()
+
+
+def test_a_batch_computes_each_function_as_python_does_and_notes_where_python_raises() -> None:
+    """The batch's function table gives Python's values to the bit (numpy's own loops are not used where they differ
+    on this CPU), and notes each value Python raises on, so that the batch steps those envs one by one."""
+    table = vector_functions()
+    rng = np.random.default_rng(3)
+    domains = {"asin": (-1, 1), "acos": (-1, 1), "log": (1e-3, 1e3), "sqrt": (0, 100)}
+    for name, function in FUNCTIONS.items():
+        if function.random:
+            continue
+        arity = {"clip": 3, "min": 2, "max": 2, "hypot": 2, "atan2": 2}.get(name, 1)
+        args = [rng.uniform(*domains.get(name, (-5, 5)), 500) for _ in range(arity)]
+        exact = [function.impl(*values) for values in zip(*(a.tolist() for a in args))]  # type: ignore[misc]
+        assert np.asarray(table[name](*args), dtype=np.float64).tolist() == exact, name
+    base, exponent = rng.uniform(0.01, 10, 500), rng.uniform(-3, 3, 500)
+    assert table["pow"](base, exponent).tolist() == [power(b, e) for b, e in zip(base.tolist(), exponent.tolist())]
+    for name, value in (("log", 0.0), ("floor", np.inf), ("round", np.nan), ("sqrt", -1.0), ("acos", 2.0), ("exp", 1e4)):
+        with float_errors() as met:
+            table[name](np.array([0.5, value]))
+        assert met, f"{name}({value}) raises in Python: the batch must step that env alone"
+    with float_errors() as met:
+        table["log"](np.array([0.5, 2.0]))
+        table["floor"](np.array([0.5, -2.5]))
+    assert not met

@@ -36,7 +36,7 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.vectorized import float_errors
+from visualenv.compiler.vector_functions import float_errors
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
