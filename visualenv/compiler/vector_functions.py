@@ -52,7 +52,7 @@ def _python_raised(name: str) -> None:
 
 
 def _elementwise(name: str, scalar: Callable[..., float], arities: tuple[int, ...]) -> Callable[..., Any]:
-    """Python's `scalar` on each element (NaN, and noted, where it raises)."""
+    """Python's `scalar` on each element (NaN, and noted, where it raises: then element by element again, each caught)."""
 
     def safe(*args: float) -> float:
         try:
@@ -61,10 +61,14 @@ def _elementwise(name: str, scalar: Callable[..., float], arities: tuple[int, ..
             _python_raised(name)
             return math.nan
 
-    ufuncs = {n: np.frompyfunc(safe, n, 1) for n in arities}
+    ufuncs = {n: np.frompyfunc(scalar, n, 1) for n in arities}
+    caught = {n: np.frompyfunc(safe, n, 1) for n in arities}
 
     def call(*args: Any) -> Any:
-        return np.asarray(ufuncs[len(args)](*args), dtype=np.float64)
+        try:
+            return np.asarray(ufuncs[len(args)](*args), dtype=np.float64)
+        except (ArithmeticError, ValueError):
+            return np.asarray(caught[len(args)](*args), dtype=np.float64)
 
     call.__name__ = name
     return call
@@ -84,6 +88,8 @@ def _integral(name: str, ufunc: Callable[[Any], Any]) -> Callable[[Any], Any]:
 
 def _clip(x: Any, low: Any, high: Any) -> Any:
     """Python's definition (low if below, else high if above, else x), which np.clip's differs from when low > high."""
+    if np.ndim(low) == 0 and np.ndim(high) == 0 and low <= high:
+        return np.clip(x, low, high)  # the same values, faster
     return np.where(x < low, low, np.where(x > high, high, x))
 
 

@@ -245,13 +245,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         alone = stepping.copy()
         step = self._batch.step
         if step is not None:
-            unfinite = ~np.isfinite(actions).all(axis=1) if self.program.discrete is None else None
+            unfinite = None  # the envs whose continuous action is not finite, if any
+            if self.program.discrete is None and not np.isfinite(actions).all():
+                unfinite = ~np.isfinite(actions).all(axis=1)
             columns = tuple(self._state)
             action = tuple(actions.T.astype(np.float64)) if self.program.discrete is None else actions
             with float_errors() as errors:
                 if self._physics is not None:
                     self._physics.active = np.flatnonzero(stepping)
-                    self._physics.watch(errors, unfinite if unfinite is not None and unfinite.any() else None)
+                    self._physics.watch(errors, unfinite)
                 state, reward, outcome, fired = step(columns, action, self._steps, self._fired)
             n = self.num_envs
             state = np.array([np.broadcast_to(v, (n,)) for v in state]) if state else self._state.copy()

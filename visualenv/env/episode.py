@@ -16,6 +16,7 @@ env's; a batch only names the env: :meth:`StepError.in_env
 
 from __future__ import annotations
 
+import math
 from typing import Any, Callable
 
 import numpy as np
@@ -66,6 +67,12 @@ class EpisodeRules:
         self._names = np.array([row[2] for row in table], dtype=object)
         self._successes = np.array(self._successful, dtype=bool)
         self._observed = program.observed if observes_state else []
+        # the largest magnitude each state variable may reach: float32's where it is observed as float32, else float64's
+        # (so a single test, abs(x) <= limit, refuses NaN, infinities and values past float32 at once)
+        limits = np.full(len(program.state_names), np.finfo(np.float64).max)
+        limits[self._observed] = OBSERVATION_LIMIT
+        self._limits = limits[:, None]
+        self._tightest = float(limits.min()) if limits.size else math.inf
 
     # -- one env: Python numbers ----------------------------------------------------------------------
 
@@ -127,9 +134,9 @@ class EpisodeRules:
 
     def unfit(self, state: np.ndarray, reward: np.ndarray) -> np.ndarray:
         """The envs whose result (state as ``(variables, envs)``, reward) :meth:`check` refuses: their lanes step them, and fault."""
-        bad = ~np.isfinite(reward) | ~np.isfinite(state).all(axis=0)
-        if self._observed:
-            bad |= (np.abs(state[self._observed]) > OBSERVATION_LIMIT).any(axis=0)
+        bad = ~np.isfinite(reward)
+        if state.size and not np.abs(state).max() <= self._tightest:  # NaN, an infinity or a large value somewhere: whose?
+            bad |= ~(np.abs(state) <= self._limits).all(axis=0)
         return bad
 
     def milestone_lists(self, fired: np.ndarray) -> np.ndarray:
