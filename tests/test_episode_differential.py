@@ -261,6 +261,7 @@ def test_every_bundled_spec_runs_the_same_episodes_in_one_env_and_in_a_batch(spe
     steps = 120 if loaded.spec.physics is not None else 300  # MuJoCo steps cost more
     counts = differential(loaded, steps)
     assert counts["raised"] == 0 and counts["errors"] == 0
+    assert counts["ended"] > 0 or loaded.spec.max_steps > steps, "no episode ended: autoreset went untested"
 
 
 def test_every_function_of_the_language_gives_one_envs_value_in_a_batch() -> None:
