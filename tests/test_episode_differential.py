@@ -13,6 +13,10 @@ element-wise code would clip away.
 
 from __future__ import annotations
 
+import ast
+import itertools
+import math
+import operator
 from pathlib import Path
 from typing import Any, Callable
 
@@ -20,7 +24,7 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-from visualenv.compiler.vector_functions import float_errors, vector_functions
+from visualenv.compiler.vector_functions import OPERATORS, float_errors, vector_functions
 from visualenv.env.batched import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import StepError
@@ -339,24 +343,34 @@ def test_a_fault_in_a_worker_names_its_env_in_the_whole_vector_env(tmp_path: Pat
 
 def test_a_batch_computes_each_function_as_python_does_and_notes_where_python_raises() -> None:
     """The batch's function table gives Python's values to the bit (numpy's own loops are not used where they differ
-    on this CPU), and notes each value Python raises on, so that the batch steps those envs one by one."""
+    on this CPU); on edge values (0, inf, NaN, huge...) each value Python raises on is noted, so that the batch steps
+    that env alone, and each one it does not note is Python's."""
     table = vector_functions()
     rng = np.random.default_rng(3)
     domains = {"asin": (-1, 1), "acos": (-1, 1), "log": (1e-3, 1e3), "sqrt": (0, 100)}
-    for name, function in FUNCTIONS.items():
-        if function.random:
-            continue
-        arity = {"clip": 3, "min": 2, "max": 2, "hypot": 2, "atan2": 2}.get(name, 1)
-        args = [rng.uniform(*domains.get(name, (-5, 5)), 500) for _ in range(arity)]
-        exact = [function.impl(*values) for values in zip(*(a.tolist() for a in args))]  # type: ignore[misc]
-        assert np.asarray(table[name](*args), dtype=np.float64).tolist() == exact, name
-    base, exponent = rng.uniform(0.01, 10, 500), rng.uniform(-3, 3, 500)
-    assert table["pow"](base, exponent).tolist() == [power(b, e) for b, e in zip(base.tolist(), exponent.tolist())]
-    for name, value in (("log", 0.0), ("floor", np.inf), ("round", np.nan), ("sqrt", -1.0), ("acos", 2.0), ("exp", 1e4)):
-        with float_errors() as met:
-            table[name](np.array([0.5, value]))
-        assert met, f"{name}({value}) raises in Python: the batch must step that env alone"
+    arity = {"clip": 3, "min": 2, "max": 2, "hypot": 2, "atan2": 2, "pow": 2, "/": 2, "//": 2, "%": 2}
+    python = {name: f.impl for name, f in FUNCTIONS.items() if not f.random}
+    python.update({"pow": power, "/": operator.truediv, "//": operator.floordiv, "%": operator.mod})
+    vector = {**table, **{symbol: OPERATORS[op] for symbol, op in (("/", ast.Div), ("//", ast.FloorDiv), ("%", ast.Mod))}}
+    for name, scalar in python.items():
+        n = arity.get(name, 1)
+        args = [rng.uniform(*domains.get(name, (0.01, 10) if name == "pow" else (-5, 5)), 300) for _ in range(n)]
+        exact = [scalar(*values) for values in zip(*(a.tolist() for a in args))]  # type: ignore[misc]
+        assert np.asarray(vector[name](*args), dtype=np.float64).tolist() == exact, name
+        edges = [0.0, -0.0, 0.5, -1.0, 2.0, 1e308, -1e308, 1e-320, math.inf, -math.inf, math.nan]
+        for values in itertools.product(edges, repeat=n):
+            try:
+                expected: float | None = float(scalar(*values))  # type: ignore[misc]
+            except (ArithmeticError, ValueError):
+                expected = None
+            with float_errors() as met:
+                got = float(np.asarray(vector[name](*(np.array([0.5, v]) for v in values)), dtype=np.float64)[1])
+            where = f"{name}{values}"
+            assert met or expected is not None, f"{where} raises in Python: the batch must note it"
+            if not met:
+                assert got == expected or (math.isnan(got) and math.isnan(expected)), f"{where}: {got} != Python's {expected}"  # type: ignore[arg-type]
     with float_errors() as met:
         table["log"](np.array([0.5, 2.0]))
         table["floor"](np.array([0.5, -2.5]))
+        OPERATORS[ast.Div](np.array([1.0, 2.0]), np.array([0.5, -3.0]))
     assert not met

@@ -16,12 +16,13 @@ and both versions compute the same thing:
 Both branches of a conditional are evaluated for every env, so an expression
 the scalar code would never reach may divide by zero, and an expression it does
 reach may raise where numpy's gives a number (``clip(1 / x, -1, 1)`` at x = 0 is
-ZeroDivisionError in Python, 1.0 in numpy). So a batch runs these functions
-under :func:`~visualenv.compiler.vector_functions.float_errors` (numpy's warnings
-off, its floating-point errors noted): after a step in which one was met, or whose
-result for an env is not finite, the scalar function steps those envs again (every
-env, when an error was met: numpy cannot say whose), which gives the same value or
-the located fault.
+ZeroDivisionError in Python, 1.0 in numpy). So divisions and the functions note
+each value Python raises on, and a batch runs these functions under
+:func:`~visualenv.compiler.vector_functions.float_errors` (numpy's warnings off,
+the notes collected): after a step in which one was noted, or whose result for an
+env is not finite, the scalar function steps those envs again (every env, when a
+value was noted: the element-wise code cannot say whose), which gives the same
+value or the located fault.
 
 Random draws (``uniform``...) and ``dynamics.python`` read one env's generator
 or call one env's hook: a step that uses them is not vectorised
@@ -38,7 +39,7 @@ from typing import Any, Callable
 import numpy as np
 
 from visualenv.expr.codegen import FUNC_PREFIX, POW, FunctionBuilder
-from visualenv.compiler.vector_functions import vector_functions
+from visualenv.compiler.vector_functions import OPERATORS, vector_functions
 from visualenv.expr.functions import FUNCTIONS
 
 WHERE, ALL, ANY, NOT = "_vwhere", "_vall", "_vany", "_vnot"
@@ -71,6 +72,7 @@ def vector_globals() -> dict[str, Any]:
     table = vector_functions()
     env: dict[str, Any] = {"__builtins__": {}, POW: table["pow"], WHERE: _where, ALL: _all, ANY: _any, NOT: np.logical_not}
     env.update({FUNC_PREFIX + n: f for n, f in table.items() if n != "pow"})
+    env.update({f"_v{op.__name__}": f for op, f in OPERATORS.items()})
     return env
 
 
@@ -80,6 +82,13 @@ def _call(func: str, args: list[ast.expr]) -> ast.Call:
 
 class _Expressions(ast.NodeTransformer):
     """Expressions to their element-wise form."""
+
+    def visit_BinOp(self, node: ast.BinOp) -> ast.AST:
+        left, right = self.visit(node.left), self.visit(node.right)
+        constant = isinstance(right, ast.Constant) and isinstance(right.value, (int, float)) and right.value != 0
+        if type(node.op) in OPERATORS and not constant:  # a division: by zero, Python raises (noted), numpy gives a number
+            return _call(f"_v{type(node.op).__name__}", [left, right])
+        return ast.BinOp(left, node.op, right)
 
     def visit_IfExp(self, node: ast.IfExp) -> ast.AST:
         return _call(WHERE, [self.visit(node.test), self.visit(node.body), self.visit(node.orelse)])

@@ -12,8 +12,8 @@ s + i: each env keeps its own random generator (a state-only
 a spec whose step draws random numbers or calls ``dynamics.python``, an env
 whose result the episode's rules refuse (not finite, or past float32 in a
 state-only observation) or whose action is not finite, and every env of a step
-in which numpy met a floating-point error (the lane then returns the same
-value, or the located fault, exactly as one env would). The rules themselves
+in which an operation met a value Python raises on (the lane then returns the
+same value, or the located fault, exactly as one env would). The rules themselves
 (endings, truncation, success, milestones, info, faults) are one env's:
 :class:`~visualenv.env.episode.EpisodeRules`. A fault raised names its env:
 ``env 3: <what env 3 alone raises>`` (:attr:`StepError.env <visualenv.errors.StepError>`).
@@ -238,9 +238,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         """Every stepping env's step at once, then the lanes of those the vectorised step could not do.
 
         An env goes to its lane when its result is one the episode's rules refuse (NaN, an infinity,
-        past float32), its simulation blew up, its action is not finite, or numpy reported a
-        floating-point error anywhere in the step (then every env does: numpy cannot say whose,
-        and an expression one env takes may raise where numpy's gives a number, as clip(1 / 0, ...)).
+        past float32), its simulation blew up, or its action is not finite; every env does when an
+        operation of the step met a value Python raises on (float_errors: a division by zero, log(0)...,
+        whose env the element-wise code cannot say, and whose result numpy may have clipped into a number).
         """
         alone = stepping.copy()
         step = self._batch.step

@@ -68,7 +68,7 @@ class BatchSimulation:
         #: the envs whose last step blew up (MuJoCo's warning or a non-finite qpos/qvel)
         self.blown = np.zeros(n, dtype=bool)
         #: what the step in progress says may fault before its MuJoCo step (:meth:`watch`), and the MjData kept for those envs
-        self._errors: Sequence[str] = ()
+        self._errors: Any = ()
         self._suspects: np.ndarray | None = None
         self.kept: dict[int, Any] = {}
         #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
@@ -133,8 +133,9 @@ class BatchSimulation:
 
         return read
 
-    def watch(self, errors: Sequence[str], suspects: np.ndarray | None) -> None:
-        """Before a step: the floating-point errors numpy meets in it (a live list), and the envs whose action is not finite.
+    def watch(self, errors: Any, suspects: np.ndarray | None) -> None:
+        """Before a step: the record of the values it meets that Python raises on (float_errors', true once one was
+        met), and the envs whose action is not finite.
 
         One env's step can fault before its MuJoCo step (a division by zero, a NaN action floored)
         and leave its MjData as it was, where the batch has stepped every env: if the step met an
