@@ -312,14 +312,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return lane
 
     def _reset_lane(self, i: int, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
-        lane = self.lanes[i]
         try:
-            lane.reset(seed=seed, options=options)
+            self._state[:, i] = self.lanes[i].begin_episode(seed=seed, options=options)
         except StepError as err:
             raise err.in_env(i) from None
         if self._physics is not None:
             self._physics.refresh(i)
-        self._state[:, i] = [lane.state[n] for n in self.program.state_names]
         self._steps[i] = 0
         self._fired[i] = 0
         self._success[i] = False

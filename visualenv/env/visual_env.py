@@ -155,6 +155,14 @@ class VisualEnv(gym.Env):
     # -- Gymnasium API ------------------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        self.begin_episode(seed=seed, options=options)
+        return self._observe(), self._rules.info(self.state, 0, None, 0, False)
+
+    def begin_episode(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[float, ...]:
+        """:meth:`reset` without its observation and info: the initial state, drawn and checked.
+
+        A batch's lane starts its env's episodes with it (the batch observes all its envs at once).
+        """
         super().reset(seed=seed)
         self._random.generator = self.np_random
         if self._has_sensor and (seed is not None or self._sensor_rng is None):
@@ -181,7 +189,7 @@ class VisualEnv(gym.Env):
         self._success = False
         self._was_reset = True
         self._not_carried = None
-        return self._observe(), self._rules.info(self.state, 0, None, 0, False)
+        return self._state
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """The action, the generated step (checked, not yet committed), the commit, the episode's end, the observation."""
