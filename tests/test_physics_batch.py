@@ -151,5 +151,6 @@ def test_a_blow_up_in_a_batch_raises_the_located_fault_of_that_env(tmp_path: Pat
         batch.step(actions)
     with pytest.raises(StepError) as alone:
         single.step(actions[1])
-    assert str(from_batch.value) == str(alone.value) and "blew up" in str(alone.value)
+    assert str(from_batch.value) == f"env 1: {alone.value}" and "blew up" in str(alone.value)  # the batch names its env
+    assert from_batch.value.env == 1 and from_batch.value.fault == str(alone.value)
     batch.close()

@@ -67,7 +67,20 @@ class RenderError(VisualEnvError):
 
 
 class StepError(VisualEnvError):
-    """A runtime fault (NaN, division by zero, math domain) while stepping an env."""
+    """A runtime fault (NaN, division by zero, math domain) while stepping an env.
+
+    A vector env's names the env it happened in (``env 3: ...``, index in :attr:`env`);
+    :attr:`fault` is the message that env alone gives.
+    """
+
+    def __init__(self, message: str, env: int | None = None) -> None:
+        self.fault = message
+        self.env = env
+        super().__init__(message if env is None else f"env {env}: {message}")
+
+    def in_env(self, env: int) -> "StepError":
+        """The same fault, as env `env` of a vector env reports it."""
+        return StepError(self.fault, env)
 
 
 class ConfigError(VisualEnvError):

@@ -10,12 +10,19 @@ and both versions compute the same thing:
   ``and``/``or``/``not`` and chained comparisons become element-wise logic;
 * an ``if`` statement (the chosen action's inputs, the outcome chain, a
   milestone) becomes masked assignments: ``x = where(mask, new, x)``;
-* the function table is swapped for numpy's (``sin`` -> ``np.sin``, ...).
+* the function table is swapped for one on columns (``sin`` -> ``np.sin``, ...), which gives
+  Python's values to the bit (:mod:`visualenv.compiler.vector_functions`).
 
 Both branches of a conditional are evaluated for every env, so an expression
-the scalar code would never reach may divide by zero: numpy's warnings are off
-while a batch steps, and an env whose result is not finite is stepped again by
-the scalar function, which gives the same value or the located fault.
+the scalar code would never reach may divide by zero, and an expression it does
+reach may raise where numpy's gives a number (``clip(1 / x, -1, 1)`` at x = 0 is
+ZeroDivisionError in Python, 1.0 in numpy). So divisions and the functions note
+each value Python raises on, and a batch runs these functions under
+:func:`~visualenv.compiler.vector_functions.float_errors` (numpy's warnings off,
+the notes collected): after a step in which one was noted, or whose result for an
+env is not finite, the scalar function steps those envs again (every env, when a
+value was noted: the element-wise code cannot say whose), which gives the same
+value or the located fault.
 
 Random draws (``uniform``...) and ``dynamics.python`` read one env's generator
 or call one env's hook: a step that uses them is not vectorised
@@ -27,14 +34,13 @@ from __future__ import annotations
 import ast
 import copy
 import functools
-import math
 from typing import Any, Callable
 
 import numpy as np
 
 from visualenv.expr.codegen import FUNC_PREFIX, POW, FunctionBuilder
+from visualenv.compiler.vector_functions import OPERATORS, vector_functions
 from visualenv.expr.functions import FUNCTIONS
-from visualenv.expr.tolerance import tolerance_columns
 
 WHERE, ALL, ANY, NOT = "_vwhere", "_vall", "_vany", "_vnot"
 
@@ -57,42 +63,16 @@ def _any(*values: Any) -> Any:
     return functools.reduce(np.logical_or, values)
 
 
-def _reduce(op: Callable[[Any, Any], Any]) -> Callable[..., Any]:
-    def call(*args: Any) -> Any:
-        items = args[0] if len(args) == 1 and isinstance(args[0], tuple) else args
-        return np.asarray(functools.reduce(op, items), dtype=np.float64)
-    return call
-
-
-def _log(x: Any, base: Any = None) -> Any:
-    return np.log(x) if base is None else np.log(x) / np.log(base)
-
-
-#: Python's math.hypot element by element, for 2 and 3 arguments
-_MATH_HYPOT = {2: np.frompyfunc(math.hypot, 2, 1), 3: np.frompyfunc(math.hypot, 3, 1)}
-
-
-def _hypot(*args: Any) -> Any:
-    """math.hypot on each env: numpy's hypot (C's) differs from Python's in the last bit, and a batch must match single envs exactly."""
-    return np.asarray(_MATH_HYPOT[len(args)](*args), dtype=np.float64)
-
-
-#: numpy versions of the deterministic functions of visualenv.expr.functions.FUNCTIONS
-NUMPY_FUNCTIONS: dict[str, Callable[..., Any]] = {
-    "sin": np.sin, "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan,
-    "atan2": np.arctan2, "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh, "sqrt": np.sqrt, "exp": np.exp,
-    "log": _log, "abs": np.abs, "min": _reduce(np.minimum), "max": _reduce(np.maximum), "clip": np.clip,
-    "hypot": _hypot, "floor": np.floor, "ceil": np.ceil, "round": np.round, "sign": np.sign,
-    "radians": np.radians, "degrees": np.degrees, "tolerance": tolerance_columns,
-}
 #: names whose presence in a generated function keeps it scalar (one env's generator or hook)
 _SCALAR_ONLY = {FUNC_PREFIX + n for n, f in FUNCTIONS.items() if f.random} | {"_python_dynamics", "_random"}
 
 
 def vector_globals() -> dict[str, Any]:
-    """The only globals a vectorised function sees: numpy's function table and the element-wise helpers."""
-    env: dict[str, Any] = {"__builtins__": {}, POW: np.float_power, WHERE: _where, ALL: _all, ANY: _any, NOT: np.logical_not}
-    env.update({FUNC_PREFIX + n: f for n, f in NUMPY_FUNCTIONS.items()})
+    """The only globals a vectorised function sees: the function table on columns and the element-wise helpers."""
+    table = vector_functions()
+    env: dict[str, Any] = {"__builtins__": {}, POW: table["pow"], WHERE: _where, ALL: _all, ANY: _any, NOT: np.logical_not}
+    env.update({FUNC_PREFIX + n: f for n, f in table.items() if n != "pow"})
+    env.update({f"_v{op.__name__}": f for op, f in OPERATORS.items()})
     return env
 
 
@@ -102,6 +82,13 @@ def _call(func: str, args: list[ast.expr]) -> ast.Call:
 
 class _Expressions(ast.NodeTransformer):
     """Expressions to their element-wise form."""
+
+    def visit_BinOp(self, node: ast.BinOp) -> ast.AST:
+        left, right = self.visit(node.left), self.visit(node.right)
+        constant = isinstance(right, ast.Constant) and isinstance(right.value, (int, float)) and right.value != 0
+        if type(node.op) in OPERATORS and not constant:  # a division: by zero, Python raises (noted), numpy gives a number
+            return _call(f"_v{type(node.op).__name__}", [left, right])
+        return ast.BinOp(left, node.op, right)
 
     def visit_IfExp(self, node: ast.IfExp) -> ast.AST:
         return _call(WHERE, [self.visit(node.test), self.visit(node.body), self.visit(node.orelse)])

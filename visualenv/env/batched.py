@@ -9,9 +9,14 @@ Env i of a batch reset with seed s is env ``visualenv.make`` reset with seed
 s + i: each env keeps its own random generator (a state-only
 :class:`~visualenv.env.visual_env.VisualEnv`, its "lane") for the draws of
 ``reset``. A lane also steps its env alone when the vectorised step cannot:
-a spec whose step draws random numbers or calls ``dynamics.python``, or an
-env whose result is not finite (the lane then returns the same value, or
-raises the located fault, exactly as one env would).
+a spec whose step draws random numbers or calls ``dynamics.python``, an env
+whose result the episode's rules refuse (not finite, or past float32 in a
+state-only observation) or whose action is not finite, and every env of a step
+in which an operation met a value Python raises on (the lane then returns the
+same value, or the located fault, exactly as one env would). The rules themselves
+(endings, truncation, success, milestones, info, faults) are one env's:
+:class:`~visualenv.env.episode.EpisodeRules`. A fault raised names its env:
+``env 3: <what env 3 alone raises>`` (:attr:`StepError.env <visualenv.errors.StepError>`).
 
 A physics spec's batch steps every env's MjData in one call and reads the
 model's names as columns (:class:`~visualenv.physics.batch.BatchSimulation`);
@@ -31,9 +36,11 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
+from visualenv.compiler.vector_functions import float_errors
+from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
-from visualenv.errors import SpecError
+from visualenv.errors import SpecError, StepError
 from visualenv.render.base import RendererOptions, load_backend, observation_space
 from visualenv.render.batch_limits import check_batchable
 from visualenv.render.sensor import sensor_models
@@ -56,7 +63,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     ``state`` (a dict of arrays, each variable with its ``_name`` mask, as Sync/AsyncVectorEnv
     nest a dict), ``steps``, ``outcome``, ``milestones`` and
     ``is_success``; an env ended by a fault under ``on_fault: terminate`` has its
-    message in ``error``.
+    message in ``error`` (the message one env gives). Under ``on_fault: raise``
+    the fault of the first env that faulted is raised, prefixed ``env i:``.
 
     Episodes are truncated after the spec's ``max_steps``, or ``max_episode_steps`` when given
     (``gymnasium.make_vec`` passes the id's), with ``info["outcome"] == "max_steps"``.
@@ -121,15 +129,14 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise SpecError([program.loaded.source.diagnostic(("observation",), "a batch renders every env through one camera pose, and this "
                 "camera of the MuJoCo model moves (it tracks a body or hangs on one): use a camera of the spec's own, render=False, "
                 "or one process per env (vectorization_mode='async')")])
-        if max_episode_steps is not None and (isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer))
-                                              or max_episode_steps < 1):
-            raise ValueError(f"max_episode_steps must be an integer of at least 1, got {max_episode_steps!r}")
         #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
-        self.max_episode_steps = program.spec.max_steps if max_episode_steps is None else int(max_episode_steps)
+        self.max_episode_steps = step_limit(program, max_episode_steps)
         repeat = program.spec.action_repeat if action_repeat is None else action_repeat
         if repeat != 1:  # the batch steps each env once per step (a later stage repeats actions in batches)
             raise ValueError(f"{program.spec.id} repeats each action {repeat} times (action_repeat), which a batch does not do yet: "
                              "make_vec(..., batched=True, action_repeat=1), or vectorization_mode='async'")
+        #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
+        self.rules = EpisodeRules(program, self.max_episode_steps, observes_state=not self.uses_camera and program.physics is None)
         self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps, action_repeat=1) for _ in range(n)]
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
@@ -164,15 +171,6 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._outcome = np.full(n, None, dtype=object)  # info["outcome"] of each env's last step
         self._errors = np.full(n, None, dtype=object)
         self._autoreset = np.zeros(n, dtype=bool)
-        rules = program.outcomes
-        self._ends = np.array([r.end for r in rules] + ["none"], dtype=object)  # index -1: no outcome
-        self._names = np.array([r.name for r in rules] + [None], dtype=object)
-        self._outcome_success = np.array([r.success for r in rules] + [False])
-        milestone_bits = [1 << i for i, r in enumerate(r for r in rules if r.end == "none")]
-        self._milestones = [r.name for r in rules if r.end == "none"]
-        successful = [bit for bit, r in zip(milestone_bits, (r for r in rules if r.end == "none")) if r.success]
-        self._success_bits = sum(successful)
-        self._max_steps = self.max_episode_steps
         self._was_reset = False
 
     # -- Gymnasium API ------------------------------------------------------------------------------
@@ -270,52 +268,70 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     # -- the step -----------------------------------------------------------------------------------
 
     def _advance(self, actions: np.ndarray, stepping: np.ndarray, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
-        """Every stepping env's step at once, then the lanes of those the vectorised step could not do."""
+        """Every stepping env's step at once, then the lanes of those the vectorised step could not do.
+
+        An env goes to its lane when its result is one the episode's rules refuse (NaN, an infinity,
+        past float32), its simulation blew up, or its action is not finite; every env does when an
+        operation of the step met a value Python raises on (float_errors: a division by zero, log(0)...,
+        whose env the element-wise code cannot say, and whose result numpy may have clipped into a number).
+        """
         alone = stepping.copy()
         step = self._batch.step
         if step is not None:
-            if self._physics is not None:
-                self._physics.active = np.flatnonzero(stepping)
+            unfinite = None  # the envs whose continuous action is not finite, if any
+            if self.program.discrete is None and not np.isfinite(actions).all():
+                unfinite = ~np.isfinite(actions).all(axis=1)
             columns = tuple(self._state)
             action = tuple(actions.T.astype(np.float64)) if self.program.discrete is None else actions
-            with np.errstate(all="ignore"):
+            with float_errors() as errors:
+                if self._physics is not None:
+                    self._physics.active = np.flatnonzero(stepping)
+                    self._physics.watch(errors, unfinite)
                 state, reward, outcome, fired = step(columns, action, self._steps, self._fired)
             n = self.num_envs
             state = np.array([np.broadcast_to(v, (n,)) for v in state]) if state else self._state.copy()
             reward = np.broadcast_to(np.asarray(reward, dtype=np.float64), (n,))
             outcome = np.broadcast_to(np.asarray(outcome, dtype=np.int64), (n,))
             fired = np.broadcast_to(np.asarray(fired, dtype=np.int64), (n,))
-            finite = np.isfinite(reward) & np.isfinite(state).all(axis=0)
+            unfit = self.rules.unfit(state, reward) | bool(errors)
             if self._physics is not None:
-                finite &= ~self._physics.blown
-            ok = stepping & finite
-            alone = stepping & ~finite
+                unfit |= self._physics.blown
+            if unfinite is not None:
+                unfit |= unfinite
+            ok = stepping & ~unfit
+            alone = stepping & unfit
             self._state[:, ok] = state[:, ok]
             self._steps[ok] += 1
-            self._success[ok] |= self._outcome_success[outcome[ok]] | ((fired[ok] & ~self._fired[ok] & self._success_bits) != 0)
+            self._success[ok] = self.rules.successes(self._success[ok], outcome[ok], fired[ok] & ~self._fired[ok])
             self._fired[ok] = fired[ok]
             rewards[ok] = reward[ok]
-            ends = self._ends[outcome]
-            terminated[ok] = ends[ok] == "terminate"
-            truncated[ok] = (ends[ok] == "truncate") | ((ends[ok] == "none") & (self._steps[ok] >= self._max_steps))
-            self._outcome[ok] = np.where((outcome[ok] < 0) & truncated[ok], "max_steps", self._names[outcome[ok]])
+            terminated[ok], truncated[ok], self._outcome[ok] = self.rules.endings(outcome[ok], self._steps[ok])
             self._errors[ok] = None
         for i in np.flatnonzero(alone):
             if self._physics is not None:
                 self._replay_lane(int(i), actions[i], rewards, terminated, truncated)
             else:
                 self._step_lane(int(i), actions[i], rewards, terminated, truncated)
+        if self._physics is not None:
+            self._physics.kept.clear()
 
     def _replay_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i's step, whose MuJoCo step the batch took, run again by its lane: its result or its located fault, as env i alone."""
-        physics = self._physics
-        with self.lanes[i].simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
-            self._step_lane(i, action, rewards, terminated, truncated)
+        physics, simulation = self._physics, self.lanes[i].simulation
+        try:
+            with simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
+                self._step_lane(i, action, rewards, terminated, truncated)
+        finally:
+            if not simulation.replay_stepped:  # it faulted before its MuJoCo step: alone, its data was not stepped
+                physics.put_back(i)
 
     def _step_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i stepped by its lane: the scalar step, with its checks and faults."""
         lane = self._lane_at(i)
-        _, reward, term, trunc, info = lane.step(action.item() if self.program.discrete is not None else action)
+        try:
+            _, reward, term, trunc, info = lane.step(action.item() if self.program.discrete is not None else action)
+        except StepError as err:
+            raise err.in_env(i) from None
         self._state[:, i] = [info["state"][n] for n in self.program.state_names]
         self._steps[i], self._fired[i], self._success[i] = lane.steps, lane.fired, info["is_success"]
         rewards[i], terminated[i], truncated[i] = reward, term, trunc
@@ -329,11 +345,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return lane
 
     def _reset_lane(self, i: int, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
-        lane = self.lanes[i]
-        lane.reset(seed=seed, options=options)
+        try:
+            self._state[:, i] = self.lanes[i].begin_episode(seed=seed, options=options)
+        except StepError as err:
+            raise err.in_env(i) from None
         if self._physics is not None:
             self._physics.refresh(i)
-        self._state[:, i] = [lane.state[n] for n in self.program.state_names]
         self._steps[i] = 0
         self._fired[i] = 0
         self._success[i] = False
@@ -400,10 +417,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         observe = self._batch.observe
         if observe is None:
             return np.stack([self._lane_at(i).physics_observation() for i in rows])
-        with np.errstate(all="ignore"):
+        with float_errors() as errors:
             columns = observe(tuple(self._state), self._steps)
         table = np.ascontiguousarray(np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in columns]).reshape(len(columns), n).T)
-        for i in np.flatnonzero(~np.isfinite(table).all(axis=1)):
+        for i in range(n) if errors else np.flatnonzero(~np.isfinite(table).all(axis=1)):
             table[i] = self._lane_at(int(i)).physics_observation()  # the same values, or the lane's own error
         return table if envs is None else table[list(rows)]
 
@@ -431,38 +448,23 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         bind = self._batch.bind
         n = self.num_envs
         if bind is None:
-            return np.array([self._lane_at(i).binding_values() for i in range(n)], dtype=np.float64).reshape(n, -1)
-        with np.errstate(all="ignore"):
+            return np.array([self._lane_bindings(i) for i in range(n)], dtype=np.float64).reshape(n, -1)
+        with float_errors() as errors:
             values = bind(tuple(self._state), self._steps)
         table = np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values]).reshape(len(values), n).T.copy()
-        for i in np.flatnonzero(~np.isfinite(table).all(axis=1)):
-            table[i] = self._lane_at(int(i)).binding_values()  # the same values, or the located fault
+        for i in range(n) if errors else np.flatnonzero(~np.isfinite(table).all(axis=1)):
+            table[i] = self._lane_bindings(int(i))  # the same values, or the located fault
         return table
 
-    def _info(self, mask: np.ndarray) -> dict[str, Any]:
-        state: dict[str, Any] = {}
-        for j, name in enumerate(self.program.state_names):
-            state[name], state[f"_{name}"] = self._state[j].copy(), mask.copy()
-        info: dict[str, Any] = {
-            "state": state, "_state": mask.copy(),
-            "steps": self._steps.copy(), "_steps": mask.copy(),
-            "outcome": self._outcome.copy(), "_outcome": mask.copy(),
-            "milestones": self._fired_names(), "_milestones": mask.copy(),
-            "is_success": self._success.copy(), "_is_success": mask.copy(),
-        }
-        erred = self._errors != None  # noqa: E711 - element-wise
-        if erred.any():
-            info["error"] = self._errors.copy()
-            info["_error"] = erred & mask
-        return info
+    def _lane_bindings(self, i: int) -> tuple:
+        """Env i's binding values computed by its lane, as one env computes them; a fault names env i."""
+        try:
+            return self._lane_at(i).binding_values()
+        except StepError as err:
+            raise err.in_env(i) from None
 
-    def _fired_names(self) -> np.ndarray:
-        """Each env's fired milestones as a list of names: one list per distinct set, shared by the envs that have it."""
-        distinct, which = np.unique(self._fired, return_inverse=True)
-        lists = np.empty(len(distinct), dtype=object)
-        for j, bits in enumerate(distinct):
-            lists[j] = [m for b, m in enumerate(self._milestones) if bits & (1 << b)]
-        return lists[which]
+    def _info(self, mask: np.ndarray) -> dict[str, Any]:
+        return self.rules.batch_info(self._state, self._steps, self._outcome, self._fired, self._success, self._errors, mask)
 
 
 def _select(obs: Any, i: int) -> Any:

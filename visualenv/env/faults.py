@@ -22,7 +22,8 @@ from visualenv.compiler.program import Program
 from visualenv.errors import StepError
 from visualenv.expr.codegen import Site
 
-_FLOAT32_MAX = float(np.finfo(np.float32).max)
+#: the largest magnitude the float32 state-only observation holds: a finite state past it would be observed as inf
+OBSERVATION_LIMIT = float(np.finfo(np.float32).max)
 #: messages clearer than Python's own for the exceptions generated code raises
 _MESSAGES: dict[type, str] = {ZeroDivisionError: "division by zero", OverflowError: "numeric overflow"}
 
@@ -65,7 +66,7 @@ class FaultDiagnosis:
     def check_observable(self, state: tuple, what: str, values: dict[str, Any], steps: int) -> None:
         """A finite state can still overflow the float32 observation (it would read inf); ``what`` formats the site's name."""
         for i in self._observed:
-            if not -_FLOAT32_MAX <= state[i] <= _FLOAT32_MAX:
+            if not -OBSERVATION_LIMIT <= state[i] <= OBSERVATION_LIMIT:
                 name = self.program.state_names[i]
                 function = "init" if what.startswith("state.") else "step"
                 site = self.program.line_maps[function].find(what.format(name))

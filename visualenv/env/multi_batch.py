@@ -25,7 +25,7 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compat.glibc import apply_policy
 from visualenv.env.cores import Share, confine, render_threads, worker_cores
-from visualenv.errors import VisualEnvError, WorkerError
+from visualenv.errors import StepError, VisualEnvError, WorkerError
 
 _BROKEN = (EOFError, BrokenPipeError, ConnectionResetError, OSError)
 
@@ -56,6 +56,9 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
                  **kwargs: Any) -> None:
         self._closed_workers = True
         self.sizes = batch_sizes(num_envs, workers)
+        bounds = np.cumsum([0, *self.sizes])
+        #: the envs of each worker's batch: env j of worker w is env start + j of the whole
+        self._slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
         self.num_envs = int(num_envs)
         self.render_mode = kwargs.get("render_mode")
         if self.render_mode not in (None, *self.metadata["render_modes"]):  # 'human' would open a page in each worker
@@ -90,8 +93,6 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         self.action_space = batch_space(self.single_action_space, self.num_envs)
         self.autoreset_mode = first["autoreset_mode"]
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
-        bounds = np.cumsum([0, *self.sizes])
-        self._slices = [slice(int(a), int(b)) for a, b in zip(bounds[:-1], bounds[1:])]
 
     @staticmethod
     def _check_spec(target: str, size: int, kwargs: dict[str, Any]) -> None:
@@ -203,6 +204,8 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         except _BROKEN:
             raise self._worker_error(call) from None
         if not ok:
+            if isinstance(value, StepError) and value.env is not None:  # env j of worker w's batch is env start + j of the whole
+                raise value.in_env(self._slices[w].start + value.env) from None
             raise value
         return value
 

@@ -15,17 +15,14 @@ from gymnasium.error import ResetNeeded
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
+from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.physics.conventions import legacy_stream
-from visualenv.env.faults import FaultDiagnosis
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 
 #: the keys reset(options=...) understands
 RESET_OPTIONS = ("state",)
-#: (terminated, truncated, info["outcome"]) of a step that no outcome ended
-_GOES_ON = (False, False, None)
-_OUT_OF_STEPS = (False, True, "max_steps")
 
 
 class VisualEnv(gym.Env):
@@ -63,10 +60,13 @@ class VisualEnv(gym.Env):
     spec's steps; ``max_episode_steps`` counts ``step()`` calls.
 
     ## Runtime faults
-    A non-finite state or reward, a division by zero or a math domain error
-    raises :class:`~visualenv.errors.StepError` naming the expression, its
-    spec line and the values; with ``on_fault: terminate`` the episode ends
-    instead and ``info["error"]`` holds the message.
+    A non-finite state or reward, a division by zero, a math domain error or
+    (state-only, without physics) a state past float32's range raises
+    :class:`~visualenv.errors.StepError` naming the expression, its spec line
+    and the values; with ``on_fault: terminate`` the episode ends instead
+    (reward 0, terminated, ``info["outcome"] == "error"``) and
+    ``info["error"]`` holds the message. These rules, and those of the episode
+    end, are :class:`~visualenv.env.episode.EpisodeRules`, which a batch's envs follow too.
 
     ## Pickling
     A pickled env goes on with its episode: the copy's next steps are the original's
@@ -112,7 +112,7 @@ class VisualEnv(gym.Env):
         #: the spec's steps per step() (dm_control's action repeat), each with the same action
         self.action_repeat: int = s.action_repeat if action_repeat is None else int(action_repeat)
         #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
-        self._step_limit = s.max_steps if max_episode_steps is None else int(max_episode_steps) * self.action_repeat
+        self._step_limit = s.max_steps if max_episode_steps is None else step_limit(program, max_episode_steps) * self.action_repeat
         #: episodes are truncated after this many step() calls: the spec's max_steps (over the action repeat), or Gymnasium's
         self.max_episode_steps: int = -(-self._step_limit // self.action_repeat)
         if s.observation is None and not s.render.view.camera:  # no camera to render a view with: no render mode (check_env reads it)
@@ -140,7 +140,9 @@ class VisualEnv(gym.Env):
             self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / (program.physics.dt * self.action_repeat))))}
         self.data: Any = self._sim.data if self._sim is not None else None
         self._fns = program.functions(self._random, self._sim)
-        self._faults = FaultDiagnosis(program)
+        #: the episode's endings, success, info and faults (shared with the batch: visualenv.env.episode)
+        self._rules = EpisodeRules(program, self._step_limit, observes_state=not self.uses_camera and program.physics is None)
+        self._faults = self._rules.faults
         self._state: tuple[float, ...] = tuple(0.0 for _ in program.state_names)
         self._steps = 0
         self._fired = 0
@@ -170,14 +172,21 @@ class VisualEnv(gym.Env):
             big = np.finfo(np.float32).max  # finite bounds: check_env warns about infinite ones
             self.observation_space = spaces.Box(-big, big, (n,), np.float32)
         self._observed = program.observed
-        self._milestones = [r.name for r in program.outcomes if r.end == "none"]
-        self._milestone_success = [r.success for r in program.outcomes if r.end == "none"]
-        #: (terminated, truncated, info["outcome"]) when outcome i ends the episode, built once
-        self._endings = [(r.end == "terminate", r.end == "truncate", r.name) for r in program.outcomes]
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+        self.begin_episode(seed=seed, options=options)
+        obs, info = self._observe(), self._rules.info(self.state, 0, None, 0, False)
+        if self.render_mode == "human":
+            self._show(None, info)
+        return obs, info
+
+    def begin_episode(self, *, seed: int | None = None, options: dict[str, Any] | None = None) -> tuple[float, ...]:
+        """:meth:`reset` without its observation and info: the initial state, drawn and checked.
+
+        A batch's lane starts its env's episodes with it (the batch observes all its envs at once).
+        """
         super().reset(seed=seed)
         self._random.generator = self._reset_generator(seed)
         if self._has_sensor and (seed is not None or self._sensor_rng is None):
@@ -196,9 +205,7 @@ class VisualEnv(gym.Env):
                 values[names.index(key)] = value
             state = tuple(values)
         self._steps = 0
-        self._faults.check_reset(state, self._steps)
-        if not self.uses_camera:
-            self._faults.check_observable(state, "state.{}.init", dict(zip(self.program.state_names, state)), self._steps)
+        self._rules.check_reset(state, self._steps)
         self._state = tuple(float(v) for v in state)
         self._steps = 0
         self._fired = 0
@@ -206,25 +213,25 @@ class VisualEnv(gym.Env):
         self._success = False
         self._was_reset = True
         self._not_carried = None
-        obs, info = self._observe(), self._info(None)
-        if self.render_mode == "human":
-            self._show(None, info)
-        return obs, info
+        return self._state
 
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """The action, the generated step (checked, not yet committed), the commit, the episode's end, the observation."""
         if not self._was_reset:
             raise ResetNeeded(f"call reset() before step(): {self._not_carried or 'the state is set by reset'} (Gymnasium's order)")
         a = self._action(action)
+        rules = self._rules
         total = 0.0
         for _ in range(self.action_repeat):  # dm_control's action repeat: the rewards summed, one observation
             try:
                 state, reward, outcome, fired = self._advance(a)
             except (ArithmeticError, ValueError, StepError) as exc:
                 return self._fault_in_step(exc, a)
-            self._commit(state, outcome, fired)
+            self._success = rules.succeeded(self._success, outcome, fired & ~self._fired)
+            self._state, self._fired = state, fired
+            self._steps += 1
             total += reward
-            terminated, truncated, name = self._ending(outcome)
+            terminated, truncated, name = rules.ending(outcome, self._steps)
             if terminated or truncated:
                 break
         reward = total
@@ -232,7 +239,7 @@ class VisualEnv(gym.Env):
             obs = self._observe()
         except StepError as err:  # an actor binding of the new state faulted: nothing to render
             return self._fault_in_observation(err)
-        info = self._info(name)
+        info = rules.info(self.state, self._steps, name, self._fired, self._success)
         if self.render_mode == "human":
             self._show(float(reward), info)
         return obs, float(reward), terminated, truncated, info
@@ -264,53 +271,24 @@ class VisualEnv(gym.Env):
         return self._discrete_action(action, n) if n is not None else self._continuous_action(action)
 
     def _advance(self, action: Any) -> tuple:
-        """The generated step on the current state: (state, reward, outcome, fired), checked; nothing is committed yet.
-
-        A NaN or infinity anywhere, or (without a camera) a state the float32
-        observation cannot hold, raises a located StepError.
-        """
+        """The generated step on the current state: (state, reward, outcome, fired), checked by the episode's rules
+        (a located StepError for NaN, an infinity, or a state the float32 observation cannot hold); nothing is committed yet."""
         old = self._state
         result = self._fns.step(old, action, self._steps, self._fired)
-        state, reward = result[0], result[1]
-        total = sum(state) + reward
-        if total - total != 0:  # NaN or infinity somewhere
-            self._faults.check_step(state, reward, self._values(old, action), self._steps)
-        if not self.uses_camera:
-            self._faults.check_observable(state, "dynamics.update.{}", self._values(old, action), self._steps)
+        self._rules.check(result[0], result[1], lambda: self._values(old, action), self._steps)
         return result
-
-    def _commit(self, state: tuple, outcome: int, fired: int) -> None:
-        """The step's result becomes the env's: the state, the step count, the fired milestones, and success."""
-        self._state = state
-        self._steps += 1
-        newly = fired & ~self._fired
-        self._fired = fired
-        if newly:
-            for i, ok in enumerate(self._milestone_success):
-                if ok and newly & (1 << i):
-                    self._success = True
-        if outcome >= 0 and self.program.outcomes[outcome].success:
-            self._success = True
-
-    def _ending(self, outcome: int) -> tuple[bool, bool, str | None]:
-        """(terminated, truncated, info["outcome"]): the ending outcome that held, else max_steps, else the episode goes on."""
-        if outcome >= 0:
-            return self._endings[outcome]
-        if self._steps >= self._step_limit:
-            return _OUT_OF_STEPS
-        return _GOES_ON
 
     def _fault_in_step(self, exc: BaseException, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """A fault computing the step, which leaves the state as it was: raised located, or (``on_fault: terminate``) the episode's end."""
         err = exc if isinstance(exc, StepError) else self._faults.raised("step", exc, self._values(self._state, action), self._steps)
-        if self.program.spec.on_fault == "raise":
+        if self._rules.raises:
             raise err from None
         self._steps += 1
         return self._end_on_fault(err, self._last_obs if self.uses_camera else self._observe())
 
     def _fault_in_observation(self, err: StepError) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """A binding of the committed state faulted before the render: raised, or the episode ends on the last frame."""
-        if self.program.spec.on_fault == "raise":
+        if self._rules.raises:
             raise err
         return self._end_on_fault(err, self._last_obs)
 
@@ -483,15 +461,10 @@ class VisualEnv(gym.Env):
 
     def _end_on_fault(self, err: StepError, obs: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """``on_fault: terminate``: the episode ends with no reward; ``obs`` is the last one that could be made."""
-        info = self._info("error")
-        info["error"] = str(err)
+        info = self._rules.fault_info(self.state, self._steps, self._fired, self._success, str(err))
         if self.render_mode == "human":
             self._show(0.0, info)
         return obs, 0.0, True, False, info
-
-    def _info(self, outcome: str | None) -> dict[str, Any]:
-        fired = [m for i, m in enumerate(self._milestones) if self._fired & (1 << i)]
-        return {"state": self.state, "steps": self._steps, "outcome": outcome, "milestones": fired, "is_success": self._success}
 
     def _values(self, state: tuple, action: Any) -> dict[str, Any]:
         """What a step's expressions read, for a fault's message: the state, each continuous input as given (before clipping), the action."""

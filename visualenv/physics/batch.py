@@ -16,6 +16,7 @@ warm start, which the next step starts from: env i would no longer equal env i a
 
 from __future__ import annotations
 
+import copy
 import os
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, Callable, Iterable, Mapping, Sequence
@@ -69,6 +70,10 @@ class BatchSimulation:
         self.active = np.arange(n)
         #: the envs whose last step blew up (MuJoCo's warning or a non-finite qpos/qvel)
         self.blown = np.zeros(n, dtype=bool)
+        #: what the step in progress says may fault before its MuJoCo step (:meth:`watch`), and the MjData kept for those envs
+        self._errors: Any = ()
+        self._suspects: np.ndarray | None = None
+        self.kept: dict[int, Any] = {}
         #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
         self._last: dict[str, tuple[list[str], list[np.ndarray]]] = {}
         self._physics_step = first.physics_step  # the spec's convention's step (visualenv.physics.conventions)
@@ -130,12 +135,35 @@ class BatchSimulation:
 
         return read
 
+    def watch(self, errors: Any, suspects: np.ndarray | None) -> None:
+        """Before a step: the record of the values it meets that Python raises on (float_errors', true once one was
+        met), and the envs whose action is not finite.
+
+        One env's step can fault before its MuJoCo step (a division by zero, a NaN action floored)
+        and leave its MjData as it was, where the batch has stepped every env: if the step met an
+        error before :meth:`advance`, every active env's MjData is kept (else the suspects'), for
+        :meth:`put_back` (rare: no bundled spec meets one).
+        """
+        self._errors, self._suspects = errors, suspects
+
+    def put_back(self, i: int) -> None:
+        """Env i's MjData as it was before the last step (kept by :meth:`advance`), and the batch's copies of it."""
+        data = self.kept.pop(i, None)
+        if data is not None:
+            sim = self.sims[i]
+            sim.mujoco.mj_copyData(sim.data, sim.model, data)
+            self.refresh(i)
+
     def advance(self, controls: Iterable[Any]) -> None:
         """Every active env's controls (columns, in the program's control order), then its frame_skip MuJoCo steps.
 
         Envs whose step blew up are marked in :attr:`blown` (their data is left as MuJoCo left
         it, as one env's is); the env replays its step alone to raise the located fault.
         """
+        self.kept = {}
+        if self._errors or self._suspects is not None:
+            keep = self.active if self._errors else self.active[self._suspects[self.active]]  # type: ignore[index]
+            self.kept = {i: copy.copy(self.sims[i].data) for i in keep.tolist()}
         n = self.num_envs
         ctrl = self._ctrl
         ctrl[:] = 0.0

@@ -60,6 +60,8 @@ class Simulation:
         #: while a batch replays this env's step (:meth:`replaying`): the values its reads had before the step, by read
         self._replay: Mapping[str, tuple] | None = None
         self._replay_blown = False
+        #: whether the last replayed step reached its MuJoCo step (False: it faulted before, and one env's data was not stepped)
+        self.replay_stepped = False
 
     # -- reset and step -----------------------------------------------------------------------------
 
@@ -121,6 +123,7 @@ class Simulation:
                     move(given[count:])
                 values = given[:count].tolist()
             if self._replay is not None:  # a batch stepped this env already: only its fault is left to raise
+                self.replay_stepped = True
                 if self._replay_blown:
                     raise PhysicsFault(self.blown_up())
                 return
@@ -195,7 +198,7 @@ class Simulation:
         MuJoCo step is not taken again (or raises the blow-up, when `blown`), and reads after it
         see the stepped data: the step's result, or its located fault, is exactly this env's alone.
         """
-        self._replay, self._replay_blown = reads, blown
+        self._replay, self._replay_blown, self.replay_stepped = reads, blown, False
         try:
             yield
         finally:
