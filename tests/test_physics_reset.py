@@ -258,13 +258,14 @@ def test_settling_keeps_the_time_unless_told(tmp_path: Path) -> None:
     assert env.data.time == pytest.approx(0.25)
 
 
+@pytest.mark.filterwarnings("ignore:MuJoCo:RuntimeWarning")  # MuJoCo's own words on the blow-up (where its warnings are Python's)
 def test_a_simulation_that_blows_up_while_settling_is_a_located_fault(tmp_path: Path) -> None:
     path = write(tmp_path, """\
         reset:
           values: {qvel_hinge: 1e300}
           settle: {steps: 10}
     """)
-    with pytest.raises(StepError) as caught, pytest.warns(RuntimeWarning, match="MuJoCo: Nan, Inf or huge value"):
+    with pytest.raises(StepError) as caught:
         VisualEnv(path, render=False).reset(seed=0)
     assert f"spec.yaml:{line_of(path, 'settle:')}: physics.reset.settle" in str(caught.value)
     assert "blew up" in str(caught.value)

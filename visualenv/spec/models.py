@@ -295,7 +295,7 @@ class Redraw(StrictModel):
 
 
 class Settle(StrictModel):
-    """Physics steps taken at reset, after the values are written (dm_control's cheetah settles 200 steps), with zero controls."""
+    """Physics steps taken at reset, after the values are written (dm_control's cheetah settles 200 steps), with the controls the reset left (zero, or a keyframe's)."""
 
     steps: int = Field(ge=1, le=1_000_000, description="physics steps (the convention's step, in one call), before the episode's first")
     time: float | None = Field(None, allow_inf_nan=False, description="the simulation time set after them (dm_control: 0); default: as they leave it")
