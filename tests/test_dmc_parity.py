@@ -33,14 +33,17 @@ ASSETS = Path(__file__).resolve().parents[1] / "specs" / "dmc" / "assets"
 
 
 def test_the_pinned_files_are_dm_controls_own() -> None:
-    """The copies are byte for byte dm_control's files (SOURCES.md's sha256) and compile to the model its loader builds."""
+    """The copies are dm_control's files (SOURCES.md's sha256 of each original), byte for byte where SOURCES.md says
+    verbatim, and each task's copy compiles to the model dm_control's loader builds (with reacher's one camera renamed)."""
     text = (ASSETS / "SOURCES.md").read_text(encoding="utf-8")
     version = re.search(r"^dm_control (\S+) ", text, re.M)
     assert version is not None and "Apache License" in (ASSETS / "LICENSE.dm_control").read_text(encoding="utf-8")
-    pinned = dict(re.findall(r"^\| `([\w./]+)` \| `([0-9a-f]{64})` \|", text, re.M))
-    assert sorted(pinned) == sorted(p.relative_to(ASSETS).as_posix() for p in ASSETS.rglob("*.xml"))
-    for name, sha in pinned.items():
-        assert hashlib.sha256((ASSETS / name).read_bytes()).hexdigest() == sha, name
+    rows = {name: (sha, how) for name, sha, how in re.findall(r"^\| `([\w./]+)` \| `([0-9a-f]{64})` \| ([^|]+) \|", text, re.M)}
+    assert sorted(rows) == sorted(p.relative_to(ASSETS).as_posix() for p in ASSETS.rglob("*.xml"))
+    verbatim = [name for name, (_, how) in rows.items() if how.strip() == "verbatim"]
+    for name in verbatim:
+        assert hashlib.sha256((ASSETS / name).read_bytes()).hexdigest() == rows[name][0], name
+    assert sorted(set(rows) - set(verbatim)) == ["cheetah.xml", "reacher.xml"]
     if metadata.version("dm_control") != version.group(1):
         pytest.skip(f"dm_control {metadata.version('dm_control')} is installed; the copies are of {version.group(1)}")
     found = importlib.util.spec_from_file_location("vendor_dm_control", ASSETS / "vendor_dm_control.py")
@@ -48,11 +51,20 @@ def test_the_pinned_files_are_dm_controls_own() -> None:
     vendor = importlib.util.module_from_spec(found)
     found.loader.exec_module(vendor)
     theirs = Path(suite.__file__).parent
-    for name in pinned:
+    for name, (sha, _) in rows.items():
+        assert hashlib.sha256((theirs / name).read_bytes()).hexdigest() == sha, name
+    for name in verbatim:
         assert (theirs / name).read_bytes() == (ASSETS / name).read_bytes(), name
+    assert sorted(vendor.MODELS) == sorted(p.name for p in ASSETS.glob("*.xml"))
     for name, module in vendor.MODELS.items():
-        xml, assets = importlib.import_module(module).get_model_and_assets()
-        assert vendor.binary(mujoco.MjModel.from_xml_path(str(ASSETS / name))) == vendor.binary(mujoco.MjModel.from_xml_string(xml, assets))
+        vendor.check(name, module)  # SystemExit if the copy compiles to another model
+    cheetah = (ASSETS / "cheetah.xml").read_text(encoding="utf-8")
+    assert "settotalmass" not in re.search(r"<compiler [^>]*>", cheetah).group(0) and cheetah.count("<inertial ") == 7
+    mass = re.search(r'<body name="torso"[^>]*>\n *<inertial [^>]* mass="([^"]+)"', cheetah).group(1)
+    heavier = cheetah.replace(f'mass="{mass}"', f'mass="{np.nextafter(float(mass), np.inf)!r}"', 1)
+    assets = importlib.import_module("dm_control.suite.cheetah").get_model_and_assets()[1]
+    expected = vendor.binary(vendor.expected_model("cheetah.xml", "dm_control.suite.cheetah"))
+    assert vendor.binary(vendor.compile_quietly(heavier, assets)) != expected  # the control: the comparison sees one bit
 
 
 def integration_state(data) -> np.ndarray:

@@ -27,6 +27,12 @@ from visualenv.spec.models import Physics
 READ_PREFIX = "_phys_read_"
 ADVANCE = "_phys_advance"
 WRITE_RESET = "_phys_write_reset"
+#: a reset's redraw loop (visualenv.compiler.physics_reset): its writer, its range of tries, its fault when none met `until`
+WRITE_REDRAW = "_phys_write_redraw"
+REDRAW_TRIES = "_phys_redraw_tries"
+REDRAW_FAILED = "_phys_redraw_failed"
+#: the reset's settling steps and last forward, after a redraw or a settle
+FINISH_RESET = "_phys_finish_reset"
 
 
 @dataclass
@@ -44,6 +50,11 @@ class PhysicsPlan:
     observe_size: int = 0  # values in the state-only observation
     scene: PhysicsScene | None = None  # what a renderer draws (made when the spec renders)
     convention: str = "gymnasium"  # whose MuJoCo calls step and reset it (visualenv.physics.conventions)
+    finishes: bool = False  # the reset goes on after its values (a redraw or a settle), and ends with its own forward
+    redraw_targets: list[str] = field(default_factory=list)  # what each try of the redraw writes, in order
+    redraw_attempts: int = 0
+    settle: tuple[int, float | None] | None = None  # the reset's settling steps and the time set after them
+    posed_geoms: tuple[int, ...] = ()  # geoms whose model position the reset writes: drawn posed from geom_xpos/geom_xmat
 
     @property
     def dt(self) -> float:
@@ -60,7 +71,20 @@ class PhysicsPlan:
         for key, names in self.reads.items():
             env[READ_PREFIX + key] = sim.reader(names, key)
         env[ADVANCE] = sim.stepper(self.controls, self.moved)
-        env[WRITE_RESET] = sim.writer(self.reset_targets)
+        env[WRITE_RESET] = sim.writer(self.reset_targets, forward=not self.finishes)
+        if self.redraw_attempts:
+            env[WRITE_REDRAW] = sim.writer(self.redraw_targets)
+            env[REDRAW_TRIES] = range(self.redraw_attempts)
+            env[REDRAW_FAILED] = redraw_failure(self.redraw_attempts)
+        if self.finishes:
+            env[FINISH_RESET] = reset_finisher(sim, self.settle)
+
+    def poses(self, data: Any) -> tuple:
+        """What a renderer poses the drawn model from (xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir), geoms a
+        reset moves included as bodies of their own (:mod:`visualenv.physics.geom_poses`); live views of `data` without them."""
+        from visualenv.physics.geom_poses import render_poses
+
+        return render_poses(data, self.posed_geoms)
 
     def batch(self, sims: list[Any], workers: int | None = None) -> Any:
         """The envs' simulations stepped and read together (:class:`~visualenv.physics.batch.BatchSimulation`)."""
@@ -73,6 +97,32 @@ class PhysicsPlan:
         for key, names in self.reads.items():
             env[READ_PREFIX + key] = batch.reader(names, key)
         env[ADVANCE] = batch.advance
+
+
+def redraw_failure(attempts: int) -> Any:
+    """The call a redraw loop makes when no try met its condition: a fault the env locates at ``physics.reset.redraw.until``."""
+    def fail() -> None:
+        from visualenv.physics.simulation import PhysicsFault
+
+        raise PhysicsFault(f"none of {attempts} tries met the condition (physics.reset.redraw.attempts): draw the values "
+                           "differently, or allow more attempts")
+
+    return fail
+
+
+def reset_finisher(sim: Any, settle: tuple[int, float | None] | None) -> Any:
+    """finish(): the reset's settling steps and the time set (:meth:`~visualenv.physics.simulation.Simulation.settle`),
+    then the convention's forward, as dm_control's ``after_reset`` ends a task's ``initialize_episode``."""
+    from visualenv.physics.conventions import forward_function
+
+    forward, model, data = forward_function(sim.convention, sim.mujoco), sim.model, sim.data
+
+    def finish() -> None:
+        if settle is not None:
+            sim.settle(*settle)
+        forward(model, data)
+
+    return finish
 
 
 def load(section: Physics, base_dir: Any) -> PhysicsModel:
@@ -164,5 +214,6 @@ def how_to_move(physics: PhysicsModel, body: int) -> str:
 #: the read of the model before its step: the only one a batch's replay of one env's step takes from the batch
 BEFORE = "before"
 
-__all__ = ["ADVANCE", "BEFORE", "WRITE_RESET", "PhysicsError", "PhysicsPlan", "advance_statement", "call_statement", "how_to_move", "load",
-           "model_object_problem", "physics_scene", "read_statement", "scope", "settable"]
+__all__ = ["ADVANCE", "BEFORE", "FINISH_RESET", "REDRAW_FAILED", "REDRAW_TRIES", "WRITE_REDRAW", "WRITE_RESET", "PhysicsError", "PhysicsPlan",
+           "advance_statement", "call_statement", "how_to_move", "load", "model_object_problem", "physics_scene", "read_statement", "scope",
+           "settable"]

@@ -22,13 +22,14 @@ from dataclasses import dataclass, field
 from typing import Any, Callable, Collection, Mapping
 
 from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean, in_file_order
-from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check, vec
+from visualenv.expr import BOOL, NUM, Checked, RandomSource, Type, check
 from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, const, function_globals, local, lower, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.compiler.actions import ActionsCompiler
 from visualenv.compiler.bindings import BindingsCompiler
 from visualenv.compiler.vectorized import vectorizable, vectorize
 from visualenv.compiler import physics as phys
+from visualenv.compiler.physics_reset import build_reset
 from visualenv.compiler.python_hook import checked_dynamics
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.render.base import BindingTarget, RenderPlan
@@ -256,44 +257,8 @@ class _Compiler(ActionsCompiler, BindingsCompiler):
             fb.body.insert(at, fb.body.pop())
 
     def build_reset(self, fb: FunctionBuilder) -> None:
-        """The physics reset's values, in order (draws included), written to the model: before the state's init."""
-        assert self.plan is not None and self.spec.physics is not None
-        scope: dict[str, Type] = dict(self.pnames)
-        start, before = len(fb.body), set(self.used)
-        self.used = set()
-        writable = phys.settable(self.plan.model)  # joint values and mocap poses
-        targets: list[str] = []
-        for key, value in self.spec.physics.reset.values.items():
-            path = ("physics", "reset", "values", key)
-            parts = [p.strip() for p in key.split(",")]
-            bad = [p for p in parts if not p.isidentifier()]
-            if bad:
-                self.error(path, f"'{bad[0]}' is not a name: a key is a qpos_/qvel_/mocap_ name, several separated by commas, or a new name", key=True)
-                continue
-            if len(parts) > 1 or parts[0].startswith(("qpos_", "qvel_", "mocap_")):
-                unknown = [p for p in parts if p not in writable]
-                if unknown:
-                    what = "joint value or mocap pose" if self.plan.model.mocap_names() else "joint value"
-                    self.error(path, f"no {what} '{unknown[0]}' to set" + did_you_mean(unknown[0], sorted(writable)), key=True)
-                    continue
-            checked = self.expr(path, value, scope, expect=NUM if len(parts) == 1 else vec(len(parts)))
-            if checked is None:
-                continue
-            site = Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names)))
-            if len(parts) == 1:
-                fb.assign(local(parts[0]), lower(checked.tree), site)
-            else:
-                fb.assign("_reset_vec", lower(checked.tree), site)
-                for i, p in enumerate(parts):
-                    fb.assign(local(p), ast.Subscript(name("_reset_vec"), const(i), ast.Load()))
-            for p in parts:
-                scope[p] = NUM
-                if p in writable and p not in targets:
-                    targets.append(p)
-        self.plan.reset_targets = targets
-        self.physics_reads(fb, "reset", start, self.used | set(targets))
-        fb.add(phys.call_statement(phys.WRITE_RESET, targets), Site("physics.reset", "the reset values, written to the model"))
-        self.used |= before
+        """The physics reset: its values, redraw and settling steps (:mod:`visualenv.compiler.physics_reset`), before the state's init."""
+        build_reset(self, fb)
 
     def build_observe(self, state_names: list[str]) -> FunctionBuilder:
         """observe(state, steps): the state-only observation of a physics spec (physics.observe, or every qpos and qvel, then the observed state)."""

@@ -392,9 +392,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     def _pose_copies(self) -> None:
         """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses."""
         if self.program.physics is not None:
-            if self._pose_arrays is None:  # live views of each lane's MjData, made once
-                datas = [lane.data for lane in self.lanes]
-                self._pose_arrays = [(d.xpos, d.xquat, d.cam_xpos, d.cam_xmat, d.light_xpos, d.light_xdir) for d in datas]
+            plan = self.program.physics
+            if self._pose_arrays is None or plan.posed_geoms:  # live views of each lane's MjData, made once (geoms a reset moves: copies)
+                self._pose_arrays = [plan.poses(lane.data) for lane in self.lanes]
             self.renderer.set_physics_poses_batch(self._pose_arrays)
 
     def _observe(self, envs: np.ndarray | None = None) -> Any:

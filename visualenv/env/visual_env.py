@@ -17,6 +17,7 @@ from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.physics.conventions import legacy_stream
+from visualenv.physics.model_fields import restore_fields, written_fields
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
@@ -421,8 +422,7 @@ class VisualEnv(gym.Env):
     def _pose(self) -> None:
         """A physics spec's bodies and cameras take MuJoCo's poses before a render."""
         if self._sim is not None:
-            data = self._sim.data
-            self.renderer.set_physics_poses(data.xpos, data.xquat, data.cam_xpos, data.cam_xmat, data.light_xpos, data.light_xdir)
+            self.renderer.set_physics_poses(*self.program.physics.poses(self._sim.data))  # type: ignore[union-attr]
 
     def _view(self) -> np.ndarray:
         """The high-resolution view of the current state."""
@@ -481,7 +481,7 @@ class VisualEnv(gym.Env):
 
         The episode is the state, step count, milestones and success, every random generator (the env's, the sensor
         noise's, the action space's) and a physics spec's MuJoCo state (``mjSTATE_INTEGRATION``: what ``mj_step``
-        needs to go on bit for bit). The renderer is not pickled: the copy builds its own on first render and poses
+        needs to go on bit for bit), with the model fields a reset writes (reacher's target). The renderer is not pickled: the copy builds its own on first render and poses
         the scene from the carried state. A ``dynamics.python`` hook is imported again by name: state it keeps in
         its own module is that module's in the receiving process.
         """
@@ -489,7 +489,7 @@ class VisualEnv(gym.Env):
             "state": self._state, "steps": self._steps, "fired": self._fired, "done": self._done, "success": self._success,
             "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
             "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs, "legacy_random": self._legacy_random,
-            "physics": self._physics_state(),
+            "physics": self._physics_state(), "model": written_fields(self._sim.model) if self._sim is not None else None,
         }
         return {"loaded": self.program.loaded, "args": self._init_args, "spec": self.spec, "episode": episode if self._was_reset else None}
 
@@ -508,6 +508,8 @@ class VisualEnv(gym.Env):
 
     def _carry_over(self, episode: dict[str, Any]) -> None:
         """The episode of the pickled env, put in place (see :meth:`__getstate__`)."""
+        if episode.get("model") is not None and self._sim is not None:  # the model fields a reset wrote (reacher's target)
+            restore_fields(self._sim.model, episode["model"])
         self._set_physics_state(episode["physics"])
         self._state = tuple(episode["state"])
         self._steps, self._fired, self._done, self._success = episode["steps"], episode["fired"], episode["done"], episode["success"]

@@ -23,6 +23,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
+from visualenv.physics.model_fields import SCALARS, array_view
 from visualenv.physics.simulation import FATAL_WARNINGS, Simulation, touching
 
 #: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)
@@ -56,7 +57,7 @@ class BatchSimulation:
         self.contacts = dict(first.contacts)
         used = {table[name][0] for names in reads.values() for name in names if name in table}
         self.fields = sorted(used | {"qpos", "qvel"})  # qpos and qvel always: a NaN in them is a blow-up
-        self.values = {f: np.zeros((n, 1 if f == "time" else np.atleast_1d(getattr(first.data, f)).size)) for f in self.fields}
+        self.values = {f: np.zeros((n, 1 if f in SCALARS else array_view(first.model, first.data, f).size)) for f in self.fields}
         self.touching = {c: np.zeros(n, dtype=bool) for names in reads.values() for c in names if c in self.contacts}
         self._copies = [self._copies_of(i) for i in range(n)]
         self._ctrl_at = np.array([table[c][1] for c in controls], dtype=int)
@@ -77,7 +78,7 @@ class BatchSimulation:
         #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
         self._last: dict[str, tuple[list[str], list[np.ndarray]]] = {}
         self._physics_step = first.physics_step  # the spec's convention's step (visualenv.physics.conventions)
-        self._extra = "time" in self.values or bool(self.touching)  # copied by refresh(), not by the plain row copies
+        self._extra = any(f in self.values for f in SCALARS) or bool(self.touching)  # copied by refresh(), not by the plain row copies
         #: per env, what its step touches: model, data, MuJoCo's warning counters, its ctrl, its row of controls, its copies
         self._lanes = [(sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
                        for i, sim in enumerate(self.sims)]
@@ -87,9 +88,9 @@ class BatchSimulation:
             self.refresh(i)
 
     def _copies_of(self, i: int) -> list[tuple[np.ndarray, np.ndarray]]:
-        """(row of the batch array, the env's live MjData array) for each field but time."""
-        data = self.sims[i].data
-        return [(self.values[f][i], np.atleast_1d(getattr(data, f)).reshape(-1)) for f in self.fields if f != "time"]
+        """(row of the batch array, the env's live MjData or MjModel array) for each field but the scalars."""
+        sim = self.sims[i]
+        return [(self.values[f][i], array_view(sim.model, sim.data, f)) for f in self.fields if f not in SCALARS]
 
     # -- state ---------------------------------------------------------------------------------------
 
@@ -98,8 +99,9 @@ class BatchSimulation:
         for row, live in self._copies[i]:
             row[:] = live
         data = self.sims[i].data
-        if "time" in self.values:
-            self.values["time"][i, 0] = data.time
+        for f in SCALARS:
+            if f in self.values:
+                self.values[f][i, 0] = getattr(data, f)
         for c, column in self.touching.items():
             column[i] = touching(data, self.contacts[c])
 

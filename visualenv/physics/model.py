@@ -13,7 +13,9 @@ are called ``<kind><index>``, e.g. ``actuator0``):
 * ``mocap_<b>_x/_y/_z`` and ``mocap_<b>_qw/_qx/_qy/_qz`` for a mocap body (``<body mocap="true">``): MuJoCo's
   ``mocap_pos`` and ``mocap_quat``, which the spec sets (:data:`SETTABLE`) to move a body that has no joint;
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
-* ``ctrl_<actuator>``; ``sim_time``.
+* ``ctrl_<actuator>``; ``sim_time``;
+* ``geom_<g>_x/_y/_z`` (world position), ``ncon`` (the contact count) and the model's own fields,
+  ``model_<field>_<element>[_<column>]``, some of which a reset writes (:mod:`visualenv.physics.model_fields`).
 
 Two elements that come to one name (joints ``left-leg`` and ``left_leg``, a free
 joint ``a``'s ``qpos_a_x`` and a hinge ``a_x``; geoms, cameras and lights, which
@@ -34,10 +36,12 @@ from typing import Any
 
 from visualenv.errors import VisualEnvError
 from visualenv.files import PACKAGE_PREFIX, package_file
+from visualenv.physics.model_fields import MODEL_FIELDS, model_values
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
-#: arrays a name can point into (attributes of MjData; ``time`` is a scalar)
-ARRAYS = ("qpos", "qvel", "xpos", "xquat", "xmat", "site_xpos", "sensordata", "ctrl", "time", "mocap_pos", "mocap_quat")
+#: arrays a name can point into (attributes of MjData; ``time`` and ``ncon`` are scalars; ``model.<field>``: MjModel's)
+ARRAYS = ("qpos", "qvel", "xpos", "xquat", "xmat", "site_xpos", "geom_xpos", "sensordata", "ctrl", "time", "ncon", "mocap_pos", "mocap_quat",
+          *(f"model.{field}" for field in MODEL_FIELDS))
 #: the arrays a spec writes: joint values at reset, mocap poses at reset and in ``dynamics.update``
 SETTABLE = ("qpos", "qvel", "mocap_pos", "mocap_quat")
 #: the arrays of a mocap body's pose, which ``dynamics.update`` also writes (before each MuJoCo step)
@@ -151,6 +155,10 @@ class PhysicsModel:
         for title, array in (("bodies", "xpos"), ("body orientations", "xquat"), ("body rotation matrices", "xmat"), ("sites", "site_xpos"), ("sensors", "sensordata"), ("actuator controls", "ctrl")):
             groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
         groups["mocap bodies (set in physics.reset.values and dynamics.update)"] = self.mocap_names()
+        groups["geom positions"] = [n for n, (a, _) in self.names.values.items() if a == "geom_xpos"]
+        groups["model fields (model_geom_pos_... and model_dof_damping_... written at reset)"] = \
+            [n for n, (a, _) in self.names.values.items() if a.startswith("model.")]
+        groups["contacts"] = ["ncon"]
         groups["geoms (for contacts)"] = list(self.names.ident["geom"])
         groups["keyframes"] = list(self.names.ident["key"])
         groups["time"] = ["sim_time"]
@@ -233,6 +241,9 @@ def name_tables(model: Any) -> NameTables:
     for a, name in enumerate(ident["actuator"]):
         names.add(f"ctrl_{name}", ("ctrl", a), owners["actuator"][a])
     names.add("sim_time", ("time", 0), "the simulation time")
+    qvel = {n: i for n, (a, i) in names.values.items() if a == "qvel"}
+    for name, target, owner in model_values(model, ident, owners, qvel):
+        names.add(name, target, owner)
     for group in _NAMED_AS_THEY_ARE:
         seen = _Names()
         for kind in group:

@@ -20,6 +20,7 @@ import numpy as np
 
 from visualenv.physics.conventions import forward_function, reset_data, step_function
 from visualenv.physics.model import SETTABLE, PhysicsModel, mujoco_module
+from visualenv.physics.model_fields import live_array, model_writer
 
 
 class PhysicsFault(ValueError):
@@ -69,19 +70,22 @@ class Simulation:
         """``mj_resetData``, or the keyframe's state (then dm_control's forward); the spec's reset values are written after (:meth:`set_state`)."""
         reset_data(self.convention, self.mujoco, self.model, self.data, keyframe)
 
-    def writer(self, names: Sequence[str]) -> Callable[[Sequence[float]], None]:
-        """set_state(values): write qpos/qvel and mocap `names` (in order), then ``mj_forward`` (as Gymnasium's set_state;
-        dm_control's after_reset)."""
+    def writer(self, names: Sequence[str], forward: bool = True) -> Callable[[Sequence[float]], None]:
+        """set_state(values): write qpos/qvel, mocap and model fields `names` (in order), then ``mj_forward`` (as Gymnasium's
+        set_state; dm_control's after_reset), unless not `forward` (a reset that goes on with a redraw or settling steps)."""
         write = self.scatter(names)
-        data, model, forward = self.data, self.model, forward_function(self.convention, self.mujoco)
+        write_model = model_writer(self.model, self.physics.names.values, names)
+        data, model, forward_pass = self.data, self.model, forward_function(self.convention, self.mujoco) if forward else None
 
         def set_state(values: Sequence[float]) -> None:
             given = np.asarray(values, dtype=np.float64)
             if not np.isfinite(given).all():
                 bad = [f"{n}={v!r}" for n, v in zip(names, given) if not math.isfinite(v)]
                 raise PhysicsFault(f"a reset value is not finite: {', '.join(bad)}")
+            write_model(given)
             write(given)
-            forward(model, data)
+            if forward_pass is not None:
+                forward_pass(model, data)
 
         return set_state
 
@@ -139,6 +143,19 @@ class Simulation:
 
         return advance
 
+    def settle(self, nstep: int, time: float | None) -> None:
+        """`nstep` physics steps in one call of the convention's step, with the controls as they are (a reset's settling steps,
+        as dm_control's ``physics.step(nstep)`` in a task's ``initialize_episode``), then the time set to `time` (if given)."""
+        data, fatal = self.data, self._fatal.tolist()
+        counts = self._warnings.tolist()
+        before = sum(counts[i] for i in fatal)
+        self.physics_step(self.model, data, nstep)
+        counts = self._warnings.tolist()
+        if sum(counts[i] for i in fatal) != before or not math.isfinite(data.qpos.sum() + data.qvel.sum()):
+            raise PhysicsFault(self.blown_up())
+        if time is not None:
+            data.time = time
+
     def blown_up(self) -> str:
         """What went wrong, in MuJoCo's words and numbers: the warnings raised and the non-finite values."""
         parts = []
@@ -174,7 +191,7 @@ class Simulation:
             plan.append((array, np.array([p for p, _ in at], int), np.array([q for _, q in at], int)))
         touches = [(i, self.contacts[n]) for i, n in enumerate(names) if n in self.contacts]
         data, size = self.data, len(names)
-        views = {a: (np.atleast_1d(getattr(data, a)).reshape(-1) if a != "time" else None) for a, _, _ in plan}
+        views = {a: live_array(self.model, data, a) for a, _, _ in plan}  # None: a scalar (time, ncon), read each time
         out = np.zeros(size)
 
         def read() -> tuple:
@@ -182,7 +199,7 @@ class Simulation:
                 return self._replay[key]
             for array, dst, src in plan:
                 view = views[array]
-                out[dst] = data.time if view is None else view[src]
+                out[dst] = getattr(data, array) if view is None else view[src]
             values = out.tolist()
             for i, pair in touches:
                 values[i] = touching(data, pair)

@@ -284,14 +284,35 @@ class Outcome(StrictModel):
 # -- physics ----------------------------------------------------------------------------------------
 
 
+class Redraw(StrictModel):
+    """Values drawn again until a condition holds (dm_control's rejection loops: joints redrawn until nothing touches)."""
+
+    values: Annotated[dict[str, Expr], Field(min_length=1)] = Field(description=(
+        "each try's values, as physics.reset.values (written, then the model forwarded); every try starts from the state "
+        "physics.reset.values left"))
+    until: Expr = Field(description="a condition read after each try's forward, e.g. 'ncon == 0' (nothing touches): the first try that meets it is kept")
+    attempts: int = Field(1000, ge=1, le=1_000_000, description="tries at most; none meeting 'until' is a located fault at reset")
+
+
+class Settle(StrictModel):
+    """Physics steps taken at reset, after the values are written (dm_control's cheetah settles 200 steps), with the controls the reset left (zero, or a keyframe's)."""
+
+    steps: int = Field(ge=1, le=1_000_000, description="physics steps (the convention's step, in one call), before the episode's first")
+    time: float | None = Field(None, allow_inf_nan=False, description="the simulation time set after them (dm_control: 0); default: as they leave it")
+
+
 class PhysicsReset(StrictModel):
-    """How each episode starts: MuJoCo's reset (or a keyframe), then values written in order (random draws allowed)."""
+    """How each episode starts: MuJoCo's reset (or a keyframe), values written in order (random draws allowed), then
+    optionally values drawn again until a condition holds (redraw) and settling steps (settle): docs/physics.md#reset."""
 
     keyframe: str | None = Field(None, description="start from this named keyframe of the model instead of its qpos0")
     values: dict[str, Expr] = Field(default_factory=dict, description=(
-        "evaluated in order after the reset: a key 'qpos_<joint>', 'qvel_<joint>' or 'mocap_<body>_x' (_y, _z, _qw...) sets that value, 'qpos_a, qpos_b' sets "
+        "evaluated in order after the reset: a key 'qpos_<joint>', 'qvel_<joint>', 'mocap_<body>_x' (_y, _z, _qw...) or a writable "
+        "model field ('model_geom_pos_<geom>_x', 'model_dof_damping_<joint>') sets that value, 'qpos_a, qpos_b' sets "
         "several from a vector, any other name is a temporary later entries can read; an entry reads the model's reset values "
         "by the same names (e.g. qpos_hinge: qpos_hinge + uniform(-0.01, 0.01)); draws happen in this order"))
+    redraw: Redraw | None = Field(None, description="values drawn again, after 'values', until a condition holds")
+    settle: Settle | None = Field(None, description="physics steps taken last, e.g. {steps: 200, time: 0}")
 
 
 class Physics(StrictModel):
