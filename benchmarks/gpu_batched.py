@@ -25,6 +25,8 @@ DEFAULT_PLAN = ["cartpole:64,256,1024,4096:1", "goalie:64,256,1024,4096:1", "car
                 "cartpole:4096:8", "goalie:4096:8", "cartpole:1024:2", "cartpole:1024:1:cpu", "cartpole:1024:8:cpu"]
 CHILD = """
 import json, sys
+from visualenv.compat.glibc import apply_policy
+apply_policy()  # what `visualenv bench --batched` does in its measuring process (freed memory kept for the next call)
 from visualenv.tools.bench_batched import measure_batch, measure_workers
 spec, n, k, steps, device = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5] or None
 if k == 1:

@@ -227,6 +227,11 @@ def test_machines_that_differ_in_what_decides_the_last_digits_are_named():
     assert unlike(here, here) == []
     assert unlike(dict(here, cpu_isa=other), here) == [f"cpu_isa {other} there, {here['cpu_isa']} here"]
     assert unlike(dict(here, cpu="another name"), here) == []  # the model name alone decides nothing
+    # two CPUs of one ISA with other vector extensions (Cascade Lake and Emerald Rapids) render in other last bits
+    newer = dict(here, cpu_features=here["cpu_features"] + " avx10_fake amx_fake")  # flags no CPU has: the test holds on any
+    assert unlike(newer, here) == ["cpu_features amx_fake avx10_fake there only, - here only"]
+    assert "cpu_features" in here and all(f.startswith(("sse", "ssse", "avx", "fma", "f16c", "amx", "vaes", "vpclmulqdq", "gfni", "sha_ni", "bmi", "adx"))
+                                          for f in here["cpu_features"].split())
     assert here["mujoco"] == versions().get("mujoco")  # physics steps differ between MuJoCo versions
     assert unlike(dict(here, mujoco="2.3.7"), here) == [f"mujoco 2.3.7 there, {here['mujoco']} here"]
     assert unlike(None, dict(here, cpu_isa="AVX2")) == ["pinned False there, True here"]  # records before machines were kept

@@ -77,7 +77,8 @@ BUSY = "while True: pass"
 
 def _render(spec: str, threads: int, out: Path) -> subprocess.Popen[bytes]:
     return subprocess.Popen([sys.executable, "-c", RENDER, spec, str(threads), str(out)], cwd=REPO,
-                            env={**os.environ, "PYTHONPATH": str(REPO)}, stderr=subprocess.PIPE)
+                            env={**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))},
+                            stderr=subprocess.PIPE)
 
 
 def _finished(process: subprocess.Popen[bytes], out: Path) -> dict[str, np.ndarray]:

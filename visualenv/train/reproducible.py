@@ -35,7 +35,10 @@ from visualenv.compat import mkl
 from visualenv.versions import versions
 
 #: the keys of a machine record that must agree for a replay to be exact
-LIKENESS_KEYS = ("cpu_isa", "torch", "blender", "numpy", "mujoco", "pinned")
+LIKENESS_KEYS = ("cpu_isa", "cpu_features", "torch", "blender", "numpy", "mujoco", "pinned")
+#: the CPU flags of vector instructions: libraries pick their code by them (two AVX-512 Xeons, Cascade Lake and Emerald
+#: Rapids, rendered Goalie's and the pendulum's same states in other last bits), so machines alike replay bit for bit
+VECTOR_FLAG_PREFIXES = ("sse", "ssse", "avx", "fma", "f16c", "amx", "vaes", "vpclmulqdq", "gfni", "sha_ni", "bmi", "adx")
 
 
 @contextmanager
@@ -63,7 +66,8 @@ def pinned_inference() -> Iterator[bool]:
 
 def machine_record(pinned: bool) -> dict[str, Any]:
     """What a replay of an evaluation needs to know about the machine that ran it."""
-    record: dict[str, Any] = {"cpu_isa": cpu_isa(), "cpu": _cpu_name(), "machine": platform.machine(), "pinned": pinned}
+    record: dict[str, Any] = {"cpu_isa": cpu_isa(), "cpu_features": cpu_features(), "cpu": _cpu_name(), "machine": platform.machine(),
+                              "pinned": pinned}
     torch = sys.modules.get("torch")
     record["torch"] = torch.__version__ if torch is not None else None
     known = versions()
@@ -71,16 +75,24 @@ def machine_record(pinned: bool) -> dict[str, Any]:
     return record
 
 
-def cpu_isa() -> str:
-    """The widest vector instruction set this CPU offers of those the renderer's and numpy's kernels choose between."""
-    flags = set()
+def _cpu_flags() -> set[str]:
     try:
         for line in Path("/proc/cpuinfo").read_text().splitlines():
             if line.startswith("flags"):
-                flags = set(line.split(":", 1)[1].split())
-                break
+                return set(line.split(":", 1)[1].split())
     except OSError:
         pass
+    return set()
+
+
+def cpu_features() -> str:
+    """This CPU's vector instruction flags, sorted (:data:`VECTOR_FLAG_PREFIXES`): what "a like machine" must share."""
+    return " ".join(sorted(f for f in _cpu_flags() if f.startswith(VECTOR_FLAG_PREFIXES)))
+
+
+def cpu_isa() -> str:
+    """The widest vector instruction set this CPU offers of those the renderer's and numpy's kernels choose between."""
+    flags = _cpu_flags()
     for isa, flag in (("AVX512", "avx512f"), ("AVX2", "avx2"), ("SSE4.2", "sse4_2")):
         if flag in flags:
             return isa
@@ -104,5 +116,11 @@ def unlike(recorded: dict[str, Any] | None, here: dict[str, Any]) -> list[str]:
     development machine with AVX2, unpinned.
     """
     recorded = recorded or {"cpu_isa": "AVX2", "pinned": False}
-    return [f"{key} {recorded.get(key)} there, {here.get(key)} here" for key in LIKENESS_KEYS
-            if key in recorded and recorded.get(key) != here.get(key)]
+    return [_difference(key, recorded.get(key), here.get(key)) for key in LIKENESS_KEYS if key in recorded and recorded.get(key) != here.get(key)]
+
+
+def _difference(key: str, there: Any, here: Any) -> str:
+    if key == "cpu_features" and isinstance(there, str) and isinstance(here, str):  # long lists: the flags one side lacks
+        a, b = set(there.split()), set(here.split())
+        return f"cpu_features {' '.join(sorted(a - b)) or '-'} there only, {' '.join(sorted(b - a)) or '-'} here only"
+    return f"{key} {there} there, {here} here"
