@@ -117,3 +117,30 @@ def test_physics_layer_never_imports_bpy_or_upper_layers() -> None:
             assert not any(m.split(".")[0] == "bpy" for m in imported), (name, imported)
             ours = {m for m in imported if m.split(".")[0] == "visualenv"}
             assert all(m in ("visualenv.errors", "visualenv.files") or m.startswith("visualenv.physics") for m in ours), (name, ours)
+
+
+#: the most lines a module may hold: past it, a module does more than one job (split it by job)
+MAX_MODULE_LINES = 600
+
+
+def test_no_module_is_over_the_size_limit() -> None:
+    big = {name: n for name, path in modules().items() if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    assert big == {}, f"split these by job (at most {MAX_MODULE_LINES} lines a module): {big}"
+
+
+def private_imports(path: Path) -> list[str]:
+    """The private names (``_name``) `path` imports from another visualenv module."""
+    found = []
+    for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+        if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "visualenv":
+            found += [f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_") and not a.name.startswith("__")]
+    return found
+
+
+def test_no_module_imports_another_modules_private_names(tmp_path: Path) -> None:
+    """What one module shares with another is public and documented; a private name stays in its module."""
+    found = {name: names for name, path in modules().items() if (names := private_imports(path))}
+    assert found == {}, f"make these public (with a docstring) or keep them in their module: {found}"
+    planted = tmp_path / "planted.py"
+    planted.write_text("from visualenv.spec.loader import _private\n")
+    assert private_imports(planted) == ["visualenv.spec.loader._private"]
