@@ -196,9 +196,25 @@ def test_a_seed_beyond_dm_controls_range_still_gives_one_stream() -> None:
     assert not np.array_equal(a.unwrapped.data.qpos, b.unwrapped.data.qpos)
 
 
-def test_a_batch_steps_as_dm_control_with_action_repeat_1_and_refuses_more() -> None:
-    with pytest.raises(ValueError, match="action_repeat=1"):
-        BatchedVectorEnv(ID, 2, render=False)
+def test_a_batch_repeats_actions_as_dm_controls_benchmarks_do() -> None:
+    """At the task's action repeat (8), a batch's step is 8 of dm_control's steps with the same action, rewards summed."""
+    batch = BatchedVectorEnv(ID, 2, render=False)
+    assert batch.action_repeat == 8 and batch.max_episode_steps == 125
+    batch.reset(seed=5)
+    theirs = [suite.load("cartpole", "swingup", task_kwargs={"random": 5 + i}) for i in range(2)]
+    for t in theirs:
+        t.reset()
+    actions = np.random.default_rng(1)
+    for _ in range(30):
+        action = actions.uniform(-1, 1, size=(2, 1))
+        _, rewards, *_ = batch.step(action)
+        for i, t in enumerate(theirs):
+            summed = sum(t.step(action[i]).reward for _ in range(8))
+            assert abs(rewards[i] - summed) <= 1e-8
+    batch.close()
+
+
+def test_a_batch_steps_as_dm_control_with_action_repeat_1() -> None:
     batch = BatchedVectorEnv(ID, 2, render=False, action_repeat=1)
     batch.reset(seed=11)
     theirs = [suite.load("cartpole", "swingup", task_kwargs={"random": 11 + i}) for i in range(2)]

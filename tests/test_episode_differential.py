@@ -185,12 +185,13 @@ def assert_same_info(batch_info: dict[str, Any], single_info: dict[str, Any], wh
         assert batch_info[key] == value, f"{where}: info[{key!r}] {batch_info[key]!r} != {value!r}"
 
 
-def differential(loaded: LoadedSpec, steps: int, nan_rate: float = 0.0, mode: AutoresetMode = AutoresetMode.NEXT_STEP) -> dict[str, int]:
-    """Step a batch of N and N single envs with the same random actions; count what happened (episodes ended, faults)."""
-    # a batch steps each env once per step: DeepMind Control's tasks are compared without their action repeat
-    batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode, action_repeat=1)
+def differential(loaded: LoadedSpec, steps: int, nan_rate: float = 0.0, mode: AutoresetMode = AutoresetMode.NEXT_STEP,
+                 repeat: int = 1) -> dict[str, int]:
+    """Step a batch of N and N single envs with the same random actions; count what happened (episodes ended, faults).
+    `repeat`: the action repeat of both (DeepMind Control's tasks default to theirs: compared with 1, and with it apart)."""
+    batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode, action_repeat=repeat)
     actions = random_actions(batch.action_space, SEED, nan_rate)
-    singles = [VisualEnv(loaded, render=False, action_repeat=1) for _ in range(N)]
+    singles = [VisualEnv(loaded, render=False, action_repeat=repeat) for _ in range(N)]
     names = batch.program.state_names
     counts = {"ended": 0, "errors": 0, "raised": 0}
     obs, info = batch.reset(seed=SEED)
@@ -267,6 +268,39 @@ def test_every_bundled_spec_runs_the_same_episodes_in_one_env_and_in_a_batch(spe
     counts = differential(loaded, steps)
     assert counts["raised"] == 0 and counts["errors"] == 0
     assert counts["ended"] > 0 or loaded.spec.max_steps > steps, "no episode ended: autoreset went untested"
+
+
+@pytest.mark.parametrize("spec", sorted((SPECS / "dmc").glob("*.yaml")), ids=lambda p: p.stem)
+def test_a_batch_repeats_actions_as_one_env_does(spec: Path) -> None:
+    """DeepMind Control's tasks at their own action repeat (4, 8...): each step() sums the repeated steps' rewards and
+    ends where the episode ends, in a batch as alone."""
+    loaded = load_spec(spec)
+    assert loaded.spec.action_repeat > 1
+    counts = differential(loaded, 1000 // loaded.spec.action_repeat + 5, repeat=loaded.spec.action_repeat)
+    assert counts["ended"] > 0 and counts["raised"] == 0 and counts["errors"] == 0
+
+
+#: a state that passes float32's range in the third of three repeated steps, after two rewarded ones
+REPEATED_OVERFLOW = """\
+id: RepeatedOverflow-v0
+state:
+  x: {init: "uniform(1, 2)"}
+actions:
+  discrete: [{grow: 1}, {grow: 2}]
+dynamics:
+  update:
+    x: "x * 1e15 * grow"
+reward: 1.0
+max_steps: 40
+on_fault: terminate
+"""
+
+
+def test_a_fault_in_a_repeated_step_ends_it_without_reward_in_a_batch_as_alone() -> None:
+    """One env's step that faults in its third repeat returns no reward (the two rewarded repeats before included):
+    a batch's does the same."""
+    counts = differential(load_spec_text(REPEATED_OVERFLOW, name="repeated.yaml"), 12, repeat=3)
+    assert counts["errors"] >= N and counts["raised"] == 0, counts
 
 
 def test_every_function_of_the_language_gives_one_envs_value_in_a_batch() -> None:

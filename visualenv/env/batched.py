@@ -67,7 +67,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     the fault of the first env that faulted is raised, prefixed ``env i:``.
 
     Episodes are truncated after the spec's ``max_steps``, or ``max_episode_steps`` when given
-    (``gymnasium.make_vec`` passes the id's), with ``info["outcome"] == "max_steps"``.
+    (``gymnasium.make_vec`` passes the id's), with ``info["outcome"] == "max_steps"``. With an
+    ``action_repeat`` of k (the spec's, or the option's), each step is k of the spec's steps per env, as
+    one env's: rewards summed, stopped where the env's episode ends, one render.
 
     Autoreset follows Gymnasium 1.x: ``autoreset_mode`` ``NEXT_STEP`` (the
     default: the step after an episode's end resets that env, ignoring its
@@ -129,15 +131,17 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise SpecError([program.loaded.source.diagnostic(("observation",), "a batch renders every env through one camera pose, and this "
                 "camera of the MuJoCo model moves (it tracks a body or hangs on one): use a camera of the spec's own, render=False, "
                 "or one process per env (vectorization_mode='async')")])
-        #: episodes are truncated after this many steps: the spec's max_steps, or Gymnasium's max_episode_steps when given
-        self.max_episode_steps = step_limit(program, max_episode_steps)
-        repeat = program.spec.action_repeat if action_repeat is None else action_repeat
-        if repeat != 1:  # the batch steps each env once per step (a later stage repeats actions in batches)
-            raise ValueError(f"{program.spec.id} repeats each action {repeat} times (action_repeat), which a batch does not do yet: "
-                             "make_vec(..., batched=True, action_repeat=1), or vectorization_mode='async'")
+        #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
+        self.action_repeat = int(program.spec.action_repeat if action_repeat is None else action_repeat)
+        if self.action_repeat < 1:
+            raise ValueError(f"action_repeat must be an integer of at least 1, got {action_repeat!r}")
+        #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
+        step_limit_ = program.spec.max_steps if max_episode_steps is None else step_limit(program, max_episode_steps) * self.action_repeat
+        #: episodes are truncated after this many step() calls
+        self.max_episode_steps = -(-step_limit_ // self.action_repeat)
         #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
-        self.rules = EpisodeRules(program, self.max_episode_steps, observes_state=not self.uses_camera and program.physics is None)
-        self.lanes = [VisualEnv(program, render=False, max_episode_steps=self.max_episode_steps, action_repeat=1) for _ in range(n)]
+        self.rules = EpisodeRules(program, step_limit_, observes_state=not self.uses_camera and program.physics is None)
+        self.lanes = [VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)]  # the batch repeats
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
@@ -200,7 +204,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         resetting = self._autoreset.copy()
         stepping = ~resetting
         if stepping.any():
-            self._advance(actions, stepping, rewards, terminated, truncated)
+            self._repeat(actions, stepping, rewards, terminated, truncated)
         for i in np.flatnonzero(resetting):
             self._reset_lane(int(i))
         done = terminated | truncated
@@ -266,6 +270,25 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._display.show(self.program.spec.id, pictures, values)
 
     # -- the step -----------------------------------------------------------------------------------
+
+    def _repeat(self, actions: np.ndarray, stepping: np.ndarray, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+        """The action repeat: each stepping env's spec step ``action_repeat`` times with its action, its rewards summed,
+        stopping where its episode ends; a step a fault ended has no reward (as one env's)."""
+        if self.action_repeat == 1:
+            self._advance(actions, stepping, rewards, terminated, truncated)
+            return
+        going = stepping.copy()
+        reward, ended, cut = np.zeros_like(rewards), np.zeros_like(terminated), np.zeros_like(truncated)
+        for _ in range(self.action_repeat):
+            reward[:], ended[:], cut[:] = 0.0, False, False
+            self._advance(actions, going, reward, ended, cut)
+            rewards[going] += reward[going]
+            terminated |= ended
+            truncated |= cut
+            going &= ~(ended | cut)
+            if not going.any():
+                break
+        rewards[stepping & (self._errors != None)] = 0.0  # noqa: E711 - element-wise: ended by a fault (on_fault: terminate)
 
     def _advance(self, actions: np.ndarray, stepping: np.ndarray, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Every stepping env's step at once, then the lanes of those the vectorised step could not do.
