@@ -4,7 +4,7 @@ VENV   ?= .venv
 PY     := $(VENV)/bin/python
 STAMP  := $(VENV)/.installed
 
-.PHONY: setup browser demo test test-variants bench schema clean
+.PHONY: setup browser demo test test-slow test-variants bench schema clean
 
 setup: $(STAMP) browser
 
@@ -24,10 +24,13 @@ browser: $(STAMP)  ## the headless Chromium of the viewer's browser tests, with 
 demo: setup  ## build a bundled spec and show its result
 	$(VENV)/bin/visualenv build specs/visual_cartpole.yaml
 
-test: setup  ## lint (ruff), type-check (mypy), then run the test suite
+test: setup  ## lint (ruff), type-check (mypy), then run the test suite (all but the `slow` end-to-end runs: about 10 min on 2 cores)
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
-	$(PY) -m pytest
+	$(PY) -m pytest -m "not slow"
+
+test-slow: setup  ## the `slow` end-to-end runs: training, the shipped agents' replays, Ray clusters, soaks (CI runs them after `make test`)
+	$(PY) -m pytest -m slow
 
 test-variants: setup  ## the suite on one core and under other CPU dispatch (docs/testing.md)
 	taskset -c 0 $(PY) -m pytest -q

@@ -135,6 +135,7 @@ def batch_rounds(rounds: int, queue: Any) -> None:
     queue.put((growth, ids, counts))
 
 
+@pytest.mark.slow
 def test_making_and_closing_batches_does_not_grow_memory():
     """Twenty rounds of making, stepping and closing a 16-env Goalie batch leave every datablock count where it was
     and grow the process by at most 8 MB (the issue's target: 20). Before each closed renderer rendered its scene

@@ -6,6 +6,8 @@ tests hold on 1, 2, 4, 8 or 16 cores (docs/testing.md: run them under ``taskset`
 
 import json
 
+import pytest
+
 from click.testing import CliRunner
 
 import visualenv
@@ -113,6 +115,7 @@ def test_step_times_pairs_each_step_with_its_render_calls():
         env.close()
 
 
+@pytest.mark.slow
 def test_short_soak_keeps_blender_data_blocks_and_memory_flat():
     env = visualenv.make("Goalie-v0")  # ~21-step episodes: many resets
     try:

@@ -42,6 +42,7 @@ print(mkl.branch(), os.environ.get("MKL_CBWR"))
 """
 
 
+@pytest.mark.slow
 def test_the_variable_pins_mkl_when_set_before_its_first_product():
     """MKL reads MKL_CBWR at its first call: in the environment from the start, or set after torch loads but before
     a product, it pins; set after a product, it is too late (what compatible_mode avoids by being entered first)."""
@@ -66,6 +67,7 @@ print(os.environ.get("MKL_CBWR"))
     assert out == f"True {mkl.COMPATIBLE_BRANCH} None"
 
 
+@pytest.mark.slow
 def test_a_process_visualenv_did_not_start_is_pinned_by_the_service_call_until_mkl_has_run():
     out = in_a_fresh_process("""
 import os, torch

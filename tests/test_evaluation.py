@@ -181,6 +181,7 @@ def pinned_forward(extra: dict, route: str = "service") -> str:
     return run.stdout.strip()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("dispatch", [{"ONEDNN_MAX_CPU_ISA": "SSE41"}, {"ATEN_CPU_CAPABILITY": "default"}, {"ONEDNN_MAX_CPU_ISA": "AVX2"}])
 def test_pinned_inference_gives_the_same_bits_whatever_kernels_the_cpu_offers(dispatch):
     """The vector code oneDNN and ATen pick (AVX-512, AVX2, SSE) must not reach a pinned policy's actions: the same
@@ -191,6 +192,7 @@ def test_pinned_inference_gives_the_same_bits_whatever_kernels_the_cpu_offers(di
     assert pinned_forward(dispatch) == plain
 
 
+@pytest.mark.slow
 def test_the_variable_pins_as_the_service_call_does():
     """`visualenv eval` and `play` pin MKL by MKL_CBWR, set before torch loads (visualenv.compat.mkl): the same bits as
     the service call's pinning, with a dispatch forced as well."""
