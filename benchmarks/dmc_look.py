@@ -1,7 +1,7 @@
 """DMC-cartpole-swingup-v0's frames beside dm_control's own render of the same states: a picture and numbers.
 
-dm_control renders with MuJoCo's OpenGL renderer (``MUJOCO_GL=egl`` unless set,
-in a child process, so that its GL context never meets Blender); visualenv's
+dm_control renders with MuJoCo's OpenGL renderer (``MUJOCO_GL=egl`` unless set to
+osmesa or glfw, in a child process, so that its GL context never meets Blender); visualenv's
 frames are Blender's (Cycles, 1 sample, ``physics.look: mujoco``). Both start
 from the same seed (their states are equal: tests/test_dmc_parity.py) and step
 the same actions with no action repeat. Prints, per state, the mean colour of
@@ -61,8 +61,9 @@ def dm_control_frames(states: tuple[tuple[int, int], ...] = STATES) -> np.ndarra
     with tempfile.TemporaryDirectory() as folder:
         acts, out = Path(folder) / "actions.npy", Path(folder) / "frames.npy"
         np.save(acts, actions(states))
-        done = subprocess.run([sys.executable, "-c", _DM_CONTROL, json.dumps(states), str(acts), str(out), str(SIZE)],
-                              capture_output=True, text=True, env={**os.environ, "MUJOCO_GL": os.environ.get("MUJOCO_GL", "egl")})
+        backend = os.environ.get("MUJOCO_GL")  # a test process may have set "disable" for dm_control's import
+        done = subprocess.run([sys.executable, "-c", _DM_CONTROL, json.dumps(states), str(acts), str(out), str(SIZE)], capture_output=True,
+                              text=True, env={**os.environ, "MUJOCO_GL": backend if backend in ("egl", "osmesa", "glfw") else "egl"})
         if done.returncode != 0 or not out.exists():
             raise RuntimeError(f"dm_control could not render: {done.stderr.strip()[-800:]}")
         return np.load(out)

@@ -206,3 +206,24 @@ def test_the_physical_look_keeps_blenders_light_and_srgb(tmp_path: Path) -> None
     physical, _, _ = frame(tmp_path, model, look="physical")
     face = inside(mask == ids["block"])
     assert physical[face].mean() > mujoco_look[face].mean() + 20
+
+
+def test_a_spec_object_standing_for_a_body_is_lit_as_a_geom(tmp_path: Path) -> None:
+    """An object the spec declares under the block's name (a cube of colour .2 .6 .4) stands for it and is lit as
+    MuJoCo lights a geom without a material: its face toward the camera rgba * (ambient + diffuse), evenly (Blender's
+    light alone left it black: the model has no light)."""
+    (tmp_path / "model.xml").write_text(BOX.format(a=0.2, d=0.5, s=0, on=1, lights=""), encoding="utf-8")
+    spec = tmp_path / "own.yaml"
+    spec.write_text(SPEC.format(camera="eye", size=32, look="") + """scene:
+  objects:
+    block: {primitive: cube, size: [1, 1, 1], material: {color: [0.2, 0.6, 0.4]}}
+""", encoding="utf-8")
+    env = visualenv.make(spec)
+    try:
+        obs, _ = env.reset(seed=0)
+        ids = env.unwrapped.segmentation_ids
+    finally:
+        env.close()
+    face = inside(obs["mask"][..., 0] == ids["block"])
+    assert face.sum() >= 100
+    assert np.abs(obs["eye"][face].astype(int) - [level(c * 0.7) for c in (0.2, 0.6, 0.4)]).max() <= 1

@@ -23,7 +23,7 @@ import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.compat.blender import sort_faces
-from visualenv.physics.scene import GeomShape, PhysicsScene
+from visualenv.physics.scene import GeomShape, LightInfo, PhysicsScene
 from visualenv.physics.texcoords import cube_uv, planar_uv
 from visualenv.render.blender.materials import make_material, show_skybox, tint_image, world_writer
 from visualenv.render.blender.mujoco_look import ambient, light_data, light_material
@@ -108,20 +108,20 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     for body in own:
         empty_of(body)
     images: dict[int, Any] = {}  # by MuJoCo texture: geoms sharing a texture share its image
-    mujoco_look = scene_data.look == "mujoco"
-    lighting = (scene_data.headlight, ambient(scene_data)) if mujoco_look else None
+    as_mujoco = scene_data.look == "mujoco"  # lit as MuJoCo's renderer lights it (mujoco_look.py)
+    lighting = (scene_data.headlight, ambient(scene_data)) if as_mujoco else None
     for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
         if geom.body in own:
             continue
-        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images, split_caps=mujoco_look)
+        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco)
         if lighting is not None:
-            light_material(obj.data.materials[0], geom, *lighting)
+            light_material(obj.data.materials[0], *lighting, emission=geom.emission, specular=geom.specular, shininess=geom.shininess)
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
         built.objects.setdefault(geom.name, obj)
     lights = []
     for light in scene_data.lights:
-        data = light_data(light) if mujoco_look else _physical_light(light)
+        data = light_data(light) if as_mujoco else _physical_light(light)
         obj = bpy.data.objects.new(light.name, data)
         collection.objects.link(obj)
         obj.location = light.pos
@@ -129,7 +129,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         obj.rotation_quaternion = Vector(light.direction).to_track_quat("-Z", "Y")
         built.objects.setdefault(light.name, obj)
         lights.append(obj)
-    if add_light and not mujoco_look:  # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
+    if add_light and not as_mujoco:  # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
         sun = bpy.data.objects.new("mujoco-headlight", bpy.data.lights.new("mujoco-headlight", "SUN"))
         sun.data.energy = 3.0
         sun.rotation_euler = (0.6, 0.0, 0.3)
@@ -152,7 +152,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     return PoseWriter(moving, cameras, lights, keys)
 
 
-def _physical_light(light: Any) -> Any:
+def _physical_light(light: LightInfo) -> Any:
     """The model's light as a Blender light of its colour (physics.look: physical): a sun, or a spot that falls off with distance."""
     data = bpy.data.lights.new(light.name, "SUN" if light.directional else "SPOT")
     data.color = light.diffuse

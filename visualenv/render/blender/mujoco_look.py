@@ -25,6 +25,7 @@ or a world that lights, turns a body's pixels into a random choice among them
   their diffuse term is the material's diffuse (no specular lobe). With one such
   light, each pixel's one sample is exact;
 * the world lights nothing (only camera rays see it), as MuJoCo's skybox;
+* the spec's own objects (an object standing for a body, a .blend's meshes) are lit as geoms without a material;
 * colours are written raw (the 'Raw' view transform, images read as numbers),
   as OpenGL writes them.
 
@@ -38,7 +39,7 @@ from typing import Any
 
 import bpy
 
-from visualenv.physics.scene import GeomShape, Headlight, LightInfo, PhysicsScene
+from visualenv.physics.scene import Headlight, LightInfo, PhysicsScene
 from visualenv.render.blender.materials import tinted_base
 
 #: MuJoCo's global ambient when nothing lights the model (``initLights``: no light, headlight off)
@@ -49,6 +50,8 @@ SUN_UNIT = math.pi
 SPOT_UNIT = 4.0 * math.pi ** 2
 #: what Blender reads images as (bytes / 255 as they are) and writes colours as (no transform), in this look
 RAW_COLORSPACE = "Non-Color"
+#: the custom property of a material lit as MuJoCo lights a geom (:func:`light_material`)
+LIT = "visualenv_mujoco_lit"
 
 
 def ambient(scene_data: PhysicsScene) -> tuple[float, float, float]:
@@ -61,12 +64,15 @@ def ambient(scene_data: PhysicsScene) -> tuple[float, float, float]:
     return tuple(sum(t[k] for t in terms) for k in range(3))  # type: ignore[return-value]
 
 
-def light_material(mat: Any, geom: GeomShape, headlight: Headlight, ambient_rgb: tuple[float, float, float]) -> None:
-    """`mat` (a geom's Principled material) lit as MuJoCo lights the geom: its diffuse lobe only (the model's lights),
-    and emitting ``texture * (colour * (emission + ambient + headlight diffuse * max(n.v, 0)) + headlight specular)``.
+def light_material(mat: Any, headlight: Headlight, ambient_rgb: tuple[float, float, float], *, emission: float = 0.0,
+                   specular: float = 0.5, shininess: float = 0.5) -> None:
+    """`mat` (a Principled material) lit as MuJoCo lights a geom of its material's `emission`, `specular` and
+    `shininess` (MuJoCo's for a geom without a material by default): its diffuse lobe only (the model's lights), and
+    emitting ``texture * (colour * (emission + ambient + headlight diffuse * max(n.v, 0)) + headlight specular)``.
 
     The colour is the tint node's (:func:`tinted_base`), so a bound colour recolours every term.
     """
+    mat[LIT] = True
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
     bsdf.inputs["Specular IOR Level"].default_value = 0.0  # MuJoCo's lights add no Fresnel reflection
@@ -77,25 +83,40 @@ def light_material(mat: Any, geom: GeomShape, headlight: Headlight, ambient_rgb:
     toward = _math(nodes, links, "MULTIPLY", _z(nodes, links, normal), -1.0)  # n.l: Cycles' camera space looks along +Z, the headlight shines back
     facing = _math(nodes, links, "MAXIMUM", toward, 0.0)
     diffuse = [v if head_on else 0.0 for v in headlight.diffuse]
-    base = tuple(a + geom.emission for a in ambient_rgb)
+    base = tuple(a + emission for a in ambient_rgb)
     light = _vector(nodes, links, "MULTIPLY_ADD", diffuse, facing, base)
     lit = _vector(nodes, links, "MULTIPLY", tinted, light)
-    specular = [s * geom.specular if head_on else 0.0 for s in headlight.specular]
-    if max(specular) > 0.0:  # Blinn-Phong with a local viewer: h between the light (the view axis) and the eye (Incoming)
+    highlight_rgb = [s * specular if head_on else 0.0 for s in headlight.specular]
+    if max(highlight_rgb) > 0.0:  # Blinn-Phong with a local viewer: h between the light (the view axis) and the eye (Incoming)
         eye = _to_camera(nodes, links, geometry.outputs["Incoming"], "VECTOR")
         half = _vector(nodes, links, "NORMALIZE", _vector(nodes, links, "ADD", eye, (0.0, 0.0, -1.0)))
         cosine = nodes.new("ShaderNodeVectorMath")
         cosine.operation = "DOT_PRODUCT"
         links.new(normal, cosine.inputs[0])
         links.new(half, cosine.inputs[1])
-        power = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", cosine.outputs["Value"], 0.0), 128.0 * geom.shininess)
+        power = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", cosine.outputs["Value"], 0.0), 128.0 * shininess)
         lit_side = _math(nodes, links, "GREATER_THAN", toward, 0.0)  # OpenGL: no highlight on a side the light misses
-        highlight = _vector(nodes, links, "MULTIPLY", _math(nodes, links, "MULTIPLY", power, lit_side), specular)
+        highlight = _vector(nodes, links, "MULTIPLY", _math(nodes, links, "MULTIPLY", power, lit_side), highlight_rgb)
         textured = _vector(nodes, links, "MULTIPLY", highlight, texture.links[0].from_socket if texture.is_linked else (1.0, 1.0, 1.0))
         lit = _vector(nodes, links, "ADD", lit, textured)
     path = nodes.new("ShaderNodeLightPath")  # a ray Cycles sampled from another surface sees no emission: it lights nothing
     links.new(_vector(nodes, links, "MULTIPLY", lit, path.outputs["Is Camera Ray"]), bsdf.inputs["Emission Color"])
     bsdf.inputs["Emission Strength"].default_value = 1.0
+
+
+def light_scene(scene: Any, headlight: Headlight, ambient_rgb: tuple[float, float, float]) -> None:
+    """Every material of `scene` not lit yet that has a Principled BSDF and no emission of its own (the spec's objects,
+    a .blend's) lit as MuJoCo lights a geom without a material, so an object standing for a body looks like one."""
+    for obj in scene.objects:
+        for slot in obj.material_slots:
+            mat = slot.material
+            if mat is None or mat.get(LIT) or mat.node_tree is None:
+                continue
+            bsdf = next((n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+            if bsdf is None or bsdf.inputs["Emission Color"].is_linked or bsdf.inputs["Emission Strength"].is_linked or (
+                    bsdf.inputs["Emission Strength"].default_value > 0 and max(bsdf.inputs["Emission Color"].default_value[:3]) > 0):
+                continue
+            light_material(mat, headlight, ambient_rgb)
 
 
 def light_data(light: LightInfo) -> Any:

@@ -23,7 +23,7 @@ from visualenv.render.blender.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
-from visualenv.render.blender.mujoco_look import backdrop, raw_images
+from visualenv.render.blender.mujoco_look import ambient, backdrop, light_scene, raw_images
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
@@ -99,6 +99,7 @@ class BlenderRenderer(Renderer):
             self._raw_colors = plan.physics is not None and plan.physics.look == "mujoco"
             if self._raw_colors:
                 backdrop(built.scene.world)
+                light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))  # the spec's own objects as geoms
             self._check_names(built)
             self._setup(built, settings.threads)
         except BaseException:
