@@ -227,3 +227,36 @@ def test_a_spec_object_standing_for_a_body_is_lit_as_a_geom(tmp_path: Path) -> N
     face = inside(obs["mask"][..., 0] == ids["block"])
     assert face.sum() >= 100
     assert np.abs(obs["eye"][face].astype(int) - [level(c * 0.7) for c in (0.2, 0.6, 0.4)]).max() <= 1
+
+
+def test_a_planes_checks_lie_where_mujoco_draws_them(tmp_path: Path) -> None:
+    """MuJoCo 3.17 lays a finite plane's 2-D texture from the plane's (-x, +y) corner: a 0.7 x 0.45 m plane with a
+    black-and-white checker repeated twice per 2 m (texuniform) has its checks' edges at x = -0.2 and 0.3 and at
+    y = -0.05, measured with mujoco.Renderer (from the centre they would be at x = -0.5, 0, 0.5 and y = 0)."""
+    model = """<mujoco><visual><headlight ambient="1 1 1" diffuse="0 0 0" specular="0 0 0"/></visual>
+      <asset><texture name="g" type="2d" builtin="checker" rgb1="1 1 1" rgb2="0 0 0" width="64" height="64"/>
+        <material name="g" texture="g" texrepeat="2 2" texuniform="true"/></asset>
+      <worldbody><geom name="floor" type="plane" size=".7 .45 .1" material="g"/><camera name="down" pos="0 0 2" fovy="60"/>
+        <body name="probe" pos="9 9 9"><joint name="slide" type="slide" axis="1 0 0"/><geom type="sphere" size=".1"/></body>
+      </worldbody><actuator><motor joint="slide"/></actuator></mujoco>"""
+    image = frame(tmp_path, model, camera="down", size=100)[0][..., 0]
+    metres = (np.arange(100) + 0.5 - 50) * (2 * 2 * np.tan(np.radians(30)) / 100)  # the floor under each column's centre
+    along_x = image[50] > 128  # the row at y = 0 (rows run down the image: -y)
+    edges_x = metres[:-1][np.diff(along_x)] + (metres[1] - metres[0]) / 2
+    inside = edges_x[np.abs(edges_x) < 0.65]
+    assert inside.shape == (2,) and np.allclose(inside, [-0.2, 0.3], atol=0.03), edges_x
+    along_y = image[:, 30] > 128  # the column at x = -0.46, within one check along x
+    edges_y = -(metres[:-1][np.diff(along_y)] + (metres[1] - metres[0]) / 2)
+    inside = edges_y[np.abs(edges_y) < 0.4]
+    assert inside.shape == (1,) and np.allclose(inside, [-0.05], atol=0.03), edges_y
+
+
+def test_the_lit_colour_is_clamped_before_the_texture_multiplies_it(tmp_path: Path) -> None:
+    """OpenGL clamps a vertex's lit colour to 1 before the texture multiplies it: a white box with a grey texture
+    (.5 on the face toward the camera) under ambient .4 and diffuse .8 shows .5, not .6 (dm_control's floors)."""
+    model = BOX.format(a=0.4, d=0.8, s=0, on=1, lights="").replace(
+        '<worldbody>', '<asset><texture name="t" type="cube" builtin="flat" rgb1=".5 .5 .5" rgb2=".5 .5 .5" width="8" height="8"/>'
+        '<material name="m" texture="t"/></asset><worldbody>').replace('rgba=".8 .6 .4 1"/>', 'rgba="1 1 1 1" material="m"/>')
+    image, mask, ids = frame(tmp_path, model)
+    face = inside(mask == ids["block"])
+    assert face.sum() >= 100 and np.abs(image[face] - level(0.5)).max() <= 1, np.unique(image[face])

@@ -48,6 +48,9 @@ class GeomShape:
     texscale: tuple[float, float, float] = (1.0, 1.0, 1.0)  # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
     unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
     texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
+    #: added to a finite plane's vertices before its 2-D texture's mapping: MuJoCo 3.17's renderer lays the texture from
+    #: the plane's (-x, +y) corner, not its centre (measured against mujoco.Renderer: tests/test_physics_texcoords.py)
+    texorigin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: its material's emission (times its colour), specular and shininess, as MuJoCo's renderer lights it (no material: 0, 0.5, 0.5)
     emission: float = 0.0
     specular: float = 0.5
@@ -248,6 +251,8 @@ def _texgen(model: Any, g: int, kind: str, mat: int, tex: int) -> dict[str, Any]
             if uniform and size[k] > 0:
                 scale[k] *= size[k]
         fields["texscale"] = (scale[0], scale[1], 0.0)
+        if kind == "plane":
+            fields["texorigin"] = (raw[0], -raw[1], 0.0)  # 0 along an infinite dimension
     if kind == "mesh":
         fields["texcoords"] = _mesh_texcoords(model, int(model.geom_dataid[g]))
     return fields

@@ -232,7 +232,7 @@ def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list
     if geom.kind == "mesh" and geom.vertices is not None:  # made in this order, at the geom's own coordinates
         points = np.asarray(geom.vertices, dtype=np.float64).reshape(-1, 3)
     else:
-        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit)
+        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit) + np.array(geom.texorigin)
     for sphere, z in caps:  # MuJoCo's caps are unit hemispheres about their own centres, scaled by the radius
         rows = [v.index for v in sphere]
         points[rows] = (np.array([v.co[:] for v in sphere]) - (0.0, 0.0, z)) / size[0]

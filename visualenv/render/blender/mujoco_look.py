@@ -68,7 +68,9 @@ def light_material(mat: Any, headlight: Headlight, ambient_rgb: tuple[float, flo
                    specular: float = 0.5, shininess: float = 0.5) -> None:
     """`mat` (a Principled material) lit as MuJoCo lights a geom of its material's `emission`, `specular` and
     `shininess` (MuJoCo's for a geom without a material by default): its diffuse lobe only (the model's lights), and
-    emitting ``texture * (colour * (emission + ambient + headlight diffuse * max(n.v, 0)) + headlight specular)``.
+    emitting ``texture * min(colour * (emission + ambient + headlight diffuse * max(n.v, 0)) + headlight specular, 1)``
+    (OpenGL clamps the lit colour before the texture multiplies it: a white floor under ambient .4 and a headlight of
+    .8 shows its texture, not 1.2 times it).
 
     The colour is the tint node's (:func:`tinted_base`), so a bound colour recolours every term.
     """
@@ -77,6 +79,7 @@ def light_material(mat: Any, headlight: Headlight, ambient_rgb: tuple[float, flo
     bsdf = next(n for n in nodes if n.type == "BSDF_PRINCIPLED")
     bsdf.inputs["Specular IOR Level"].default_value = 0.0  # MuJoCo's lights add no Fresnel reflection
     texture, tinted = tinted_base(mat)
+    texel = texture.links[0].from_socket if texture.is_linked else (1.0, 1.0, 1.0)
     head_on = headlight.active
     geometry = nodes.new("ShaderNodeNewGeometry")
     normal = _to_camera(nodes, links, geometry.outputs["Normal"], "NORMAL")
@@ -97,8 +100,8 @@ def light_material(mat: Any, headlight: Headlight, ambient_rgb: tuple[float, flo
         power = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", cosine.outputs["Value"], 0.0), 128.0 * shininess)
         lit_side = _math(nodes, links, "GREATER_THAN", toward, 0.0)  # OpenGL: no highlight on a side the light misses
         highlight = _vector(nodes, links, "MULTIPLY", _math(nodes, links, "MULTIPLY", power, lit_side), highlight_rgb)
-        textured = _vector(nodes, links, "MULTIPLY", highlight, texture.links[0].from_socket if texture.is_linked else (1.0, 1.0, 1.0))
-        lit = _vector(nodes, links, "ADD", lit, textured)
+        lit = _vector(nodes, links, "ADD", lit, _vector(nodes, links, "MULTIPLY", highlight, texel))
+    lit = _vector(nodes, links, "MINIMUM", lit, texel)  # texture * min(x, 1) = min(texture * x, texture)
     path = nodes.new("ShaderNodeLightPath")  # a ray Cycles sampled from another surface sees no emission: it lights nothing
     links.new(_vector(nodes, links, "MULTIPLY", lit, path.outputs["Is Camera Ray"]), bsdf.inputs["Emission Color"])
     bsdf.inputs["Emission Strength"].default_value = 1.0
