@@ -35,6 +35,7 @@ BLENDER_MODULES = {
     "test_heightmap",
     "test_inspect_init",
     "test_make_options",
+    "test_mujoco_look",
     "test_parallel",
     "test_physics_scene",
     "test_quiet_exit",

@@ -103,3 +103,12 @@ def test_a_large_image_converted_in_bands_on_threads_gives_the_same_bytes():
     assert all(np.array_equal(a, b) for a, b in zip(one, three))
     expected = srgb_bytes(values.reshape(601, 523, 4)[::-1, :, :3])
     assert np.abs(three[1].astype(int) - expected).max() <= 1 and np.array_equal(three[0], to_grayscale(three[1]))
+
+
+def test_raw_rgb_and_grayscale_are_the_linear_values_as_bytes(capture):
+    """physics.look 'mujoco' writes colours as they are (Blender's 'Raw' view): each channel rounded half up to a byte,
+    the luma of those bytes."""
+    expected = np.floor(np.clip(capture._buffer.reshape(5, 7, 4)[::-1, :, :3] * 255.0 + 0.5, 0, 255)).astype(np.uint8)
+    assert np.array_equal(capture.rgb(raw=True), expected)
+    assert np.array_equal(capture.grayscale(raw=True), to_grayscale(expected))
+    assert not np.array_equal(capture.rgb(raw=True), capture.rgb())

@@ -79,3 +79,19 @@ def test_a_gradient_skybox_is_rgb1_above_and_rgb2_below() -> None:
     level = cube_to_equirect(_pixels(model, 0))[..., 0].mean(axis=1)  # by row, bottom first
     assert level[-1] > 0.9 and level[0] < 0.1
     assert np.all(np.diff(level) > -0.03)  # brighter upwards all the way (nearest texels: steps, no dips)
+
+
+def test_a_large_skybox_face_is_averaged_as_mipmaps_average_it():
+    """dm_control's sky: 800-texel faces with 1 % white dots. Averaged in 4 x 4 blocks to 200 texels (at most 256),
+    the dots become a faint haze of the same mean; a small map is kept as it is."""
+    from visualenv.physics.texcoords import SKY_FACE_TEXELS, average_faces
+
+    rng = np.random.default_rng(0)
+    faces = np.full((6 * 800, 800, 4), 0.3, np.float32)
+    faces[..., :3][rng.random((6 * 800, 800)) < 0.01] = 1.0
+    averaged = average_faces(faces)
+    assert averaged.shape == (6 * 200, 200, 4) and 200 <= SKY_FACE_TEXELS
+    assert abs(averaged[..., 0].mean() - faces[..., 0].mean()) < 1e-4
+    assert averaged[..., 0].max() < 0.5 < faces[..., 0].max()  # no texel a white dot
+    small = faces[: 6 * 100, :100]
+    assert average_faces(small) is small

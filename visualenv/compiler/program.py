@@ -233,7 +233,7 @@ class _Compiler(ActionsCompiler, BindingsCompiler):
         self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts, convention=section.convention)
         if self.spec.observation is not None or self.spec.render.view.camera:  # drawn: every geom must be drawable
             try:
-                self.plan.scene = phys.physics_scene(model, section.draw_sites)
+                self.plan.scene = phys.physics_scene(model, section.draw_sites, section.look)
             except phys.PhysicsError as exc:
                 self.error(("physics", "model"), str(exc))
         self.pnames = phys.scope(model, section.contacts)

@@ -48,6 +48,13 @@ class GeomShape:
     texscale: tuple[float, float, float] = (1.0, 1.0, 1.0)  # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
     unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
     texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
+    #: added to a finite plane's vertices before its 2-D texture's mapping: MuJoCo 3.17's renderer lays the texture from
+    #: the plane's (-x, +y) corner, not its centre (measured against mujoco.Renderer: tests/test_physics_texcoords.py)
+    texorigin: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    #: its material's emission (times its colour), specular and shininess, as MuJoCo's renderer lights it (no material: 0, 0.5, 0.5)
+    emission: float = 0.0
+    specular: float = 0.5
+    shininess: float = 0.5
 
 
 @dataclass(frozen=True)
@@ -58,6 +65,20 @@ class LightInfo:
     direction: tuple[float, float, float]
     diffuse: tuple[float, float, float]
     cutoff: float  # spot cone half angle (degrees)
+    ambient: tuple[float, float, float] = (0.0, 0.0, 0.0)
+    castshadow: bool = True
+    exponent: float = 10.0  # a spot's intensity falls as cos(angle from its axis) ** exponent
+    attenuation: tuple[float, float, float] = (1.0, 0.0, 0.0)  # a spot's intensity over (a0 + a1 d + a2 d^2), d its distance
+
+
+@dataclass(frozen=True)
+class Headlight:
+    """MuJoCo's headlight (``visual/headlight``): a directional light along the camera's view that casts no shadow."""
+
+    ambient: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    diffuse: tuple[float, float, float] = (0.4, 0.4, 0.4)
+    specular: tuple[float, float, float] = (0.5, 0.5, 0.5)
+    active: bool = True
 
 
 @dataclass(frozen=True)
@@ -85,11 +106,14 @@ class PhysicsScene:
     sky: np.ndarray | None = None
     #: the visible sites, drawn as MuJoCo's viewer draws them (:func:`visible_sites`), each named ``site:<name>``
     sites: tuple[GeomShape, ...] = ()
+    headlight: Headlight = Headlight()
+    #: how the renderer lights and colours the model (physics.look): "mujoco" as MuJoCo's OpenGL renderer, "physical" by Blender's lights
+    look: str = "mujoco"
 
 
-def physics_scene(physics: PhysicsModel, draw_sites: bool = True) -> PhysicsScene:
+def physics_scene(physics: PhysicsModel, draw_sites: bool = True, look: str = "mujoco") -> PhysicsScene:
     """The scene of `physics`: refuses a visible height field (not drawn yet), names every geom and camera; its visible
-    sites unless `draw_sites` is false."""
+    sites unless `draw_sites` is false; `look` is physics.look."""
     mujoco = mujoco_module()
     model = physics.model
     data = mujoco.MjData(model)
@@ -107,9 +131,12 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True) -> PhysicsScen
                                "(hidden) or replace it with a mesh or boxes")
         geoms.append(_geom(model, g, GEOM_KINDS[gtype], idents["geom"][g], textures))
     lights = tuple(
-        LightInfo(idents["light"][i], bool(_light_directional(model, i)), tuple(map(float, data.light_xpos[i])),  # type: ignore[arg-type]
-                  tuple(map(float, data.light_xdir[i])), tuple(map(float, model.light_diffuse[i])), float(model.light_cutoff[i]))  # type: ignore[arg-type]
+        LightInfo(idents["light"][i], bool(_light_directional(model, i)), _floats(data.light_xpos[i]), _floats(data.light_xdir[i]),  # type: ignore[arg-type]
+                  _floats(model.light_diffuse[i]), float(model.light_cutoff[i]), _floats(model.light_ambient[i]),  # type: ignore[arg-type]
+                  bool(model.light_castshadow[i]), float(model.light_exponent[i]), _floats(model.light_attenuation[i]))  # type: ignore[arg-type]
         for i in range(model.nlight))
+    head = model.vis.headlight
+    headlight = Headlight(_floats(head.ambient), _floats(head.diffuse), _floats(head.specular), bool(head.active))  # type: ignore[arg-type]
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
     cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()),
                                tuple(map(float, data.cam_xpos[i])), _quat(mujoco, data.cam_xmat[i]))  # type: ignore[arg-type]
@@ -117,7 +144,12 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True) -> PhysicsScen
     skyboxes = [t for t in range(model.ntex) if int(model.tex_type[t]) == 2]  # mjTEXTURE_SKYBOX
     sky = cube_to_equirect(_pixels(model, skyboxes[0])) if skyboxes else None
     sites = visible_sites(physics) if draw_sites else ()
-    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky, sites)
+    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky, sites,
+                        headlight, look)
+
+
+def _floats(values: Any) -> tuple[float, ...]:
+    return tuple(float(v) for v in values)
 
 
 def visible_sites(physics: PhysicsModel) -> tuple[GeomShape, ...]:
@@ -133,8 +165,10 @@ def visible_sites(physics: PhysicsModel) -> tuple[GeomShape, ...]:
         mat = int(model.site_matid[i])
         if mat >= 0 and np.allclose(rgba, _DEFAULT_RGBA):
             rgba = tuple(float(v) for v in model.mat_rgba[mat])
+        emission, specular, shininess = _shading(model, mat)
         out.append(GeomShape(f"site:{ident}", kind, int(model.site_bodyid[i]), tuple(float(v) for v in model.site_size[i]),  # type: ignore[arg-type]
-                             tuple(map(float, model.site_pos[i])), tuple(map(float, model.site_quat[i])), rgba))  # type: ignore[arg-type]
+                             tuple(map(float, model.site_pos[i])), tuple(map(float, model.site_quat[i])), rgba,  # type: ignore[arg-type]
+                             emission=emission, specular=specular, shininess=shininess))
     return tuple(out)
 
 
@@ -165,8 +199,10 @@ def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarr
         f0, nf = int(model.mesh_faceadr[mesh]), int(model.mesh_facenum[mesh])
         vertices = np.array(model.mesh_vert[v0:v0 + nv], dtype=np.float64)
         faces = np.array(model.mesh_face[f0:f0 + nf], dtype=np.int64)
+    emission, specular, shininess = _shading(model, mat)
     shape = GeomShape(name, kind, int(model.geom_bodyid[g]), size, tuple(map(float, model.geom_pos[g])),  # type: ignore[arg-type]
-                      tuple(map(float, model.geom_quat[g])), rgba, vertices, faces)  # type: ignore[arg-type]
+                      tuple(map(float, model.geom_quat[g])), rgba, vertices, faces,  # type: ignore[arg-type]
+                      emission=emission, specular=specular, shininess=shininess)
     tex = _texture_id(model, mat)
     if tex < 0:
         return shape
@@ -174,6 +210,13 @@ def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarr
         textures[tex] = _pixels(model, tex)
     return replace(shape, texture=textures[tex], texture_type="cube" if int(model.tex_type[tex]) == 1 else "2d", texture_id=tex,
                    **_texgen(model, g, kind, mat, tex))
+
+
+def _shading(model: Any, mat: int) -> tuple[float, float, float]:
+    """A material's emission, specular and shininess, or MuJoCo's (mjv_updateScene's) for an element without one."""
+    if mat < 0:
+        return 0.0, 0.5, 0.5
+    return float(model.mat_emission[mat]), float(model.mat_specular[mat]), float(model.mat_shininess[mat])
 
 
 def _texture_id(model: Any, mat: int) -> int:
@@ -208,6 +251,8 @@ def _texgen(model: Any, g: int, kind: str, mat: int, tex: int) -> dict[str, Any]
             if uniform and size[k] > 0:
                 scale[k] *= size[k]
         fields["texscale"] = (scale[0], scale[1], 0.0)
+        if kind == "plane":
+            fields["texorigin"] = (raw[0], -raw[1], 0.0)  # 0 along an infinite dimension
     if kind == "mesh":
         fields["texcoords"] = _mesh_texcoords(model, int(model.geom_dataid[g]))
     return fields

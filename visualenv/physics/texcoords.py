@@ -82,6 +82,20 @@ def cube_uv(points: np.ndarray, loop_starts: np.ndarray, loop_vertex: np.ndarray
 
 #: the most texels across an equirectangular sky made from a cube map (4 per cube texel, up to this)
 SKY_WIDTH = 1024
+#: the most texels a side of a skybox face keeps: larger faces are averaged in blocks, as MuJoCo's mipmaps average a
+#: face's texels under each pixel of an observation (dm_control's 800-texel sky: its 1 % of white dots a faint haze, not stars)
+SKY_FACE_TEXELS = 256
+
+
+def average_faces(pixels: np.ndarray, most: int = SKY_FACE_TEXELS) -> np.ndarray:
+    """A cube map (faces stacked, bottom row first) with each face averaged in square blocks to at most `most` texels a
+    side, by the smallest block that divides the face (the map unchanged when it is small enough, or no block divides it)."""
+    texels = pixels.shape[1]
+    block = next((b for b in range(2, texels + 1) if texels % b == 0 and texels // b <= most), 1) if texels > most else 1
+    if block == 1:
+        return pixels
+    rows, channels = pixels.shape[0], pixels.shape[2]
+    return pixels.reshape(rows // block, block, texels // block, block, channels).mean(axis=(1, 3), dtype=np.float64).astype(pixels.dtype)
 
 
 def cube_to_equirect(pixels: np.ndarray, *, width: int | None = None) -> np.ndarray:
@@ -93,8 +107,10 @@ def cube_to_equirect(pixels: np.ndarray, *, width: int | None = None) -> np.ndar
     a gradient puts ``rgb1``) is the world's +Z: a direction ``(x, y, z)`` samples the
     cube map at ``(x, z, -y)``. Blender's equirectangular mapping puts azimuth
     ``atan2(y, x) = 0`` at the image's centre column and the zenith at its top row.
-    Texels are taken nearest (Blender interpolates the image it is given).
+    Texels are taken nearest (Blender interpolates the image it is given), from faces averaged to at most
+    :data:`SKY_FACE_TEXELS` a side (:func:`average_faces`).
     """
+    pixels = average_faces(pixels)
     texels = pixels.shape[1]
     faces = pixels.shape[0] // texels
     width = width or min(4 * texels, SKY_WIDTH)

@@ -331,6 +331,10 @@ class Physics(StrictModel):
     observe: Annotated[list[Expr], Field(min_length=1)] | None = Field(
         None, description="the state-only observation (float64), one number per entry; default: every qpos, then every qvel, then the observed state")
     draw_sites: bool = Field(True, description="draw the model's sites as MuJoCo's viewer does (groups 0 to 2, their rgba and size); false: not drawn")
+    look: Literal["mujoco", "physical"] = Field("mujoco", description=(
+        "how the model is lit and coloured: 'mujoco' as MuJoCo's renderer draws it (its headlight and lights, their ambient and "
+        "diffuse terms, shadows, colours written without a display transform), evenly lit at 1 sample; 'physical': Blender's "
+        "path-traced light (the model's lights, or a sun standing in for the headlight, the world's light, sRGB colours)"))
 
 
 # -- actors, observation, rendering --------------------------------------------------------------

@@ -54,7 +54,9 @@ def mjcf_report(path: Path) -> str:
     if "hfield" in " ".join(drawn) or "sdf" in " ".join(drawn):
         lines.append("  a height field or SDF cannot be drawn yet: a rendered spec over this model is refused (hide it in group 3)")
     lines.append("cameras (observation.camera): " + (", ".join(idents["camera"]) or "none: the spec adds its own"))
-    lines.append("lights: " + (", ".join(idents["light"]) or "none: a sun stands in for MuJoCo's headlight"))
+    head = m.vis.headlight
+    lines.append("lights: " + (", ".join(idents["light"]) or "none") + "; MuJoCo's headlight: "
+                 + (f"ambient {head.ambient[0]:g}, diffuse {head.diffuse[0]:g}" if head.active else "off"))
     return "\n".join(lines)
 
 

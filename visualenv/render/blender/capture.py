@@ -139,17 +139,21 @@ class Capture:
             list(self._pool.map(band, [slice(a, b) for a, b in zip(edges[:-1], edges[1:])]))
         return out
 
-    def rgb(self) -> np.ndarray:
-        """(H, W, 3) sRGB bytes, as Blender's 'Standard' view transform writes them."""
+    def rgb(self, raw: bool = False) -> np.ndarray:
+        """(H, W, 3) sRGB bytes, as Blender's 'Standard' view transform writes them (`raw`: the linear values, as 'Raw' does)."""
+        if raw:
+            return self._convert(3, lambda rows: self._quantised(255, rows)[:, :, :3].astype(np.uint8))
         return self._convert(3, lambda rows: np.take(SRGB_TABLE, self._quantised(65535, rows)[:, :, :3]))
 
-    def grayscale(self) -> np.ndarray:
-        """(H, W, 1) BT.601 luma of the sRGB bytes: the same bytes as ``to_grayscale(rgb())``, in one pass."""
+    def grayscale(self, raw: bool = False) -> np.ndarray:
+        """(H, W, 1) BT.601 luma of the sRGB bytes (`raw`: of the 'Raw' bytes): the same bytes as ``to_grayscale(rgb(raw))``, in one pass."""
+        top, tables = (255, LUMA_RAW_TABLES) if raw else (65535, LUMA_TABLES)
+
         def rows_to_bytes(rows: slice) -> np.ndarray:
-            levels = self._quantised(65535, rows)
-            luma = np.take(LUMA_TABLES[0], levels[:, :, 0])
-            luma += np.take(LUMA_TABLES[1], levels[:, :, 1])
-            luma += np.take(LUMA_TABLES[2], levels[:, :, 2])
+            levels = self._quantised(top, rows)
+            luma = np.take(tables[0], levels[:, :, 0])
+            luma += np.take(tables[1], levels[:, :, 1])
+            luma += np.take(tables[2], levels[:, :, 2])
             luma *= np.float32(0.001)
             return luma.astype(np.uint8)[:, :, None]
         return self._convert(1, rows_to_bytes)
@@ -182,17 +186,19 @@ def _srgb_table(size: int = 65536) -> np.ndarray:
 SRGB_TABLE = _srgb_table()
 
 
-def _luma_tables() -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """Per channel, the sRGB byte times its BT.601 weight (float32, exact), the red one plus 500.5.
+def _luma_tables(encoded: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Per channel, the byte `encoded` gives each level (sRGB, or raw) times its BT.601 weight (float32, exact), the red one plus 500.5.
 
     Summed and scaled by 0.001, then truncated, they give ``(299 R + 587 G + 114 B + 500) // 1000``
     exactly: the sum is an integer plus 0.5, at least 0.0005 from the next integer after scaling,
     far beyond float32's rounding error at these magnitudes.
     """
-    tables = [SRGB_TABLE.astype(np.float32) * np.float32(weight) for weight in LUMA_601]
+    tables = [encoded.astype(np.float32) * np.float32(weight) for weight in LUMA_601]
     tables[0] += np.float32(500.5)
     return tables[0], tables[1], tables[2]
 
 
 #: the BT.601 luma tables :meth:`Capture.grayscale` sums (:func:`_luma_tables`)
-LUMA_TABLES = _luma_tables()
+LUMA_TABLES = _luma_tables(SRGB_TABLE)
+#: the same for 'Raw' bytes (physics.look 'mujoco'), indexed by the byte itself
+LUMA_RAW_TABLES = _luma_tables(np.arange(256))

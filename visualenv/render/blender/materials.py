@@ -206,6 +206,23 @@ def tint_image(mat: Any, image: Any, *, repeat: bool) -> None:
     links.new(tinted, bsdf.inputs["Base Color"])
 
 
+def tinted_base(mat: Any) -> tuple[Any, Any]:
+    """The base colour of `mat` (a Principled material) as a product made by a tint node (:data:`TINT`, where a bound
+    colour writes): the node's texture input (linked to a texture, or white) and its output. The node is made here,
+    with a white texture input, when nothing drives the base colour."""
+    bsdf = _principled(mat)
+    base = bsdf.inputs["Base Color"]
+    if base.is_linked:
+        color_sockets(mat)  # a texture's tint node (made now if another node drives the colour)
+    else:
+        texture, tinted = _tint_node(mat.node_tree.nodes, TINT, tuple(base.default_value))
+        texture.default_value = (1.0, 1.0, 1.0, 1.0)
+        mat.node_tree.links.new(tinted, base)
+    node = base.links[0].from_node
+    texture = [sock for sock in node.inputs if sock.type == "RGBA"][0]
+    return texture, base.links[0].from_socket
+
+
 def see_through(scene: Any) -> bool:
     """Whether any material in `scene` has a Principled alpha below 1."""
     for obj in scene.objects:

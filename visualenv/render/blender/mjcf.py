@@ -23,9 +23,10 @@ import numpy as np
 from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.compat.blender import sort_faces
-from visualenv.physics.scene import GeomShape, PhysicsScene
+from visualenv.physics.scene import GeomShape, LightInfo, PhysicsScene
 from visualenv.physics.texcoords import cube_uv, planar_uv
-from visualenv.render.blender.materials import make_material, show_skybox, tint_image
+from visualenv.render.blender.materials import make_material, show_skybox, tint_image, world_writer
+from visualenv.render.blender.mujoco_look import ambient, light_data, light_material
 from visualenv.spec.models import Material
 
 #: round shapes' segments: enough for smooth silhouettes at observation sizes
@@ -107,20 +108,20 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     for body in own:
         empty_of(body)
     images: dict[int, Any] = {}  # by MuJoCo texture: geoms sharing a texture share its image
+    as_mujoco = scene_data.look == "mujoco"  # lit as MuJoCo's renderer lights it (mujoco_look.py)
+    lighting = (scene_data.headlight, ambient(scene_data)) if as_mujoco else None
     for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
         if geom.body in own:
             continue
-        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images)
+        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco)
+        if lighting is not None:
+            light_material(obj.data.materials[0], *lighting, emission=geom.emission, specular=geom.specular, shininess=geom.shininess)
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
         built.objects.setdefault(geom.name, obj)
     lights = []
     for light in scene_data.lights:
-        data = bpy.data.lights.new(light.name, "SUN" if light.directional else "SPOT")
-        data.color = light.diffuse
-        data.energy = 3.0 * max(light.diffuse) if light.directional else 300.0 * max(light.diffuse)
-        if not light.directional:
-            data.spot_size = min(math.radians(2 * light.cutoff), math.pi)
+        data = light_data(light) if as_mujoco else _physical_light(light)
         obj = bpy.data.objects.new(light.name, data)
         collection.objects.link(obj)
         obj.location = light.pos
@@ -128,7 +129,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         obj.rotation_quaternion = Vector(light.direction).to_track_quat("-Z", "Y")
         built.objects.setdefault(light.name, obj)
         lights.append(obj)
-    if add_light:  # MuJoCo's viewer lights a model without lights by a headlight; a sun from above and in front stands in
+    if add_light and not as_mujoco:  # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
         sun = bpy.data.objects.new("mujoco-headlight", bpy.data.lights.new("mujoco-headlight", "SUN"))
         sun.data.energy = 3.0
         sun.rotation_euler = (0.6, 0.0, 0.3)
@@ -151,9 +152,25 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     return PoseWriter(moving, cameras, lights, keys)
 
 
+def _physical_light(light: LightInfo) -> Any:
+    """The model's light as a Blender light of its colour (physics.look: physical): a sun, or a spot that falls off with distance."""
+    data = bpy.data.lights.new(light.name, "SUN" if light.directional else "SPOT")
+    data.color = light.diffuse
+    data.energy = 3.0 * max(light.diffuse) if light.directional else 300.0 * max(light.diffuse)
+    if not light.directional:
+        data.spot_size = min(math.radians(2 * light.cutoff), math.pi)
+    return data
+
+
 def show_model_sky(scene_data: PhysicsScene, world: Any) -> None:
-    """The model's skybox behind the scene (seen by the camera, lighting nothing), when it has one."""
-    if scene_data.sky is None or world is None or world.node_tree is None:
+    """The model's skybox behind the scene (seen by the camera, lighting nothing), when it has one; without one, in
+    MuJoCo's look, black (MuJoCo clears its image to black)."""
+    if world is None or world.node_tree is None:
+        return
+    if scene_data.sky is None:
+        write = world_writer(world, "color")
+        if scene_data.look == "mujoco" and not isinstance(write, str):
+            write((0.0, 0.0, 0.0))
         return
     show_skybox(world, _packed_image("mjcf-skybox", scene_data.sky))
 
@@ -175,9 +192,10 @@ def _packed_image(name: str, pixels: np.ndarray) -> Any:
     return image
 
 
-def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
+def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list[int]]:
     """Builds the geom's surface in `bm` (its own frame, metres): a textured geom's vertices' MuJoCo object coordinates
-    (texcoords.py; none without a texture), and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped)."""
+    (texcoords.py; none without a texture), and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped).
+    `split_caps`: a cylinder's flat ends get vertices of their own, so that its smooth side's normals point straight out."""
     size = geom.size
     caps: list[tuple[list[Any], float]] = []  # a capsule's end spheres and their centres: MuJoCo textures each about its centre
     made: list[int] = []
@@ -193,6 +211,8 @@ def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
             bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)
     elif geom.kind in ("cylinder", "capsule"):
         bmesh.ops.create_cone(bm, cap_ends=True, segments=SEGMENTS, radius1=size[0], radius2=size[0], depth=2 * size[1])
+        if split_caps:  # Cycles smooths by vertex normals: a rim vertex shared with an end tilts the side's normals up to 45 degrees
+            bmesh.ops.split_edges(bm, edges=[e for e in bm.edges if any(len(f.verts) > 4 for f in e.link_faces)])
         if geom.kind == "capsule":  # a cylinder and two spheres: the overlap does not show
             for z in (-size[1], size[1]):
                 made_sphere = bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=size[0],
@@ -212,7 +232,7 @@ def _shape(bm: Any, geom: GeomShape) -> tuple[np.ndarray, list[int]]:
     if geom.kind == "mesh" and geom.vertices is not None:  # made in this order, at the geom's own coordinates
         points = np.asarray(geom.vertices, dtype=np.float64).reshape(-1, 3)
     else:
-        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit)
+        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit) + np.array(geom.texorigin)
     for sphere, z in caps:  # MuJoCo's caps are unit hemispheres about their own centres, scaled by the radius
         rows = [v.index for v in sphere]
         points[rows] = (np.array([v.co[:] for v in sphere]) - (0.0, 0.0, z)) / size[0]
@@ -239,10 +259,13 @@ def _uv_map(mesh: Any, geom: GeomShape, points: np.ndarray, made: list[int]) -> 
     layer.data.foreach_set("uv", uv.astype(np.float32).reshape(-1))
 
 
-def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any]) -> Any:
+def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any], split_caps: bool) -> Any:
+    """The geom's mesh object and material. `split_caps`: a cylinder's (or capsule's) side is smoothed apart from its flat
+    ends, its normals straight out as MuJoCo's (smoothed with them, the side's normals tilt up to 45 degrees toward the
+    ends; kept so in physics.look 'physical', whose frames a shipped agent was trained on)."""
     mesh = bpy.data.meshes.new(geom.name)
     bm = bmesh.new()
-    points, made = _shape(bm, geom)
+    points, made = _shape(bm, geom, split_caps)
     for face in bm.faces:
         face.smooth = geom.kind in ("sphere", "ellipsoid", "capsule", "cylinder")
     if geom.kind in ("sphere", "ellipsoid", "capsule"):  # made by create_uvsphere (a mesh keeps MuJoCo's face order: _uv_map reads it)

@@ -23,6 +23,7 @@ from visualenv.render.blender.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
+from visualenv.render.blender.mujoco_look import ambient, backdrop, light_scene, raw_images
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
@@ -94,6 +95,11 @@ class BlenderRenderer(Renderer):
                 add_light=not plan.physics.lights and not any(o.type == "LIGHT" for o in built.objects.values()))
             if plan.physics is not None and plan.scene.world is None and not plan.scene.file:  # the spec's world wins
                 show_model_sky(plan.physics, built.scene.world)
+            #: colours written as they are (physics.look: mujoco, as MuJoCo's renderer writes them), not through sRGB
+            self._raw_colors = plan.physics is not None and plan.physics.look == "mujoco"
+            if self._raw_colors:
+                backdrop(built.scene.world)
+                light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))  # the spec's own objects as geoms
             self._check_names(built)
             self._setup(built, settings.threads)
         except BaseException:
@@ -141,8 +147,10 @@ class BlenderRenderer(Renderer):
         self._objects = built.objects
         self._layer = user_file.render_layer(scene)
         self._free_bound_objects(built)
-        cfg.configure_scene(scene, device=self.device, threads=threads, noise=plan.settings.noise)
+        cfg.configure_scene(scene, device=self.device, threads=threads, noise=plan.settings.noise, raw=self._raw_colors)
         cfg.quiet_emission(scene)
+        if self._raw_colors:
+            raw_images(scene)
         self._see_through = see_through(scene) or any(t.property == "color" and t.size == 4 for t in plan.bindings)
         r = scene.render
         r.image_settings.file_format = "BMP"
@@ -393,7 +401,7 @@ class BlenderRenderer(Renderer):
     def _read_capture(self, view: View, capture: Capture) -> np.ndarray:
         if view.color in ("depth", "segmentation"):
             return capture.raw()
-        return capture.rgb() if view.color == "rgb" else capture.grayscale()
+        return capture.rgb(raw=self._raw_colors) if view.color == "rgb" else capture.grayscale(raw=self._raw_colors)
 
     def _read_file(self, view: View) -> np.ndarray:
         rgb = read_bmp(self._output.path)
@@ -416,7 +424,7 @@ class BlenderRenderer(Renderer):
         override = self._overrides.get(mode)
         layer.material_override = override[0] if override else None
         layer.world_override = override[1] if override else None
-        cfg.set_color_management(self._scene, depth=override is not None)
+        cfg.set_color_management(self._scene, raw=override is not None or self._raw_colors)
         if mode == "segmentation":
             self._lights.hide()
         elif self._mode == "segmentation":

@@ -131,8 +131,8 @@ def resolve_device(device: str) -> str:
 # -- writing settings to a scene ---------------------------------------------------------------------
 
 
-def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "independent") -> None:
-    """Settings that never change between renders: colour management, output, threads, device."""
+def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "independent", raw: bool = False) -> None:
+    """Settings that never change between renders: colour management (`raw`: colours written as they are), output, threads, device."""
     r = scene.render
     r.image_settings.media_type = "IMAGE"  # a file saved for video or multilayer EXR output has no BMP
     r.use_multiview = False
@@ -153,7 +153,7 @@ def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "inde
         r.threads = threads
     else:
         r.threads_mode = "AUTO"
-    set_color_management(scene, depth=False)
+    set_color_management(scene, raw=raw)
     c = scene.cycles
     c.device = device
     c.use_adaptive_sampling = False
@@ -190,11 +190,11 @@ def quiet_emission(scene: Any) -> None:
         mat.cycles.emission_sampling = "NONE"
 
 
-def set_color_management(scene: Any, *, depth: bool) -> None:
-    """'Standard' (plain sRGB) for colour, 'Raw' (values written as they are) for depth."""
+def set_color_management(scene: Any, *, raw: bool) -> None:
+    """'Standard' (plain sRGB) for colour, 'Raw' (values written as they are) for depth, ids and MuJoCo's look."""
     vs = scene.view_settings
     scene.display_settings.display_device = "sRGB"
-    vs.view_transform = "Raw" if depth else "Standard"
+    vs.view_transform = "Raw" if raw else "Standard"
     vs.look = "None"
     vs.exposure = 0.0
     vs.gamma = 1.0
