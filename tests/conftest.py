@@ -23,6 +23,7 @@ BLENDER_MODULES = {
     "test_batched",
     "test_batched_instances",
     "test_batched_scale",
+    "test_batched_tracking",
     "test_bench_and_soak",
     "test_blend_corpus",
     "test_blend_scripts_off",

@@ -20,7 +20,6 @@ pytest.importorskip("bpy")
 import visualenv  # noqa: E402
 from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
-from visualenv.errors import SpecError  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
@@ -123,7 +122,3 @@ def test_the_tracking_camera_keeps_the_body_in_view(ident: str) -> None:
         env.close()
 
 
-@pytest.mark.parametrize("ident", ["DMC-cheetah-run-v0", "DMC-walker-walk-v0"])
-def test_a_batch_refuses_a_tracking_camera_for_now(ident: str) -> None:
-    with pytest.raises(SpecError, match="this camera of the MuJoCo model moves"):
-        BatchedVectorEnv(ident, 2, action_repeat=1)

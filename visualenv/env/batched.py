@@ -125,12 +125,6 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise ValueError("render_mode='human' shows a grid of the observations, and a state-only batch has none: "
                              "use render_mode='rgb_array' for the views")
         self._display: Any = None  # render_mode="human": the page the grid is shown on, opened by the first step shown
-        scene = program.physics.scene if program.physics is not None else None
-        moving = [c.name for c in scene.cameras if c.moves] if scene is not None else []
-        if self.uses_camera and observation is not None and any(v.camera in moving for v in observation.views().values()):
-            raise SpecError([program.loaded.source.diagnostic(("observation",), "a batch renders every env through one camera pose, and this "
-                "camera of the MuJoCo model moves (it tracks a body or hangs on one): use a camera of the spec's own, render=False, "
-                "or one process per env (vectorization_mode='async')")])
         #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
         self.action_repeat = int(program.spec.action_repeat if action_repeat is None else action_repeat)
         if self.action_repeat < 1:

@@ -88,6 +88,8 @@ class CameraInfo:
     moves: bool = False  # it tracks a body, or hangs on one that moves
     pos: tuple[float, float, float] = (0.0, 0.0, 0.0)  # world, at qpos0 (cam_xpos): where a camera that never moves stays
     quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
+    #: its orientation changes (it hangs on a moving body, or aims at one); a track or trackcom camera keeps its own
+    turns: bool = False
 
 
 @dataclass(frozen=True)
@@ -138,14 +140,25 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True, look: str = "m
     head = model.vis.headlight
     headlight = Headlight(_floats(head.ambient), _floats(head.diffuse), _floats(head.specular), bool(head.active))  # type: ignore[arg-type]
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
-    cameras = tuple(CameraInfo(idents["camera"][i], float(model.cam_fovy[i]), int(model.cam_mode[i]) != 0 or int(model.cam_bodyid[i]) in set(moving.tolist()),
-                               tuple(map(float, data.cam_xpos[i])), _quat(mujoco, data.cam_xmat[i]))  # type: ignore[arg-type]
-                    for i in range(model.ncam))
+    cameras = tuple(_camera(model, data, i, idents["camera"][i], set(moving.tolist())) for i in range(model.ncam))
     skyboxes = [t for t in range(model.ntex) if int(model.tex_type[t]) == 2]  # mjTEXTURE_SKYBOX
     sky = cube_to_equirect(_pixels(model, skyboxes[0])) if skyboxes else None
     sites = visible_sites(physics) if draw_sites else ()
     return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky, sites,
                         headlight, look)
+
+
+#: MuJoCo's camera modes (mjtCamLight) that keep a camera's orientation in the world: track, trackcom
+STEADY_MODES = (1, 2)
+
+
+def _camera(model: Any, data: Any, i: int, name: str, moving: set[int]) -> CameraInfo:
+    """Camera i: its field of view, pose at qpos0, and whether it moves (a mode other than fixed, or a moving body) and turns."""
+    mode, on_moving = int(model.cam_mode[i]), int(model.cam_bodyid[i]) in moving
+    moves = mode != 0 or on_moving
+    turns = moves and mode not in STEADY_MODES  # fixed on a moving body, or aimed at a body (targetbody, targetbodycom)
+    return CameraInfo(name, float(model.cam_fovy[i]), moves, tuple(map(float, data.cam_xpos[i])),  # type: ignore[arg-type]
+                      _quat(mujoco_module(), data.cam_xmat[i]), turns)  # type: ignore[arg-type]
 
 
 def _floats(values: Any) -> tuple[float, ...]:

@@ -3,8 +3,10 @@
 A batch renders every env through one custom camera with one world; a bound sun
 is copied per env and lights only its own copy (Cycles' light linking, at most
 :data:`MAX_OWN_SUNS` envs). A camera the state turns (a bound rotation, a
-``look_at``, an aimed camera that moves) is followed by turning each env's rays
-in the camera's shader, up to :data:`MAX_TURNING_ENVS` envs. So an engine other
+``look_at``, an aimed camera that moves; a MuJoCo model's camera on a moving body or
+aimed at one) is followed by turning each env's rays in the camera's shader, up to
+:data:`MAX_TURNING_ENVS` envs (a model camera that only moves, ``track`` or
+``trackcom``, is followed by moving each env's copy, at any number of envs). So an engine other
 than Cycles, a bound world, a bound sun past that many envs or under a world that is not one colour, a camera the state
 zooms (``lens``) or scales, a turning camera past its envs or with a depth
 observation are refused when the batch is built (``BatchedVectorEnv(...)``),
@@ -85,7 +87,7 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
         why = spec_turning(plan, view.camera, bound)
         if why:
             raise turning_error(plan, view.camera, why)
-        if spec_turns(plan, view.camera, bound):
+        if spec_turns(plan, view.camera, bound) or model_turns(plan, view.camera):
             check_turning(plan, view.camera, view.color, num_envs)
     for name in bound:
         if name == WORLD_ACTOR and name not in objects and not plan.scene.file:
@@ -105,6 +107,13 @@ def check_turning(plan: RenderPlan, camera: str, color: str, num_envs: int) -> N
                                   f"at most {MAX_TURNING_ENVS} envs (make_vec(..., workers=K) runs several)")
     if color == "depth":
         raise turning_limit_error(plan, camera, "while a depth observation is measured along one camera's forward axis for every env")
+
+
+def model_turns(plan: RenderPlan, camera: str) -> bool:
+    """Whether `camera` is a camera of the MuJoCo model (not the spec's own) that turns: on a moving body, or aimed at one."""
+    if plan.physics is None or camera in plan.scene.objects:
+        return False
+    return any(info.name == camera and info.turns for info in plan.physics.cameras)
 
 
 def spec_turns(plan: RenderPlan, camera: str, bound: dict[str, set[str]]) -> bool:

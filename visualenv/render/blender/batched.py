@@ -121,6 +121,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._threads = threads or len(os.sched_getaffinity(0))  # Cycles' render threads (0: every core this process may use)
         self._removed: set[int] = set()  # objects drawn as instances rather than copied (none while the base class compiles)
         super()._setup(built, threads)
+        #: the MuJoCo model's cameras that move (tracking a body or hanging on one), by object pointer: (their row of
+        #: cam_xpos and cam_xmat, whether they turn); each env's pose is its lane's (:meth:`set_physics_poses_batch`)
+        self._tracked = self._tracked_cameras()
+        self._camera_rows: list[tuple[np.ndarray, np.ndarray]] = []  # each env's cam_xpos and cam_xmat, as last handed
         self._refuse_turning_cameras()
         scene = built.scene
         self._layer.update()  # matrix_world of every object, read below
@@ -159,6 +163,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._anchors_moved = False
         #: per tiles camera of a turning camera: its rotation parameters as last written (:meth:`_aim_rays`)
         self._rays: dict[int, dict[str, float]] = {}
+
+    def _tracked_cameras(self) -> dict[int, tuple[int, bool]]:
+        """The model's moving cameras: (their index in MuJoCo's camera arrays, whether they turn), by object pointer."""
+        physics, poses = self.plan.physics, self._poses
+        if physics is None or poses is None:
+            return {}
+        return {camera.as_pointer(): (i, info.turns) for i, (info, camera) in enumerate(zip(physics.cameras, poses.cameras))
+                if info.moves and self._objects.get(info.name) == camera}
 
     def _removable(self, copied: list[Any]) -> set[int]:
         """The objects to draw as instances (:func:`instances.removable`): none without instancing, or with a sun of each
@@ -219,9 +231,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
         return None
 
     def _turns(self, camera_name: str) -> bool:
-        """Whether the state turns this camera (a rotation or look_at bound on it or an ancestor, or it is aimed and moves):
-        its tiles shader then turns each env's rays (:meth:`_aim_rays`)."""
+        """Whether the state turns this camera (a rotation or look_at bound on it or an ancestor, or it is aimed and moves;
+        a model camera that hangs on a moving body or aims at one): its tiles shader then turns each env's rays (:meth:`_aim_rays`)."""
         objects = self._objects
+        if self._tracked.get(objects[camera_name].as_pointer(), (0, False))[1]:
+            return True  # a model camera on a moving body, or aimed at one
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         spec = self.plan.scene.objects.get(camera_name)
         aimed = isinstance(spec, CameraObject) and spec.look_at is not None
@@ -248,7 +262,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
         return tiled, view.camera.matrix_world.normalized().translation.copy(), self._camera_moves(view.camera)
 
     def _camera_moves(self, camera: Any) -> bool:
-        """Whether a binding moves the camera (or an ancestor): then the copies' anchors follow it every step."""
+        """Whether a binding moves the camera (or an ancestor), or it is a model camera that moves: then the copies'
+        anchors follow it every step."""
+        if camera.as_pointer() in self._tracked:
+            return True
         chain = {o.as_pointer() for o in with_ancestors(camera)}
         carriers = {name for name, obj in self._objects.items() if obj.as_pointer() in chain}
         return any(t.object in carriers and BINDABLES[t.property].moves for t in self.plan.bindings)
@@ -322,6 +339,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """
         if self._poses is None:
             return
+        if self._tracked:
+            self._camera_rows = [(p[2], p[3]) for p in poses]
         if self._copy_poses is None:  # the writers depend on the model alone: made at the first call
             nbody = len(poses[0][0])
             self._body_poses = (np.empty((self.num_envs, nbody, 3)), np.empty((self.num_envs, nbody, 4)))
@@ -467,10 +486,16 @@ class BatchedBlenderRenderer(BlenderRenderer):
         flip = np.diag([1.0, 1.0, -1.0])
         to_camera = flip @ np.linalg.inv(_rotation(tiles.matrix_basis))
         values = {}
-        if any(copy.objects[name].parent != copy.anchor for copy in self._copies[:1]):
+        if source.as_pointer() not in self._tracked and any(copy.objects[name].parent != copy.anchor for copy in self._copies[:1]):
             self._layer.update()  # the camera's rotation depends on its parents: evaluate them (once for all copies)
+        tracked = self._tracked.get(source.as_pointer())
         for k, copy in enumerate(self._copies):
-            rotation = to_camera @ _rotation(self._camera_pose(copy, name)) @ flip
+            if tracked is not None:  # a model camera: env k's cam_xmat, as one env's camera takes it (mjcf.PoseWriter)
+                own = np.asarray(self._camera_rows[k][1][tracked[0]], dtype=np.float64).reshape(3, 3) if self._camera_rows else \
+                    _rotation(source.matrix_world)
+            else:
+                own = _rotation(self._camera_pose(copy, name))
+            rotation = to_camera @ own @ flip
             quat = Matrix(rotation.tolist()).to_quaternion()
             for i in range(4):
                 values[f"r{k}_{i}"] = float(quat[i])
@@ -500,16 +525,26 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
+        for k, (copy, where) in enumerate(zip(self._copies, self._camera_places(camera))):
+            place = self._offset(k) + reference - where
+            if copy.anchor is not None:  # None: every object of env k is an instance, placed from _offsets
+                copy.anchor.location = place
+            self._offsets[k] = tuple(place)
+        self._anchors_moved = True
+
+    def _camera_places(self, camera: Any) -> list[Vector]:
+        """Each env's camera position in its own copy (relative to its anchor): a model camera's is its env's cam_xpos."""
+        tracked = self._tracked.get(camera.as_pointer())
+        if tracked is not None:
+            if not self._camera_rows:  # no poses handed yet: where the model puts it at qpos0
+                return [camera.matrix_basis.translation.copy()] * self.num_envs
+            return [Vector(rows[0][tracked[0]].tolist()) for rows in self._camera_rows]
         name = next(n for n, o in self._objects.items() if o == camera)
         on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
         if not on_anchor:
             self._layer.update()  # the camera's place depends on its parents: evaluate them
-        for k, copy in enumerate(self._copies):
-            cam = copy.objects[name]
-            where = Vector(cam.location) if on_anchor else (copy.anchor.matrix_world.inverted() @ cam.matrix_world).translation
-            copy.anchor.location = self._offset(k) + reference - where
-            self._offsets[k] = tuple(copy.anchor.location)
-        self._anchors_moved = True
+        return [Vector(copy.objects[name].location) if on_anchor
+                else (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation for copy in self._copies]
 
     def close(self) -> None:
         self._copies = []
