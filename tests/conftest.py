@@ -31,6 +31,7 @@ BLENDER_MODULES = {
     "test_capture",
     "test_compat_blender",
     "test_determinism",
+    "test_distractions",
     "test_dmc_pixels",
     "test_evaluation",
     "test_heightmap",

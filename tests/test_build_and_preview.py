@@ -44,6 +44,7 @@ def test_a_broken_build_record_is_named(tmp_path):
         assert message in str(info.value)
 
 
+@pytest.mark.slow
 def test_preview_writes_frames_of_a_random_episode(tmp_path):
     result = CliRunner().invoke(main, ["preview", "Hover2D-v0", "--out", str(tmp_path), "--steps", "3"])
     assert result.exit_code == 0, result.output

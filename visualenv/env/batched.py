@@ -45,6 +45,7 @@ from visualenv.render.base import RendererOptions, load_backend, observation_spa
 from visualenv.render.batch_limits import check_batchable
 from visualenv.render.sensor import sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
+from visualenv.spec.options import distraction_settings
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
 BATCH_BACKEND = "visualenv.render.blender.batched:BatchedBlenderRenderer"
@@ -97,6 +98,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         backend: str = BATCH_BACKEND,
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
+        distractions: float | Mapping[str, Any] | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
@@ -125,6 +127,11 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise ValueError("render_mode='human' shows a grid of the observations, and a state-only batch has none: "
                              "use render_mode='rgb_array' for the views")
         self._display: Any = None  # render_mode="human": the page the grid is shown on, opened by the first step shown
+        if self.uses_camera and distraction_settings(distractions, program.spec.distractions) is not None:
+            where = program.loaded.source.diagnostic(("distractions",) if distractions is None else (), (
+                "a batch does not draw distractions yet (each env's own camera and colours in one render): use one process "
+                "per env (make_vec(..., batched=False), vectorization_mode='async'), render=False, or distractions=0"))
+            raise SpecError([where])
         #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
         self.action_repeat = int(program.spec.action_repeat if action_repeat is None else action_repeat)
         if self.action_repeat < 1:
@@ -504,5 +511,6 @@ def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: An
     Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``,
     which passes the id's ``max_episode_steps`` (the spec's max_steps, or the one given to make_vec).
     """
-    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat") if k in kwargs}
+    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
+           if k in kwargs}
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

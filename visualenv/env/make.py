@@ -28,6 +28,7 @@ def make(
     resize: tuple[int, int] | None = None,
     max_episode_steps: int | None = None,
     action_repeat: int | None = None,
+    distractions: float | dict[str, Any] | None = None,
     **renderer_options: Any,
 ) -> gym.Env:
     """Make an env from a spec path, a build folder (``build/<Id>``) or an id.
@@ -44,6 +45,9 @@ def make(
             (``info["outcome"]`` says ``"max_steps"``); ``gymnasium.make(id, max_episode_steps=N)`` sets it too.
         action_repeat: the spec's steps per ``step()`` with the same action, rewards summed, one observation
             (dm_control's action repeat); default: the spec's ``action_repeat`` (``DMC-cartpole-swingup-v0``: 8).
+        distractions: what the observation shows changed per episode, the state and rewards untouched: a difficulty in
+            [0, 1] (camera and colours, fixed per episode) or the spec's ``distractions`` section as a dict
+            (docs/distractions.md); default: the spec's; 0: none.
         renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
 
     Every option is checked as the same value in a spec would be (``device="tpu"``,
@@ -54,13 +58,13 @@ def make(
     if max_episode_steps is None:
         max_episode_steps = make_time_limit()  # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
     check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize,
-                       max_episode_steps=max_episode_steps, action_repeat=action_repeat)
+                       max_episode_steps=max_episode_steps, action_repeat=action_repeat, distractions=distractions)
     options = RendererOptions.parse(renderer_options)
     path = resolve(target)
     unwrapped = VisualEnv(load_spec(path), render=render, render_mode=render_mode, params=params, renderer_options=options,
-                          max_episode_steps=max_episode_steps, action_repeat=action_repeat)
+                          max_episode_steps=max_episode_steps, action_repeat=action_repeat, distractions=distractions)
     given = {"render": render, "render_mode": render_mode, "params": params, "frame_stack": frame_stack, "grayscale": grayscale or None,
-             "resize": resize, "action_repeat": action_repeat, **renderer_options}
+             "resize": resize, "action_repeat": action_repeat, "distractions": distractions, **renderer_options}
     unwrapped.spec = EnvSpec(
         id=f"{NAMESPACE}/{unwrapped.program.spec.id}", entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT,
         max_episode_steps=unwrapped.max_episode_steps, kwargs={"target": str(path.resolve()), **{k: v for k, v in given.items() if v is not None}},

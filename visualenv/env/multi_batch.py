@@ -105,7 +105,7 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
 
         program = compile_spec(load_spec(resolve(target)), kwargs.get("params"))
         if kwargs.get("render") is not False and program.spec.observation is not None:
-            own = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat")
+            own = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
             options = RendererOptions.parse({k: v for k, v in kwargs.items() if k not in own})
             check_batchable(program.render_plan().with_options(options), size)
 

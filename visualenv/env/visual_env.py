@@ -19,8 +19,10 @@ from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.physics.conventions import legacy_stream
 from visualenv.physics.model_fields import restore_fields, written_fields
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
+from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
+from visualenv.spec.options import distraction_settings
 
 #: the keys reset(options=...) understands
 RESET_OPTIONS = ("state",)
@@ -99,6 +101,7 @@ class VisualEnv(gym.Env):
         backend: str = BLENDER_BACKEND,
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
+        distractions: float | Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__()
         if isinstance(spec, Program) and not params:
@@ -107,7 +110,7 @@ class VisualEnv(gym.Env):
             loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
             program = compile_spec(loaded, params)
         self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options, "backend": backend,
-                           "max_episode_steps": max_episode_steps, "action_repeat": action_repeat}
+                           "max_episode_steps": max_episode_steps, "action_repeat": action_repeat, "distractions": distractions}
         self.program = program
         s = program.spec
         #: the spec's steps per step() (dm_control's action repeat), each with the same action
@@ -173,6 +176,9 @@ class VisualEnv(gym.Env):
             big = np.finfo(np.float32).max  # finite bounds: check_env warns about infinite ones
             self.observation_space = spaces.Box(-big, big, (n,), np.float32)
         self._observed = program.observed
+        #: what the observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
+        self.distractions = distraction_settings(distractions, s.distractions)
+        self._distractions = EpisodeDistractions(self.distractions) if self.distractions is not None and self.uses_camera else None
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
@@ -192,6 +198,8 @@ class VisualEnv(gym.Env):
         self._random.generator = self._reset_generator(seed)
         if self._has_sensor and (seed is not None or self._sensor_rng is None):
             self._sensor_rng = sensor_generator(self.np_random)
+        if self._distractions is not None:
+            self._distractions.begin(self.np_random, seed is not None)
         if self._sim is not None:
             self._sim.reset(self.program.physics.keyframe)  # type: ignore[union-attr]
         try:
@@ -236,6 +244,8 @@ class VisualEnv(gym.Env):
             if terminated or truncated:
                 break
         reward = total
+        if self._distractions is not None:
+            self._distractions.advance()
         try:
             obs = self._observe()
         except StepError as err:  # an actor binding of the new state faulted: nothing to render
@@ -420,9 +430,11 @@ class VisualEnv(gym.Env):
         return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
 
     def _pose(self) -> None:
-        """A physics spec's bodies and cameras take MuJoCo's poses before a render."""
+        """Before a render: a physics spec's bodies and cameras take MuJoCo's poses; the episode's distraction is drawn."""
         if self._sim is not None:
             self.renderer.set_physics_poses(*self.program.physics.poses(self._sim.data))  # type: ignore[union-attr]
+        if self._distractions is not None and self._distractions.current is not None:
+            self.renderer.distract(self._distractions.current)
 
     def _view(self) -> np.ndarray:
         """The high-resolution view of the current state."""
@@ -490,6 +502,7 @@ class VisualEnv(gym.Env):
             "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
             "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs, "legacy_random": self._legacy_random,
             "physics": self._physics_state(), "model": written_fields(self._sim.model) if self._sim is not None else None,
+            "distractions": self._distractions,
         }
         return {"loaded": self.program.loaded, "args": self._init_args, "spec": self.spec, "episode": episode if self._was_reset else None}
 
@@ -517,6 +530,7 @@ class VisualEnv(gym.Env):
         self._legacy_random = episode.get("legacy_random")
         self._random.generator = self._legacy_random if self._legacy_random is not None else self._np_random
         self._sensor_rng = episode["sensor_rng"]
+        self._distractions = episode.get("distractions", self._distractions)
         if episode["action_space_rng"] is not None:
             self.action_space._np_random = episode["action_space_rng"]
         self._last_obs = episode["last_obs"]

@@ -18,6 +18,7 @@ from typing import Any, Callable, Literal, Mapping, Sequence, get_args
 import numpy as np
 from gymnasium import spaces
 
+from visualenv.errors import RenderError
 from visualenv.spec.options import RENDER_OVERRIDES, check_make_options
 from visualenv.spec.models import CameraView, Observation, RenderSettings, Scene
 from visualenv.spec.source import SourceMap
@@ -94,6 +95,10 @@ class Renderer(ABC):
     @abstractmethod
     def close(self) -> None:
         """Free everything this renderer created (idempotent)."""
+
+    def distract(self, distraction: Any) -> None:
+        """Draw a :class:`~visualenv.render.distractions.Distraction` in the next renders (a backend that cannot refuses)."""
+        raise RenderError(f"the {type(self).__name__} renderer draws no distractions")
 
     def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,  # noqa: B027 - optional
                           light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:

@@ -458,6 +458,18 @@ class RenderSettings(StrictModel):
     view: ViewSettings = Field(default_factory=ViewSettings)
 
 
+class Distractions(StrictModel):
+    """The ``distractions`` section: what the observation shows changed per episode (or drifting every step), the
+    state and rewards untouched; the Distracting Control Suite's kinds at its scale (docs/distractions.md)."""
+
+    difficulty: float = Field(ge=0.0, le=1.0, description=(
+        "the scale of every change: camera orbit and roll up to difficulty x pi/2, zoom up to difficulty/2, colours "
+        "shifted by up to difficulty per channel (the Distracting Control Suite's 0.1, 0.2, 0.3)"))
+    camera: bool = Field(True, description="the observation cameras orbit, roll and zoom about the point they look at")
+    colors: bool = Field(True, description="every material's colour and the sky's shift")
+    dynamic: bool = Field(False, description="false: drawn at reset and kept for the episode; true: drifting every step as well")
+
+
 # -- the whole spec ---------------------------------------------------------------------------------
 
 
@@ -486,6 +498,8 @@ class Spec(StrictModel):
     action_repeat: int = Field(1, ge=1, le=10_000, description=(
         "steps the spec makes per env.step() with the same action (dm_control's action repeat): their rewards summed, one "
         "observation; max_steps, steps and dt count the spec's own steps; make(action_repeat=k) overrides it"))
+    distractions: Optional[Distractions] = Field(None, description=(
+        "changes of the observation's camera and colours per episode, the state and rewards untouched; make(distractions=...) overrides it"))
     dt: float = Field(1.0, gt=0, description="seconds per step, available as 'dt' in expressions")
     on_fault: Literal["raise", "terminate"] = Field(
         "raise", description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']"

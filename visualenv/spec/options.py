@@ -10,13 +10,13 @@ fails at ``make()`` with the message the spec would give, located at
 
 from __future__ import annotations
 
-from typing import Annotated, Any, Literal, Optional, Union
+from typing import Annotated, Any, Literal, Mapping, Optional, Union
 
 from pydantic import Field, ValidationError
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
-from visualenv.spec.models import Name, RenderSettings, StrictModel
+from visualenv.spec.models import Distractions, Name, RenderSettings, StrictModel
 from visualenv.spec.source import SourceMap
 
 #: where option errors are reported (in place of file:line)
@@ -40,6 +40,21 @@ class MakeOptions(StrictModel):
         None, description="Gymnasium's name: episodes are truncated after this many steps, in place of the spec's max_steps")
     action_repeat: Optional[Annotated[int, Field(ge=1, le=10_000)]] = Field(
         None, description="the spec's steps per step() with the same action, rewards summed (in place of the spec's action_repeat)")
+    distractions: Optional[Union[Annotated[float, Field(ge=0.0, le=1.0)], Distractions]] = Field(
+        None, description="a difficulty (every kind, fixed per episode) or the spec's distractions section as a dict; 0 turns the spec's off")
+
+
+def distraction_settings(given: float | Mapping[str, Any] | Distractions | None, spec: Distractions | None) -> Distractions | None:
+    """The distractions an env draws: the option's (a difficulty, or a section as a dict), else the spec's; None for none."""
+    if given is None:
+        chosen = spec
+    elif isinstance(given, Distractions):
+        chosen = given
+    elif isinstance(given, Mapping):
+        chosen = Distractions.model_validate(dict(given))
+    else:
+        chosen = Distractions(difficulty=float(given))
+    return chosen if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors) else None
 
 
 def check_make_options(**options: Any) -> None:

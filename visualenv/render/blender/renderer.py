@@ -5,7 +5,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any, Callable, Sequence
 
 import bpy
@@ -16,11 +16,13 @@ from visualenv.compat.blender import release_render_result
 from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, in_file_order
 from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
+from visualenv.render.distractions import Distraction
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
 from visualenv.render.blender.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
+from visualenv.render.blender.distractions import DistractionRig
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
 from visualenv.render.blender.mujoco_look import ambient, backdrop, light_scene, raw_images
@@ -190,6 +192,8 @@ class BlenderRenderer(Renderer):
         self._set_mode("color")
         self._setters = self._compile_bindings()
         self._last: tuple | None = None
+        self._rig: DistractionRig | None = None  # made by the first distract()
+        self._distraction = Distraction()
 
     def _free_bound_objects(self, built: BuiltScene) -> None:
         """The env's copy of the scene lets the bindings through: what the file animates, constrains
@@ -330,17 +334,32 @@ class BlenderRenderer(Renderer):
     # -- rendering ----------------------------------------------------------------------------------
 
     def apply(self, values: Sequence[Any]) -> None:
-        """Write the binding values that changed since the last call."""
+        """Write the binding values that changed since the last call, then the distraction (where there is one)."""
         values = tuple(values)
         if values != self._last:
             write_bindings(values, self._last, self._size, self._setters, self._aimed, self._targets)
             self._last = values
+        if self._rig is not None:
+            self._rig.apply(self._distraction)
 
     def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
                           light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
         """Every moving body's, and the model's cameras' and lights' poses from MuJoCo's arrays (:mod:`mjcf`)."""
         if self._poses is not None:
             self._poses.write(xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir)
+
+    def distract(self, distraction: Distraction) -> None:
+        """Draw `distraction` in the next renders: observation cameras moved, colours shifted (:mod:`distractions`)."""
+        self._check_open()
+        if self._rig is None:
+            tracker = DataTracker()
+            self._rig = DistractionRig(self._scene, [v.camera for v in self._views])
+            self._ids.extend(tracker.new())
+            children = self._rig.children
+            self._views = [replace(v, camera=children[v.camera.name]) for v in self._views]
+            if self._view is not None and self._view.camera.name in children:
+                self._view = replace(self._view, camera=children[self._view.camera.name])
+        self._distraction = distraction
 
     def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
         self._check_open()

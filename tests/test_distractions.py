@@ -1,0 +1,148 @@
+"""Distractions (docs/distractions.md): the observation's camera and colours change per episode, nothing else does.
+
+Rendered with real Blender: the state, rewards and random streams of a distracted env are those of the plain env,
+its pixels differ from the plain env's more at higher difficulty, each kind changes what it says, a seed draws the
+same distractions again, and a batch refuses them with a clear error.
+"""
+
+from __future__ import annotations
+
+import pickle
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+import visualenv
+from visualenv.errors import SpecError
+
+ROOT = Path(__file__).resolve().parents[1]
+CARTPOLE = ROOT / "specs" / "dmc" / "cartpole_swingup.yaml"
+#: the Distracting Control Suite's difficulties
+LEVELS = (0.1, 0.2, 0.3)
+
+
+def segmented_cartpole(folder: Path, distractions: dict | None = None) -> Path:
+    """DMC-cartpole-swingup-v0 with a segmentation camera beside its colour one (its model path made absolute)."""
+    data = yaml.safe_load(CARTPOLE.read_text(encoding="utf-8"))
+    data["physics"]["model"] = str((CARTPOLE.parent / data["physics"]["model"]).resolve())
+    view = data["observation"]
+    data["observation"] = {"cameras": {"eye": view, "mask": {**view, "color": "segmentation"}}}
+    data["action_repeat"] = 1
+    if distractions is not None:
+        data["distractions"] = distractions
+    out = folder / "cartpole_segmented.yaml"
+    out.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    return out
+
+
+def first_frames(target, seeds, **options) -> list:
+    env = visualenv.make(target, **options)
+    try:
+        return [env.reset(seed=seed)[0] for seed in seeds]
+    finally:
+        env.close()
+
+
+def mean_difference(a: np.ndarray, b: np.ndarray) -> float:
+    return float(np.abs(a.astype(int) - b.astype(int)).mean())
+
+
+def test_distractions_leave_the_state_rewards_and_random_streams_unchanged() -> None:
+    plain = visualenv.make("DMC-cartpole-swingup-v0", action_repeat=2)
+    distracted = visualenv.make("DMC-cartpole-swingup-v0", action_repeat=2, distractions=0.3)
+    try:
+        a, _ = plain.reset(seed=7)
+        b, _ = distracted.reset(seed=7)
+        assert mean_difference(a, b) > 5  # the pixels do change
+        actions = np.random.default_rng(0).uniform(-1, 1, size=(12, 1)).astype(np.float32)
+        for action in actions:
+            p, d = plain.step(action), distracted.step(action)
+            assert p[1:4] == d[1:4]  # reward, terminated, truncated
+            assert np.array_equal(plain.unwrapped.data.qpos, distracted.unwrapped.data.qpos)
+            assert np.array_equal(plain.unwrapped.data.qvel, distracted.unwrapped.data.qvel)
+        assert plain.unwrapped.np_random.random() == distracted.unwrapped.np_random.random()
+    finally:
+        plain.close()
+        distracted.close()
+
+
+def test_a_higher_difficulty_changes_the_pixels_more() -> None:
+    seeds = range(4)
+    clean = first_frames("DMC-cartpole-swingup-v0", seeds)
+    distances = [np.mean([mean_difference(c, f) for c, f in zip(clean, first_frames("DMC-cartpole-swingup-v0", seeds, distractions=level))])
+                 for level in LEVELS]
+    assert np.all(np.diff(distances) > 1.0) and distances[0] > 2.0, distances
+    assert first_frames("DMC-cartpole-swingup-v0", [0], distractions=0)[0].tobytes() == clean[0].tobytes()
+
+
+def test_each_kind_changes_what_it_says(tmp_path: Path) -> None:
+    """Colours alone keep every pixel on its object (the segmentation is the plain env's) and change the colours;
+    the camera alone moves the objects in the image."""
+    spec = segmented_cartpole(tmp_path)
+    (clean,) = first_frames(spec, [3])
+    (colors,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "camera": False})
+    (camera,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "colors": False})
+    assert np.array_equal(colors["mask"], clean["mask"]) and mean_difference(colors["eye"], clean["eye"]) > 5
+    assert (colors["mask"] != camera["mask"]).mean() > 0.05
+
+
+def test_a_seed_draws_the_same_distractions_and_dynamic_ones_drift(tmp_path: Path) -> None:
+    env = visualenv.make("DMC-cartpole-swingup-v0", distractions=0.2)
+    try:
+        first, _ = env.reset(seed=11)
+        other, _ = env.reset(seed=12)
+        again, _ = env.reset(seed=11)
+        assert first.tobytes() == again.tobytes() and mean_difference(first, other) > 2
+        before = env.unwrapped._distractions.current
+        env.step(np.zeros(1, np.float32))
+        assert env.unwrapped._distractions.current == before  # fixed for the episode
+    finally:
+        env.close()
+    spec = segmented_cartpole(tmp_path, {"difficulty": 0.3, "dynamic": True, "colors": False})
+    env = visualenv.make(spec)
+    try:
+        obs, _ = env.reset(seed=1)
+        masks = [obs["mask"]]
+        for _ in range(3):
+            env.unwrapped.data.qvel[:] = 0  # a still cart and pole: what moves in the image is the camera
+            masks.append(env.step(np.zeros(1, np.float32))[0]["mask"])
+        assert all((a != b).any() for a, b in zip(masks, masks[1:]))
+    finally:
+        env.close()
+
+
+def test_an_env_carries_its_distraction_through_pickle() -> None:
+    env = visualenv.make("DMC-cartpole-swingup-v0", distractions=0.3)
+    copy = None
+    try:
+        env.reset(seed=4)
+        copy = pickle.loads(pickle.dumps(env))
+        action = np.full(1, 0.5, np.float32)
+        assert env.step(action)[0].tobytes() == copy.step(action)[0].tobytes()
+    finally:
+        env.close()
+        if copy is not None:
+            copy.close()
+
+
+def test_any_spec_takes_them_and_the_spec_section_is_checked(tmp_path: Path) -> None:
+    """A spec of the house's own scene (Goalie) is distracted the same way; a bad section names its line."""
+    (clean,) = first_frames("Goalie-v0", [0])
+    (moved,) = first_frames("Goalie-v0", [0], distractions=0.2)
+    assert mean_difference(clean, moved) > 2
+    spec = tmp_path / "bad.yaml"
+    text = CARTPOLE.read_text(encoding="utf-8").replace("model: assets/", f"model: {CARTPOLE.parent}/assets/")
+    spec.write_text(text + "distractions: {difficulty: 2}\n", encoding="utf-8")
+    with pytest.raises(SpecError) as caught:
+        visualenv.make(spec)
+    line = len(text.splitlines()) + 1
+    assert f"bad.yaml:{line}:" in str(caught.value) and "distractions.difficulty" in str(caught.value), str(caught.value)
+
+
+def test_a_batch_refuses_distractions_clearly() -> None:
+    with pytest.raises(SpecError, match="a batch does not draw distractions yet"):
+        visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0.2)
+    batch = visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0)  # none: a batch as before
+    batch.close()

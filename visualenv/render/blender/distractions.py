@@ -1,0 +1,136 @@
+"""A :class:`~visualenv.render.distractions.Distraction` drawn in a Blender scene: cameras moved, colours shifted.
+
+Each observation camera gets a child camera (the same lens, parented to it) whose local pose is the orbit about the
+point the camera looks at: the parent goes on following its bindings or its MuJoCo body, the child follows it, and
+the observation is rendered through the child. Colours shift where colour bindings write (each Principled
+material's tint, :func:`~visualenv.render.blender.materials.tinted_base`), so a MuJoCo look and a bound colour
+are shifted alike; the sky shifts as the model's skybox, the image sky's tint or the world's colour. A value is
+written only when it changes: Cycles updates a shader on every write.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import bpy
+import numpy as np
+from mathutils import Matrix, Vector
+
+from visualenv.render.blender.materials import SKY_TINT, SKYBOX, tinted_base
+from visualenv.render.distractions import Distraction, color_shifts
+
+#: the name of the Mix node that adds the sky's shift behind a model's skybox
+SKY_SHIFT = "visualenv distraction sky"
+#: the orbit's centre when a camera's view axis hits nothing: this far along it
+FALLBACK_FOCUS = 3.0
+
+
+class DistractionRig:
+    """The cameras and colour sockets of one scene that distractions move; :meth:`apply` draws one distraction."""
+
+    def __init__(self, scene: Any, cameras: list[Any]) -> None:
+        self._scene = scene
+        #: the observation camera each child stands for, by the parent's name
+        self.children: dict[str, Any] = {}
+        for camera in cameras:
+            if camera.name in self.children:
+                continue
+            child = bpy.data.objects.new(f"{camera.name} distracted", camera.data)
+            scene.collection.objects.link(child)
+            child.parent = camera
+            child.matrix_parent_inverse = Matrix.Identity(4)
+            self.children[camera.name] = child
+        self._focus: dict[str, float] = {}
+        self._sockets = self._color_sockets(scene)
+        #: a skybox's socket holds its shift s as (s + 1) / 2 (a Linear Light mix adds 2b - 1), not a colour
+        self._offset = len(self._sockets) - 1 if self._sockets and self._sockets[-1].node.name == SKY_SHIFT else None
+        self._base = [tuple(socket.default_value) for socket in self._sockets]
+        self._written = list(self._base)
+        self._last: Distraction | None = None
+
+    @staticmethod
+    def _color_sockets(scene: Any) -> list[Any]:
+        """Every Principled material's tint socket in the scene (by material name), then the sky's."""
+        materials = {slot.material.name: slot.material for obj in scene.objects for slot in obj.material_slots
+                     if slot.material is not None and slot.material.node_tree is not None}
+        sockets = []
+        for name in sorted(materials):
+            mat = materials[name]
+            if any(node.type == "BSDF_PRINCIPLED" for node in mat.node_tree.nodes):
+                tint = tinted_base(mat)[1].node
+                sockets.append([sock for sock in tint.inputs if sock.type == "RGBA"][1])
+        sky = _sky_socket(scene.world)
+        return [*sockets, sky] if sky is not None else sockets
+
+    def apply(self, distraction: Distraction) -> None:
+        """Pose the child cameras and write the shifted colours: where a binding rewrote a colour since, from its new value."""
+        if distraction != self._last:
+            for name, child in self.children.items():
+                child.matrix_basis = orbit(distraction, self._focus_of(name))
+        shifts = color_shifts(distraction, len(self._sockets) - 1)
+        for i, socket in enumerate(self._sockets):
+            now = tuple(socket.default_value)
+            if now != self._written[i]:  # a colour binding wrote it: shift its value
+                self._base[i] = now
+            base = self._base[i]
+            if i == self._offset:
+                value = (*((shifts[i] + 1.0) / 2.0).tolist(), 1.0)
+            else:
+                value = (*np.clip(np.array(base[:3]) + shifts[i], 0.0, 1.0).tolist(), *base[3:])
+            if value != now:
+                socket.default_value = value
+            self._written[i] = tuple(socket.default_value)
+        self._last = distraction
+
+    def _focus_of(self, name: str) -> float:
+        """How far ahead of the camera its orbit's centre lies, measured once: the point of its view axis nearest the
+        world's origin (where a model stands, or the body a tracking camera keeps in view at reset), else the first
+        surface along the axis, else :data:`FALLBACK_FOCUS`."""
+        if name not in self._focus:
+            camera = self.children[name].parent
+            self._scene.view_layers[0].update()
+            pose = camera.matrix_world
+            origin, forward = pose.translation, (pose.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+            nearest = float(-origin.dot(forward))
+            if nearest > camera.data.clip_start:
+                self._focus[name] = nearest
+            else:
+                hit, where, *_ = self._scene.ray_cast(self._scene.view_layers[0].depsgraph, origin + forward * camera.data.clip_start, forward)
+                self._focus[name] = float((where - origin).length) if hit else FALLBACK_FOCUS
+        return self._focus[name]
+
+
+def orbit(distraction: Distraction, focus: float) -> Matrix:
+    """The camera's local pose that orbits it by yaw (about its up axis) and pitch (about its right axis) about the
+    point `focus` ahead of it, zooms its distance to that point and rolls it about its view axis."""
+    ahead = Matrix.Translation((0.0, 0.0, -focus))
+    turn = Matrix.Rotation(distraction.yaw, 4, "Y") @ Matrix.Rotation(distraction.pitch, 4, "X")
+    back = Matrix.Translation((0.0, 0.0, focus * distraction.zoom))
+    return ahead @ turn @ back @ Matrix.Rotation(distraction.roll, 4, "Z")
+
+
+def _sky_socket(world: Any) -> Any:
+    """The colour socket that shifts the sky: a Linear Light mix behind a model's skybox (made here), the image sky's
+    tint, or the world's unlinked Background colour; None where the world has none of them."""
+    if world is None or world.node_tree is None:
+        return None
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    skybox = nodes.get(SKYBOX)
+    if skybox is not None:
+        shift = nodes.get(SKY_SHIFT)
+        if shift is None:
+            shift = nodes.new("ShaderNodeMix")
+            shift.name, shift.data_type, shift.blend_type, shift.clamp_result = SKY_SHIFT, "RGBA", "LINEAR_LIGHT", True
+            shift.inputs["Factor"].default_value = 1.0
+            first, second = [sock for sock in shift.inputs if sock.type == "RGBA"]
+            second.default_value = (0.5, 0.5, 0.5, 1.0)  # 2 x 0.5 - 1: no shift
+            out = next(sock for sock in shift.outputs if sock.type == "RGBA")
+            for link in list(skybox.outputs["Color"].links):
+                links.new(out, link.to_socket)
+            links.new(skybox.outputs["Color"], first)
+        return [sock for sock in shift.inputs if sock.type == "RGBA"][1]
+    tint = nodes.get(SKY_TINT)
+    if tint is not None:
+        return [sock for sock in tint.inputs if sock.type == "RGBA"][1]
+    background = next((n for n in nodes if n.type == "BACKGROUND"), None)
+    return background.inputs["Color"] if background is not None and not background.inputs["Color"].is_linked else None

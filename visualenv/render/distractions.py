@@ -1,0 +1,112 @@
+"""Distractions: what one episode's observation shows changed, drawn apart from the env's own random stream.
+
+The Distracting Control Suite (Stone et al., 2021) changes what a pixel agent sees and nothing it controls: the
+camera's pose, the colours of the bodies, the floor and the sky, the background. Here each kind is drawn at reset
+from a generator of its own (:func:`distraction_generator`), so the state, the rewards and the env's random numbers
+are those of the same env without distractions, and the same seed draws the same distractions.
+
+A :class:`Distraction` is renderer-neutral numbers; a renderer applies it (Blender:
+:mod:`visualenv.render.blender.distractions`). Colours are drawn per material in the renderer's order from
+``colors_seed``, so that the numbers here do not depend on how many materials a scene has.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from visualenv.spec.models import Distractions
+
+#: the spawn key that derives the distractions' generator from the env's seed (the letters "DS")
+SPAWN_KEY = 0x4453
+#: a dynamic distraction's step: this share of its range at most, every env step
+DRIFT = 0.05
+
+
+@dataclass(frozen=True)
+class Distraction:
+    """One episode's changes (or one step's, when dynamic). Angles in radians, in the camera's own frame: ``yaw``
+    about its up axis and ``pitch`` about its right axis orbit it about the point it looks at, ``roll`` turns it
+    about its view axis; ``zoom`` scales its distance to that point. ``color_shift`` is the largest change of a
+    colour channel; ``colors_seed`` draws each material's and the sky's shift (:func:`color_shifts`)."""
+
+    yaw: float = 0.0
+    pitch: float = 0.0
+    roll: float = 0.0
+    zoom: float = 1.0
+    color_shift: float = 0.0
+    colors_seed: int = 0
+    colors_phase: float = 0.0  # a dynamic episode's drift of every colour, in [-1, 1] of color_shift
+
+
+def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generator:
+    """The distractions' generator of an env seeded with `seed_seq`: a child of it by a key of its own, so that neither
+    the env's stream nor its other children (the sensor's) move, and a reset with seed s draws the same."""
+    child = np.random.SeedSequence(seed_seq.entropy, spawn_key=(*seed_seq.spawn_key, SPAWN_KEY))
+    return np.random.Generator(np.random.PCG64(child))
+
+
+def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
+    """An episode's distraction at `settings`' difficulty: each angle uniform in ±difficulty·pi/2, the zoom in
+    1 ± difficulty/2, the colours' seed. A kind that is off stays as it is."""
+    scale = settings.difficulty
+    angles = rng.uniform(-1.0, 1.0, size=3) * scale * math.pi / 2
+    zoom = 1.0 + float(rng.uniform(-0.5, 0.5)) * scale
+    seed = int(rng.integers(0, 2**31 - 1))
+    if not settings.camera:
+        angles, zoom = np.zeros(3), 1.0
+    return Distraction(yaw=float(angles[0]), pitch=float(angles[1]), roll=float(angles[2]), zoom=zoom,
+                       color_shift=scale if settings.colors else 0.0, colors_seed=seed)
+
+
+def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Generator) -> Distraction | None:
+    """A dynamic distraction one step on: every number moved by at most :data:`DRIFT` of its range, kept inside it."""
+    if settings is None:
+        return None
+    scale = limits.difficulty
+    bound = scale * math.pi / 2
+    step = rng.uniform(-DRIFT, DRIFT, size=5)
+
+    def moved(value: float, change: float, low: float, high: float) -> float:
+        return float(np.clip(value + change * (high - low) / 2, low, high))
+
+    phase = moved(settings.colors_phase, step[4], -1.0, 1.0) if limits.colors else 0.0
+    if not limits.camera:
+        return replace(settings, colors_phase=phase)
+    return replace(settings, yaw=moved(settings.yaw, step[0], -bound, bound), pitch=moved(settings.pitch, step[1], -bound, bound),
+                   roll=moved(settings.roll, step[2], -bound, bound), zoom=moved(settings.zoom, step[3], 1 - scale / 2, 1 + scale / 2),
+                   colors_phase=phase)
+
+
+def color_shifts(distraction: Distraction, count: int) -> np.ndarray:
+    """(count + 1, 3) shifts of RGB in [-color_shift, color_shift]: one per material in the renderer's order, the
+    sky's last. A dynamic episode's phase moves every shift along one direction of its own, inside the range."""
+    rng = np.random.default_rng(distraction.colors_seed)
+    base = rng.uniform(-1.0, 1.0, size=(count + 1, 3))
+    direction = rng.uniform(-1.0, 1.0, size=(count + 1, 3))
+    return np.clip(base + distraction.colors_phase * direction, -1.0, 1.0) * distraction.color_shift
+
+
+class EpisodeDistractions:
+    """An env's distractions across episodes: its generator (seeded by a seeded reset, else going on) and the current
+    draw, which a dynamic setting moves every step. Pickles with the env's episode."""
+
+    def __init__(self, settings: Distractions) -> None:
+        self.settings = settings
+        self.rng: np.random.Generator | None = None
+        self.current: Distraction | None = None
+
+    def begin(self, np_random: np.random.Generator, seeded: bool) -> None:
+        """A new episode's draw; a seeded reset (or the first) starts the generator from the env's seed."""
+        if seeded or self.rng is None:
+            seed_seq = np_random.bit_generator.seed_seq
+            assert isinstance(seed_seq, np.random.SeedSequence), "Gymnasium seeds np_random from a SeedSequence"
+            self.rng = distraction_generator(seed_seq)
+        self.current = draw(self.settings, self.rng)
+
+    def advance(self) -> None:
+        """One env step: a dynamic distraction drifts (:func:`drift`), a fixed one stays."""
+        if self.settings.dynamic and self.rng is not None:
+            self.current = drift(self.current, self.settings, self.rng)
