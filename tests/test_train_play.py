@@ -123,6 +123,14 @@ def test_bad_hyperparameters_fail_before_anything_starts(tmp_path, args, message
     assert not (tmp_path / "runs").exists()  # no empty run folder left behind
 
 
+def test_a_config_files_exponent_numbers_are_numbers(tmp_path):
+    """YAML 1.1 reads 3e-4 as text; --config reads it as the number --set reads (here n_steps is the one refused)."""
+    config = tmp_path / "hyper.yaml"
+    config.write_text("learning_rate: 3e-4\nn_steps: abc\n")
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--config", str(config), "--steps", "64", "--out", str(tmp_path / "runs")])
+    assert result.exit_code == 1 and "n_steps: expected a number" in result.output and "learning_rate" not in result.output, result.output
+
+
 def test_config_file_must_be_a_mapping(tmp_path):
     bad = tmp_path / "hyper.yaml"
     bad.write_text("- learning_rate: 1e-4\n")

@@ -96,6 +96,8 @@ def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dic
     """--config's mapping, then each --set KEY=VALUE over it."""
     import yaml
 
+    from visualenv.spec.yaml_pitfalls import EXPONENT_NUMBER
+
     hyper: dict[str, Any] = {}
     if config_file:
         try:
@@ -104,7 +106,8 @@ def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dic
             raise click.BadParameter(f"{config_file} is not YAML: {exc}", param_hint="--config") from None
         if not isinstance(loaded, dict):
             raise click.BadParameter(f"{config_file}: expected a mapping of hyperparameters (name: value), got a {type(loaded).__name__}", param_hint="--config")
-        hyper.update(loaded)
+        # YAML 1.1 reads 3e-4 as text; it is the number --set (JSON) and YAML 1.2 read
+        hyper.update({key: float(value) if isinstance(value, str) and EXPONENT_NUMBER.match(value) else value for key, value in loaded.items()})
     for item in overrides:
         key, sep, value = item.partition("=")
         if not sep:
