@@ -261,8 +261,6 @@ def test_a_state_only_batch_steps_each_envs_own_simulation() -> None:
         for i, env in enumerate(singles):
             single_obs, single_reward, *_ = env.step(step[i])
             assert np.array_equal(obs[i], single_obs) and rewards[i] == single_reward
-    with pytest.raises(SpecError, match=r"half_cheetah.yaml:\d+:\d+: observation: a batch renders every env through one camera pose"):
-        BatchedVectorEnv(spec, 2)
 
 
 def test_an_input_for_an_actuator_that_does_not_exist(tmp_path: Path) -> None:
