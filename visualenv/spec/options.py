@@ -54,7 +54,7 @@ def distraction_settings(given: float | Mapping[str, Any] | Distractions | None,
         chosen = Distractions.model_validate(dict(given))
     else:
         chosen = Distractions(difficulty=float(given))
-    return chosen if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors) else None
+    return chosen if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors or chosen.background) else None
 
 
 def check_make_options(**options: Any) -> None:
