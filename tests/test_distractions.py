@@ -151,3 +151,14 @@ def test_a_batch_refuses_distractions_clearly() -> None:
         visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0.2)
     batch = visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0)  # none: a batch as before
     batch.close()
+
+
+@pytest.mark.parametrize("given, message", [
+    ({"difficulty": 0.1, "cam": True}, "visualenv.make(): distractions.cam: unknown key 'cam' (did you mean 'camera'?"),
+    ({"difficulty": 3}, "visualenv.make(): distractions.difficulty: expected a value less than or equal to 1, got 3"),
+    ("hard", "visualenv.make(): distractions: expected a mapping or a number, got text"),
+])
+def test_a_bad_option_says_what_was_expected(given, message) -> None:
+    with pytest.raises(SpecError) as caught:
+        visualenv.make("DMC-cartpole-swingup-v0", distractions=given)
+    assert str(caught.value).startswith(message), str(caught.value)
