@@ -79,13 +79,18 @@ def test_a_higher_difficulty_changes_the_pixels_more() -> None:
 
 def test_each_kind_changes_what_it_says(tmp_path: Path) -> None:
     """Colours alone keep every pixel on its object (the segmentation is the plain env's) and change the colours;
-    the camera alone moves the objects in the image."""
+    the camera alone moves the objects in the image; the background alone changes the sky's pixels only."""
     spec = segmented_cartpole(tmp_path)
     (clean,) = first_frames(spec, [3])
-    (colors,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "camera": False})
-    (camera,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "colors": False})
+    (colors,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "camera": False, "background": False})
+    (camera,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "colors": False, "background": False})
+    (backdrop,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "colors": False, "camera": False})
     assert np.array_equal(colors["mask"], clean["mask"]) and mean_difference(colors["eye"], clean["eye"]) > 5
     assert (colors["mask"] != camera["mask"]).mean() > 0.05
+    sky = clean["mask"][..., 0] == 0
+    assert np.array_equal(backdrop["mask"], clean["mask"]) and sky.mean() > 0.2
+    assert mean_difference(backdrop["eye"][sky], clean["eye"][sky]) > 10
+    assert np.array_equal(backdrop["eye"][~sky], clean["eye"][~sky])  # the background lights nothing
 
 
 def test_a_seed_draws_the_same_distractions_and_dynamic_ones_drift(tmp_path: Path) -> None:
@@ -100,7 +105,7 @@ def test_a_seed_draws_the_same_distractions_and_dynamic_ones_drift(tmp_path: Pat
         assert env.unwrapped._distractions.current == before  # fixed for the episode
     finally:
         env.close()
-    spec = segmented_cartpole(tmp_path, {"difficulty": 0.3, "dynamic": True, "colors": False})
+    spec = segmented_cartpole(tmp_path, {"difficulty": 0.3, "dynamic": True, "colors": False, "background": False})
     env = visualenv.make(spec)
     try:
         obs, _ = env.reset(seed=1)
@@ -146,3 +151,14 @@ def test_a_batch_refuses_distractions_clearly() -> None:
         visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0.2)
     batch = visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0)  # none: a batch as before
     batch.close()
+
+
+@pytest.mark.parametrize("given, message", [
+    ({"difficulty": 0.1, "cam": True}, "visualenv.make(): distractions.cam: unknown key 'cam' (did you mean 'camera'?"),
+    ({"difficulty": 3}, "visualenv.make(): distractions.difficulty: expected a value less than or equal to 1, got 3"),
+    ("hard", "visualenv.make(): distractions: expected a mapping or a number, got text"),
+])
+def test_a_bad_option_says_what_was_expected(given, message) -> None:
+    with pytest.raises(SpecError) as caught:
+        visualenv.make("DMC-cartpole-swingup-v0", distractions=given)
+    assert str(caught.value).startswith(message), str(caught.value)

@@ -1,7 +1,8 @@
 """Distractions: what one episode's observation shows changed, drawn apart from the env's own random stream.
 
 The Distracting Control Suite (Stone et al., 2021) changes what a pixel agent sees and nothing it controls: the
-camera's pose, the colours of the bodies, the floor and the sky, the background. Here each kind is drawn at reset
+camera's pose, the colours of the bodies, the floor and the sky, the background (its videos; here a moving pattern).
+Here each kind is drawn at reset
 from a generator of its own (:func:`distraction_generator`), so the state, the rewards and the env's random numbers
 are those of the same env without distractions, and the same seed draws the same distractions.
 
@@ -23,6 +24,8 @@ from visualenv.spec.models import Distractions
 SPAWN_KEY = 0x4453
 #: a dynamic distraction's step: this share of its range at most, every env step
 DRIFT = 0.05
+#: how far a dynamic background plays each env step (the pattern's fourth coordinate: about 1 changes it wholly)
+BACKGROUND_STEP = 0.05
 
 
 @dataclass(frozen=True)
@@ -39,6 +42,10 @@ class Distraction:
     color_shift: float = 0.0
     colors_seed: int = 0
     colors_phase: float = 0.0  # a dynamic episode's drift of every colour, in [-1, 1] of color_shift
+    #: the background's contrast (0: no background), the seed of its colours and pattern, and how far it has played
+    background: float = 0.0
+    background_seed: int = 0
+    background_time: float = 0.0
 
 
 def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generator:
@@ -57,8 +64,10 @@ def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
     seed = int(rng.integers(0, 2**31 - 1))
     if not settings.camera:
         angles, zoom = np.zeros(3), 1.0
+    background_seed = int(rng.integers(0, 2**31 - 1))  # drawn last: the draws before it are those of a spec without it
     return Distraction(yaw=float(angles[0]), pitch=float(angles[1]), roll=float(angles[2]), zoom=zoom,
-                       color_shift=scale if settings.colors else 0.0, colors_seed=seed)
+                       color_shift=scale if settings.colors else 0.0, colors_seed=seed,
+                       background=scale if settings.background else 0.0, background_seed=background_seed)
 
 
 def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Generator) -> Distraction | None:
@@ -73,11 +82,43 @@ def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Gen
         return float(np.clip(value + change * (high - low) / 2, low, high))
 
     phase = moved(settings.colors_phase, step[4], -1.0, 1.0) if limits.colors else 0.0
+    played = settings.background_time + (BACKGROUND_STEP if limits.background else 0.0)
     if not limits.camera:
-        return replace(settings, colors_phase=phase)
+        return replace(settings, colors_phase=phase, background_time=played)
     return replace(settings, yaw=moved(settings.yaw, step[0], -bound, bound), pitch=moved(settings.pitch, step[1], -bound, bound),
                    roll=moved(settings.roll, step[2], -bound, bound), zoom=moved(settings.zoom, step[3], 1 - scale / 2, 1 + scale / 2),
-                   colors_phase=phase)
+                   colors_phase=phase, background_time=played)
+
+
+#: the difficulty from which the background hides the sky wholly (the suite's hardest level); below, in proportion
+OPAQUE_FROM = 0.3
+
+
+@dataclass(frozen=True)
+class Background:
+    """The pattern behind the scene: two colours a noise field blends (its `scale` across the view, `time` its
+    fourth coordinate, which a dynamic episode plays), over the sky at `opacity`; drawn from ``background_seed``."""
+
+    first: tuple[float, float, float]
+    second: tuple[float, float, float]
+    scale: float
+    time: float
+    opacity: float
+
+
+def background(distraction: Distraction) -> Background | None:
+    """The episode's background (None without one): a mean colour uniform in the colour cube, the two colours on
+    either side of it by up to the difficulty (their contrast), a pattern of 2 to 8 blobs across the view, over the
+    sky at an opacity of difficulty / :data:`OPAQUE_FROM` (at most 1)."""
+    if distraction.background <= 0:
+        return None
+    rng = np.random.default_rng(distraction.background_seed)
+    mean = rng.uniform(0.0, 1.0, size=3)
+    spread = rng.uniform(-1.0, 1.0, size=3) * distraction.background
+    first, second = np.clip(mean + spread, 0.0, 1.0), np.clip(mean - spread, 0.0, 1.0)
+    scale, start = float(rng.uniform(2.0, 8.0)), float(rng.uniform(0.0, 100.0))
+    return Background(tuple(first.tolist()), tuple(second.tolist()), scale, start + distraction.background_time,  # type: ignore[arg-type]
+                      min(1.0, distraction.background / OPAQUE_FROM))
 
 
 def color_shifts(distraction: Distraction, count: int) -> np.ndarray:

@@ -467,6 +467,8 @@ class Distractions(StrictModel):
         "shifted by up to difficulty per channel (the Distracting Control Suite's 0.1, 0.2, 0.3)"))
     camera: bool = Field(True, description="the observation cameras orbit, roll and zoom about the point they look at")
     colors: bool = Field(True, description="every material's colour and the sky's shift")
+    background: bool = Field(True, description=(
+        "a moving pattern of two random colours in place of the sky, seen by the camera only (standing in for the suite's videos)"))
     dynamic: bool = Field(False, description="false: drawn at reset and kept for the episode; true: drifting every step as well")
 
 

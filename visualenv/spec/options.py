@@ -54,7 +54,13 @@ def distraction_settings(given: float | Mapping[str, Any] | Distractions | None,
         chosen = Distractions.model_validate(dict(given))
     else:
         chosen = Distractions(difficulty=float(given))
-    return chosen if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors) else None
+    return chosen if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors or chosen.background) else None
+
+
+class _DistractionsSection(StrictModel):
+    """``distractions`` given as a mapping: checked as the spec's section alone (not as either branch of the option)."""
+
+    distractions: Distractions
 
 
 def check_make_options(**options: Any) -> None:
@@ -66,8 +72,13 @@ def check_make_options(**options: Any) -> None:
     if isinstance(options.get("resize"), list):  # [w, h] reads as well as (w, h)
         options["resize"] = tuple(options["resize"])
     problems = []
-    for model, names in ((RenderSettings, RENDER_OVERRIDES), (MakeOptions, tuple(MakeOptions.model_fields))):
-        given = {k: options[k] for k in names if options.get(k) is not None}
+    section = options.get("distractions") if isinstance(options.get("distractions"), Mapping) else None
+    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [(RenderSettings, RENDER_OVERRIDES),
+                                                               (MakeOptions, tuple(k for k in MakeOptions.model_fields if section is None or k != "distractions"))]
+    if section is not None:
+        checks.append((_DistractionsSection, ("distractions",)))
+    for model, names in checks:
+        given = {k: dict(options[k]) if k == "distractions" and section is not None else options[k] for k in names if options.get(k) is not None}
         try:
             model.model_validate(given)
         except ValidationError as exc:

@@ -16,8 +16,8 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.render.blender.materials import SKY_TINT, SKYBOX, tinted_base
-from visualenv.render.distractions import Distraction, color_shifts
+from visualenv.render.blender.materials import SKY_MAP_RESOLUTION, SKY_TINT, SKYBOX, tinted_base
+from visualenv.render.distractions import Distraction, background, color_shifts
 
 #: the name of the Mix node that adds the sky's shift behind a model's skybox
 SKY_SHIFT = "visualenv distraction sky"
@@ -28,7 +28,8 @@ FALLBACK_FOCUS = 3.0
 class DistractionRig:
     """The cameras and colour sockets of one scene that distractions move; :meth:`apply` draws one distraction."""
 
-    def __init__(self, scene: Any, cameras: list[Any]) -> None:
+    def __init__(self, scene: Any, cameras: list[Any], backdrop: bool = False) -> None:
+        """`backdrop`: build the background's nodes (a distraction with a background will come)."""
         self._scene = scene
         #: the observation camera each child stands for, by the parent's name
         self.children: dict[str, Any] = {}
@@ -47,6 +48,7 @@ class DistractionRig:
         self._base = [tuple(socket.default_value) for socket in self._sockets]
         self._written = list(self._base)
         self._last: Distraction | None = None
+        self._backdrop = _backdrop_sockets(scene.world) if backdrop else None
 
     @staticmethod
     def _color_sockets(scene: Any) -> list[Any]:
@@ -67,6 +69,8 @@ class DistractionRig:
         if distraction != self._last:
             for name, child in self.children.items():
                 child.matrix_basis = orbit(distraction, self._focus_of(name))
+            if self._backdrop is not None:
+                _show_background(self._backdrop, distraction)
         shifts = color_shifts(distraction, len(self._sockets) - 1)
         for i, socket in enumerate(self._sockets):
             now = tuple(socket.default_value)
@@ -134,3 +138,47 @@ def _sky_socket(world: Any) -> Any:
         return [sock for sock in tint.inputs if sock.type == "RGBA"][1]
     background = next((n for n in nodes if n.type == "BACKGROUND"), None)
     return background.inputs["Color"] if background is not None and not background.inputs["Color"].is_linked else None
+
+
+def _backdrop_sockets(world: Any) -> dict[str, Any] | None:
+    """The world's output wrapped so that camera rays see a noise pattern of two colours where `on` is 1 (the rest of
+    the world, what lights the scene, as it was); the sockets :func:`_show_background` writes. None without a world."""
+    if world is None or world.node_tree is None:
+        return None
+    nodes, links = world.node_tree.nodes, world.node_tree.links
+    out = next((n for n in nodes if n.type == "OUTPUT_WORLD"), None)
+    if out is None or not out.inputs["Surface"].is_linked:
+        return None
+    original = out.inputs["Surface"].links[0].from_socket
+    coords, noise = nodes.new("ShaderNodeTexCoord"), nodes.new("ShaderNodeTexNoise")
+    noise.noise_dimensions = "4D"
+    links.new(coords.outputs["Generated"], noise.inputs["Vector"])
+    blend = nodes.new("ShaderNodeMix")
+    blend.data_type = "RGBA"
+    links.new(noise.outputs["Fac"], blend.inputs["Factor"])
+    first, second = [sock for sock in blend.inputs if sock.type == "RGBA"]
+    shown = nodes.new("ShaderNodeBackground")
+    links.new(next(sock for sock in blend.outputs if sock.type == "RGBA"), shown.inputs["Color"])
+    path, on = nodes.new("ShaderNodeLightPath"), nodes.new("ShaderNodeMath")
+    on.operation = "MULTIPLY"
+    links.new(path.outputs["Is Camera Ray"], on.inputs[0])
+    mix = nodes.new("ShaderNodeMixShader")
+    links.new(on.outputs["Value"], mix.inputs["Fac"])
+    links.new(original, mix.inputs[1])
+    links.new(shown.outputs["Background"], mix.inputs[2])
+    links.new(mix.outputs["Shader"], out.inputs["Surface"])
+    if world.cycles.sampling_method == "AUTOMATIC":  # a textured world's automatic map costs seconds at every change
+        world.cycles.sampling_method = "MANUAL"
+        world.cycles.sample_map_resolution = SKY_MAP_RESOLUTION
+    return {"first": first, "second": second, "scale": noise.inputs["Scale"], "time": noise.inputs["W"], "on": on.inputs[1]}
+
+
+def _show_background(sockets: dict[str, Any], distraction: Distraction) -> None:
+    """Write the distraction's background (or none) into the world's sockets."""
+    shown = background(distraction)
+    sockets["on"].default_value = 0.0 if shown is None else shown.opacity
+    if shown is not None:
+        sockets["first"].default_value = (*shown.first, 1.0)
+        sockets["second"].default_value = (*shown.second, 1.0)
+        sockets["scale"].default_value = shown.scale
+        sockets["time"].default_value = shown.time

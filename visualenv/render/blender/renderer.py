@@ -353,7 +353,7 @@ class BlenderRenderer(Renderer):
         self._check_open()
         if self._rig is None:
             tracker = DataTracker()
-            self._rig = DistractionRig(self._scene, [v.camera for v in self._views])
+            self._rig = DistractionRig(self._scene, [v.camera for v in self._views], backdrop=distraction.background > 0)
             self._ids.extend(tracker.new())
             children = self._rig.children
             self._views = [replace(v, camera=children[v.camera.name]) for v in self._views]
