@@ -162,3 +162,21 @@ def test_a_bad_option_says_what_was_expected(given, message) -> None:
     with pytest.raises(SpecError) as caught:
         visualenv.make("DMC-cartpole-swingup-v0", distractions=given)
     assert str(caught.value).startswith(message), str(caught.value)
+
+
+def test_eval_plays_an_agent_on_distracted_episodes(tmp_path: Path) -> None:
+    """`visualenv eval --distractions d`: the shipped agent on distracted observations, said so and not held to its results.json."""
+    import json
+
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+
+    out = tmp_path / "eval.json"
+    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--episodes", "2", "--distractions", "0.2", "-o", str(out)])
+    assert result.exit_code == 0, result.output
+    assert "distracted at difficulty 0.2 (not compared with results.json)" in result.output and "reproduces" not in result.output
+    figures = json.loads(out.read_text())
+    assert figures["distractions"] == 0.2 and figures["matches_results_json"] is None and figures["episodes"] == 2
+    refused = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "random", "--distractions", "0.2"])
+    assert refused.exit_code == 2 and "--distractions" in refused.output

@@ -65,13 +65,16 @@ def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episo
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 100]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 12884901888, a seed no run trains, selects or reports on]")
+@click.option("--distractions", type=click.FloatRange(0.0, 1.0), default=None,
+              help="observations distracted at this difficulty (docs/distractions.md: camera, colours, background, per episode); "
+                   "new episodes, not compared with results.json")
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @click.option("--write-results", is_flag=True,
               help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made")
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def eval_command(spec: str, model_path: str, trust_pickle: bool, algo: str | None, episodes: int | None, seed: int | None,
-                 json_out: str | None, write_results: bool) -> None:
+                 distractions: float | None, json_out: str | None, write_results: bool) -> None:
     """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
 
     The intervals are a percentile bootstrap of the mean (return, length) and Wilson's
@@ -86,13 +89,20 @@ def eval_command(spec: str, model_path: str, trust_pickle: bool, algo: str | Non
 
     if json_out:
         check_writable(json_out, "--out")
+    if distractions is not None and (model_path == RANDOM or write_results):
+        raise click.BadParameter("goes with a model's evaluation, not with random actions (state-only) nor --write-results "
+                                 "(results.json holds the undistracted one)", param_hint="--distractions")
     if model_path == RANDOM:
         results, recorded = evaluate_random(spec, episodes=episodes, seed=seed), None
         click.echo(f"uniform random actions (the baseline): {results['episodes']} episodes, the first reset with seed {results['eval_seed']}")
     else:
         model_path = model_file(spec, model_path)
-        results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed, trust_pickle=trust_pickle)
-        click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}")
+        results, recorded = evaluate_model(spec, model_path, algo=algo, episodes=episodes, seed=seed, trust_pickle=trust_pickle,
+                                           distractions=distractions)
+        click.echo(f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}"
+                   + (f", distracted at difficulty {distractions} (not compared with results.json)" if distractions is not None else ""))
+        if distractions is not None:
+            recorded = None
     purpose = seed_purpose(results["eval_seed"])
     if purpose in ("training", "selection"):
         click.echo(f"note: seed {results['eval_seed']} lies in the {purpose} band: a run seeded near it has seen these episodes "

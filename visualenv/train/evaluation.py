@@ -84,17 +84,21 @@ def selection_record(run_dir: Path, seed: int) -> dict[str, Any] | None:
     return record
 
 
-def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True, transpose: bool = True) -> Any:
+def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True, transpose: bool = True,
+                  distractions: float | None = None) -> Any:
     """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.
 
-    RLlib's policies take the images channels last (``transpose=False``).
+    RLlib's policies take the images channels last (``transpose=False``). `distractions`: the env's difficulty
+    (docs/distractions.md), else the spec's.
     """
     from stable_baselines3.common.vec_env import VecTransposeImage
 
     from visualenv.env.sb3_vec import make_sb3_vec
 
-    state_only: dict[str, Any] = {} if render else {"render": False}
-    env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **state_only)
+    options: dict[str, Any] = {} if render else {"render": False}
+    if distractions is not None:
+        options["distractions"] = distractions
+    env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **options)
     return VecTransposeImage(env) if transpose and channels_last_images(env.observation_space) else env
 
 
@@ -284,12 +288,14 @@ def evaluate_random(spec: str, *, episodes: int | None = None, seed: int | None 
 
 
 def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None, episodes: int | None = None,
-                   seed: int | None = None, trust_pickle: bool = False) -> tuple[dict[str, Any], RecordedEvaluation | None]:
+                   seed: int | None = None, trust_pickle: bool = False,
+                   distractions: float | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
 
     Unset arguments take the run's values (config.json and results.json beside the model),
     else PPO, 100 episodes and :data:`FRESH_SEED`; the run's final evaluation is replayed when the
     seed is the run's. `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.models.load_model`).
+    `distractions`: the observations distracted at this difficulty (the results say so in ``distractions``).
     """
     from gymnasium import spaces
 
@@ -309,12 +315,15 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
     probe = stacked_like(VisualEnv(load_spec(spec_path), render=render), model, str(model_path))  # refuses a model of another env
     probe.close()
     frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
-    vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render, transpose=not channels_last_images(space))
+    vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render, transpose=not channels_last_images(space),
+                            distractions=distractions)
     try:
         results = final_evaluation(model, vec_env, episodes or (recorded.episodes if recorded else FINAL_EPISODES), seed,
                                    resets_before=replayed.resets_before if replayed else 0)
     finally:
         vec_env.close()
+    if distractions is not None:
+        results["distractions"] = distractions
     return results, replayed
 
 
