@@ -10,6 +10,7 @@ written only when it changes: Cycles updates a shader on every write.
 
 from __future__ import annotations
 
+import re
 from typing import Any
 
 import bpy
@@ -23,6 +24,8 @@ from visualenv.render.distractions import Distraction, background, color_shifts
 SKY_SHIFT = "visualenv distraction sky"
 #: the orbit's centre when a camera's view axis hits nothing: this far along it
 FALLBACK_FOCUS = 3.0
+#: what Blender appends to a datablock's name that another holds
+TAKEN_SUFFIX = re.compile(r"\.\d{3,}$")
 
 
 class DistractionRig:
@@ -52,11 +55,12 @@ class DistractionRig:
 
     @staticmethod
     def _color_sockets(scene: Any) -> list[Any]:
-        """Every Principled material's tint socket in the scene (by material name), then the sky's."""
+        """Every Principled material's tint socket in the scene, then the sky's. By name without the ``.001`` Blender
+        adds to a name taken (a second env in the process has them): each env of a spec shifts its materials alike."""
         materials = {slot.material.name: slot.material for obj in scene.objects for slot in obj.material_slots
                      if slot.material is not None and slot.material.node_tree is not None}
         sockets = []
-        for name in sorted(materials):
+        for name in sorted(materials, key=lambda taken: TAKEN_SUFFIX.sub("", taken)):
             mat = materials[name]
             if any(node.type == "BSDF_PRINCIPLED" for node in mat.node_tree.nodes):
                 tint = tinted_base(mat)[1].node
