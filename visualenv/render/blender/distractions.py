@@ -85,7 +85,7 @@ class DistractionRig:
                 value = (*((shifts[i] + 1.0) / 2.0).tolist(), 1.0)
             else:
                 value = (*np.clip(np.array(base[:3]) + shifts[i], 0.0, 1.0).tolist(), *base[3:])
-            value = tuple(np.float32(value).tolist())  # as the socket holds it: an equal value is not written again
+            value = tuple(np.asarray(value, dtype=np.float32).tolist())  # as the socket holds it: an equal value is not written again
             if value != now:  # a write is a shader update in Cycles: only a change
                 socket.default_value = value
             self._written[i] = tuple(socket.default_value)
