@@ -27,6 +27,7 @@ suite = pytest.importorskip("dm_control.suite")
 
 import visualenv  # noqa: E402
 from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.physics.simulation import integration_state  # noqa: E402
 
 ID = "DMC-cartpole-swingup-v0"
 ASSETS = Path(__file__).resolve().parents[1] / "specs" / "dmc" / "assets"
@@ -65,14 +66,6 @@ def test_the_pinned_files_are_dm_controls_own() -> None:
     assets = importlib.import_module("dm_control.suite.cheetah").get_model_and_assets()[1]
     expected = vendor.binary(vendor.expected_model("cheetah.xml", "dm_control.suite.cheetah"))
     assert vendor.binary(vendor.compile_quietly(heavier, assets)) != expected  # the control: the comparison sees one bit
-
-
-def integration_state(data) -> np.ndarray:
-    """MuJoCo's whole integration state (time, qpos, qvel, act, warm start, ctrl...): what the next step starts from."""
-    model = data.model
-    state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
-    mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
-    return state
 
 
 def their_observation(time_step) -> np.ndarray:

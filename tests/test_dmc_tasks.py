@@ -25,6 +25,7 @@ suite = pytest.importorskip("dm_control.suite")
 
 import visualenv  # noqa: E402
 from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.physics.simulation import integration_state  # noqa: E402
 
 #: id -> (dm_control's domain and task, PlaNet's action repeat, dm_control's camera 0)
 TASKS = {
@@ -41,14 +42,6 @@ WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping",)}
 def load(ident: str, seed: int):
     domain, task, *_ = TASKS[ident]
     return suite.load(domain, task, task_kwargs={"random": seed})
-
-
-def integration_state(data) -> np.ndarray:
-    """MuJoCo's whole integration state (time, qpos, qvel, act, warm start, ctrl...): what the next step starts from."""
-    model = data.model
-    state = np.empty(mujoco.mj_stateSize(model, mujoco.mjtState.mjSTATE_INTEGRATION))
-    mujoco.mj_getState(model, data, state, mujoco.mjtState.mjSTATE_INTEGRATION)
-    return state
 
 
 def their_observation(time_step) -> np.ndarray:

@@ -51,6 +51,11 @@ def version() -> tuple[int, int] | None:
         return None
 
 
+class _Mallinfo2(ctypes.Structure):
+    _fields_ = [(name, ctypes.c_size_t) for name in
+                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
+
+
 @functools.cache
 def _glibc() -> Any:
     """The C library this process runs on, where it is a glibc this module was written for; else None."""
@@ -61,6 +66,8 @@ def _glibc() -> Any:
         libc = ctypes.CDLL(None)
         libc.mallopt.argtypes, libc.mallopt.restype = [ctypes.c_int, ctypes.c_int], ctypes.c_int
         libc.malloc_trim.argtypes, libc.malloc_trim.restype = [ctypes.c_size_t], ctypes.c_int
+        if hasattr(libc, "mallinfo2"):  # glibc 2.33 and later
+            libc.mallinfo2.restype = _Mallinfo2
     except (OSError, AttributeError):
         return None
     return libc
@@ -87,22 +94,15 @@ def apply_policy() -> bool:
     return _applied
 
 
-class _Mallinfo2(ctypes.Structure):
-    _fields_ = [(name, ctypes.c_size_t) for name in
-                ("arena", "ordblks", "smblks", "hblks", "hblkhd", "usmblks", "fsmblks", "uordblks", "fordblks", "keepcost")]
-
-
 def bytes_in_use() -> int | None:
     """Bytes the process holds from ``malloc`` now (``mallinfo2``: heap blocks in use plus mmapped ones); None without it.
 
     Why not resident memory: what glibc keeps after a ``free`` stays resident, so a freed frame does not show there
     on every machine; this counts what is allocated. glibc 2.33 and later.
     """
-    libc = _glibc()
-    info = getattr(libc, "mallinfo2", None)
+    info = getattr(_glibc(), "mallinfo2", None)
     if info is None:
         return None
-    info.restype = _Mallinfo2
     found = info()
     return int(found.uordblks + found.hblkhd)
 

@@ -18,6 +18,7 @@ from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.physics.conventions import legacy_stream
 from visualenv.physics.model_fields import restore_fields, written_fields
+from visualenv.physics.simulation import integration_state
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
 from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
@@ -538,13 +539,7 @@ class VisualEnv(gym.Env):
 
     def _physics_state(self) -> np.ndarray | None:
         """MuJoCo's full integration state of a physics spec (None without physics)."""
-        if self._sim is None:
-            return None
-        mujoco, model = self._sim.mujoco, self._sim.model
-        signature = mujoco.mjtState.mjSTATE_INTEGRATION
-        state = np.empty(mujoco.mj_stateSize(model, signature))
-        mujoco.mj_getState(model, self._sim.data, state, signature)
-        return state
+        return None if self._sim is None else integration_state(self._sim.data)
 
     def _set_physics_state(self, state: np.ndarray | None) -> None:
         """Put MuJoCo's integration state back, then ``mj_forward`` (the poses a render reads)."""

@@ -41,6 +41,16 @@ def touching(data: Any, pair: tuple[int, int]) -> bool:
     return bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
 
 
+
+def integration_state(data: Any) -> np.ndarray:
+    """MuJoCo's whole integration state of `data` (``mjSTATE_INTEGRATION``: time, qpos, qvel, act, warm start,
+    controls...): what the next ``mj_step`` starts from, so that two equal states step alike to the bit."""
+    mujoco = mujoco_module()
+    signature = mujoco.mjtState.mjSTATE_INTEGRATION
+    state = np.empty(mujoco.mj_stateSize(data.model, signature))
+    mujoco.mj_getState(data.model, data, state, signature)
+    return state
+
 class Simulation:
     """An env's MjModel (its own copy, so randomising one env's model leaves the others alone) and MjData."""
 

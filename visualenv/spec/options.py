@@ -72,13 +72,13 @@ def check_make_options(**options: Any) -> None:
     if isinstance(options.get("resize"), list):  # [w, h] reads as well as (w, h)
         options["resize"] = tuple(options["resize"])
     problems = []
-    section = options.get("distractions") if isinstance(options.get("distractions"), Mapping) else None
-    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [(RenderSettings, RENDER_OVERRIDES),
-                                                               (MakeOptions, tuple(k for k in MakeOptions.model_fields if section is None or k != "distractions"))]
-    if section is not None:
-        checks.append((_DistractionsSection, ("distractions",)))
+    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [(RenderSettings, RENDER_OVERRIDES), (MakeOptions, tuple(MakeOptions.model_fields))]
+    if isinstance(options.get("distractions"), Mapping):  # checked as the spec's section alone, not as either branch of the option
+        options["distractions"] = dict(options["distractions"])
+        checks = [(RenderSettings, RENDER_OVERRIDES), (MakeOptions, tuple(k for k in MakeOptions.model_fields if k != "distractions")),
+                  (_DistractionsSection, ("distractions",))]
     for model, names in checks:
-        given = {k: dict(options[k]) if k == "distractions" and section is not None else options[k] for k in names if options.get(k) is not None}
+        given = {k: options[k] for k in names if options.get(k) is not None}
         try:
             model.model_validate(given)
         except ValidationError as exc:
