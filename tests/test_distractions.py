@@ -209,3 +209,19 @@ def test_two_envs_in_one_process_draw_the_same_distractions(tmp_path: Path) -> N
     finally:
         first.close()
         second.close()
+
+
+def test_a_bound_colour_still_changes_under_shifted_colours(tmp_path: Path) -> None:
+    """A colour binding and the distraction write one socket: the bound colour goes on changing every step, shifted."""
+    spec = tmp_path / "bound.yaml"
+    spec.write_text(TWO_NAMES.replace("state: {x: {init: 0.0}}", "state: {x: {init: 0.0}, red: {init: 0.1}}")
+                    .replace("dynamics: {update: {x: x + dx}}", "dynamics: {update: {x: x + dx, red: red + 0.3}}")
+                    .replace("distractions:", "actors: {Pole: {color: [red, 0.2, 0.2]}}\ndistractions:"), encoding="utf-8")
+    env = visualenv.make(spec)
+    try:
+        frames = [env.reset(seed=2)[0], *(env.step(0)[0] for _ in range(2))]
+    finally:
+        env.close()
+    left = (slice(None), slice(0, 14))  # the Pole's half of the image: only its colour changes from step to step
+    reds = [frame[left][..., 0].astype(int).sum() for frame in frames]
+    assert reds[0] < reds[1] < reds[2], reds

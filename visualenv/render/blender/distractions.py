@@ -3,8 +3,8 @@
 Each observation camera gets a child camera (the same lens, parented to it) whose local pose is the orbit about the
 point the camera looks at: the parent goes on following its bindings or its MuJoCo body, the child follows it, and
 the observation is rendered through the child. Colours shift where colour bindings write (each Principled
-material's tint, :func:`~visualenv.render.blender.materials.tinted_base`), so a MuJoCo look and a bound colour
-are shifted alike; the sky shifts as the model's skybox, the image sky's tint or the world's colour. A value is
+material's base colour or its tint, :func:`~visualenv.render.blender.materials.color_sockets`), so a MuJoCo look and
+a bound colour are shifted alike; the sky shifts as the model's skybox, the image sky's tint or the world's colour. A value is
 written only when it changes: Cycles updates a shader on every write.
 """
 
@@ -17,7 +17,7 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.render.blender.materials import SKY_MAP_RESOLUTION, SKY_TINT, SKYBOX, tinted_base
+from visualenv.render.blender.materials import SKY_MAP_RESOLUTION, SKY_TINT, SKYBOX, color_sockets
 from visualenv.render.distractions import Distraction, background, color_shifts
 
 #: the name of the Mix node that adds the sky's shift behind a model's skybox
@@ -51,45 +51,54 @@ class DistractionRig:
         self._base = [tuple(socket.default_value) for socket in self._sockets]
         self._written = list(self._base)
         self._last: Distraction | None = None
+        self._shifts = np.zeros((len(self._sockets), 3))  # the current distraction's (color_shifts)
         self._backdrop = _backdrop_sockets(scene.world) if backdrop else None
 
     @staticmethod
     def _color_sockets(scene: Any) -> list[Any]:
-        """Every Principled material's tint socket in the scene, then the sky's. By name without the ``.001`` Blender
+        """Every Principled material's colour socket in the scene (where a colour binding writes), then the sky's. By name without the ``.001`` Blender
         adds to a name taken (a second env in the process has them): each env of a spec shifts its materials alike."""
         materials = {slot.material.name: slot.material for obj in scene.objects for slot in obj.material_slots
                      if slot.material is not None and slot.material.node_tree is not None}
         sockets = []
         for name in sorted(materials, key=lambda taken: TAKEN_SUFFIX.sub("", taken)):
-            mat = materials[name]
-            if any(node.type == "BSDF_PRINCIPLED" for node in mat.node_tree.nodes):
-                tint = tinted_base(mat)[1].node
-                sockets.append([sock for sock in tint.inputs if sock.type == "RGBA"][1])
+            found = color_sockets(materials[name])  # the socket a colour binding writes: both see one colour
+            if found is not None:
+                sockets.append(found[0])
         sky = _sky_socket(scene.world)
         return [*sockets, sky] if sky is not None else sockets
 
     def apply(self, distraction: Distraction) -> None:
-        """Pose the child cameras and write the shifted colours: where a binding rewrote a colour since, from its new value."""
-        if distraction != self._last:
+        """Pose the child cameras and write the shifted colours: where a binding rewrote a colour since, from its new
+        value. A render with the same distraction and no colour rewritten writes nothing."""
+        changed = distraction != self._last
+        if changed:
             for name, child in self.children.items():
                 child.matrix_basis = orbit(distraction, self._focus_of(name))
             if self._backdrop is not None:
                 _show_background(self._backdrop, distraction)
-        shifts = color_shifts(distraction, len(self._sockets) - 1)
+            self._shifts = color_shifts(distraction, len(self._sockets) - 1)
+            self._last = distraction
         for i, socket in enumerate(self._sockets):
             now = tuple(socket.default_value)
-            if now != self._written[i]:  # a colour binding wrote it: shift its value
+            rewritten = now != self._written[i]  # a colour binding wrote it: shift its new value
+            if not (changed or rewritten):
+                continue
+            if rewritten:
                 self._base[i] = now
-            base = self._base[i]
-            if i == self._offset:
-                value = (*((shifts[i] + 1.0) / 2.0).tolist(), 1.0)
-            else:
-                value = (*np.clip(np.array(base[:3]) + shifts[i], 0.0, 1.0).tolist(), *base[3:])
-            value = tuple(np.asarray(value, dtype=np.float32).tolist())  # as the socket holds it: an equal value is not written again
+            value = self._shifted(i)
             if value != now:  # a write is a shader update in Cycles: only a change
                 socket.default_value = value
             self._written[i] = tuple(socket.default_value)
-        self._last = distraction
+
+    def _shifted(self, i: int) -> tuple[float, ...]:
+        """Socket i's value under the current shifts, as the socket holds it (float32): an equal value is not written again."""
+        base, shift = self._base[i], self._shifts[i]
+        if i == self._offset:
+            value = (*((shift + 1.0) / 2.0).tolist(), 1.0)
+        else:
+            value = (*np.clip(np.array(base[:3]) + shift, 0.0, 1.0).tolist(), *base[3:])
+        return tuple(np.asarray(value, dtype=np.float32).tolist())
 
     def _focus_of(self, name: str) -> float:
         """How far ahead of the camera its orbit's centre lies, measured once: the point of its view axis nearest the
