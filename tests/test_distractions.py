@@ -156,12 +156,22 @@ def test_a_batch_refuses_distractions_clearly() -> None:
 @pytest.mark.parametrize("given, message", [
     ({"difficulty": 0.1, "cam": True}, "visualenv.make(): distractions.cam: unknown key 'cam' (did you mean 'camera'?"),
     ({"difficulty": 3}, "visualenv.make(): distractions.difficulty: expected a value less than or equal to 1, got 3"),
-    ("hard", "visualenv.make(): distractions: expected a mapping or a number, got text"),
+    ("extreme", "visualenv.make(): distractions: expected a difficulty from 0 to 1, a level by name (easy, medium, hard) or a mapping"),
 ])
 def test_a_bad_option_says_what_was_expected(given, message) -> None:
     with pytest.raises(SpecError) as caught:
         visualenv.make("DMC-cartpole-swingup-v0", distractions=given)
     assert str(caught.value).startswith(message), str(caught.value)
+
+
+@pytest.mark.parametrize("name, difficulty", [("easy", 0.1), ("medium", 0.2), ("hard", 0.3)])
+def test_the_suites_levels_by_name(name, difficulty) -> None:
+    env = visualenv.make("DMC-cartpole-swingup-v0", distractions=name)
+    try:
+        settings = env.unwrapped.distractions
+        assert settings.difficulty == difficulty and settings.camera and settings.colors and settings.background
+    finally:
+        env.close()
 
 
 def test_eval_plays_an_agent_on_distracted_episodes(tmp_path: Path) -> None:
@@ -180,6 +190,8 @@ def test_eval_plays_an_agent_on_distracted_episodes(tmp_path: Path) -> None:
     assert figures["distractions"] == 0.2 and figures["matches_results_json"] is None and figures["episodes"] == 2
     refused = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "random", "--distractions", "0.2"])
     assert refused.exit_code == 2 and "--distractions" in refused.output
+    unknown = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--distractions", "harder"])
+    assert unknown.exit_code == 2 and "expected a difficulty from 0 to 1, or easy, medium, hard" in unknown.output, unknown.output
 
 
 TWO_NAMES = """id: TwoNames-v0

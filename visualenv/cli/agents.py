@@ -57,6 +57,23 @@ def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episo
         click.echo(f"recorded {record}")
 
 
+def _difficulty(value: str | None) -> float | None:
+    """--distractions: a difficulty in [0, 1], or a Distracting Control Suite level by name."""
+    from visualenv.spec.options import DISTRACTION_LEVELS
+
+    if value is None:
+        return None
+    if value in DISTRACTION_LEVELS:
+        return DISTRACTION_LEVELS[value]
+    try:
+        difficulty = float(value)
+    except ValueError:
+        difficulty = -1.0
+    if not 0.0 <= difficulty <= 1.0:
+        raise click.BadParameter(f"{value!r}: expected a difficulty from 0 to 1, or {', '.join(DISTRACTION_LEVELS)}", param_hint="--distractions")
+    return difficulty
+
+
 @main.command("eval")
 @click.argument("spec")
 @click.option("--model", "model_path", required=True, help=MODEL_HELP.format(", or 'random' (uniform random actions, the baseline)"))
@@ -65,9 +82,9 @@ def play(spec: str, model_path: str | None, trust_pickle: bool, algo: str, episo
 @click.option("--episodes", type=click.IntRange(min=1), default=None, help="deterministic episodes  [default: its run's final evaluation's, else 100]")
 @click.option("--seed", type=click.IntRange(min=0), default=None,
               help="seed of the evaluation env  [default: its run's final evaluation's (results.json's eval_seed), else 12884901888, a seed no run trains, selects or reports on]")
-@click.option("--distractions", type=click.FloatRange(0.0, 1.0), default=None,
-              help="observations distracted at this difficulty (docs/distractions.md: camera, colours, background, per episode); "
-                   "new episodes, not compared with results.json")
+@click.option("--distractions", metavar="D", callback=lambda ctx, param, value: _difficulty(value), default=None,
+              help="observations distracted at this difficulty, 0 to 1, or easy, medium, hard (0.1, 0.2, 0.3) (docs/distractions.md: "
+                   "camera, colours, background, per episode); new episodes, not compared with results.json")
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @click.option("--write-results", is_flag=True,
               help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made")

@@ -11,7 +11,9 @@ import click
 from click.core import ParameterSource
 
 from visualenv.cli.group import (ALGORITHMS, friendly, main)
+from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
+from visualenv.train.distill import DistillConfig
 
 
 def _parse_value(text: str) -> Any:
@@ -90,6 +92,44 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     click.echo(f"run folder: {run_dir}")
     results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
     _report(results, run_dir)
+
+
+@main.command()
+@click.argument("spec")
+@click.option("--teacher", required=True, type=click.Path(exists=True, dir_okay=False),
+              help="a state-only policy file of SPEC (best_model.safetensors of `visualenv train SPEC --state-only`)")
+@click.option("--rounds", default=DistillConfig.rounds, show_default=True, type=click.IntRange(min=1),
+              help="DAgger rounds; the teacher acts in the first, the student in the others")
+@click.option("--episodes", default=DistillConfig.episodes, show_default=True, type=click.IntRange(min=1), help="episodes rolled out per round")
+@click.option("--epochs", default=DistillConfig.epochs, show_default=True, type=click.FloatRange(min=0, min_open=True),
+              help="passes over all frames gathered so far, per round")
+@click.option("--batch-size", default=DistillConfig.batch_size, show_default=True, type=click.IntRange(min=1))
+@click.option("--learning-rate", default=DistillConfig.learning_rate, show_default=True, type=click.FloatRange(min=0, min_open=True))
+@click.option("--shift", default=DistillConfig.shift, show_default=True, type=click.IntRange(min=0), help="random shift of the frames in pixels")
+@click.option("--frame-stack", default=DistillConfig.frame_stack, show_default=True, type=click.IntRange(min=1))
+@click.option("--eval-episodes", default=DistillConfig.eval_episodes, show_default=True, type=click.IntRange(min=1),
+              help="episodes of each round's evaluation, which selects the best round")
+@click.option("--final-episodes", default=DistillConfig.final_eval_episodes, show_default=True, type=click.IntRange(min=1),
+              help="episodes of the best round's final evaluation, on seeds neither rounds nor selection use")
+@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31 - 1))
+@click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@click.option("--no-progress", is_flag=True)
+@friendly
+@compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the final evaluation replays in `visualenv eval` on any CPU
+def distill(spec: str, teacher: str, rounds: int, episodes: int, epochs: float, batch_size: int, learning_rate: float, shift: int,
+            frame_stack: int, eval_episodes: int, final_episodes: int, seed: int, out_root: str, no_progress: bool) -> None:
+    """Teach a pixel policy (CNN on stacked frames) to act as a state-only TEACHER of SPEC does (DAgger).
+
+    Writes runs/<Id>/<timestamp>/: config.json, rounds.csv, best and final policy files, results.json. docs/distill.md.
+    """
+    from visualenv.train.distill import distill as run_distill
+
+    config = DistillConfig(spec=spec, teacher=teacher, rounds=rounds, episodes=episodes, epochs=epochs, batch_size=batch_size,
+                           learning_rate=learning_rate, shift=shift, frame_stack=frame_stack, eval_episodes=eval_episodes,
+                           final_eval_episodes=final_episodes, seed=seed, progress=not no_progress)
+    _, results = run_distill(config, out_root, log=click.echo)
+    click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
+               f"length {results['mean_length']:.1f}; {results['frames']} frames in {results['wall_time_s']:.0f} s")
 
 
 def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dict[str, Any]:

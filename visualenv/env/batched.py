@@ -98,7 +98,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         backend: str = BATCH_BACKEND,
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
-        distractions: float | Mapping[str, Any] | None = None,
+        distractions: float | str | Mapping[str, Any] | None = None,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")

@@ -28,7 +28,7 @@ def make(
     resize: tuple[int, int] | None = None,
     max_episode_steps: int | None = None,
     action_repeat: int | None = None,
-    distractions: float | dict[str, Any] | None = None,
+    distractions: float | str | dict[str, Any] | None = None,
     **renderer_options: Any,
 ) -> gym.Env:
     """Make an env from a spec path, a build folder (``build/<Id>``) or an id.
@@ -46,7 +46,8 @@ def make(
         action_repeat: the spec's steps per ``step()`` with the same action, rewards summed, one observation
             (dm_control's action repeat); default: the spec's ``action_repeat`` (``DMC-cartpole-swingup-v0``: 8).
         distractions: what the observation shows changed per episode, the state and rewards untouched: a difficulty in
-            [0, 1] (camera and colours, fixed per episode) or the spec's ``distractions`` section as a dict
+            [0, 1] (every kind, fixed per episode), a level of the Distracting Control Suite by name (``"easy"``,
+            ``"medium"``, ``"hard"``: 0.1, 0.2, 0.3) or the spec's ``distractions`` section as a dict
             (docs/distractions.md); default: the spec's; 0: none.
         renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
 

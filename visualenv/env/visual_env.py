@@ -102,7 +102,7 @@ class VisualEnv(gym.Env):
         backend: str = BLENDER_BACKEND,
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
-        distractions: float | Mapping[str, Any] | None = None,
+        distractions: float | str | Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__()
         if isinstance(spec, Program) and not params:
@@ -456,6 +456,10 @@ class VisualEnv(gym.Env):
             obs = self.renderer.render_observation(self._bind())
             self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs
+        return self.state_observation()
+
+    def state_observation(self) -> np.ndarray:
+        """What the env observes with ``render=False``, whatever it renders: a state-only teacher's input (`visualenv distill`)."""
         if self._fns.observe is not None:
             return self.physics_observation()
         state = self._state

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from typing import Annotated, Any, Literal, Mapping, Optional, Union
 
-from pydantic import Field, ValidationError
+from pydantic import Field, ValidationError, field_validator
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
@@ -25,6 +25,8 @@ WHERE = "visualenv.make()"
 RENDER_OVERRIDES = ("engine", "samples", "device", "threads", "noise")
 
 _Pixels = Annotated[int, Field(ge=1, le=8192)]
+#: the Distracting Control Suite's levels, by the names its paper gives them
+DISTRACTION_LEVELS = {"easy": 0.1, "medium": 0.2, "hard": 0.3}
 
 
 class MakeOptions(StrictModel):
@@ -40,12 +42,23 @@ class MakeOptions(StrictModel):
         None, description="Gymnasium's name: episodes are truncated after this many steps, in place of the spec's max_steps")
     action_repeat: Optional[Annotated[int, Field(ge=1, le=10_000)]] = Field(
         None, description="the spec's steps per step() with the same action, rewards summed (in place of the spec's action_repeat)")
-    distractions: Optional[Union[Annotated[float, Field(ge=0.0, le=1.0)], Distractions]] = Field(
-        None, description="a difficulty (every kind, fixed per episode) or the spec's distractions section as a dict; 0 turns the spec's off")
+    distractions: Optional[Union[Annotated[float, Field(ge=0.0, le=1.0)], Literal["easy", "medium", "hard"], Distractions]] = Field(
+        None, description="a difficulty (every kind, fixed per episode), one of the Distracting Control Suite's levels by name "
+        "(easy 0.1, medium 0.2, hard 0.3) or the spec's distractions section as a dict; 0 turns the spec's off")
+
+    @field_validator("distractions", mode="before")
+    @classmethod
+    def _a_level_by_name(cls, value: Any) -> Any:
+        if isinstance(value, str) and value not in DISTRACTION_LEVELS:
+            raise ValueError(f"expected a difficulty from 0 to 1, a level by name ({', '.join(DISTRACTION_LEVELS)}) or a mapping, got {value!r}")
+        return value
 
 
-def distraction_settings(given: float | Mapping[str, Any] | Distractions | None, spec: Distractions | None) -> Distractions | None:
-    """The distractions an env draws: the option's (a difficulty, or a section as a dict), else the spec's; None for none."""
+def distraction_settings(given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None) -> Distractions | None:
+    """The distractions an env draws: the option's (a difficulty, a level's name, or a section as a dict), else the spec's;
+    None for none."""
+    if isinstance(given, str):
+        given = DISTRACTION_LEVELS[given]
     if given is None:
         chosen = spec
     elif isinstance(given, Distractions):

@@ -85,7 +85,7 @@ def selection_record(run_dir: Path, seed: int) -> dict[str, Any] | None:
 
 
 def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True, transpose: bool = True,
-                  distractions: float | None = None) -> Any:
+                  distractions: float | str | None = None) -> Any:
     """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.
 
     RLlib's policies take the images channels last (``transpose=False``). `distractions`: the env's difficulty
@@ -289,7 +289,7 @@ def evaluate_random(spec: str, *, episodes: int | None = None, seed: int | None 
 
 def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None, episodes: int | None = None,
                    seed: int | None = None, trust_pickle: bool = False,
-                   distractions: float | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
+                   distractions: float | str | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
 
     Unset arguments take the run's values (config.json and results.json beside the model),

@@ -1,0 +1,93 @@
+"""`visualenv distill`: a pixel student taught by a state-only teacher (DAgger), its fitting and its run folder."""
+
+import csv
+import hashlib
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from stable_baselines3.common.policies import ActorCriticCnnPolicy
+
+from visualenv.cli import main
+from visualenv.train.distill import DistillConfig, _fit, _shifted
+
+
+def _images_and_labels(n: int, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
+    """Images with a bright square on the left or the right; the label says which side."""
+    generator = np.random.default_rng(0)
+    frames = generator.integers(0, 40, (n, 3, 36, 36), dtype=np.uint8)
+    left = generator.random(n) < 0.5
+    frames[left, :, 10:26, 2:14] = 255
+    frames[~left, :, 10:26, 22:34] = 255
+    labels = left.astype(np.int64) if discrete else np.where(left, 0.5, -0.5).astype(np.float32)[:, None]
+    return frames, labels
+
+
+@pytest.mark.parametrize("discrete", [False, True])
+def test_the_student_learns_what_the_images_show(discrete):
+    torch.manual_seed(0)
+    frames, labels = _images_and_labels(64, discrete)
+    actions = gym.spaces.Discrete(2) if discrete else gym.spaces.Box(-1, 1, (1,), np.float32)
+    student = ActorCriticCnnPolicy(gym.spaces.Box(0, 255, (3, 36, 36), np.uint8), actions, lambda _: 0.0)
+    config = DistillConfig(spec="", teacher="", epochs=1, batch_size=32, shift=2)
+    optimizer = torch.optim.Adam(student.parameters(), lr=1e-3)
+    generator = np.random.default_rng(0)
+    first = _fit(student, optimizer, frames, labels, config, generator)
+    for _ in range(30):
+        last = _fit(student, optimizer, frames, labels, config, generator)
+    assert last < first / 5, (first, last)
+    chosen = student.predict(frames, deterministic=True)[0]
+    expected = labels if discrete else np.sign(labels)
+    assert np.mean((chosen if discrete else np.sign(chosen)) == expected) == 1.0
+
+
+def test_random_shift_moves_each_image_by_at_most_the_shift():
+    images = torch.zeros((200, 1, 9, 9), dtype=torch.uint8)
+    images[:, 0, 4, 4] = 255
+    shifted = _shifted(images, 2, np.random.default_rng(0))
+    assert shifted.shape == images.shape and shifted.dtype == torch.uint8
+    moved = {tuple(int(v) for v in np.argwhere(img[0].numpy() == 255)[0]) for img in shifted}
+    assert moved == {(y, x) for y in range(2, 7) for x in range(2, 7)}  # every offset of -2..2 drawn, none further
+    assert _shifted(images, 0, np.random.default_rng(0)) is images
+
+
+@pytest.fixture(scope="module")
+def teacher(tmp_path_factory):
+    """A state-only Goalie policy file: a few hundred PPO steps make a teacher good enough to imitate."""
+    out = tmp_path_factory.mktemp("teacher")
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--state-only", "--steps", "256", "--envs", "1", "--eval-every", "256",
+                                       "--eval-episodes", "1", "--final-episodes", "1", "--set", "n_steps=128", "--set", "batch_size=64",
+                                       "--out", str(out), "--no-progress"])
+    assert result.exit_code == 0, result.output
+    return next((out / "Goalie-v0").iterdir()) / "best_model.safetensors"
+
+
+@pytest.mark.slow
+def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
+    result = CliRunner().invoke(main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--rounds", "2", "--episodes", "2",
+                                       "--eval-episodes", "1", "--final-episodes", "2", "--frame-stack", "2", "--out", str(tmp_path)])
+    assert result.exit_code == 0, result.output
+    run = next((tmp_path / "Goalie-v0").iterdir())
+    with (run / "rounds.csv").open() as f:
+        rounds = list(csv.DictReader(f))
+    assert [r["round"] for r in rounds] == ["0", "1"]
+    assert 0 < int(rounds[0]["frames"]) < int(rounds[1]["frames"])  # each round adds the frames it rolled out
+    config = json.loads((run / "config.json").read_text())
+    assert config["config"]["algo"] == "dagger" and config["config"]["frame_stack"] == 2
+    assert config["teacher"]["sha256"] == hashlib.sha256(teacher.read_bytes()).hexdigest()
+    meta = json.loads((run / "best_model.json").read_text())
+    assert meta["algorithm"] == "dagger" and meta["frame_stack"] == 2 and meta["observation_space"]["shape"][0] == 2
+    results = json.loads((run / "results.json").read_text())
+    assert results["episodes"] == 2 and results["frames"] == int(rounds[1]["frames"]) and results["model"] == "best_model.safetensors"
+    replay = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run / "best_model.safetensors")])
+    assert replay.exit_code == 0 and "reproduces its run's results.json" in replay.output, replay.output
+
+
+def test_a_teacher_of_another_env_is_refused_before_anything_runs(teacher, tmp_path):
+    result = CliRunner().invoke(main, ["distill", "Hover2D-v0", "--teacher", str(teacher), "--out", str(tmp_path)])
+    assert result.exit_code != 0 and "Traceback" not in result.output
+    assert "the teacher acts on observations of shape (4,)" in result.output and "have shape (6,)" in result.output, result.output
+    assert not (tmp_path / "Hover2D-v0").exists()

@@ -1,0 +1,220 @@
+"""`visualenv distill`: a pixel policy taught by a state-only one (DAgger), the short way to a pixel agent on a few cores.
+
+Reinforcement learning from pixels spends most of its samples and updates learning to
+see. A state-only agent of the same env trains in minutes (``visualenv train --state-only``);
+distillation then teaches a CNN policy to act as that teacher does, from the frames alone.
+It runs DAgger (Ross, Gordon and Bagnell, 2011): in round 0 the teacher acts; in every
+later round the student acts, the teacher labels each state the student visits with its
+own action, and the student fits every label gathered so far (the squared error of its
+deterministic action, or the cross-entropy of a discrete one), on frames shifted at random
+by a few pixels (DrQ's augmentation).
+
+The student is SB3's ``ActorCriticCnnPolicy`` (NatureCNN) on the stacked frames, so it
+ships, loads and evaluates like a PPO agent: ``visualenv eval``, ``play``, the policy file.
+Its value head is untrained. A distilled agent's returns are not reinforcement learning's
+returns at so many env steps: docs/distill.md says how to report them.
+
+A run folder ``runs/<Id>/<timestamp>/`` holds ``config.json`` (command, settings, versions,
+the teacher's file and sha256), ``rounds.csv`` (per round: frames, the rollouts' mean return,
+the loss, the selection evaluation), ``best_model.safetensors`` (the round that evaluated
+best), ``final_model.safetensors`` and ``results.json`` (the best model on fresh seeds).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+import json
+import shlex
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from visualenv.compat import mkl
+from visualenv.errors import ConfigError
+
+ROUNDS_COLUMNS = ("round", "frames", "rollout_return", "loss", "eval_return", "wall_s")
+
+
+@dataclass
+class DistillConfig:
+    spec: str
+    teacher: str  # a state-only policy file of the same spec (`visualenv train --state-only`)
+    rounds: int = 8  # DAgger rounds; round 0 is the teacher's own
+    episodes: int = 16  # episodes rolled out per round
+    epochs: float = 2.0  # passes over all frames gathered so far, per round
+    batch_size: int = 128
+    learning_rate: float = 3e-4
+    shift: int = 4  # random shift of the frames in pixels (0: none)
+    frame_stack: int = 3
+    eval_episodes: int = 10  # per round, on the selection seeds
+    final_eval_episodes: int = 100
+    seed: int = 0
+    progress: bool = True
+
+
+def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str], None] = print) -> tuple[Path, dict[str, Any]]:
+    """Run DAgger rounds, keep the round that evaluates best, evaluate it on fresh seeds: the run folder made under
+    `out_root` once the teacher is checked, and results.json's figures."""
+    import torch
+
+    from visualenv.env.registration import resolve
+    from visualenv.spec.loader import load_spec
+    from visualenv.train.evaluation import evaluate, final_evaluation, final_seed, make_eval_env, selection_seed
+    from visualenv.train.models import load_model, save_policy
+    from visualenv.train.sb3 import new_run_dir
+
+    spec_path = str(resolve(config.spec))
+    mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there
+    teacher = load_model(config.teacher)
+    _check_teacher(teacher, spec_path)
+    run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
+    log(f"run folder: {run_dir}")
+    _record_run(run_dir, config, spec_path)
+    torch.manual_seed(config.seed)
+    started = time.perf_counter()
+    rollouts = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack)
+    evaluator = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=config.frame_stack)
+    try:
+        student = _student(rollouts)
+        optimizer = torch.optim.Adam(student.parameters(), lr=config.learning_rate)
+        frames: list[np.ndarray] = []
+        labels: list[np.ndarray] = []
+        best: tuple[float, dict[str, Any]] | None = None
+        generator = np.random.default_rng(config.seed)
+        with (run_dir / "rounds.csv").open("w", newline="") as f:
+            writer = csv.writer(f)
+            writer.writerow(ROUNDS_COLUMNS)
+            for round_ in range(config.rounds):
+                obs, act, returns = _rollouts(rollouts, teacher, None if round_ == 0 else student, config.episodes)
+                frames.append(obs)
+                labels.append(act)
+                loss = _fit(student, optimizer, np.concatenate(frames), np.concatenate(labels), config, generator)
+                scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
+                if best is None or scored > best[0]:
+                    best = (scored, {k: v.clone() for k, v in student.state_dict().items()})
+                row = (round_, sum(len(x) for x in frames), round(float(np.mean(returns)), 3), round(loss, 6), round(scored, 3),
+                       round(time.perf_counter() - started, 1))
+                writer.writerow(row)
+                f.flush()
+                if config.progress:
+                    log(f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} ({'teacher' if round_ == 0 else 'student'}), "
+                        f"loss {loss:.4f}, evaluation {scored:.1f}")
+        save_policy(student, run_dir / "final_model.safetensors", half=False, algorithm="dagger", run_dir=run_dir)
+        assert best is not None
+        student.load_state_dict(best[1])
+        best_path = save_policy(student, run_dir / "best_model.safetensors", half=False, algorithm="dagger", run_dir=run_dir)
+    finally:
+        rollouts.close()
+        evaluator.close()
+    final_env = make_eval_env(spec_path, seed=final_seed(config.seed), frame_stack=config.frame_stack)
+    try:
+        results = final_evaluation(load_model(best_path), final_env, config.final_eval_episodes, final_seed(config.seed))
+    finally:
+        final_env.close()
+    results.update({"selection": {"eval_seed": selection_seed(config.seed), "mean_reward": best[0], "episodes": config.eval_episodes},
+                    "frames": sum(len(x) for x in frames), "teacher_steps": int(len(frames[0])),
+                    "wall_time_s": round(time.perf_counter() - started, 1), "model": best_path.name})
+    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    return run_dir, results
+
+
+def _record_run(run_dir: Path, config: DistillConfig, spec_path: str) -> None:
+    """config.json: the command, the settings under the keys `eval` and `export-policy` read, the versions, the teacher's file."""
+    from visualenv.versions import versions
+
+    teacher = Path(config.teacher)
+    record = {"command": shlex.join(sys.argv), "config": {**asdict(config), "algo": "dagger", "render": True}, "versions": versions(),
+              "spec_path": spec_path, "teacher": {"path": str(teacher), "sha256": hashlib.sha256(teacher.read_bytes()).hexdigest()}}
+    (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+
+
+def _check_teacher(teacher: Any, spec_path: str) -> None:
+    """A teacher that cannot read this env's state, or acts in another action space, is a clear error before anything runs."""
+    from visualenv.env import VisualEnv
+    from visualenv.spec import load_spec
+
+    env = VisualEnv(load_spec(spec_path), render=False)
+    try:
+        state, actions = env.observation_space, env.action_space
+    finally:
+        env.close()
+    if teacher.observation_space.shape != state.shape or teacher.action_space != actions:
+        raise ConfigError(f"the teacher acts on observations of shape {teacher.observation_space.shape} with actions {teacher.action_space}; "
+                          f"{spec_path}'s state-only observations have shape {state.shape} and its actions are {actions}: "
+                          "train the teacher on the same spec with `visualenv train --state-only`")
+
+
+def _student(vec_env: Any) -> Any:
+    """SB3's PPO CNN policy on the env's stacked, channels-first frames."""
+    from stable_baselines3.common.policies import ActorCriticCnnPolicy
+
+    return ActorCriticCnnPolicy(vec_env.observation_space, vec_env.action_space, lambda _: 0.0)
+
+
+def _rollouts(vec_env: Any, teacher: Any, student: Any | None, episodes: int) -> tuple[np.ndarray, np.ndarray, list[float]]:
+    """`episodes` episodes acted by the student (the teacher when None): each frame and the teacher's action in its state."""
+    env = vec_env.unwrapped.envs[0].unwrapped
+    discrete = getattr(env.action_space, "n", None)
+    frames: list[np.ndarray] = []
+    labels: list[np.ndarray] = []
+    returns: list[float] = []
+    obs = vec_env.reset()
+    ret = 0.0
+    while len(returns) < episodes:
+        label, _ = teacher.predict(env.state_observation()[None], deterministic=True)
+        frames.append(obs[0])
+        labels.append(np.asarray(label[0], dtype=np.float32 if discrete is None else np.int64))
+        action = label if student is None else student.predict(obs, deterministic=True)[0]
+        obs, reward, done, _ = vec_env.step(action)
+        ret += float(reward[0])
+        if done[0]:
+            returns.append(ret)
+            ret = 0.0
+    return np.stack(frames), np.stack(labels), returns
+
+
+def _fit(student: Any, optimizer: Any, frames: np.ndarray, labels: np.ndarray, config: DistillConfig, generator: np.random.Generator) -> float:
+    """`config.epochs` passes of minibatches over every frame so far; the last pass's mean loss."""
+    import torch
+
+    student.set_training_mode(True)
+    updates = max(1, int(config.epochs * len(frames) / config.batch_size))
+    losses = []
+    for _ in range(updates):
+        batch = generator.integers(0, len(frames), config.batch_size)
+        images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator)
+        loss = _imitation_loss(student.get_distribution(images).distribution, torch.from_numpy(labels[batch]))
+        optimizer.zero_grad()
+        loss.backward()
+        optimizer.step()
+        losses.append(loss.item())
+    student.set_training_mode(False)
+    last = losses[-max(1, len(frames) // config.batch_size):]
+    return float(np.mean(last))
+
+
+def _imitation_loss(distribution: Any, labels: Any) -> Any:
+    """How far the student's deterministic action is from the teacher's: squared error of the Gaussian's mean to a
+    continuous action, cross-entropy of the logits to a discrete one."""
+    import torch
+
+    if isinstance(distribution, torch.distributions.Categorical):
+        return torch.nn.functional.cross_entropy(distribution.logits, labels.long())
+    return torch.nn.functional.mse_loss(distribution.mean, labels)
+
+
+def _shifted(images: Any, shift: int, generator: np.random.Generator) -> Any:
+    """Each image moved by up to `shift` pixels each way, its edge pixels repeated (DrQ's random shift)."""
+    import torch
+
+    if shift == 0:
+        return images
+    n, _, h, w = images.shape
+    padded = torch.nn.functional.pad(images.float(), (shift, shift, shift, shift), mode="replicate").to(images.dtype)
+    dy, dx = generator.integers(0, 2 * shift + 1, (2, n))
+    return torch.stack([padded[i, :, y:y + h, x:x + w] for i, (y, x) in enumerate(zip(dy, dx))])
