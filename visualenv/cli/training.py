@@ -98,9 +98,13 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 @click.argument("spec")
 @click.option("--teacher", required=True, type=click.Path(exists=True, dir_okay=False),
               help="a state-only policy file of SPEC (best_model.safetensors of `visualenv train SPEC --state-only`)")
+@click.option("--student", type=click.Path(exists=True, dir_okay=False), default=None,
+              help="start from this policy file of an earlier distillation of SPEC (it acts from the first round on)")
 @click.option("--rounds", default=DistillConfig.rounds, show_default=True, type=click.IntRange(min=1),
               help="DAgger rounds; the teacher acts in the first, the student in the others")
 @click.option("--episodes", default=DistillConfig.episodes, show_default=True, type=click.IntRange(min=1), help="episodes rolled out per round")
+@click.option("--mixing", default=DistillConfig.mixing, show_default=True, type=click.FloatRange(0, 1),
+              help="the teacher acts a step of round r with probability MIXING ** r, else the student (DAgger's beta)")
 @click.option("--epochs", default=DistillConfig.epochs, show_default=True, type=click.FloatRange(min=0, min_open=True),
               help="passes over all frames gathered so far, per round")
 @click.option("--batch-size", default=DistillConfig.batch_size, show_default=True, type=click.IntRange(min=1))
@@ -116,7 +120,7 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 @click.option("--no-progress", is_flag=True)
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the final evaluation replays in `visualenv eval` on any CPU
-def distill(spec: str, teacher: str, rounds: int, episodes: int, epochs: float, batch_size: int, learning_rate: float, shift: int,
+def distill(spec: str, teacher: str, student: str | None, rounds: int, episodes: int, mixing: float, epochs: float, batch_size: int, learning_rate: float, shift: int,
             frame_stack: int, eval_episodes: int, final_episodes: int, seed: int, out_root: str, no_progress: bool) -> None:
     """Teach a pixel policy (CNN on stacked frames) to act as a state-only TEACHER of SPEC does (DAgger).
 
@@ -124,7 +128,7 @@ def distill(spec: str, teacher: str, rounds: int, episodes: int, epochs: float, 
     """
     from visualenv.train.distill import distill as run_distill
 
-    config = DistillConfig(spec=spec, teacher=teacher, rounds=rounds, episodes=episodes, epochs=epochs, batch_size=batch_size,
+    config = DistillConfig(spec=spec, teacher=teacher, student=student, rounds=rounds, episodes=episodes, mixing=mixing, epochs=epochs, batch_size=batch_size,
                            learning_rate=learning_rate, shift=shift, frame_stack=frame_stack, eval_episodes=eval_episodes,
                            final_eval_episodes=final_episodes, seed=seed, progress=not no_progress)
     _, results = run_distill(config, out_root, log=click.echo)
