@@ -1,12 +1,15 @@
 """A batch of physics envs: the share of a batch step that MuJoCo's stepping and the pose writing take, and memory per env.
 
     python benchmarks/physics_batch.py [--spec SPEC] [--envs 256] [--steps 40] [--resolution 8] [--mode state|rendered|both]
-                                       [--copies] [--spec-camera]
-    python benchmarks/physics_batch.py --kernels     # N MjData stepped: a Python loop, a thread pool, mujoco.rollout
+                                       [--copies] [--spec-camera] [--engine mujoco|lanes|both]
+    python benchmarks/physics_batch.py --kernels     # N MjData stepped: a Python loop, a thread pool, the batch, mujoco.rollout
 
 "physics" is the time in MuJoCo's stepping (the controls written, frame_skip ``mj_step``,
-``mj_rnePostConstraint``, the blow-up check), whether a batch steps each lane's MjData from its
-own generated step or all of them in one call; "poses" is the time writing every env's MuJoCo
+``mj_rnePostConstraint``, the blow-up check, the copies the reads take), whether a batch steps each
+lane's MjData from its own generated step or all of them in one call, by MuJoCo's batch API
+(``--engine mujoco``, where the installed mujoco has ``mujoco.batch``) or each lane's MjData on a
+thread pool (``--engine lanes``, the path before it; ``both`` alternates them, lanes first, in one
+process); "poses" is the time writing every env's MuJoCo
 poses into the scene: into each env's copy of the model's objects, and, where the bodies are drawn
 as instances, composing and writing every instancer's transforms (the whole of ``InstancedCopies.write``,
 the spec's own instanced objects included). Both are timed by wrapping the functions that do
@@ -69,8 +72,8 @@ def instrument(physics: Timer, poses: Timer) -> None:
 
     stepper = simulation.Simulation.stepper
 
-    def timed_stepper(self: Any, controls: Any) -> Any:
-        return physics.wrap(stepper(self, controls))
+    def timed_stepper(self: Any, controls: Any, *moved: Any) -> Any:
+        return physics.wrap(stepper(self, controls, *moved))
 
     simulation.Simulation.stepper = timed_stepper  # type: ignore[method-assign]
     try:
@@ -105,6 +108,15 @@ def spec_at(resolution: int, spec: Path, folder: str, spec_camera: bool = False)
     return out
 
 
+def use_engine(engine: str) -> None:
+    """Step batches by MuJoCo's batch API ("mujoco", where this code and mujoco have it) or each lane's MjData ("lanes")."""
+    try:
+        from visualenv.physics import batch, mujoco_batch
+    except ImportError:  # code before the batch API: always the lanes
+        return
+    batch.batch_module = mujoco_batch.batch_module if engine == "mujoco" else (lambda *args: None)  # type: ignore[assignment]
+
+
 def measure(spec: Path, n: int, steps: int, rendered: bool, copies: bool = False) -> None:
     from visualenv.env.batched import BatchedVectorEnv
 
@@ -112,6 +124,7 @@ def measure(spec: Path, n: int, steps: int, rendered: bool, copies: bool = False
     instrument(physics, poses)
     before = rss_mb()
     env = BatchedVectorEnv(spec, n, render=rendered)
+    engine = "mujoco.batch" if getattr(env._physics, "engine", None) is not None else "lanes"
     if rendered and copies:
         from visualenv.render.blender.batched import BatchedBlenderRenderer
 
@@ -129,18 +142,18 @@ def measure(spec: Path, n: int, steps: int, rendered: bool, copies: bool = False
     for _ in range(3):  # warm-up: the first render builds and compiles the scene
         env.step(action())
     physics.on = poses.on = True
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         env.step(action())
-    total = time.perf_counter() - start
+    total, cpu = time.perf_counter() - start, time.process_time() - cpu
     after = rss_mb()
     env.close()
     step_ms = total / steps * 1e3
     phys_ms, pose_ms = physics.seconds / steps * 1e3, poses.seconds / steps * 1e3
     share = (phys_ms + pose_ms) / step_ms * 100
     kind = ("rendered, copies" if copies else "rendered") if rendered else "state-only"
-    print(f"{spec.name} {kind} N={n}: batch step {step_ms:.2f} ms ({n / total * steps:.0f} env-steps/s); physics {phys_ms:.2f} ms, "
-          f"poses {pose_ms:.2f} ms: {share:.1f} % of the step; RSS +{after - before:.0f} MB = {(after - before) / n:.2f} MB/env", flush=True)
+    print(f"{spec.name} {kind}, {engine}, N={n}: batch step {step_ms:.2f} ms ({n / total * steps:.0f} env-steps/s); physics {phys_ms:.2f} ms, "
+          f"poses {pose_ms:.2f} ms: {share:.1f} % of the step; process CPU {cpu / steps * 1e3:.0f} ms a step; RSS +{after - before:.0f} MB = {(after - before) / n:.2f} MB/env", flush=True)
 
 
 def kernels(spec: Path, sizes: list[int], seconds: float) -> None:
@@ -182,12 +195,17 @@ def kernel(label: str, plan: Any, n: int, seconds: float) -> None:
     roller = rollout.Rollout(nthread=cores)
     scratch = [mujoco.MjData(model) for _ in range(cores)]
     models = [s.model for s in sims]
+    use_engine("mujoco")
     batch = plan.batch(sims, workers=cores)
+    use_engine("lanes")
+    lanes = plan.batch([plan.simulation() for _ in range(n)], workers=cores)
     zeros = [np.zeros(n) for _ in plan.controls]
     ways = {
         "python loop": lambda: run(pairs),
         f"{cores} threads": lambda: list(pool.map(run, chunks)),
-        f"BatchSimulation.advance ({cores} threads)": lambda: batch.advance(zeros),
+        f"BatchSimulation.advance, lanes ({cores} threads)": lambda: lanes.advance(zeros),
+        f"BatchSimulation.advance, {'mujoco.batch' if getattr(batch, 'engine', None) else 'lanes'} ({cores} threads)":
+            lambda: batch.advance(zeros),
         f"rollout ({cores} threads)": lambda: roller.rollout(models, scratch, start_state, control, nstep=fs,
                                                               state=states, sensordata=sensors, skip_checks=True),
     }
@@ -201,6 +219,7 @@ def kernel(label: str, plan: Any, n: int, seconds: float) -> None:
     pool.shutdown()
     roller.close()
     batch.close()
+    lanes.close()
 
 
 def main() -> None:
@@ -213,16 +232,19 @@ def main() -> None:
     parser.add_argument("--kernels", action="store_true", help="only compare ways of stepping N MjData (N = 16, 64, 256)")
     parser.add_argument("--copies", action="store_true", help="rendered: copy every object per env (the path before instanced bodies)")
     parser.add_argument("--spec-camera", action="store_true", help="observe through a fixed camera of the spec's own (for a moving model camera)")
+    parser.add_argument("--engine", choices=("mujoco", "lanes", "both"), default="mujoco",
+                        help="step by MuJoCo's batch API, each lane's MjData (the path before it), or both, alternated")
     args = parser.parse_args()
     if args.kernels:
         kernels(args.spec, [16, 64, 256], 1.0)
         return
+    engines = ("lanes", "mujoco") if args.engine == "both" else (args.engine,)
     with tempfile.TemporaryDirectory() as folder:
         spec = spec_at(args.resolution, args.spec, folder, args.spec_camera)
-        if args.mode in ("state", "both"):
-            measure(spec, args.envs, args.steps, rendered=False)
-        if args.mode in ("rendered", "both"):
-            measure(spec, args.envs, args.steps, rendered=True, copies=args.copies)
+        for rendered in {"state": (False,), "rendered": (True,), "both": (False, True)}[args.mode]:
+            for engine in engines:
+                use_engine(engine)
+                measure(spec, args.envs, args.steps, rendered=rendered, copies=args.copies)
 
 
 if __name__ == "__main__":

@@ -89,8 +89,11 @@ class PhysicsPlan:
     def batch(self, sims: list[Any], workers: int | None = None) -> Any:
         """The envs' simulations stepped and read together (:class:`~visualenv.physics.batch.BatchSimulation`)."""
         from visualenv.physics.batch import BatchSimulation
+        from visualenv.physics.model_fields import is_writable
 
-        return BatchSimulation(sims, self.reads, self.controls, workers, self.moved)
+        table = self.model.names.values
+        written = any(is_writable(table[n][0]) for n in (*self.reset_targets, *self.redraw_targets))
+        return BatchSimulation(sims, self.reads, self.controls, workers, self.moved, models_written=written)
 
     def bind_batch(self, env: dict[str, Any], batch: Any) -> None:
         """Put a batch's column reads and its MuJoCo step into a vectorised function's globals."""

@@ -142,12 +142,13 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self.max_episode_steps = -(-step_limit_ // self.action_repeat)
         #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
         self.rules = EpisodeRules(program, step_limit_, observes_state=not self.uses_camera and program.physics is None)
-        self.lanes = [VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)]  # the batch repeats
+        self._lanes = [VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)]  # the batch repeats
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
+        self._pose_sources: list[Any] | None = None  # what the pose arrays view: each env's MjData, or MuJoCo's batch's rows
         if program.physics is not None:
-            physics = program.physics.batch([lane.simulation for lane in self.lanes])
+            physics = program.physics.batch([lane.simulation for lane in self._lanes])
             self._batch = program.batch_functions(physics)
             if self._batch.step is not None:
                 self._physics = physics
@@ -159,7 +160,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self.uses_camera and backend == BATCH_BACKEND:
             check_batchable(program.render_plan().with_options(self._renderer_options), n)  # refused now, not at the first render
         self._backend = backend
-        single = self.lanes[0]
+        single = self._lanes[0]
         self.single_action_space = single.action_space
         self.action_space = batch_space(single.action_space, n)
         self.single_observation_space = observation_space(observation) if self.uses_camera else single.observation_space  # type: ignore[arg-type]
@@ -177,6 +178,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._errors = np.full(n, None, dtype=object)
         self._autoreset = np.zeros(n, dtype=bool)
         self._was_reset = False
+
+    @property
+    def lanes(self) -> list[VisualEnv]:
+        """Each env's state-only single env, its MuJoCo data whole (MuJoCo's batch API steps copies of its own: handed out, they
+        are brought up to date first)."""
+        if self._physics is not None:
+            for i in range(self.num_envs):
+                self._physics.sync(i)
+        return self._lanes
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
@@ -341,7 +351,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def _replay_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
         """Env i's step, whose MuJoCo step the batch took, run again by its lane: its result or its located fault, as env i alone."""
-        physics, simulation = self._physics, self.lanes[i].simulation
+        physics, simulation = self._physics, self._lanes[i].simulation
         try:
             with simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
                 self._step_lane(i, action, rewards, terminated, truncated)
@@ -364,13 +374,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def _lane_at(self, i: int) -> VisualEnv:
         """Env i's lane, put where env i is in its episode."""
-        lane = self.lanes[i]
+        lane = self._lanes[i]
+        if self._physics is not None:
+            self._physics.sync(i)
         lane.restore(self._state[:, i], int(self._steps[i]), int(self._fired[i]), bool(self._success[i]))
         return lane
 
     def _reset_lane(self, i: int, *, seed: int | None = None, options: dict[str, Any] | None = None) -> None:
         try:
-            self._state[:, i] = self.lanes[i].begin_episode(seed=seed, options=options)
+            self._state[:, i] = self._lanes[i].begin_episode(seed=seed, options=options)
         except StepError as err:
             raise err.in_env(i) from None
         if self._physics is not None:
@@ -417,8 +429,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses."""
         if self.program.physics is not None:
             plan = self.program.physics
-            if self._pose_arrays is None or plan.posed_geoms:  # live views of each lane's MjData, made once (geoms a reset moves: copies)
-                self._pose_arrays = [plan.poses(lane.data) for lane in self.lanes]
+            sources = self._physics.pose_sources() if self._physics is not None else [lane.data for lane in self._lanes]
+            if self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources:  # live views, made once (moved geoms: copies)
+                self._pose_arrays = [plan.poses(source) for source in sources]
+                self._pose_sources = sources
             self.renderer.set_physics_poses_batch(self._pose_arrays)
 
     def _observe(self, envs: np.ndarray | None = None) -> Any:
@@ -454,13 +468,13 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if isinstance(obs, dict):
             out = {key: value.copy() for key, value in obs.items()}
             for row, i in enumerate(rows):
-                noisy = self.lanes[i].apply_sensors({key: value[row] for key, value in obs.items()}, self._sensors)
+                noisy = self._lanes[i].apply_sensors({key: value[row] for key, value in obs.items()}, self._sensors)
                 for key in out:
                     out[key][row] = noisy[key]
             return out
         out = obs.copy()
         for row, i in enumerate(rows):
-            out[row] = self.lanes[i].apply_sensors(obs[row], self._sensors)
+            out[row] = self._lanes[i].apply_sensors(obs[row], self._sensors)
         return out
 
     def binding_values(self) -> list[tuple]:

@@ -1,13 +1,18 @@
 """N envs' simulations stepped together, their named values read as numpy columns across envs.
 
 A batch of a physics spec runs the program's vectorised step (:mod:`visualenv.compiler.vectorized`)
-on columns: its reads of the model's names and its MuJoCo step are this module's. Each env keeps
-its own MjModel and MjData (those of its lane, so env i of a batch is env i alone); one call steps
-all of them (``frame_skip`` physics steps each, as the spec's convention makes them), split over a thread
-pool where there are cores for it (MuJoCo releases the GIL while it steps). After the step every
-env's arrays that the program reads are copied into one (N, size) array per MjData field, so a
-read is one numpy indexing per field for the whole batch, and a step's reads before the MuJoCo
-step see the copies made after the last one (or after a reset).
+on columns: its reads of the model's names and its MuJoCo step are this module's. Env i steps on
+its own MjModel (that of its lane, so env i of a batch is env i alone), ``frame_skip`` physics
+steps as the spec's convention makes them, in one call for the batch:
+
+* by MuJoCo's own batch API where the installed mujoco has it and it fits the spec
+  (:mod:`visualenv.physics.mujoco_batch`): its C threads step the envs, and what they computed
+  comes back as ``(N, size)`` arrays;
+* else each lane's MjData, split over a thread pool where there are cores for it (MuJoCo releases
+  the GIL while it steps), each env's arrays copied into ``(N, size)`` arrays after its step.
+
+Either way a read is one numpy indexing per field for the whole batch, and a step's reads before
+the MuJoCo step see the values after the last one (or after a reset, copied from the lane).
 
 ``mujoco.rollout`` is not used: it steps scratch MjData from state vectors and returns states, not
 the stepped MjData (body poses, sensors after ``mj_rnePostConstraint``, contacts) nor the solver's
@@ -23,7 +28,8 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 
 import numpy as np
 
-from visualenv.physics.model_fields import SCALARS, array_view
+from visualenv.physics.model_fields import MODEL_PREFIX, SCALARS, array_view
+from visualenv.physics.mujoco_batch import MujocoBatch, batch_module
 from visualenv.physics.simulation import FATAL_WARNINGS, Simulation, touching
 
 #: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)
@@ -48,7 +54,7 @@ class BatchSimulation:
     """The simulations of a batch's envs (one per env, in env order), stepped and read together."""
 
     def __init__(self, sims: Sequence[Simulation], reads: Mapping[str, Sequence[str]], controls: Sequence[str],
-                 workers: int | None = None, moved: Sequence[str] = ()) -> None:
+                 workers: int | None = None, moved: Sequence[str] = (), models_written: bool = False) -> None:
         self.sims = list(sims)
         first = self.sims[0]
         self.num_envs = n = len(self.sims)
@@ -83,7 +89,13 @@ class BatchSimulation:
         self._lanes = [(sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
                        for i, sim in enumerate(self.sims)]
         self.workers = max(1, min(default_workers(n) if workers is None else workers, n))
-        self._pool = ThreadPoolExecutor(self.workers - 1, thread_name_prefix="visualenv-mujoco") if self.workers > 1 else None
+        api = batch_module(first.convention, bool(self.touching), bool(moved))
+        #: MuJoCo's own batch API stepping the envs (None: the lanes' MjData are stepped here, on a thread pool)
+        self.engine = None if api is None else MujocoBatch(api, self.sims, [f for f in self.fields if not f.startswith(MODEL_PREFIX)],
+                                                           self.workers, moved, models_written)
+        self._pool = None
+        if self.engine is None and self.workers > 1:
+            self._pool = ThreadPoolExecutor(self.workers - 1, thread_name_prefix="visualenv-mujoco")
         for i in range(n):
             self.refresh(i)
 
@@ -104,11 +116,27 @@ class BatchSimulation:
                 self.values[f][i, 0] = getattr(data, f)
         for c, column in self.touching.items():
             column[i] = touching(data, self.contacts[c])
+        if self.engine is not None:
+            self.engine.load(i)
+
+    def sync(self, i: int) -> None:
+        """Env i's lane's MjData made whole before the lane steps, reads or is handed out (MuJoCo's batch steps its own)."""
+        if self.engine is not None:
+            self.engine.sync(i)
+
+    def pose_sources(self) -> list[Any]:
+        """Per env, what a renderer poses it from (MjData's pose arrays as attributes); the same list while nothing moved."""
+        return [sim.data for sim in self.sims] if self.engine is None else self.engine.pose_sources()
 
     def close(self) -> None:
+        """The pool's threads ended; MuJoCo's batch let go, every lane's MjData made whole first."""
         if self._pool is not None:
             self._pool.shutdown()
             self._pool = None
+        if self.engine is not None:
+            for i in range(self.num_envs):
+                self.engine.sync(i)
+            self.engine = None
 
     # -- the generated code's calls ------------------------------------------------------------------
 
@@ -165,7 +193,9 @@ class BatchSimulation:
         self.kept = {}
         if self._errors or self._suspects is not None:
             keep = self.active if self._errors else self.active[self._suspects[self.active]]  # type: ignore[index]
-            self.kept = {i: copy.copy(self.sims[i].data) for i in keep.tolist()}
+            for i in keep.tolist():
+                self.sync(i)
+                self.kept[i] = copy.copy(self.sims[i].data)
         n = self.num_envs
         ctrl = self._ctrl
         ctrl[:] = 0.0
@@ -180,7 +210,9 @@ class BatchSimulation:
             finite = np.isfinite(self._moved).all(axis=1)
             self.blown[[i for i in active if not finite[i]]] = True
             active = [i for i in active if finite[i]]
-        if self._pool is None or len(active) < 2 * self.workers:
+        if self.engine is not None:
+            warned = self._step_engine(np.array(active, dtype=int))
+        elif self._pool is None or len(active) < 2 * self.workers:
             warned = self._run(active)
         else:
             size = -(-len(active) // self.workers)
@@ -193,6 +225,16 @@ class BatchSimulation:
             self.blown[warned] = True
         finite = np.isfinite(self.values["qpos"]).all(axis=1) & np.isfinite(self.values["qvel"]).all(axis=1)
         self.blown[self.active] |= ~finite[self.active]
+
+    def _step_engine(self, envs: np.ndarray) -> list[int]:
+        """`envs` stepped by MuJoCo's batch, what they computed copied into the batch's arrays; the envs MuJoCo warned about."""
+        engine = self.engine
+        assert engine is not None
+        warned = engine.step(envs, self._ctrl, self._moved, self._fatal)
+        rows = slice(None) if envs.size == self.num_envs else envs
+        for f, out in engine.outputs.items():
+            self.values[f][rows] = out[rows]
+        return warned
 
     def _run(self, envs: list[int]) -> list[int]:
         """Step `envs` one after another (a thread's share): controls, the steps, the copies; the envs MuJoCo warned about."""
