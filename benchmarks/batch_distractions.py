@@ -3,6 +3,7 @@ batch of N envs, without distractions, with every kind fixed per episode (0.2), 
 camera orbit: no shader compiled again), and with every kind drifting every step. Kinds alternate, each in a fresh
 process. A reset draws every env's distraction; a fixed one changes nothing in the steps after it, a dynamic one changes
 every env's every step (its camera orbit makes Cycles compile the tiles shader again, as a camera the state turns).
+Wall time and this process's CPU time (every thread's: less moved by other processes on a shared machine).
 
     python benchmarks/batch_distractions.py [N,...] [ROUNDS] [KIND,...]
 """
@@ -30,16 +31,18 @@ def one(n: int, kind: str, steps: int = 16, resets: int = 3) -> None:
     batch.reset(seed=0)
     for _ in range(3):
         batch.step(rng.uniform(-1, 1, (n, 1)).astype(np.float32))
-    start = time.perf_counter()
+    start, cpu = time.perf_counter(), time.process_time()
     for _ in range(steps):
         batch.step(rng.uniform(-1, 1, (n, 1)).astype(np.float32))
-    step_ms = (time.perf_counter() - start) / steps * 1000
-    times = []
+    step_ms, step_cpu = ((time.perf_counter() - start) / steps * 1000, (time.process_time() - cpu) / steps * 1000)
+    times, cpus = [], []
     for seed in range(1, resets + 1):
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         batch.reset(seed=seed)
         times.append((time.perf_counter() - start) * 1000)
-    print(f"N={n:>4} {kind:<16}: {step_ms:7.1f} ms a step, {statistics.median(times):7.1f} ms a reset", flush=True)
+        cpus.append((time.process_time() - cpu) * 1000)
+    print(f"N={n:>4} {kind:<16}: a step {step_ms:7.1f} ms ({step_cpu:7.1f} ms CPU), a reset {statistics.median(times):7.1f} ms "
+          f"({statistics.median(cpus):7.1f} ms CPU)", flush=True)
     batch.close()
 
 

@@ -134,10 +134,14 @@ def test_an_env_carries_its_distraction_through_pickle() -> None:
 
 
 def test_any_spec_takes_them_and_the_spec_section_is_checked(tmp_path: Path) -> None:
-    """A spec of the house's own scene (Goalie) is distracted the same way; a bad section names its line."""
+    """A spec of the house's own scene (Goalie) is distracted the same way, and its background changes only the sky,
+    though Goalie's world lights its field; a bad section names its line."""
     (clean,) = first_frames("Goalie-v0", [0])
     (moved,) = first_frames("Goalie-v0", [0], distractions=0.2)
     assert mean_difference(clean, moved) > 2
+    (backdrop,) = first_frames("Goalie-v0", [0], distractions={"difficulty": 0.3, "camera": False, "colors": False})
+    sky = (backdrop != clean).any(axis=-1)
+    assert sky.mean() > 0.05 and np.array_equal(backdrop[20:], clean[20:]), sky.mean()  # rows 0-15 are the sky
     spec = tmp_path / "bad.yaml"
     text = CARTPOLE.read_text(encoding="utf-8").replace("model: assets/", f"model: {CARTPOLE.parent}/assets/")
     spec.write_text(text + "distractions: {difficulty: 2}\n", encoding="utf-8")

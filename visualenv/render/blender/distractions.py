@@ -7,18 +7,19 @@ the observation is rendered through the child. Colours shift where colour bindin
 material's base colour or its tint, :func:`~visualenv.render.blender.materials.color_sockets`), so a MuJoCo look and
 a bound colour are shifted alike. A value is written only when it changes: Cycles updates a shader on every write.
 
-The sky's shift and the background are drawn on a *backdrop* (:func:`make_backdrop`): a sphere about the camera just
-inside its far clip, seen by camera rays only, so it lights nothing and the world lights the scene as before. It lets
-1 - opacity of what lies behind it (the sky) through and adds (1 - opacity) x the sky's shift + opacity x the
-background's pattern. Its shader reads those numbers as attributes of its object (Attribute nodes of type Instancer:
-an instance's own, else its object's custom properties), so a batch draws one backdrop per env, instances of one
-mesh each with its own numbers, and its tiles equal the envs alone (:mod:`batch_distractions`).
+The sky's shift and the background are drawn on a *backdrop* (:func:`make_backdrops`): a sphere about the camera
+just inside its far clip, seen by camera rays only, which lets 1 - opacity of the sky through and adds
+(1 - opacity) x the sky's shift + opacity x the background's pattern. It lights nothing, and the world is left as it
+was, so the scene is lit as without distractions to the bit (the world's own camera-only branch did not: Goalie's
+field came out 4 levels brighter with a background, its world's light sampled otherwise). Its numbers are attributes
+of its instance, so a batch draws one backdrop per env, each with its own (:mod:`batch_distractions`), and a tile
+equals its env alone. Its cost: every camera ray meets one more surface (docs/distractions.md).
 """
 
 from __future__ import annotations
 
 import re
-from typing import Any, Callable
+from typing import Any, Callable, Sequence
 
 import bmesh
 import bpy
@@ -33,6 +34,8 @@ from visualenv.render.distractions import Distraction, background, color_shifts
 FALLBACK_FOCUS = 3.0
 #: what Blender appends to a datablock's name that another holds
 TAKEN_SUFFIX = re.compile(r"\.\d{3,}$")
+#: the custom property that marks a backdrop (a ray cast for the orbit's centre that meets it met nothing)
+BACKDROP = "visualenv_backdrop"
 #: the backdrop's attributes, three numbers each: the sky's shift, the background's two colours, and its pattern's
 #: scale, time (its fourth coordinate) and opacity
 SKY_SHIFT, FIRST, SECOND, PATTERN = ("visualenv_sky_shift", "visualenv_background_first", "visualenv_background_second",
@@ -40,8 +43,6 @@ SKY_SHIFT, FIRST, SECOND, PATTERN = ("visualenv_sky_shift", "visualenv_backgroun
 #: the backdrop's vertices lie this share of the camera's far clip away; its faces at least 99.9 % of that (an icosphere
 #: of BACKDROP_SUBDIVISIONS): what lies between them and the far clip is seen through the backdrop
 BACKDROP_REACH, BACKDROP_SUBDIVISIONS = 0.999, 5
-#: the custom property that marks a backdrop (a ray cast that meets it met nothing)
-BACKDROP = "visualenv_backdrop"
 #: ray visibilities a backdrop turns off: only camera rays see it
 UNSEEN_BY = ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter", "visible_shadow")
 
@@ -50,7 +51,7 @@ class DistractionRig:
     """The cameras, colour sockets and backdrop of one env's scene that distractions change; :meth:`apply` draws one."""
 
     def __init__(self, scene: Any, cameras: list[Any], backdrop: bool = False) -> None:
-        """`backdrop`: make the backdrop (a distraction with a background or colours will come)."""
+        """`backdrop`: make the backdrop, for the sky's shift and the background (a distraction with either will come)."""
         self._scene = scene
         #: the observation camera each child stands for, by the parent's name
         self.children: dict[str, Any] = {}
@@ -68,12 +69,11 @@ class DistractionRig:
         self._written = list(self._base)
         self._last: Distraction | None = None
         self._shifts = np.zeros((len(self._sockets) + 1, 3))  # the current distraction's (color_shifts), the sky's last
-        #: the backdrop, about the first camera (None: no background or colours)
+        #: the object that holds the backdrop, about the first camera (None: no background or colours)
         self.backdrop = None
         if backdrop:
             first = next(iter(self.children.values()))
-            name = f"{first.name} backdrop"
-            self.backdrop = make_backdrop(scene.collection, name, first.data.clip_end, backdrop_material(name))
+            self.backdrop = make_backdrops(scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end)
             self.backdrop.parent = first
             self.backdrop.matrix_parent_inverse = Matrix.Identity(4)
 
@@ -86,9 +86,7 @@ class DistractionRig:
                 child.matrix_basis = orbit(distraction, self._focus_of(name))
             self._shifts = color_shifts(distraction, len(self._sockets))
             if self.backdrop is not None:
-                for key, numbers in backdrop_values(distraction, self._shifts[-1]).items():
-                    self.backdrop[key] = numbers
-                self.backdrop.update_tag()  # a custom property's change alone does not reach Cycles
+                write_backdrops(self.backdrop, [distraction], self._shifts[-1:])
             self._last = distraction
         for i, socket in enumerate(self._sockets):
             now = tuple(socket.default_value)
@@ -159,7 +157,7 @@ def shift_by_attribute(material: Any, name: str) -> None:
     assert sockets is not None, "a distracted material has a Principled BSDF (distracted_materials)"
     target = sockets[0]
     nodes, links = material.node_tree.nodes, material.node_tree.links
-    shift = _mix(nodes, "ADD")
+    shift = mix_node(nodes, "ADD")
     shift.name = SHIFTED
     shift.clamp_result = True
     shifted, base = [sock for sock in shift.inputs if sock.type == "RGBA"]
@@ -171,18 +169,18 @@ def shift_by_attribute(material: Any, name: str) -> None:
     links.new(next(sock for sock in shift.outputs if sock.type == "RGBA"), target)
 
 
-def backdrop_values(distraction: Distraction, sky_shift: np.ndarray) -> dict[str, tuple[float, float, float]]:
-    """The backdrop's numbers for `distraction` (its sky's shift given: the last row of its colour shifts)."""
-    shown = background(distraction)
-    shift = tuple(float(v) for v in sky_shift)
-    if shown is None:
-        return {SKY_SHIFT: shift, FIRST: (0.0, 0.0, 0.0), SECOND: (0.0, 0.0, 0.0), PATTERN: (1.0, 0.0, 0.0)}  # type: ignore[dict-item]
-    return {SKY_SHIFT: shift, FIRST: shown.first, SECOND: shown.second, PATTERN: (shown.scale, shown.time, shown.opacity)}  # type: ignore[dict-item]
+def mix_node(nodes: Any, blend: str) -> Any:
+    node = nodes.new("ShaderNodeMix")
+    node.data_type = "RGBA"
+    node.blend_type = blend
+    node.inputs["Factor"].default_value = 1.0
+    return node
 
 
-def make_backdrop(collection: Any, name: str, clip_end: float, material: Any) -> Any:
-    """A backdrop in `collection` for a camera whose far clip is `clip_end`: an icosphere about the origin (parent it
-    to the camera, or instance it) just inside the clip, of `material`, seen by camera rays only."""
+def make_backdrops(collection: Any, name: str, places: np.ndarray, clip_end: float) -> Any:
+    """Backdrops in `collection` about `places` (``(n, 3)``, in the space of the object returned: parent it to a camera)
+    for cameras whose far clip is `clip_end`: instances of one hidden icosphere just inside it on the points of a mesh,
+    whose attributes hold each one's numbers (:func:`write_backdrops`)."""
     mesh = bpy.data.meshes.new(name)
     bm = bmesh.new()
     try:
@@ -190,19 +188,61 @@ def make_backdrop(collection: Any, name: str, clip_end: float, material: Any) ->
         bm.to_mesh(mesh)
     finally:
         bm.free()
-    mesh.materials.append(material)
-    obj = bpy.data.objects.new(name, mesh)
-    obj[BACKDROP] = True
-    collection.objects.link(obj)
+    mesh.materials.append(backdrop_material(name))
+    sphere = bpy.data.objects.new(name, mesh)
+    collection.objects.link(sphere)
     for visibility in UNSEEN_BY:
-        setattr(obj, visibility, False)
-    return obj
+        setattr(sphere, visibility, False)
+    sphere.hide_render = True  # its instances draw it
+    points = bpy.data.meshes.new(f"{name} places")
+    points.vertices.add(len(places))
+    points.vertices.foreach_set("co", np.asarray(places, dtype=np.float32).ravel())
+    for key in (SKY_SHIFT, FIRST, SECOND, PATTERN):
+        points.attributes.new(key, "FLOAT_COLOR", "POINT")
+    holder = bpy.data.objects.new(f"{name} places", points)
+    collection.objects.link(holder)
+    holder.modifiers.new("visualenv backdrops", "NODES").node_group = _instancing(name, sphere)
+    sphere[BACKDROP] = holder[BACKDROP] = True
+    return holder
+
+
+def write_backdrops(holder: Any, distractions: Sequence[Distraction], sky_shifts: np.ndarray) -> None:
+    """Each backdrop's numbers (one distraction per point of `holder`, made by :func:`make_backdrops`; its sky's shift
+    given, ``(n, 3)``: the last row of its colour shifts): the shift, the background's colours, and its pattern's
+    scale, time and opacity (0: no background)."""
+    shown = [background(d) for d in distractions]
+    numbers = {SKY_SHIFT: np.asarray(sky_shifts),
+               FIRST: np.array([b.first if b else (0.0, 0.0, 0.0) for b in shown]),
+               SECOND: np.array([b.second if b else (0.0, 0.0, 0.0) for b in shown]),
+               PATTERN: np.array([(b.scale, b.time, b.opacity) if b else (1.0, 0.0, 0.0) for b in shown])}
+    for key, values in numbers.items():
+        rgba = np.ones((len(values), 4), dtype=np.float32)
+        rgba[:, :3] = values
+        holder.data.attributes[key].data.foreach_set("color", rgba.ravel())
+    holder.data.update_tag()
+
+
+def _instancing(name: str, obj: Any) -> Any:
+    """Geometry Nodes: an instance of `obj` on every point (the points' attributes go with it)."""
+    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    info = nodes.new("GeometryNodeObjectInfo")
+    info.transform_space = "ORIGINAL"
+    info.inputs["Object"].default_value = obj
+    info.inputs["As Instance"].default_value = True
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    links.new(nodes.new("NodeGroupInput").outputs[0], on_points.inputs["Points"])
+    links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    links.new(on_points.outputs["Instances"], nodes.new("NodeGroupOutput").inputs[0])
+    return group
 
 
 def backdrop_material(name: str) -> Any:
     """The backdrop's shader: Transparent of 1 - opacity, plus Emission of (1 - opacity) x the sky's shift + opacity x
-    the pattern, two colours blended by a 4D noise of the ray's direction (scale and time its attributes'), as the
-    world's own camera rays saw the background before; every number an attribute. Not a light Cycles samples."""
+    the pattern, two colours blended by a 4D noise of the ray's direction (scale and time its attributes'), as one
+    env's world shows them to its camera rays; every number an attribute. Not a light Cycles samples."""
     material = bpy.data.materials.new(name)
     ensure_node_tree(material)
     material.cycles.emission_sampling = "NONE"
@@ -219,9 +259,10 @@ def backdrop_material(name: str) -> Any:
     links.new(direction.outputs["Vector"], noise.inputs["Vector"])
     links.new(pattern.outputs["X"], noise.inputs["Scale"])
     links.new(pattern.outputs["Y"], noise.inputs["W"])
-    blend, glow = _mix(nodes, "MIX"), _mix(nodes, "MIX")
+    blend, glow = mix_node(nodes, "MIX"), mix_node(nodes, "MIX")
     links.new(noise.outputs["Fac"], blend.inputs["Factor"])
-    for node, first, second in ((blend, env_attribute(nodes, FIRST), env_attribute(nodes, SECOND)), (glow, env_attribute(nodes, SKY_SHIFT), blend)):
+    for node, first, second in ((blend, env_attribute(nodes, FIRST), env_attribute(nodes, SECOND)),
+                                (glow, env_attribute(nodes, SKY_SHIFT), blend)):
         a, b = [sock for sock in node.inputs if sock.type == "RGBA"]
         links.new(first.outputs["Color"], a)
         links.new(next(sock for sock in second.outputs if sock.type == "RGBA"), b)
@@ -230,7 +271,8 @@ def backdrop_material(name: str) -> Any:
     through.operation = "SUBTRACT"
     through.inputs[0].default_value = 1.0
     links.new(pattern.outputs["Z"], through.inputs[1])
-    transparent, emission, both = nodes.new("ShaderNodeBsdfTransparent"), nodes.new("ShaderNodeEmission"), nodes.new("ShaderNodeAddShader")
+    transparent, emission = nodes.new("ShaderNodeBsdfTransparent"), nodes.new("ShaderNodeEmission")
+    both = nodes.new("ShaderNodeAddShader")
     links.new(through.outputs["Value"], transparent.inputs["Color"])
     links.new(next(sock for sock in glow.outputs if sock.type == "RGBA"), emission.inputs["Color"])
     emission.inputs["Strength"].default_value = 1.0
@@ -238,11 +280,3 @@ def backdrop_material(name: str) -> Any:
     links.new(emission.outputs[0], both.inputs[1])
     links.new(both.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
     return material
-
-
-def _mix(nodes: Any, blend: str) -> Any:
-    node = nodes.new("ShaderNodeMix")
-    node.data_type = "RGBA"
-    node.blend_type = blend
-    node.inputs["Factor"].default_value = 1.0
-    return node

@@ -187,7 +187,7 @@ class BlenderRenderer(Renderer):
         self._resolution: tuple[int, int] | None = None
         self._config: cfg.EngineConfig | None = None
         self._mode = ""
-        #: backdrops of the distractions (:mod:`distractions`): seen in colour renders only
+        #: the distractions' backdrops (:mod:`distractions`): seen in colour renders only
         self._backdrops: list[Any] = []
         self._depth_range: tuple[float, float] | None = None
         self._depth_forward: tuple[float, ...] | None = None
@@ -453,14 +453,14 @@ class BlenderRenderer(Renderer):
             self._lights.hide()
         elif self._mode == "segmentation":
             self._lights.show()
-        for sphere in self._backdrops:
-            sphere.hide_render = mode != "color"
+        for holder in self._backdrops:
+            holder.hide_render = mode != "color"
         self._mode = mode
 
-    def _add_backdrop(self, sphere: Any) -> None:
-        """A distraction's backdrop, shown in colour renders only; the rays that pass through it need transparent bounces."""
-        sphere.hide_render = self._mode != "color"
-        self._backdrops.append(sphere)
+    def _add_backdrop(self, holder: Any) -> None:
+        """A distraction's backdrops, shown in colour renders only; the rays that pass through them need transparent bounces."""
+        holder.hide_render = self._mode != "color"
+        self._backdrops.append(holder)
         self._see_through = True
         self._config = None  # the bounces written again at the next render
 
