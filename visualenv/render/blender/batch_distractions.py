@@ -30,6 +30,7 @@ from visualenv.render.blender.env_attributes import EnvAttributes, shift_name
 from visualenv.render.distractions import Distraction, color_shifts
 from visualenv.spec.models import Distractions
 
+
 class BatchDistractions:
     """The distractions of a batch's envs (:attr:`current`, one per env), drawn into its scene by :meth:`draw`."""
 
@@ -65,9 +66,9 @@ class BatchDistractions:
         return self._backdrops
 
     def draw(self) -> None:
-        """Write the numbers of every env whose distraction changed since the last draw."""
-        changed = [k for k, (now, drawn) in enumerate(zip(self.current, self._drawn)) if now != drawn]
-        if not changed:
+        """Write every env's numbers where any env's distraction changed since the last draw (only those that changed
+        reach Blender: :class:`EnvAttributes` compares)."""
+        if self.current == self._drawn:
             return
         shifts = np.stack([color_shifts(d, self._count) for d in self.current])  # (N, materials + 1, 3), the sky's last
         if self.shifting and self._values is not None:

@@ -40,8 +40,8 @@ BACKDROP = "visualenv_backdrop"
 #: scale, time (its fourth coordinate) and opacity
 SKY_SHIFT, FIRST, SECOND, PATTERN = ("visualenv_sky_shift", "visualenv_background_first", "visualenv_background_second",
                                      "visualenv_background_pattern")
-#: the backdrop's vertices lie this share of the camera's far clip away; its faces at least 99.9 % of that (an icosphere
-#: of BACKDROP_SUBDIVISIONS): what lies between them and the far clip is seen through the backdrop
+#: the backdrop's vertices lie this share of the camera's far clip away, its faces at least 99.89 % of that (an
+#: icosphere of BACKDROP_SUBDIVISIONS, 5,120 faces): what lies in the last 0.2 % before the far clip is seen through it
 BACKDROP_REACH, BACKDROP_SUBDIVISIONS = 0.999, 5
 #: ray visibilities a backdrop turns off: only camera rays see it
 UNSEEN_BY = ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter", "visible_shadow")
@@ -162,7 +162,7 @@ def shift_by_attribute(material: Any, name: str) -> None:
     shift.clamp_result = True
     shifted, base = [sock for sock in shift.inputs if sock.type == "RGBA"]
     links.new(env_attribute(nodes, name).outputs["Color"], shifted)
-    if target.is_linked:  # an instance's bound colour
+    if target.is_linked:  # a node drives the colour
         links.new(target.links[0].from_socket, base)
     else:
         base.default_value = target.default_value
@@ -170,6 +170,7 @@ def shift_by_attribute(material: Any, name: str) -> None:
 
 
 def mix_node(nodes: Any, blend: str) -> Any:
+    """A Mix node of two colours by `blend` (its blend type), its factor 1."""
     node = nodes.new("ShaderNodeMix")
     node.data_type = "RGBA"
     node.blend_type = blend
