@@ -181,9 +181,9 @@ def test_each_tile_is_the_envs_own_render(spec):
 
 
 def test_a_batch_past_the_image_limit_renders_in_several_calls(monkeypatch):
-    from visualenv.render.blender import batched
+    from visualenv.render.blender import batch_calls, batched
 
-    monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 100 * 100)  # two tiles a call: five envs take three calls
+    monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 100 * 100)  # two tiles a call: five envs take three calls
     calls: list[int] = []
     original = batched.BatchedBlenderRenderer.raw_render
     monkeypatch.setattr(batched.BatchedBlenderRenderer, "raw_render", lambda self: (calls.append(1), original(self))[1])
@@ -194,7 +194,7 @@ def test_a_batch_past_the_image_limit_renders_in_several_calls(monkeypatch):
 
 def test_a_batch_larger_than_one_image_renders_every_tile():
     """441 envs at 100x100 would be a 2,100 x 2,100 image, which Cycles' in-memory result returned black: two calls instead."""
-    from visualenv.render.blender.batched import MAX_IMAGE_PIXELS, envs_per_call
+    from visualenv.render.blender.batch_calls import MAX_IMAGE_PIXELS, envs_per_call
     from visualenv.render.blender.tiles_camera import grid_shape
 
     per_call = envs_per_call(441, 100, 100)
@@ -426,7 +426,7 @@ def test_reset_envs_are_rendered_alone_only_while_that_is_cheaper():
     """One env alone is a call over the whole scene (its cost grows with N); the grid again costs N tiles, cheap on
     many threads and on a GPU. So the limit grows slower than N, is lower on a GPU and with more threads, and few
     envs never render alone past the camera switch's cost."""
-    from visualenv.render.blender.batched import ALONE_OVERHEAD_TILES, alone_limit
+    from visualenv.render.blender.batch_calls import ALONE_OVERHEAD_TILES, alone_limit
 
     cpu2, cpu16, gpu = (alone_limit(1024, "CPU", 2), alone_limit(1024, "CPU", 16), alone_limit(1024, "GPU", 16))
     assert gpu < cpu16 < cpu2 < 1024 - ALONE_OVERHEAD_TILES

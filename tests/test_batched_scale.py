@@ -166,7 +166,7 @@ def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkey
     """Past one image, parts of whole rows of copies are rendered by the tiles camera moved down the grid: the
     tiles equal one image's (a batch that fits), also when SAME_STEP renders reset envs again, and the camera's
     shader parameters (each change makes Cycles compile it again) are set once, not per call."""
-    from visualenv.render.blender import batched
+    from visualenv.render.blender import batch_calls, batched
 
     spec = small(tmp_path, "visual_cartpole.yaml")
     actions = np.array([0, 1, 0, 1, 1])
@@ -175,7 +175,7 @@ def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkey
         frames = [whole.reset(seed=2)[0]] + [whole.step(actions)[0] for _ in range(30)]
     finally:
         whole.close()
-    monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles an image: 5 envs in three parts of one row of 2
+    monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles an image: 5 envs in three parts of one row of 2
     split = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")
     calls: list[int] = []
     original = batched.BatchedBlenderRenderer.raw_render
@@ -313,11 +313,11 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
 def test_a_turning_camera_renders_reset_envs_alone_split_batches_and_views(monkeypatch):
     """With a turning camera: envs rendered alone (after an autoreset), a batch split over several calls, and the
     high-resolution view are each env's own render."""
-    from visualenv.render.blender import batched
+    from visualenv.render.blender import batch_calls, batched
     from visualenv.spec import load_spec_text
 
     monkeypatch.setattr(batched, "alone_limit", lambda n, device, threads: n)
-    monkeypatch.setattr(batched, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles a call: three envs take two calls
+    monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles a call: three envs take two calls
     example = (Path(__file__).parents[1] / "examples" / "domain_randomization.yaml").read_text()
     text = example.replace("[84, 84]", "[32, 32]") + "render: {engine: cycles, view: {resolution: [40, 40], preset: fast}}\n"
     loaded = load_spec_text(text, name="dr.yaml")

@@ -2,7 +2,7 @@
 
 Rendered with real Blender: the state, rewards and random streams of a distracted env are those of the plain env,
 its pixels differ from the plain env's more at higher difficulty, each kind changes what it says, a seed draws the
-same distractions again, and a batch refuses them with a clear error.
+same distractions again, and each tile of a batch is its env distracted alone.
 """
 
 from __future__ import annotations
@@ -15,6 +15,7 @@ import pytest
 import yaml
 
 import visualenv
+from visualenv.env.batched import BatchedVectorEnv
 from visualenv.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -133,10 +134,14 @@ def test_an_env_carries_its_distraction_through_pickle() -> None:
 
 
 def test_any_spec_takes_them_and_the_spec_section_is_checked(tmp_path: Path) -> None:
-    """A spec of the house's own scene (Goalie) is distracted the same way; a bad section names its line."""
+    """A spec of the house's own scene (Goalie) is distracted the same way, and its background changes only the sky,
+    though Goalie's world lights its field; a bad section names its line."""
     (clean,) = first_frames("Goalie-v0", [0])
     (moved,) = first_frames("Goalie-v0", [0], distractions=0.2)
     assert mean_difference(clean, moved) > 2
+    (backdrop,) = first_frames("Goalie-v0", [0], distractions={"difficulty": 0.3, "camera": False, "colors": False})
+    sky = (backdrop != clean).any(axis=-1)
+    assert sky.mean() > 0.05 and np.array_equal(backdrop[20:], clean[20:]), sky.mean()  # rows 0-15 are the sky
     spec = tmp_path / "bad.yaml"
     text = CARTPOLE.read_text(encoding="utf-8").replace("model: assets/", f"model: {CARTPOLE.parent}/assets/")
     spec.write_text(text + "distractions: {difficulty: 2}\n", encoding="utf-8")
@@ -146,11 +151,70 @@ def test_any_spec_takes_them_and_the_spec_section_is_checked(tmp_path: Path) -> 
     assert f"bad.yaml:{line}:" in str(caught.value) and "distractions.difficulty" in str(caught.value), str(caught.value)
 
 
-def test_a_batch_refuses_distractions_clearly() -> None:
-    with pytest.raises(SpecError, match="a batch does not draw distractions yet"):
-        visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0.2)
-    batch = visualenv.make_vec("DMC-cartpole-swingup-v0", 2, batched=True, distractions=0)  # none: a batch as before
-    batch.close()
+def agreement(a: np.ndarray, b: np.ndarray) -> float:
+    """The share of pixels within 8 levels (what the batch tests hold a tile to against its env's own render)."""
+    return float((np.abs(a.astype(int) - b.astype(int)) <= 8).mean())
+
+
+def test_each_tile_of_a_batch_is_its_env_distracted_alone(tmp_path: Path) -> None:
+    """Every kind at 0.2 in one batch render: each env's colour and segmentation tiles agree with the env alone (same
+    seed, same actions; noise='shared', as a batch renders) on >= 98 % of pixels within 8 levels, every step; the
+    state and rewards are those of the undistracted batch."""
+    spec, n = segmented_cartpole(tmp_path), 3
+    batch = visualenv.make_vec(spec, n, batched=True, distractions=0.2)
+    plain = visualenv.make_vec(spec, n, batched=True, render=False)
+    alone = [visualenv.make(spec, distractions=0.2, noise="shared") for _ in range(n)]
+    try:
+        tiles, _ = batch.reset(seed=7)
+        plain.reset(seed=7)
+        frames = [env.reset(seed=7 + k)[0] for k, env in enumerate(alone)]
+        for actions in np.random.default_rng(0).uniform(-1, 1, size=(3, n, 1)).astype(np.float32):
+            for key in ("eye", "mask"):
+                scores = [agreement(tiles[key][k], frames[k][key]) for k in range(n)]
+                assert min(scores) >= 0.98, (key, scores)
+            tiles, rewards, terminated, truncated, info = batch.step(actions)
+            _, plain_rewards, plain_terminated, plain_truncated, plain_info = plain.step(actions)
+            assert np.array_equal(rewards, plain_rewards) and np.array_equal(terminated | truncated, plain_terminated | plain_truncated)
+            assert all(np.array_equal(info["state"][name], plain_info["state"][name]) for name in plain_info["state"])
+            frames = [env.step(actions[k])[0] for k, env in enumerate(alone)]
+        assert mean_difference(tiles["eye"][0], tiles["eye"][1]) > 5  # each env its own camera, colours and background
+    finally:
+        for env in (batch, plain, *alone):
+            env.close()
+
+
+def test_a_batch_draws_dynamic_distractions_and_a_reset_envs_new_ones() -> None:
+    """Goalie (its camera bound to the state): distractions drifting every step, and env 0, whose ball ends its episode
+    first (step 21 of these actions), drawing its next episode's at its own autoreset; each tile as its env alone."""
+    n, settings = 3, {"difficulty": 0.3, "dynamic": True}
+    batch = visualenv.make_vec("Goalie-v0", n, batched=True, distractions=settings)
+    alone = [visualenv.make("Goalie-v0", distractions=settings, noise="shared") for _ in range(n)]
+    try:
+        tiles, _ = batch.reset(seed=3)
+        frames = [env.reset(seed=3 + k)[0] for k, env in enumerate(alone)]
+        done, lone_resets = np.zeros(n, dtype=bool), 0
+        for actions in np.random.default_rng(0).integers(0, 2, size=(24, n)):
+            assert min(agreement(tiles[k], frames[k]) for k in range(n)) >= 0.98
+            tiles, _, terminated, truncated, _ = batch.step(actions)
+            frames = [env.reset()[0] if done[k] else env.step(int(actions[k]))[0] for k, env in enumerate(alone)]
+            lone_resets += int(done.any() and not done.all())
+            done = terminated | truncated
+        assert lone_resets and min(agreement(tiles[k], frames[k]) for k in range(n)) >= 0.98
+    finally:
+        for env in (batch, *alone):
+            env.close()
+
+
+def test_what_a_batch_cannot_distract_is_refused_when_it_is_built(tmp_path: Path) -> None:
+    """An orbiting camera turns each env's rays, which a depth observation cannot follow; without the camera's orbit the
+    same batch is fine."""
+    data = yaml.safe_load(segmented_cartpole(tmp_path).read_text(encoding="utf-8"))
+    data["observation"]["cameras"]["mask"]["color"] = "depth"
+    spec = tmp_path / "depth.yaml"
+    spec.write_text(yaml.safe_dump(data, sort_keys=False), encoding="utf-8")
+    with pytest.raises(SpecError, match=r"camera 'fixed' turns with its distraction .* depth observation"):
+        BatchedVectorEnv(spec, 2, distractions=0.2)
+    BatchedVectorEnv(spec, 2, distractions={"difficulty": 0.2, "camera": False}).close()
 
 
 @pytest.mark.parametrize("given, message", [

@@ -27,6 +27,7 @@ in its lane without stepping MuJoCo again, to the same value or located fault.
 from __future__ import annotations
 
 import os
+from dataclasses import replace
 from typing import Any, Mapping
 
 import gymnasium as gym
@@ -41,8 +42,9 @@ from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError, StepError
-from visualenv.render.base import RendererOptions, load_backend, observation_space
+from visualenv.render.base import RenderPlan, RendererOptions, load_backend, observation_space
 from visualenv.render.batch_limits import check_batchable
+from visualenv.render.distractions import Distraction, EpisodeDistractions
 from visualenv.render.sensor import sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 from visualenv.spec.options import distraction_settings
@@ -78,6 +80,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     the ended episode is in ``info["final_obs"]``, its info in
     ``info["final_info"]``, as SB3's VecEnv expects; only the reset envs are
     rendered a second time).
+
+    Distractions (the spec's ``distractions`` or the option's, docs/distractions.md) are drawn per env: env i draws
+    its own from a generator its lane's seed starts, as env i alone draws them (at each of its resets, and every step
+    when dynamic), and its tile shows them (:mod:`visualenv.render.blender.batch_distractions`).
 
     ``render_mode="human"`` shows a grid of the observations live on a local web page after every reset and step
     (:mod:`visualenv.viewer.human`) and ``render()`` returns None.
@@ -127,11 +133,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise ValueError("render_mode='human' shows a grid of the observations, and a state-only batch has none: "
                              "use render_mode='rgb_array' for the views")
         self._display: Any = None  # render_mode="human": the page the grid is shown on, opened by the first step shown
-        if self.uses_camera and distraction_settings(distractions, program.spec.distractions) is not None:
-            where = program.loaded.source.diagnostic(("distractions",) if distractions is None else (), (
-                "a batch does not draw distractions yet (each env's own camera and colours in one render): use one process "
-                "per env (make_vec(..., batched=False), vectorization_mode='async'), render=False, or distractions=0"))
-            raise SpecError([where])
+        #: what each env's observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
+        self.distractions = distraction_settings(distractions, program.spec.distractions) if self.uses_camera else None
         #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
         self.action_repeat = int(program.spec.action_repeat if action_repeat is None else action_repeat)
         if self.action_repeat < 1:
@@ -158,7 +161,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._batch = program.batch_functions()
         self._renderer_options = RendererOptions.parse(renderer_options)
         if self.uses_camera and backend == BATCH_BACKEND:
-            check_batchable(program.render_plan().with_options(self._renderer_options), n)  # refused now, not at the first render
+            check_batchable(self._render_plan(), n)  # refused now, not at the first render
         self._backend = backend
         single = self._lanes[0]
         self.single_action_space = single.action_space
@@ -178,6 +181,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._errors = np.full(n, None, dtype=object)
         self._autoreset = np.zeros(n, dtype=bool)
         self._was_reset = False
+        #: each env's distractions, drawn from its own generator as the env alone draws them (its lane's seed)
+        self._distractions = [EpisodeDistractions(self.distractions) for _ in range(n)] if self.distractions is not None else []
 
     @property
     def lanes(self) -> list[VisualEnv]:
@@ -216,6 +221,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         stepping = ~resetting
         if stepping.any():
             self._repeat(actions, stepping, rewards, terminated, truncated)
+        for i in np.flatnonzero(stepping & (self._errors == None)) if self._distractions else ():  # noqa: E711 - as one env, not after a fault
+            self._distractions[i].advance()
         for i in np.flatnonzero(resetting):
             self._reset_lane(int(i))
         done = terminated | truncated
@@ -387,6 +394,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise err.in_env(i) from None
         if self._physics is not None:
             self._physics.refresh(i)
+        if self._distractions:
+            self._distractions[i].begin(self.lanes[i].np_random, seed is not None)
         self._steps[i] = 0
         self._fired[i] = 0
         self._success[i] = False
@@ -413,10 +422,12 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     def renderer(self) -> Any:
         """The batch renderer, built on first use."""
         if self._renderer is None:
-            cls = load_backend(self._backend)
-            plan = self.program.render_plan().with_options(self._renderer_options)
-            self._renderer = cls(plan, self._renderer_options, num_envs=self.num_envs)
+            self._renderer = load_backend(self._backend)(self._render_plan(), self._renderer_options, num_envs=self.num_envs)
         return self._renderer
+
+    def _render_plan(self) -> RenderPlan:
+        """The program's render plan with the options' overrides and the distractions the envs will draw."""
+        return replace(self.program.render_plan().with_options(self._renderer_options), distractions=self.distractions)
 
     @property
     def segmentation_ids(self) -> dict[str, int]:
@@ -426,7 +437,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return dict(getattr(self.renderer, "segmentation_ids", {}))
 
     def _pose_copies(self) -> None:
-        """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses."""
+        """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses; each env's distraction is drawn."""
+        if self._distractions:
+            self.renderer.distract_batch([d.current or Distraction() for d in self._distractions])
         if self.program.physics is not None:
             plan = self.program.physics
             sources = self._physics.pose_sources() if self._physics is not None else [lane.data for lane in self._lanes]

@@ -61,6 +61,8 @@ class RenderPlan:
     source: SourceMap
     cameras: tuple[tuple[tuple, str], ...] = ()  # every camera the spec names, with its field's path (Spec.camera_uses)
     physics: Any = None  # a physics spec's drawable model (visualenv.physics.scene.PhysicsScene), posed by set_physics_poses
+    #: the distractions the env will ask for (visualenv.spec.models.Distractions): a batch builds its scene for them
+    distractions: Any = None
 
     def with_options(self, options: "RendererOptions") -> "RenderPlan":
         """This plan with the options' overrides written into its render settings (RendererOptions checked them when it was made)."""

@@ -4,8 +4,8 @@ A batch renders every env through one custom camera with one world; a bound sun
 is copied per env and lights only its own copy (Cycles' light linking, at most
 :data:`MAX_OWN_SUNS` envs). A camera the state turns (a bound rotation, a
 ``look_at``, an aimed camera that moves; a MuJoCo model's camera on a moving body or
-aimed at one) is followed by turning each env's rays in the camera's shader, up to
-:data:`MAX_TURNING_ENVS` envs (a model camera that only moves, ``track`` or
+aimed at one; an observation camera a distraction orbits) is followed by turning each env's rays in the
+camera's shader, up to :data:`MAX_TURNING_ENVS` envs (a model camera that only moves, ``track`` or
 ``trackcom``, is followed by moving each env's copy, at any number of envs). So an engine other
 than Cycles, a bound world, a bound sun past that many envs or under a world that is not one colour, a camera the state
 zooms (``lens``) or scales, a turning camera past its envs or with a depth
@@ -49,8 +49,8 @@ def turning_error(plan: RenderPlan, camera: str, why: str) -> SpecError:
                       f"scale or constraint on the camera or its parents; {ONE_PROCESS_EACH}")])
 
 
-def turning_limit_error(plan: RenderPlan, camera: str, why: str) -> SpecError:
-    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' turns with the state: a batch turns each env's "
+def turning_limit_error(plan: RenderPlan, camera: str, why: str, cause: str = "turns with the state") -> SpecError:
+    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' {cause}: a batch turns each env's "
                       f"rays in its camera's shader, {why}; {ONE_PROCESS_EACH}")])
 
 
@@ -83,12 +83,16 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
     bound: dict[str, set[str]] = {}
     for target in plan.bindings:
         bound.setdefault(target.object, set()).add(target.property)
+    distractions = plan.distractions
+    orbiting = distractions is not None and distractions.camera and distractions.difficulty > 0
     for view in plan.views.values():
         why = spec_turning(plan, view.camera, bound)
         if why:
             raise turning_error(plan, view.camera, why)
         if spec_turns(plan, view.camera, bound) or model_turns(plan, view.camera):
             check_turning(plan, view.camera, view.color, num_envs)
+        elif orbiting:
+            check_turning(plan, view.camera, view.color, num_envs, "turns with its distraction (the camera's orbit)")
     for name in bound:
         if name == WORLD_ACTOR and name not in objects and not plan.scene.file:
             raise world_error(plan, name)
@@ -100,13 +104,13 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
             raise sun_world_error(plan, name)
 
 
-def check_turning(plan: RenderPlan, camera: str, color: str, num_envs: int) -> None:
+def check_turning(plan: RenderPlan, camera: str, color: str, num_envs: int, cause: str = "turns with the state") -> None:
     """Refuse what a batch of a turning camera cannot render: more envs than its shader holds, depth along turned rays."""
     if num_envs > MAX_TURNING_ENVS:
         raise turning_limit_error(plan, camera, f"which holds at most {MAX_TURNING_ENVS} envs, not {num_envs}; use batches of "
-                                  f"at most {MAX_TURNING_ENVS} envs (make_vec(..., workers=K) runs several)")
+                                  f"at most {MAX_TURNING_ENVS} envs (make_vec(..., workers=K) runs several)", cause)
     if color == "depth":
-        raise turning_limit_error(plan, camera, "while a depth observation is measured along one camera's forward axis for every env")
+        raise turning_limit_error(plan, camera, "while a depth observation is measured along one camera's forward axis for every env", cause)
 
 
 def model_turns(plan: RenderPlan, camera: str) -> bool:

@@ -25,16 +25,15 @@ got another "shadow" of the world). A camera the state zooms (lens) or scales is
 refused.
 
 This module schedules the render calls: an image holds at most
-:data:`MAX_IMAGE_PIXELS` (a larger batch is rendered in parts of whole rows of
+:data:`~batch_calls.MAX_IMAGE_PIXELS` (a larger batch is rendered in parts of whole rows of
 copies), and envs an autoreset just reset are rendered alone where that costs
-less than every tile again (:func:`alone_limit`). It extends
+less than every tile again (:func:`~batch_calls.alone_limit`). It extends
 :class:`BlenderRenderer` through its construction and render hooks
 (``_setup``, ``_setter``, ``_render``).
 """
 
 from __future__ import annotations
 
-import math
 import os
 from dataclasses import replace
 from typing import Any, Sequence
@@ -44,8 +43,13 @@ from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
+from visualenv.render.distractions import Distraction
 from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
+from visualenv.render.blender.batch_calls import MAX_IMAGE_SIDE, alone_limit, envs_per_call
+from visualenv.render.blender.batch_distractions import BatchDistractions
+from visualenv.render.blender.distractions import focus_distance
+from visualenv.render.blender.env_attributes import CAMERA_TURN, EnvAttributes, read_per_env, turn_to_env_cameras
 from visualenv.render.blender.instances import InstancedCopies, removable
 from visualenv.render.blender.copies import Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, make_copy, one_colour
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
@@ -53,41 +57,6 @@ from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
 from visualenv.spec.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
-
-#: the largest image one render call makes; past it a batch is rendered in several calls. Measured: a
-#: larger image comes back black from the in-memory readback (Cycles' result then reaches Blender in
-#: tiles, after the engine's render returns), 2,000 x 2,000 and 2,080 x 800 did not; the file readback is unaffected
-MAX_IMAGE_PIXELS = 2048 * 2048
-#: what rendering a few envs alone costs beyond their own tiles, in tiles: switching the scene's camera to the
-#: one-tile camera and back makes Cycles re-synchronise, measured 37 ms against 2.5 ms a tile (2-core CPU, N = 16)
-ALONE_OVERHEAD_TILES = 16
-#: reset envs rendered alone, at most, per square root of N (:func:`alone_limit`): Cycles on the CPU, times the
-#: square root of its render threads; Cycles on a GPU
-ALONE_PER_ROOT_CPU = 6.0
-ALONE_PER_ROOT_GPU = 0.5
-#: the widest and tallest image one render call makes (Cycles renders larger ones in several tiles of its own)
-MAX_IMAGE_SIDE = 2048
-
-
-def alone_limit(num_envs: int, device: str, threads: int) -> float:
-    """How many reset envs a batch renders alone (one env-sized call each) before rendering all N tiles again is cheaper.
-
-    One env alone is a render call over the whole scene, whose cost grows with N; the grid again costs N tiles, and a
-    tile costs less the more threads trace it, and little on a GPU. Break-even measured at 100x100
-    (docs/performance.md, *Reset envs rendered alone*): 3.4 to 6.8 times the square root of N on 2 CPU threads,
-    1.3 on 16, 0.3 to 0.8 on an H200 with OptiX. Below about 16 envs the camera switch (ALONE_OVERHEAD_TILES) decides.
-    """
-    per_root = ALONE_PER_ROOT_GPU if device == "GPU" else ALONE_PER_ROOT_CPU / math.sqrt(max(1, threads))
-    return min(per_root * math.sqrt(num_envs), num_envs - ALONE_OVERHEAD_TILES)
-
-
-def envs_per_call(count: int, width: int, height: int) -> int:
-    """The most envs one render call takes: their grid's image must stay within MAX_IMAGE_PIXELS."""
-    n = max(1, min(count, MAX_IMAGE_PIXELS // (width * height)))
-    while n > 1 and math.prod(grid_shape(n)) * width * height > MAX_IMAGE_PIXELS:
-        n -= 1
-    return n
-
 
 class BatchedBlenderRenderer(BlenderRenderer):
     """Renders `num_envs` copies of a plan's scene in one Blender scene, one Cycles call per observation camera.
@@ -121,14 +90,22 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._threads = threads or len(os.sched_getaffinity(0))  # Cycles' render threads (0: every core this process may use)
         self._removed: set[int] = set()  # objects drawn as instances rather than copied (none while the base class compiles)
         super()._setup(built, threads)
+        settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
+        self._distracting = BatchDistractions(settings, built.scene, self.num_envs) if settings is not None else None
+        orbiting = self._distracting is not None and self._distracting.orbiting
+        self._orbiting = {self._objects[v.camera].as_pointer() for v in self.plan.views.values()} if orbiting else set()
         #: the MuJoCo model's cameras that move (tracking a body or hanging on one), by object pointer: (their row of
         #: cam_xpos and cam_xmat, whether they turn); each env's pose is its lane's (:meth:`set_physics_poses_batch`)
         self._tracked = self._tracked_cameras()
         self._camera_rows: list[tuple[np.ndarray, np.ndarray]] = []  # each env's cam_xpos and cam_xmat, as last handed
         self._refuse_turning_cameras()
         scene = built.scene
+        #: whether a MuJoCo look's headlight is turned to each env's camera (a turning observation camera: env_attributes)
+        self._turned_headlights = any(self._turns(v.camera) for v in self.plan.views.values()) and turn_to_env_cameras(scene)
         self._layer.update()  # matrix_world of every object, read below
-        self._spacing = copy_spacing(scene, max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0))
+        reach = max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0)
+        backdrops = self._distracting is not None and self._distracting.backdropped  # each env's within its far clip
+        self._spacing = copy_spacing(scene, 2 * reach if backdrops else reach)
         self._cols = self._grid_columns()
         # suns are directional: one serves every copy, unless bound to the state: then each copy has its own, lighting
         # only that copy's objects (Cycles' light linking)
@@ -156,6 +133,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._offsets = np.array([tuple(self._offset(k)) for k in range(self.num_envs)])  # each copy's anchor, as its instances see it
         self._instances = self._instance(copied)
         self._tiled_views = [self._tiled_view(view) for view in self._views]
+        #: what each env's shaders read of their own (its colour shifts, its camera's turn)
+        self._env_values = EnvAttributes.of_copies(self._copies, [o for o in copied if o.as_pointer() not in self._removed], self._instances)
+        if self._distracting is not None:  # its backdrop about the place the first camera's rays start from
+            self._distracting.attach(self._env_values)
+            if self._distracting.backdropped:
+                centres = np.array([tuple(self._tiled_views[0][1] + self._offset(k)) for k in range(self.num_envs)])
+                self._add_backdrop(self._distracting.make_backdrops(self._copies[0].anchor.users_collection[0], centres,
+                                                                    self._views[0].camera.data.clip_end))
         self._tiled_view_camera: tuple[View, Any, bool] | None = None  # the view camera's, built at the first view
         self._alone: dict[int, View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
         #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
@@ -193,7 +178,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         cameras = [view.camera for view in self._views] + ([self._view.camera] if self._view is not None else [])
         anchored = not any(self._camera_moves(camera) for camera in cameras)  # anchors that stay put: static meshes realized
         return InstancedCopies(anchor.users_collection[0], anchor, removed, self.plan.bindings, self._objects, self.num_envs,
-                               self._posed_bodies(), realize_static=anchored)
+                               self._posed_bodies(), realize_static=anchored, env_attributes=read_per_env)
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Any:
         """No setter for an object drawn as instances: its instances are posed from numpy (:meth:`_write_instances`)."""
@@ -234,8 +219,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """Whether the state turns this camera (a rotation or look_at bound on it or an ancestor, or it is aimed and moves;
         a model camera that hangs on a moving body or aims at one): its tiles shader then turns each env's rays (:meth:`_aim_rays`)."""
         objects = self._objects
-        if self._tracked.get(objects[camera_name].as_pointer(), (0, False))[1]:
-            return True  # a model camera on a moving body, or aimed at one
+        if self._tracked.get(objects[camera_name].as_pointer(), (0, False))[1] or objects[camera_name].as_pointer() in self._orbiting:
+            return True  # a model camera on a moving body, or aimed at one; an observation camera a distraction orbits
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         spec = self.plan.scene.objects.get(camera_name)
         aimed = isinstance(spec, CameraObject) and spec.look_at is not None
@@ -264,7 +249,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _camera_moves(self, camera: Any) -> bool:
         """Whether a binding moves the camera (or an ancestor), or it is a model camera that moves: then the copies'
         anchors follow it every step."""
-        if camera.as_pointer() in self._tracked:
+        if camera.as_pointer() in self._tracked or camera.as_pointer() in self._orbiting:
             return True
         chain = {o.as_pointer() for o in with_ancestors(camera)}
         carriers = {name for name, obj in self._objects.items() if obj.as_pointer() in chain}
@@ -355,6 +340,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
         for k, writer in self._copy_poses:
             writer.write(*poses[k])
 
+    def distract_batch(self, distractions: Sequence[Distraction]) -> None:
+        """Each env's distraction in the next renders, drawn as the env alone draws it (:mod:`batch_distractions`)."""
+        if self._distracting is None:
+            raise RenderError("this batch draws no distractions: its plan had none when it was built")
+        if len(distractions) != self.num_envs:
+            raise ValueError(f"expected a distraction for each of {self.num_envs} envs, got {len(distractions)}")
+        self._distracting.current = list(distractions)
+
     def _write_copies(self, values: Sequence[Sequence[Any]] | np.ndarray, envs: Sequence[int] | None) -> None:
         """Each env's binding values into its copy (the bindings of copied objects, env by env; `envs` only, when given)
         and into the table its instances are posed from (:meth:`_write_instances`, every env: the others are not shown)."""
@@ -364,6 +357,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
                 self._apply_copy(self._copies[i], tuple(rows[i]))
         if self._instances is not None:
             self._table = np.asarray(values, dtype=np.float64).reshape(self.num_envs, self._instances.size)
+        if self._distracting is not None:
+            self._distracting.draw()
 
     def _write_instances(self) -> None:
         """Pose every env's instances from the last binding table, at their copies' anchors (moved by :meth:`_place_copies`)."""
@@ -458,6 +453,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self.shader_updates += 1
             self._alone[j] = alone
         alone = self._alone[j]
+        if self._turned_headlights:  # the one-tile camera stands at each env's own pose: no turn
+            self._env_values.write({CAMERA_TURN: np.zeros((self.num_envs, 3))})
         pose = view.camera.matrix_world.copy()
         images = []
         for i in envs:
@@ -480,25 +477,20 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """
         if tiles.data.custom_shader is None or not tiles.data.custom_shader.name.startswith(TURNING_NAME):
             return
-        name = next(n for n, o in self._objects.items() if o == source)
         # in float64, from the matrices Blender composes from location, rotation and scale (those Cycles renders):
         # rounding here shows as whole rows of a fine floor texture flipping between its checks
         flip = np.diag([1.0, 1.0, -1.0])
         to_camera = flip @ np.linalg.inv(_rotation(tiles.matrix_basis))
-        values = {}
-        if source.as_pointer() not in self._tracked and any(copy.objects[name].parent != copy.anchor for copy in self._copies[:1]):
-            self._layer.update()  # the camera's rotation depends on its parents: evaluate them (once for all copies)
-        tracked = self._tracked.get(source.as_pointer())
-        for k, copy in enumerate(self._copies):
-            if tracked is not None:  # a model camera: env k's cam_xmat, as one env's camera takes it (mjcf.PoseWriter)
-                own = np.asarray(self._camera_rows[k][1][tracked[0]], dtype=np.float64).reshape(3, 3) if self._camera_rows else \
-                    _rotation(source.matrix_world)
-            else:
-                own = _rotation(self._camera_pose(copy, name))
-            rotation = to_camera @ own @ flip
+        values, turns = {}, []
+        for k, pose in enumerate(self._camera_poses(source)):
+            rotation = to_camera @ pose[:3, :3] @ flip
             quat = Matrix(rotation.tolist()).to_quaternion()
             for i in range(4):
                 values[f"r{k}_{i}"] = float(quat[i])
+            axis, angle = quat.to_axis_angle()
+            turns.append(tuple(axis * angle))
+        if self._turned_headlights:  # a MuJoCo look's headlight along env k's own camera axis
+            self._env_values.write({CAMERA_TURN: np.array(turns)})
         if values != self._rays.get(tiles.as_pointer()):
             params = tiles.data.cycles_custom
             for key, value in values.items():
@@ -525,31 +517,52 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
-        for k, (copy, where) in enumerate(zip(self._copies, self._camera_places(camera))):
-            place = self._offset(k) + reference - where
+        for k, (copy, pose) in enumerate(zip(self._copies, self._camera_poses(camera))):
+            place = self._offset(k) + reference - Vector(pose[:3, 3].tolist())  # its camera's place in the copy
             if copy.anchor is not None:  # None: every object of env k is an instance, placed from _offsets
                 copy.anchor.location = place
             self._offsets[k] = tuple(place)
         self._anchors_moved = True
 
-    def _camera_places(self, camera: Any) -> list[Vector]:
-        """Each env's camera position in its own copy (relative to its anchor): a model camera's is its env's cam_xpos."""
+    def _camera_poses(self, camera: Any) -> list[np.ndarray]:
+        """Each env's pose of `camera` in its own copy (relative to its anchor), ``(4, 4)`` float64: a model camera's
+        is its env's cam_xpos and cam_xmat (as one env's camera takes them: mjcf.PoseWriter); an observation camera
+        that a distraction orbits, orbited as the env's own (:class:`BatchDistractions`)."""
         tracked = self._tracked.get(camera.as_pointer())
         if tracked is not None:
-            if not self._camera_rows:  # no poses handed yet: where the model puts it at qpos0
-                return [camera.matrix_basis.translation.copy()] * self.num_envs
-            return [Vector(rows[0][tracked[0]].tolist()) for rows in self._camera_rows]
-        name = next(n for n, o in self._objects.items() if o == camera)
-        on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
-        if not on_anchor:
-            self._layer.update()  # the camera's place depends on its parents: evaluate them
-        return [Vector(copy.objects[name].location) if on_anchor
-                else (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation for copy in self._copies]
+            rows = [(r[0][tracked[0]], np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3)) for r in self._camera_rows] \
+                or [(camera.matrix_basis.translation, _rotation(camera.matrix_world))] * self.num_envs  # no poses yet: at qpos0
+            poses = [_pose(place, rotation) for place, rotation in rows]
+        else:
+            name = next(n for n, o in self._objects.items() if o == camera)
+            on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
+            if not on_anchor:
+                self._layer.update()  # the camera's place depends on its parents: evaluate them (once for all copies)
+            poses = [_pose(copy.objects[name].location if on_anchor else
+                           (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation,
+                           _rotation(self._camera_pose(copy, name))) for copy in self._copies]
+        if camera.as_pointer() not in self._orbiting:
+            return poses
+        assert self._distracting is not None
+        return self._distracting.orbited(camera.as_pointer(), poses, lambda k: focus_distance(
+            self._scene, Matrix(poses[k].tolist()), camera.data.clip_start, Vector(self._offsets[k]), self._posed_for_cast))
+
+    def _posed_for_cast(self) -> None:
+        """Every env's instances posed, as the next render draws them, for a ray cast."""
+        self._write_instances()
+        self._layer.update()
 
     def close(self) -> None:
         self._copies = []
         self._instances = None
         super().close()
+
+
+def _pose(place: Any, rotation: np.ndarray) -> np.ndarray:
+    """A ``(4, 4)`` float64 pose of a position and a rotation."""
+    pose = np.eye(4)
+    pose[:3, :3], pose[:3, 3] = rotation, tuple(place)
+    return pose
 
 
 def _rotation(matrix: Matrix) -> np.ndarray:

@@ -1,38 +1,57 @@
-"""A :class:`~visualenv.render.distractions.Distraction` drawn in a Blender scene: cameras moved, colours shifted.
+"""A :class:`~visualenv.render.distractions.Distraction` drawn in a Blender scene: cameras moved, colours shifted, the
+sky's shift and the background drawn on a backdrop.
 
 Each observation camera gets a child camera (the same lens, parented to it) whose local pose is the orbit about the
 point the camera looks at: the parent goes on following its bindings or its MuJoCo body, the child follows it, and
 the observation is rendered through the child. Colours shift where colour bindings write (each Principled
 material's base colour or its tint, :func:`~visualenv.render.blender.materials.color_sockets`), so a MuJoCo look and
-a bound colour are shifted alike; the sky shifts as the model's skybox, the image sky's tint or the world's colour. A value is
-written only when it changes: Cycles updates a shader on every write.
+a bound colour are shifted alike. A value is written only when it changes: Cycles updates a shader on every write.
+
+The sky's shift and the background are drawn on a *backdrop* (:func:`make_backdrops`): a sphere about the camera
+just inside its far clip, seen by camera rays only, which lets 1 - opacity of the sky through and adds
+(1 - opacity) x the sky's shift + opacity x the background's pattern. It lights nothing, and the world is left as it
+was, so the scene is lit as without distractions to the bit (the world's own camera-only branch did not: Goalie's
+field came out 4 levels brighter with a background, its world's light sampled otherwise). Its numbers are attributes
+of its instance, so a batch draws one backdrop per env, each with its own (:mod:`batch_distractions`), and a tile
+equals its env alone. Its cost: every camera ray meets one more surface (docs/distractions.md).
 """
 
 from __future__ import annotations
 
 import re
-from typing import Any
+from typing import Any, Callable, Sequence
 
+import bmesh
 import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.render.blender.materials import SKY_MAP_RESOLUTION, SKY_TINT, SKYBOX, color_sockets
+from visualenv.render.blender.env_attributes import env_attribute
+from visualenv.render.blender.materials import SHIFTED, color_sockets, ensure_node_tree
 from visualenv.render.distractions import Distraction, background, color_shifts
 
-#: the name of the Mix node that adds the sky's shift behind a model's skybox
-SKY_SHIFT = "visualenv distraction sky"
 #: the orbit's centre when a camera's view axis hits nothing: this far along it
 FALLBACK_FOCUS = 3.0
 #: what Blender appends to a datablock's name that another holds
 TAKEN_SUFFIX = re.compile(r"\.\d{3,}$")
+#: the custom property that marks a backdrop (a ray cast for the orbit's centre that meets it met nothing)
+BACKDROP = "visualenv_backdrop"
+#: the backdrop's attributes, three numbers each: the sky's shift, the background's two colours, and its pattern's
+#: scale, time (its fourth coordinate) and opacity
+SKY_SHIFT, FIRST, SECOND, PATTERN = ("visualenv_sky_shift", "visualenv_background_first", "visualenv_background_second",
+                                     "visualenv_background_pattern")
+#: the backdrop's vertices lie this share of the camera's far clip away, its faces at least 99.89 % of that (an
+#: icosphere of BACKDROP_SUBDIVISIONS, 5,120 faces): what lies in the last 0.2 % before the far clip is seen through it
+BACKDROP_REACH, BACKDROP_SUBDIVISIONS = 0.999, 5
+#: ray visibilities a backdrop turns off: only camera rays see it
+UNSEEN_BY = ("visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter", "visible_shadow")
 
 
 class DistractionRig:
-    """The cameras and colour sockets of one scene that distractions move; :meth:`apply` draws one distraction."""
+    """The cameras, colour sockets and backdrop of one env's scene that distractions change; :meth:`apply` draws one."""
 
     def __init__(self, scene: Any, cameras: list[Any], backdrop: bool = False) -> None:
-        """`backdrop`: build the background's nodes (a distraction with a background will come)."""
+        """`backdrop`: make the backdrop, for the sky's shift and the background (a distraction with either will come)."""
         self._scene = scene
         #: the observation camera each child stands for, by the parent's name
         self.children: dict[str, Any] = {}
@@ -45,39 +64,29 @@ class DistractionRig:
             child.matrix_parent_inverse = Matrix.Identity(4)
             self.children[camera.name] = child
         self._focus: dict[str, float] = {}
-        self._sockets = self._color_sockets(scene)
-        #: a skybox's socket holds its shift s as (s + 1) / 2 (a Linear Light mix adds 2b - 1), not a colour
-        self._offset = len(self._sockets) - 1 if self._sockets and self._sockets[-1].node.name == SKY_SHIFT else None
-        self._base = [tuple(socket.default_value) for socket in self._sockets]
+        self._sockets = [sockets[0] for material in distracted_materials(scene) if (sockets := color_sockets(material))]
+        self._base: list[tuple[float, ...]] = [tuple(socket.default_value) for socket in self._sockets]
         self._written = list(self._base)
         self._last: Distraction | None = None
-        self._shifts = np.zeros((len(self._sockets), 3))  # the current distraction's (color_shifts)
-        self._backdrop = _backdrop_sockets(scene.world) if backdrop else None
-
-    @staticmethod
-    def _color_sockets(scene: Any) -> list[Any]:
-        """Every Principled material's colour socket in the scene (where a colour binding writes), then the sky's. By name without the ``.001`` Blender
-        adds to a name taken (a second env in the process has them): each env of a spec shifts its materials alike."""
-        materials = {slot.material.name: slot.material for obj in scene.objects for slot in obj.material_slots
-                     if slot.material is not None and slot.material.node_tree is not None}
-        sockets = []
-        for name in sorted(materials, key=lambda taken: TAKEN_SUFFIX.sub("", taken)):
-            found = color_sockets(materials[name])  # the socket a colour binding writes: both see one colour
-            if found is not None:
-                sockets.append(found[0])
-        sky = _sky_socket(scene.world)
-        return [*sockets, sky] if sky is not None else sockets
+        self._shifts = np.zeros((len(self._sockets) + 1, 3))  # the current distraction's (color_shifts), the sky's last
+        #: the object that holds the backdrop, about the first camera (None: no background or colours)
+        self.backdrop = None
+        if backdrop:
+            first = next(iter(self.children.values()))
+            self.backdrop = make_backdrops(scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end)
+            self.backdrop.parent = first
+            self.backdrop.matrix_parent_inverse = Matrix.Identity(4)
 
     def apply(self, distraction: Distraction) -> None:
-        """Pose the child cameras and write the shifted colours: where a binding rewrote a colour since, from its new
-        value. A render with the same distraction and no colour rewritten writes nothing."""
+        """Pose the child cameras, write the backdrop's numbers and the shifted colours: where a binding rewrote a colour
+        since, from its new value. A render with the same distraction and no colour rewritten writes nothing."""
         changed = distraction != self._last
         if changed:
             for name, child in self.children.items():
                 child.matrix_basis = orbit(distraction, self._focus_of(name))
-            if self._backdrop is not None:
-                _show_background(self._backdrop, distraction)
-            self._shifts = color_shifts(distraction, len(self._sockets) - 1)
+            self._shifts = color_shifts(distraction, len(self._sockets))
+            if self.backdrop is not None:
+                write_backdrops(self.backdrop, [distraction], self._shifts[-1:])
             self._last = distraction
         for i, socket in enumerate(self._sockets):
             now = tuple(socket.default_value)
@@ -93,29 +102,43 @@ class DistractionRig:
 
     def _shifted(self, i: int) -> tuple[float, ...]:
         """Socket i's value under the current shifts, as the socket holds it (float32): an equal value is not written again."""
-        base, shift = self._base[i], self._shifts[i]
-        if i == self._offset:
-            value = (*((shift + 1.0) / 2.0).tolist(), 1.0)
-        else:
-            value = (*np.clip(np.array(base[:3]) + shift, 0.0, 1.0).tolist(), *base[3:])
+        base = self._base[i]
+        value = (*np.clip(np.array(base[:3]) + self._shifts[i], 0.0, 1.0).tolist(), *base[3:])
         return tuple(np.asarray(value, dtype=np.float32).tolist())
 
     def _focus_of(self, name: str) -> float:
-        """How far ahead of the camera its orbit's centre lies, measured once: the point of its view axis nearest the
-        world's origin (where a model stands, or the body a tracking camera keeps in view at reset), else the first
-        surface along the axis, else :data:`FALLBACK_FOCUS`."""
+        """How far ahead of the camera its orbit's centre lies, measured once (:func:`focus_distance`)."""
         if name not in self._focus:
             camera = self.children[name].parent
             self._scene.view_layers[0].update()
-            pose = camera.matrix_world
-            origin, forward = pose.translation, (pose.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
-            nearest = float(-origin.dot(forward))
-            if nearest > camera.data.clip_start:
-                self._focus[name] = nearest
-            else:
-                hit, where, *_ = self._scene.ray_cast(self._scene.view_layers[0].depsgraph, origin + forward * camera.data.clip_start, forward)
-                self._focus[name] = float((where - origin).length) if hit else FALLBACK_FOCUS
+            self._focus[name] = focus_distance(self._scene, camera.matrix_world, camera.data.clip_start)
         return self._focus[name]
+
+
+def distracted_materials(scene: Any) -> list[Any]:
+    """Every Principled material of the scene's objects (one a colour binding writes), in the order their shifts are
+    drawn (:func:`~visualenv.render.distractions.color_shifts`): by name without the ``.001`` Blender adds to a name
+    taken (a second env in the process has them), so each env of a spec shifts its materials alike."""
+    materials = {slot.material.name: slot.material for obj in scene.objects for slot in obj.material_slots
+                 if slot.material is not None and slot.material.node_tree is not None}
+    ordered = [materials[name] for name in sorted(materials, key=lambda taken: TAKEN_SUFFIX.sub("", taken))]
+    return [material for material in ordered if color_sockets(material) is not None]
+
+
+def focus_distance(scene: Any, pose: Matrix, clip_start: float, offset: Vector | None = None,
+                   before_cast: Callable[[], object] = lambda: None) -> float:
+    """How far ahead of a camera at `pose` (in its env's own frame; `offset`: where that frame stands in the scene) its
+    orbit's centre lies: the point of its view axis nearest the env's origin (where a model stands, or the body a
+    tracking camera keeps in view), else the first surface along the axis (`before_cast` readies the scene for the
+    ray cast), else :data:`FALLBACK_FOCUS`."""
+    origin, forward = pose.translation, (pose.to_3x3() @ Vector((0.0, 0.0, -1.0))).normalized()
+    nearest = float(-origin.dot(forward))
+    if nearest > clip_start:
+        return nearest
+    before_cast()
+    camera = origin + offset if offset is not None else origin
+    hit, where, _, _, obj, _ = scene.ray_cast(scene.view_layers[0].depsgraph, camera + forward * clip_start, forward)
+    return float((where - camera).length) if hit and not obj.get(BACKDROP) else FALLBACK_FOCUS
 
 
 def orbit(distraction: Distraction, focus: float) -> Matrix:
@@ -127,72 +150,134 @@ def orbit(distraction: Distraction, focus: float) -> Matrix:
     return ahead @ turn @ back @ Matrix.Rotation(distraction.roll, 4, "Z")
 
 
-def _sky_socket(world: Any) -> Any:
-    """The colour socket that shifts the sky: a Linear Light mix behind a model's skybox (made here), the image sky's
-    tint, or the world's unlinked Background colour; None where the world has none of them."""
-    if world is None or world.node_tree is None:
-        return None
-    nodes, links = world.node_tree.nodes, world.node_tree.links
-    skybox = nodes.get(SKYBOX)
-    if skybox is not None:
-        shift = nodes.get(SKY_SHIFT)
-        if shift is None:
-            shift = nodes.new("ShaderNodeMix")
-            shift.name, shift.data_type, shift.blend_type, shift.clamp_result = SKY_SHIFT, "RGBA", "LINEAR_LIGHT", True
-            shift.inputs["Factor"].default_value = 1.0
-            first, second = [sock for sock in shift.inputs if sock.type == "RGBA"]
-            second.default_value = (0.5, 0.5, 0.5, 1.0)  # 2 x 0.5 - 1: no shift
-            out = next(sock for sock in shift.outputs if sock.type == "RGBA")
-            for link in list(skybox.outputs["Color"].links):
-                links.new(out, link.to_socket)
-            links.new(skybox.outputs["Color"], first)
-        return [sock for sock in shift.inputs if sock.type == "RGBA"][1]
-    tint = nodes.get(SKY_TINT)
-    if tint is not None:
-        return [sock for sock in tint.inputs if sock.type == "RGBA"][1]
-    background = next((n for n in nodes if n.type == "BACKGROUND"), None)
-    return background.inputs["Color"] if background is not None and not background.inputs["Color"].is_linked else None
+def shift_by_attribute(material: Any, name: str) -> None:
+    """The material's colour (where a binding writes) plus the attribute `name` (an instance's, else its object's custom
+    property), kept in [0, 1]: a batch's per-env shift. The binding then writes the shift node's second colour."""
+    sockets = color_sockets(material)
+    assert sockets is not None, "a distracted material has a Principled BSDF (distracted_materials)"
+    target = sockets[0]
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    shift = mix_node(nodes, "ADD")
+    shift.name = SHIFTED
+    shift.clamp_result = True
+    shifted, base = [sock for sock in shift.inputs if sock.type == "RGBA"]
+    links.new(env_attribute(nodes, name).outputs["Color"], shifted)
+    if target.is_linked:  # a node drives the colour
+        links.new(target.links[0].from_socket, base)
+    else:
+        base.default_value = target.default_value
+    links.new(next(sock for sock in shift.outputs if sock.type == "RGBA"), target)
 
 
-def _backdrop_sockets(world: Any) -> dict[str, Any] | None:
-    """The world's output wrapped so that camera rays see a noise pattern of two colours where `on` is 1 (the rest of
-    the world, what lights the scene, as it was); the sockets :func:`_show_background` writes. None without a world."""
-    if world is None or world.node_tree is None:
-        return None
-    nodes, links = world.node_tree.nodes, world.node_tree.links
-    out = next((n for n in nodes if n.type == "OUTPUT_WORLD"), None)
-    if out is None or not out.inputs["Surface"].is_linked:
-        return None
-    original = out.inputs["Surface"].links[0].from_socket
-    coords, noise = nodes.new("ShaderNodeTexCoord"), nodes.new("ShaderNodeTexNoise")
+def mix_node(nodes: Any, blend: str) -> Any:
+    """A Mix node of two colours by `blend` (its blend type), its factor 1."""
+    node = nodes.new("ShaderNodeMix")
+    node.data_type = "RGBA"
+    node.blend_type = blend
+    node.inputs["Factor"].default_value = 1.0
+    return node
+
+
+def make_backdrops(collection: Any, name: str, places: np.ndarray, clip_end: float) -> Any:
+    """Backdrops in `collection` about `places` (``(n, 3)``, in the space of the object returned: parent it to a camera)
+    for cameras whose far clip is `clip_end`: instances of one hidden icosphere just inside it on the points of a mesh,
+    whose attributes hold each one's numbers (:func:`write_backdrops`)."""
+    mesh = bpy.data.meshes.new(name)
+    bm = bmesh.new()
+    try:
+        bmesh.ops.create_icosphere(bm, subdivisions=BACKDROP_SUBDIVISIONS, radius=clip_end * BACKDROP_REACH)
+        bm.to_mesh(mesh)
+    finally:
+        bm.free()
+    mesh.materials.append(backdrop_material(name))
+    sphere = bpy.data.objects.new(name, mesh)
+    collection.objects.link(sphere)
+    for visibility in UNSEEN_BY:
+        setattr(sphere, visibility, False)
+    sphere.hide_render = True  # its instances draw it
+    points = bpy.data.meshes.new(f"{name} places")
+    points.vertices.add(len(places))
+    points.vertices.foreach_set("co", np.asarray(places, dtype=np.float32).ravel())
+    for key in (SKY_SHIFT, FIRST, SECOND, PATTERN):
+        points.attributes.new(key, "FLOAT_COLOR", "POINT")
+    holder = bpy.data.objects.new(f"{name} places", points)
+    collection.objects.link(holder)
+    holder.modifiers.new("visualenv backdrops", "NODES").node_group = _instancing(name, sphere)
+    sphere[BACKDROP] = holder[BACKDROP] = True
+    return holder
+
+
+def write_backdrops(holder: Any, distractions: Sequence[Distraction], sky_shifts: np.ndarray) -> None:
+    """Each backdrop's numbers (one distraction per point of `holder`, made by :func:`make_backdrops`; its sky's shift
+    given, ``(n, 3)``: the last row of its colour shifts): the shift, the background's colours, and its pattern's
+    scale, time and opacity (0: no background)."""
+    shown = [background(d) for d in distractions]
+    numbers = {SKY_SHIFT: np.asarray(sky_shifts),
+               FIRST: np.array([b.first if b else (0.0, 0.0, 0.0) for b in shown]),
+               SECOND: np.array([b.second if b else (0.0, 0.0, 0.0) for b in shown]),
+               PATTERN: np.array([(b.scale, b.time, b.opacity) if b else (1.0, 0.0, 0.0) for b in shown])}
+    for key, values in numbers.items():
+        rgba = np.ones((len(values), 4), dtype=np.float32)
+        rgba[:, :3] = values
+        holder.data.attributes[key].data.foreach_set("color", rgba.ravel())
+    holder.data.update_tag()
+
+
+def _instancing(name: str, obj: Any) -> Any:
+    """Geometry Nodes: an instance of `obj` on every point (the points' attributes go with it)."""
+    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    info = nodes.new("GeometryNodeObjectInfo")
+    info.transform_space = "ORIGINAL"
+    info.inputs["Object"].default_value = obj
+    info.inputs["As Instance"].default_value = True
+    on_points = nodes.new("GeometryNodeInstanceOnPoints")
+    links.new(nodes.new("NodeGroupInput").outputs[0], on_points.inputs["Points"])
+    links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
+    links.new(on_points.outputs["Instances"], nodes.new("NodeGroupOutput").inputs[0])
+    return group
+
+
+def backdrop_material(name: str) -> Any:
+    """The backdrop's shader: Transparent of 1 - opacity, plus Emission of (1 - opacity) x the sky's shift + opacity x
+    the pattern, two colours blended by a 4D noise of the ray's direction (scale and time its attributes'), as one
+    env's world shows them to its camera rays; every number an attribute. Not a light Cycles samples."""
+    material = bpy.data.materials.new(name)
+    ensure_node_tree(material)
+    material.cycles.emission_sampling = "NONE"
+    nodes, links = material.node_tree.nodes, material.node_tree.links
+    nodes.clear()
+    pattern = nodes.new("ShaderNodeSeparateXYZ")
+    links.new(env_attribute(nodes, PATTERN).outputs["Vector"], pattern.inputs[0])
+    direction = nodes.new("ShaderNodeVectorMath")
+    direction.operation = "SCALE"
+    direction.inputs["Scale"].default_value = -1.0
+    links.new(nodes.new("ShaderNodeNewGeometry").outputs["Incoming"], direction.inputs[0])
+    noise = nodes.new("ShaderNodeTexNoise")
     noise.noise_dimensions = "4D"
-    links.new(coords.outputs["Generated"], noise.inputs["Vector"])
-    blend = nodes.new("ShaderNodeMix")
-    blend.data_type = "RGBA"
+    links.new(direction.outputs["Vector"], noise.inputs["Vector"])
+    links.new(pattern.outputs["X"], noise.inputs["Scale"])
+    links.new(pattern.outputs["Y"], noise.inputs["W"])
+    blend, glow = mix_node(nodes, "MIX"), mix_node(nodes, "MIX")
     links.new(noise.outputs["Fac"], blend.inputs["Factor"])
-    first, second = [sock for sock in blend.inputs if sock.type == "RGBA"]
-    shown = nodes.new("ShaderNodeBackground")
-    links.new(next(sock for sock in blend.outputs if sock.type == "RGBA"), shown.inputs["Color"])
-    path, on = nodes.new("ShaderNodeLightPath"), nodes.new("ShaderNodeMath")
-    on.operation = "MULTIPLY"
-    links.new(path.outputs["Is Camera Ray"], on.inputs[0])
-    mix = nodes.new("ShaderNodeMixShader")
-    links.new(on.outputs["Value"], mix.inputs["Fac"])
-    links.new(original, mix.inputs[1])
-    links.new(shown.outputs["Background"], mix.inputs[2])
-    links.new(mix.outputs["Shader"], out.inputs["Surface"])
-    if world.cycles.sampling_method == "AUTOMATIC":  # a textured world's automatic map costs seconds at every change
-        world.cycles.sampling_method = "MANUAL"
-        world.cycles.sample_map_resolution = SKY_MAP_RESOLUTION
-    return {"first": first, "second": second, "scale": noise.inputs["Scale"], "time": noise.inputs["W"], "on": on.inputs[1]}
-
-
-def _show_background(sockets: dict[str, Any], distraction: Distraction) -> None:
-    """Write the distraction's background (or none) into the world's sockets."""
-    shown = background(distraction)
-    sockets["on"].default_value = 0.0 if shown is None else shown.opacity
-    if shown is not None:
-        sockets["first"].default_value = (*shown.first, 1.0)
-        sockets["second"].default_value = (*shown.second, 1.0)
-        sockets["scale"].default_value = shown.scale
-        sockets["time"].default_value = shown.time
+    for node, first, second in ((blend, env_attribute(nodes, FIRST), env_attribute(nodes, SECOND)),
+                                (glow, env_attribute(nodes, SKY_SHIFT), blend)):
+        a, b = [sock for sock in node.inputs if sock.type == "RGBA"]
+        links.new(first.outputs["Color"], a)
+        links.new(next(sock for sock in second.outputs if sock.type == "RGBA"), b)
+    links.new(pattern.outputs["Z"], glow.inputs["Factor"])
+    through = nodes.new("ShaderNodeMath")
+    through.operation = "SUBTRACT"
+    through.inputs[0].default_value = 1.0
+    links.new(pattern.outputs["Z"], through.inputs[1])
+    transparent, emission = nodes.new("ShaderNodeBsdfTransparent"), nodes.new("ShaderNodeEmission")
+    both = nodes.new("ShaderNodeAddShader")
+    links.new(through.outputs["Value"], transparent.inputs["Color"])
+    links.new(next(sock for sock in glow.outputs if sock.type == "RGBA"), emission.inputs["Color"])
+    emission.inputs["Strength"].default_value = 1.0
+    links.new(transparent.outputs[0], both.inputs[0])
+    links.new(emission.outputs[0], both.inputs[1])
+    links.new(both.outputs[0], nodes.new("ShaderNodeOutputMaterial").inputs["Surface"])
+    return material

@@ -24,7 +24,8 @@ copied object stood: the same pixels.
 
 An env's visibility is its point's selection (a hidden instance is left out),
 and a bound colour an instance attribute that the mesh's own materials read
-with an Attribute node (type Instancer). Moving instances stay instances:
+with an Attribute node (type Instancer), as each env's distraction of the
+colours and its camera's turn (:meth:`InstancedCopies.write_env_attributes`). Moving instances stay instances:
 realizing them, or merging the meshes, makes Cycles rebuild the geometry every
 step (about four times the cost); Cycles' persistent data keeps them.
 
@@ -161,6 +162,7 @@ class _Instancer:
     visible: list[slice]  # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
     selected: bool  # whether the points carry a visible attribute
     color: slice | None
+    attributes: Sequence[str] = ()  # each env's own numbers (write_env_attributes)
     realized: bool = False  # every env's copy in one static mesh, built once (:func:`_realizable`)
     last: dict[str, np.ndarray] = field(default_factory=dict)
 
@@ -170,9 +172,10 @@ class InstancedCopies:
 
     def __init__(self, collection: Any, anchor: Any, originals: Sequence[Any], bindings: Sequence[BindingTarget],
                  objects: dict[str, Any], num_envs: int, bodies: Mapping[int, int] | None = None, *,
-                 realize_static: bool = False) -> None:
+                 realize_static: bool = False, env_attributes: Callable[[Any], Sequence[str]] = lambda obj: ()) -> None:
         """`bodies`: the MuJoCo body index of each object (by pointer) that takes a body's pose (:meth:`write`'s `poses`).
-        `realize_static`: whether the anchors stay where they are built, so static meshes may be realized."""
+        `realize_static`: whether the anchors stay where they are built, so static meshes may be realized.
+        `env_attributes`: the attributes an original's materials read per env (:meth:`write_env_attributes`)."""
         check_bpy("copy of Blender's matrix arithmetic")
         self.num_envs = num_envs
         self._realize_static = realize_static
@@ -211,6 +214,7 @@ class InstancedCopies:
         self._anchors: np.ndarray | None = None  # the anchors' world matrices the static nodes' world matrices were computed with
         #: whether any object takes a MuJoCo body's pose
         self.posed = bool(self._posed)
+        self._env_attributes = env_attributes
         self._instancers: list[_Instancer] = []
         for obj in originals:
             if obj.type == "MESH":
@@ -240,9 +244,12 @@ class InstancedCopies:
             for slot in obj.material_slots:
                 if slot.material is not None:
                     _read_instance_color(slot.material)
+        attributes = list(self._env_attributes(obj))
+        for name in attributes:
+            mesh.attributes.new(name, "FLOAT_COLOR", "POINT")
         holder = bpy.data.objects.new(f"{obj.name}-instances", mesh)
         collection.objects.link(holder)
-        realized = (self._realize_static and self._nodes[node].static and not selected and color is None
+        realized = (self._realize_static and self._nodes[node].static and not selected and color is None and not attributes
                     and _realizable(obj, self.num_envs))
         if realized:  # Cycles reads these from an instance's object, and from the holder of a realized mesh
             for name in RAY_SETTINGS:
@@ -251,7 +258,7 @@ class InstancedCopies:
                 setattr(holder.cycles, name, getattr(obj.cycles, name))
         modifier = holder.modifiers.new("visualenv instances", "NODES")
         modifier.node_group = _node_group(f"{obj.name}-instances", obj, selected, realized)
-        return _Instancer(node, mesh, visible, selected, color, realized)
+        return _Instancer(node, mesh, visible, selected, color, attributes, realized)
 
     def write(self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Pose every env's instances: `values` the binding table ``(N, size)``, `offsets` each env's anchor, a
@@ -309,11 +316,23 @@ class InstancedCopies:
                 inst.mesh.update_tag()  # the depsgraph evaluates its modifier again
 
 
+    def write_env_attributes(self, arrays: Mapping[str, np.ndarray]) -> None:
+        """Each env's own numbers, ``(N, 4)`` float32 by attribute name, into the instances whose materials read them."""
+        for inst in self._instancers:
+            changed = False
+            for name in inst.attributes:
+                if name in arrays:
+                    changed |= _write(inst, name, arrays[name])
+            if changed:
+                inst.mesh.update_tag()
+
+
 def _write(inst: _Instancer, name: str, array: np.ndarray) -> bool:
     last = inst.last.get(name)
     if last is not None and np.array_equal(last, array):
         return False
-    inst.mesh.attributes[name].data.foreach_set("color" if name == COLOR else "value", array.ravel())
+    attribute = inst.mesh.attributes[name]
+    attribute.data.foreach_set("color" if attribute.data_type == "FLOAT_COLOR" else "value", array.ravel())
     inst.last[name] = array
     return True
 

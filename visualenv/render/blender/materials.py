@@ -148,23 +148,28 @@ def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
 
 
 TINT = "visualenv tint"  # the node a bound colour writes when a texture drives the base colour
+#: the node that adds a batch's per-env distraction shift to a material's colour (its second colour: what a binding writes)
+SHIFTED = "visualenv distraction shift"
 
 
 def color_sockets(mat: Any) -> tuple[Any, Any] | None:
     """The sockets a bound colour writes in `mat`: the colour's (Principled base colour, or its tint node's) and the
     alpha's (None when a node drives Alpha). When a texture (or any node) drives the base colour, it is multiplied by
-    a tint node (white: the texture unchanged) made here. None when the material has no Principled BSDF."""
+    a tint node (white: the texture unchanged) made here. None when the material has no Principled BSDF. Where a
+    distraction shifts the colour (:data:`SHIFTED`), the colour is the one its shift node adds to."""
     bsdf = _principled(mat)
     if bsdf is None:
         return None
     base = bsdf.inputs["Base Color"]
-    if base.is_linked and base.links[0].from_node.name != TINT:
+    if base.is_linked and base.links[0].from_node.name not in (TINT, SHIFTED):
         nodes, links = mat.node_tree.nodes, mat.node_tree.links
         source = base.links[0].from_socket
         texture, tinted = _tint_node(nodes, TINT, (1.0, 1.0, 1.0, 1.0))
         links.new(source, texture)
         links.new(tinted, base)
     target = [s for s in base.links[0].from_node.inputs if s.type == "RGBA"][1] if base.is_linked else base
+    if target.is_linked and target.links[0].from_node.name == SHIFTED:  # a textured colour's tint, shifted
+        target = [s for s in target.links[0].from_node.inputs if s.type == "RGBA"][1]
     alpha = None if bsdf.inputs["Alpha"].is_linked else bsdf.inputs["Alpha"]
     return target, alpha
 

@@ -187,6 +187,8 @@ class BlenderRenderer(Renderer):
         self._resolution: tuple[int, int] | None = None
         self._config: cfg.EngineConfig | None = None
         self._mode = ""
+        #: the distractions' backdrops (:mod:`distractions`): seen in colour renders only
+        self._backdrops: list[Any] = []
         self._depth_range: tuple[float, float] | None = None
         self._depth_forward: tuple[float, ...] | None = None
         self._set_mode("color")
@@ -353,8 +355,11 @@ class BlenderRenderer(Renderer):
         self._check_open()
         if self._rig is None:
             tracker = DataTracker()
-            self._rig = DistractionRig(self._scene, [v.camera for v in self._views], backdrop=distraction.background > 0)
+            self._rig = DistractionRig(self._scene, [v.camera for v in self._views],
+                                       backdrop=distraction.background > 0 or distraction.color_shift > 0)
             self._ids.extend(tracker.new())
+            if self._rig.backdrop is not None:
+                self._add_backdrop(self._rig.backdrop)
             children = self._rig.children
             self._views = [replace(v, camera=children[v.camera.name]) for v in self._views]
             if self._view is not None and self._view.camera.name in children:
@@ -448,7 +453,16 @@ class BlenderRenderer(Renderer):
             self._lights.hide()
         elif self._mode == "segmentation":
             self._lights.show()
+        for holder in self._backdrops:
+            holder.hide_render = mode != "color"
         self._mode = mode
+
+    def _add_backdrop(self, holder: Any) -> None:
+        """A distraction's backdrops, shown in colour renders only; the rays that pass through them need transparent bounces."""
+        holder.hide_render = self._mode != "color"
+        self._backdrops.append(holder)
+        self._see_through = True
+        self._config = None  # the bounces written again at the next render
 
     # -- access and lifecycle -----------------------------------------------------------------------
 
