@@ -395,7 +395,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self._physics is not None:
             self._physics.refresh(i)
         if self._distractions:
-            self._distractions[i].begin(self.lanes[i].np_random, seed is not None)
+            self._distractions[i].begin(self._lanes[i].np_random, seed is not None)
         self._steps[i] = 0
         self._fired[i] = 0
         self._success[i] = False
