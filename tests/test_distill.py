@@ -84,6 +84,17 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
     assert results["episodes"] == 2 and results["frames"] == int(rounds[1]["frames"]) and results["model"] == "best_model.safetensors"
     replay = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run / "best_model.safetensors")])
     assert replay.exit_code == 0 and "reproduces its run's results.json" in replay.output, replay.output
+    # a second segment starts from the first's student, which acts from its first round on
+    again = CliRunner().invoke(main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--student", str(run / "best_model.safetensors"),
+                                      "--rounds", "1", "--episodes", "1", "--mixing", "0.5", "--eval-episodes", "1", "--final-episodes", "1",
+                                      "--frame-stack", "2", "--out", str(tmp_path / "again")])
+    assert again.exit_code == 0 and "(the teacher's share 50%)" in again.output, again.output
+    second = next((tmp_path / "again" / "Goalie-v0").iterdir())
+    assert json.loads((second / "config.json").read_text())["student"]["sha256"] == hashlib.sha256((run / "best_model.safetensors").read_bytes()).hexdigest()
+    refused = CliRunner().invoke(main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--student", str(run / "best_model.safetensors"),
+                                        "--out", str(tmp_path / "refused")])  # frame stack 3 by default: the student sees 2
+    assert refused.exit_code != 0 and "the student to start from sees" in refused.output and "Traceback" not in refused.output, refused.output
+    assert not (tmp_path / "refused" / "Goalie-v0").exists()
 
 
 def test_a_teacher_of_another_env_is_refused_before_anything_runs(teacher, tmp_path):

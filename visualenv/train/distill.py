@@ -61,57 +61,32 @@ class DistillConfig:
 
 def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str], None] = print) -> tuple[Path, dict[str, Any]]:
     """Run DAgger rounds, keep the round that evaluates best, evaluate it on fresh seeds: the run folder made under
-    `out_root` once the teacher is checked, and results.json's figures."""
+    `out_root` once the teacher and the student are checked, and results.json's figures."""
     import torch
 
     from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
-    from visualenv.train.evaluation import evaluate, final_evaluation, final_seed, make_eval_env, selection_seed
+    from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_seed
     from visualenv.train.models import load_model, save_policy
     from visualenv.train.sb3 import new_run_dir
 
     spec_path = str(resolve(config.spec))
     mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there
     teacher = load_model(config.teacher)
-    start = load_model(config.student) if config.student else None
     _check_teacher(teacher, spec_path)
-    run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
-    log(f"run folder: {run_dir}")
-    _record_run(run_dir, config, spec_path)
     torch.manual_seed(config.seed)
-    started = time.perf_counter()
     rollouts = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack)
     evaluator = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=config.frame_stack)
     try:
-        student = _student(rollouts, start)
-        optimizer = torch.optim.Adam(student.parameters(), lr=config.learning_rate)
-        frames: list[np.ndarray] = []
-        labels: list[np.ndarray] = []
-        best: tuple[float, dict[str, Any]] | None = None
-        generator = np.random.default_rng(config.seed)
-        with (run_dir / "rounds.csv").open("w", newline="") as f:
-            writer = csv.writer(f)
-            writer.writerow(ROUNDS_COLUMNS)
-            for round_ in range(config.rounds):
-                share = config.mixing ** (round_ + bool(config.student))  # a given student acts from the first round on
-                obs, act, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator)
-                frames.append(obs)
-                labels.append(act)
-                loss = _fit(student, optimizer, np.concatenate(frames), np.concatenate(labels), config, generator)
-                scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
-                if best is None or scored > best[0]:
-                    best = (scored, {k: v.clone() for k, v in student.state_dict().items()})
-                row = (round_, sum(len(x) for x in frames), round(float(np.mean(returns)), 3), round(loss, 6), round(scored, 3),
-                       round(time.perf_counter() - started, 1))
-                writer.writerow(row)
-                f.flush()
-                if config.progress:
-                    log(f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
-                        f"loss {loss:.4f}, evaluation {scored:.1f}")
+        student = _student(rollouts, load_model(config.student) if config.student else None)
+        run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
+        log(f"run folder: {run_dir}")
+        _record_run(run_dir, config, spec_path)
+        started = time.perf_counter()
+        best_score, best_weights, frames = _rounds(student, teacher, rollouts, evaluator, config, run_dir / "rounds.csv", log)
         student.to(memory_format=torch.contiguous_format)  # safetensors stores contiguous tensors
         save_policy(student, run_dir / "final_model.safetensors", half=False, algorithm="dagger", run_dir=run_dir)
-        assert best is not None
-        student.load_state_dict(best[1])
+        student.load_state_dict(best_weights)
         best_path = save_policy(student, run_dir / "best_model.safetensors", half=False, algorithm="dagger", run_dir=run_dir)
     finally:
         rollouts.close()
@@ -121,20 +96,59 @@ def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str],
         results = final_evaluation(load_model(best_path), final_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         final_env.close()
-    results.update({"selection": {"eval_seed": selection_seed(config.seed), "mean_reward": best[0], "episodes": config.eval_episodes},
-                    "frames": sum(len(x) for x in frames), "teacher_steps": int(len(frames[0])),
-                    "wall_time_s": round(time.perf_counter() - started, 1), "model": best_path.name})
+    results.update({"selection": {"eval_seed": selection_seed(config.seed), "mean_reward": best_score, "episodes": config.eval_episodes},
+                    "frames": frames, "wall_time_s": round(time.perf_counter() - started, 1), "model": best_path.name})
     (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
     return run_dir, results
 
 
+def _rounds(student: Any, teacher: Any, rollouts: Any, evaluator: Any, config: DistillConfig, table: Path,
+            log: Callable[[str], None]) -> tuple[float, dict[str, Any], int]:
+    """The DAgger rounds, each a row of `table` (rounds.csv): the best evaluation, the student's weights then, the frames."""
+    import torch
+
+    from visualenv.train.evaluation import evaluate
+
+    optimizer = torch.optim.Adam(student.parameters(), lr=config.learning_rate)
+    generator = np.random.default_rng(config.seed)
+    frames: list[np.ndarray] = []
+    labels: list[np.ndarray] = []
+    best: tuple[float, dict[str, Any]] = (-np.inf, {})
+    started = time.perf_counter()
+    with table.open("w", newline="") as f:
+        writer = csv.writer(f)
+        writer.writerow(ROUNDS_COLUMNS)
+        for round_ in range(config.rounds):
+            share = config.mixing ** (round_ + bool(config.student))  # a given student acts from the first round on
+            obs, act, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator)
+            frames.append(obs)
+            labels.append(act)
+            loss = _fit(student, optimizer, np.concatenate(frames), np.concatenate(labels), config, generator)
+            scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
+            if scored > best[0]:
+                best = (scored, {k: v.clone() for k, v in student.state_dict().items()})
+            row = (round_, sum(len(x) for x in frames), round(float(np.mean(returns)), 3), round(loss, 6), round(scored, 3),
+                   round(time.perf_counter() - started, 1))
+            writer.writerow(row)
+            f.flush()
+            if config.progress:
+                log(f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
+                    f"loss {loss:.4f}, evaluation {scored:.1f}")
+    return best[0], best[1], sum(len(x) for x in frames)
+
+
 def _record_run(run_dir: Path, config: DistillConfig, spec_path: str) -> None:
-    """config.json: the command, the settings under the keys `eval` and `export-policy` read, the versions, the teacher's file."""
+    """config.json: the command, the settings under the keys `eval` and `export-policy` read, the versions, and the
+    teacher's file and the student's it started from (path and sha256)."""
     from visualenv.versions import versions
 
-    teacher = Path(config.teacher)
+    def named(path: str) -> dict[str, str]:
+        return {"path": path, "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
+
     record = {"command": shlex.join(sys.argv), "config": {**asdict(config), "algo": "dagger", "render": True}, "versions": versions(),
-              "spec_path": spec_path, "teacher": {"path": str(teacher), "sha256": hashlib.sha256(teacher.read_bytes()).hexdigest()}}
+              "spec_path": spec_path, "teacher": named(config.teacher)}
+    if config.student:
+        record["student"] = named(config.student)
     (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
 
 
