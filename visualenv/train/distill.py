@@ -42,9 +42,11 @@ ROUNDS_COLUMNS = ("round", "frames", "rollout_return", "loss", "eval_return", "w
 
 @dataclass
 class DistillConfig:
+    """The settings of a distillation, as `visualenv distill`'s options name them (config.json records them)."""
+
     spec: str
     teacher: str  # a state-only policy file of the same spec (`visualenv train --state-only`)
-    rounds: int = 8  # DAgger rounds; round 0 is the teacher's own
+    rounds: int = 8  # DAgger rounds; round 0 is the teacher's own unless a student is given
     episodes: int = 16  # episodes rolled out per round
     mixing: float = 0.5  # the teacher acts a step of round r with probability mixing ** r (DAgger's beta), else the student
     student: str | None = None  # a policy file of an earlier distillation of the spec to start from (then mixing ** (r + 1))
