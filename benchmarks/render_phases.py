@@ -10,6 +10,11 @@ around them (the depsgraph update of the moved instancers, the render result's b
 per call, for the calls of the measured steps ("moved") and for the same calls again with nothing moved ("still").
 Cycles syncs inside the engine's render, so the scene update is what "moved" costs over "still".
 ``--static-instanced`` keeps static meshes as instances (the path before they were realized), for a before/after.
+
+Two host costs per unit follow: the scene update per instance Cycles syncs (what a moved call costs over a still
+one, over the instances and objects the scene draws: every env's instance of each instancer that is not realized,
+and the objects copied per env), and the readback per pixel (the capture's copy of the Combined pass inside the
+engine's render, and its conversion to the observation's bytes after the call).
 """
 
 from __future__ import annotations
@@ -54,15 +59,20 @@ def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, d
     renderer = env.renderer
     import cycles  # Blender's bundled add-on, importable once bpy is loaded
 
+    from visualenv.render.blender.capture import Capture
+
     engine = cycles.CyclesRender
     update, render = engine.update, engine.render
+    copy_from = Capture._copy_from
     figures = {}
     try:
         for kind in ("moved", "still"):
-            phases: dict[str, list[float]] = {"update": [], "render": [], "call": []}
+            phases: dict[str, list[float]] = {"update": [], "render": [], "call": [], "copy": [], "convert": []}
             _timed_engine(engine, phases)
-            call = renderer.raw_render
-            renderer.raw_render = timed(call, phases["call"])  # an instance attribute over the method
+            call, read = renderer.raw_render, renderer._read_capture
+            renderer.raw_render = timed(call, phases["call"])  # instance attributes over the methods
+            renderer._read_capture = timed(read, phases["convert"])
+            Capture._copy_from = timed(copy_from, phases["copy"])  # type: ignore[method-assign]
             try:
                 for _ in range(steps):
                     if kind == "moved":
@@ -71,14 +81,25 @@ def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, d
                         renderer.render_batch(env.binding_table())  # the same tiles again: nothing moved
             finally:
                 engine.update, engine.render = update, render
-                del renderer.raw_render
+                Capture._copy_from = copy_from  # type: ignore[method-assign]
+                del renderer.raw_render, renderer._read_capture
             median = {name: 1000 * statistics.median(values) for name, values in phases.items()}
             median["around"] = median["call"] - median["update"] - median["render"]
             median["calls per step"] = len(phases["call"]) / steps
             figures[kind] = median
+        figures["drawn"] = {"instances": drawn_instances(renderer), "pixels": renderer.scene.render.resolution_x
+                            * renderer.scene.render.resolution_y}
     finally:
         env.close()
     return figures
+
+
+def drawn_instances(renderer: Any) -> int:
+    """What Cycles syncs object by object once anything moves: each env's instance of every instancer not realized
+    into one static mesh, and every object of the copies (their anchors and lights, and cameras left as copies)."""
+    instancers = renderer._instances._instancers if renderer._instances is not None else []
+    copied = sum(len(copy.anchor.children_recursive) + 1 for copy in renderer._copies if copy.anchor is not None)
+    return renderer.num_envs * sum(not inst.realized for inst in instancers) + copied
 
 
 def main() -> None:
@@ -104,8 +125,17 @@ def main() -> None:
     print(f"{args.spec} at {args.resolution}x{args.resolution}, {args.envs} envs, device {args.device or 'of the spec'}, "
           f"static meshes {static}; ms per render call (medians)")
     print(f"  {'':>6} {'call':>8} {'engine.update':>14} {'engine.render':>14} {'around':>8} {'calls/step':>11}")
-    for kind, m in figures.items():
+    for kind in ("moved", "still"):
+        m = figures[kind]
         print(f"  {kind:>6} {m['call']:>8.1f} {m['update']:>14.1f} {m['render']:>14.1f} {m['around']:>8.1f} {m['calls per step']:>11.1f}")
+    moved, still, drawn = figures["moved"], figures["still"], figures["drawn"]
+    instances, pixels = drawn["instances"], drawn["pixels"]
+    update_us = 1000 * (moved["call"] - still["call"]) / instances
+    print(f"  scene update: {moved['call'] - still['call']:.1f} ms a call over {instances:,} instances and objects synced: "
+          f"{update_us:.2f} us each")
+    copy_ns, convert_ns = (1e6 * still[name] / pixels for name in ("copy", "convert"))
+    print(f"  readback: {pixels:,} pixels a call; the pass copied {still['copy']:.2f} ms ({copy_ns:.2f} ns a pixel), "
+          f"converted {still['convert']:.2f} ms ({convert_ns:.2f} ns a pixel); {copy_ns + convert_ns:.2f} ns a pixel in all")
 
 
 if __name__ == "__main__":

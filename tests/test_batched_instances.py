@@ -94,19 +94,23 @@ def _instanced(renderer, realized_only: bool = False) -> set[str]:
 
 def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
     """A static mesh is realized unless its material reads its placement (a procedural texture in object coordinates:
-    realized, 23 pixels of this scene differ) or a moving camera moves the copies' anchors; either way every tile
-    equals the copied objects' tile."""
+    realized, 23 pixels of this scene differ) or a moving camera moves the copies' anchors: then the static meshes
+    that a merged mesh draws alike are one mesh in the anchor's space, one instance per env (a static group). Either
+    way every tile equals the copied objects' tile."""
     scene = SCENE.replace(
         "    Lamp:", "    Tiles: {primitive: cube, size: 0.6, location: [-2.4, 1, 0.3], material: {color: [0.9, 0.9, 0.9], "
-        "texture: {type: checker, scale: 3}}}\n    Lamp:")
+        "texture: {type: checker, scale: 3}}}\n"
+        "    Post: {primitive: cylinder, radius: 0.15, depth: 1.5, location: [2.4, 1.2, 0.75], rotation: [0, 0.3, 0], "
+        "scale: [1, 1.5, 1], material: {color: [0.1, 0.4, 0.9]}}\n    Lamp:")
     follow = scene.replace("  Lamp: {strength: 250 + 100 * a}", "  Lamp: {strength: 250 + 100 * a}\n  Camera: {location: [0.5 * x, -6, 3]}")
-    for text, realized in ((scene, {"Floor"}), (follow, set())):
+    for text, realized, groups in ((scene, {"Floor", "Post"}, []), (follow, set(), [["Floor", "Post"]])):
         env = BatchedVectorEnv(load_spec_text(text, name="instances.yaml"), 3, render=False)
         env.reset(seed=2)
         instanced, copied = _renderers(env)
         try:
             assert _instanced(instanced, realized_only=True) == realized
             assert "Tiles" in _instanced(instanced)
+            assert sorted(sorted(group) for group in instanced._instances.groups) == groups
             for step in range(2):
                 table = env.binding_table()
                 ours, theirs = instanced.render_batch(table), copied.render_batch(table)
@@ -133,5 +137,26 @@ def test_a_batch_of_instances_adds_no_objects_per_env():
         counts[n] = len(renderer.scene.objects)
         assert not renderer._per_copy and all(copy.anchor is None for copy in renderer._copies[1:])
         assert _instanced(renderer, realized_only=True) == {"Track"}  # the moving cart and pole stay instances
+        env.close()
+    assert counts[2] == counts[6], counts
+
+
+def test_a_moving_camera_adds_no_objects_per_env():
+    """Goalie's camera follows the goalie: its pose is computed from the binding table, so the scene holds as many
+    objects for 6 envs as for 2, and its eight plain static meshes are one static group (the field's texture reads its
+    generated coordinates: its own instancer)."""
+    from pathlib import Path
+
+    from visualenv.spec.loader import load_spec
+
+    loaded = load_spec(Path(__file__).parents[1] / "specs" / "goalie.yaml")
+    counts = {}
+    for n in (2, 6):
+        env = BatchedVectorEnv(loaded, n)
+        renderer = env.renderer  # built, not rendered
+        counts[n] = len(renderer.scene.objects)
+        assert not renderer._per_copy and all(copy.anchor is None for copy in renderer._copies[1:])
+        assert [sorted(group) for group in renderer._instances.groups] == [["Column" + str(i) for i in range(1, 8)] + ["GoalLine"]]
+        assert len(renderer._instances._instancers) == 3  # the field, the ball and the group: one instance each per env
         env.close()
     assert counts[2] == counts[6], counts

@@ -130,8 +130,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
             copy.aimed, copy.targets = self._aimed, self._targets
         self._objects = built.objects
         self._per_copy = bool(self._copies[0].setters or self._copies[0].aimed)  # whether any binding is written per copy
-        self._offsets = np.array([tuple(self._offset(k)) for k in range(self.num_envs)])  # each copy's anchor, as its instances see it
+        self._grid = np.array([tuple(self._offset(k)) for k in range(self.num_envs)], dtype=np.float32)  # the copies' grid places
+        self._offsets = self._grid.astype(np.float64)  # each copy's anchor, as its instances see it
         self._instances = self._instance(copied)
+        #: the anchors that carry an object drawn as itself, by env: only they follow a moving camera (the others
+        #: hold nothing, or copy 0's originals that instances draw)
+        self._carrying = [(k, copy.anchor) for k, copy in enumerate(self._copies) if copy.anchor is not None
+                          and any(o.as_pointer() not in self._removed for o in copy.anchor.children_recursive)]
+        self._table = np.zeros((self.num_envs, self._instances.size if self._instances is not None else 0))
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         #: what each env's shaders read of their own (its colour shifts, its camera's turn)
         self._env_values = EnvAttributes.of_copies(self._copies, [o for o in copied if o.as_pointer() not in self._removed], self._instances)
@@ -376,11 +382,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if moving_camera is not None:
             self._follow(moving_camera, reference)
         elif self._anchors_moved:
-            for k, copy in enumerate(self._copies):
-                offset = self._offset(k)
-                self._offsets[k] = tuple(offset)
-                if copy.anchor is not None:
-                    copy.anchor.location = offset
+            self._offsets[:] = self._grid
+            for k, anchor in self._carrying:
+                anchor.location = self._grid[k]
             self._anchors_moved = False
 
     def _render_tiles(self, view: View) -> np.ndarray:
@@ -517,11 +521,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
-        for k, (copy, pose) in enumerate(zip(self._copies, self._camera_poses(camera))):
-            place = self._offset(k) + reference - Vector(pose[:3, 3].tolist())  # its camera's place in the copy
-            if copy.anchor is not None:  # None: every object of env k is an instance, placed from _offsets
-                copy.anchor.location = place
-            self._offsets[k] = tuple(place)
+        cameras = np.array([pose[:3, 3] for pose in self._camera_poses(camera)], dtype=np.float32)
+        places = (self._grid + np.array(tuple(reference), dtype=np.float32)) - cameras  # in float32, as mathutils' vectors add
+        for k, anchor in self._carrying:
+            anchor.location = places[k]
+        self._offsets[:] = places
         self._anchors_moved = True
 
     def _camera_poses(self, camera: Any) -> list[np.ndarray]:
@@ -533,6 +537,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
             rows = [(r[0][tracked[0]], np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3)) for r in self._camera_rows] \
                 or [(camera.matrix_basis.translation, _rotation(camera.matrix_world))] * self.num_envs  # no poses yet: at qpos0
             poses = [_pose(place, rotation) for place, rotation in rows]
+        elif camera.as_pointer() in self._removed and self._instances is not None:  # computed: no copies to read
+            poses_given = self._body_poses if self._copy_poses is not None else None
+            worlds = self._instances.local_matrices(camera, self._table, poses_given).astype(np.float64)
+            rotations = worlds[:, :3, :3] / np.linalg.norm(worlds[:, :3, :3], axis=1, keepdims=True)
+            poses = [_pose(world[:3, 3], rotation) for world, rotation in zip(worlds, rotations)]
         else:
             name = next(n for n, o in self._objects.items() if o == camera)
             on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy

@@ -88,8 +88,9 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
     An object in `posed` (a MuJoCo body's) takes its location and rotation from MuJoCo's poses, so nothing may bind
     them; a quaternion-rotated object (the MJCF geoms and bodies) is computable while nothing binds its rotation.
     """
+    kinds: tuple[str, ...] = ("MESH", "EMPTY", "CAMERA")  # the object itself may be a camera: its pose places its env's anchor
     while obj is not None:
-        if obj.type not in ("MESH", "EMPTY") or obj.constraints or obj.parent_type != "OBJECT":
+        if obj.type not in kinds or obj.constraints or obj.parent_type != "OBJECT":
             return False
         props = bound.get(obj.as_pointer(), set())
         if obj.rotation_mode not in ("XYZ", "QUATERNION") or (obj.rotation_mode == "QUATERNION" and "rotation" in props):
@@ -103,7 +104,7 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
             return False
         if obj.as_pointer() in aimed or not props <= COMPUTED:
             return False
-        obj = obj.parent
+        obj, kinds = obj.parent, ("MESH", "EMPTY")
     return True
 
 
@@ -112,7 +113,8 @@ def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects:
     """Pointers of the objects that need no copies, with only such objects (or objects never copied) under them:
     meshes and empties whose world matrices numpy computes (:func:`_computable`; the meshes are drawn as instances,
     moving or not: every object in the scene adds to Blender's update of a moved one, about 10 us each), and cameras
-    that nothing moves (a batch renders through its own tiles camera; a moving camera's copies place their anchors).
+    that are not aimed and that nothing moves or whose pose numpy computes too (a batch renders through its own tiles
+    camera; a moving camera's pose, :meth:`InstancedCopies.local_matrices`, places its env's anchor)
     `posed`: pointers of the objects that take MuJoCo bodies' poses (:class:`InstancedCopies` computes them too)."""
     bound: dict[int, set[str]] = {}
     for target in bindings:
@@ -157,7 +159,7 @@ class _Node:
 class _Instancer:
     """One original mesh drawn once per env: its node, its point mesh and what its points carry."""
 
-    node: int
+    node: int | None  # None: a static group's, posed at each env's anchor
     mesh: Any
     visible: list[slice]  # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
     selected: bool  # whether the points carry a visible attribute
@@ -180,7 +182,8 @@ class InstancedCopies:
         self.num_envs = num_envs
         self._realize_static = realize_static
         bodies = bodies or {}
-        originals = [o for o in originals if o.type in ("MESH", "EMPTY")]  # the cameras removed need no instances
+        # cameras are nodes (their poses: local_matrices), with no instancer
+        originals = [o for o in originals if o.type in ("MESH", "EMPTY", "CAMERA")]
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         starts: dict[tuple[str, str], slice] = {}
         start = 0
@@ -216,17 +219,26 @@ class InstancedCopies:
         self.posed = bool(self._posed)
         self._env_attributes = env_attributes
         self._instancers: list[_Instancer] = []
+        groups = {} if realize_static else _static_groups([o for o in originals if o.type == "MESH" and self._groupable(o)])
+        grouped = {o.as_pointer() for members in groups.values() for o in members}
+        #: every static group's members' names, one list per group (one instance per env draws each group)
+        self.groups = [[o.name for o in members] for members in groups.values()]
         for obj in originals:
-            if obj.type == "MESH":
+            if obj.type == "MESH" and obj.as_pointer() not in grouped:
                 self._instancers.append(self._instancer(collection, obj, index[obj.as_pointer()], anchor))
+        for k, members in enumerate(groups.values()):
+            self._instancers.append(self._group_instancer(collection, f"{collection.name}-static{k}", members, anchor))
         for obj in originals:
-            obj.hide_render = True  # its instances draw it, env 0's among them
+            if obj.type != "CAMERA":
+                obj.hide_render = True  # its instances draw it, env 0's among them
 
-    def _instancer(self, collection: Any, obj: Any, node: int, anchor: Any) -> _Instancer:
-        """A mesh of N points under a Geometry Nodes modifier that instances `obj` on each, posed by its transform attribute."""
-        chain = list(with_ancestors(obj, anchor))
-        visible = [self._nodes[node].slices["visible"]] if "visible" in self._nodes[node].slices else []
-        color = self._nodes[node].slices.get("color")
+    def _instancer(self, collection: Any, obj: Any, node: int | None, anchor: Any, group_attributes: Sequence[str] = ()) -> _Instancer:
+        """A mesh of N points under a Geometry Nodes modifier that instances `obj` on each, posed by its transform attribute
+        (`node` None: a static group's object, posed at each env's anchor, its members' `group_attributes` on its points)."""
+        chain = list(with_ancestors(obj, anchor)) if node is not None else []
+        slices = self._nodes[node].slices if node is not None else {}
+        visible = [slices["visible"]] if "visible" in slices else []
+        color = slices.get("color")
         for ancestor in chain[1:]:
             slices = self._nodes[self._index[ancestor.as_pointer()]].slices
             if ancestor.type == "EMPTY" and "visible" in slices:
@@ -236,7 +248,7 @@ class InstancedCopies:
         mesh = bpy.data.meshes.new(f"{obj.name}-instances")
         mesh.vertices.add(self.num_envs)
         mesh.attributes.new(TRANSFORM, "FLOAT4X4", "POINT")
-        selected = bool(visible) or obj.hide_render  # a visible binding overrides how the original was set
+        selected = bool(visible) or (obj.hide_render and node is not None)  # a visible binding overrides how the original was set
         if selected:
             mesh.attributes.new(VISIBLE, "BOOLEAN", "POINT")
         if color is not None:
@@ -244,13 +256,13 @@ class InstancedCopies:
             for slot in obj.material_slots:
                 if slot.material is not None:
                     _read_instance_color(slot.material)
-        attributes = list(self._env_attributes(obj))
+        attributes = list(self._env_attributes(obj)) if node is not None else list(group_attributes)
         for name in attributes:
             mesh.attributes.new(name, "FLOAT_COLOR", "POINT")
         holder = bpy.data.objects.new(f"{obj.name}-instances", mesh)
         collection.objects.link(holder)
-        realized = (self._realize_static and self._nodes[node].static and not selected and color is None and not attributes
-                    and _realizable(obj, self.num_envs))
+        realized = (node is not None and self._realize_static and self._nodes[node].static and not selected and color is None
+                    and not attributes and _realizable(obj, self.num_envs))
         if realized:  # Cycles reads these from an instance's object, and from the holder of a realized mesh
             for name in RAY_SETTINGS:
                 setattr(holder, name, getattr(obj, name))
@@ -259,6 +271,41 @@ class InstancedCopies:
         modifier = holder.modifiers.new("visualenv instances", "NODES")
         modifier.node_group = _node_group(f"{obj.name}-instances", obj, selected, realized)
         return _Instancer(node, mesh, visible, selected, color, attributes, realized)
+
+    def _groupable(self, obj: Any) -> bool:
+        """Whether a static mesh may join its env's other static meshes in one mesh in the anchor's space (a static
+        group): nothing moves, hides or colours it, and a merged mesh draws it with the same pixels (:func:`_realizable`)."""
+        node = self._nodes[self._index[obj.as_pointer()]]
+        return (node.static and not obj.hide_render and "visible" not in node.slices and "color" not in node.slices
+                and not any("visible" in self._nodes[self._index[o.as_pointer()]].slices or
+                            "color" in self._nodes[self._index[o.as_pointer()]].slices for o in list(with_ancestors(obj))[1:]
+                            if o.as_pointer() in self._index)
+                and _realizable(obj, 1))
+
+    def _group_instancer(self, collection: Any, name: str, members: Sequence[Any], anchor: Any) -> _Instancer:
+        """One object whose mesh joins `members` in the anchor's space (realized once by Geometry Nodes), drawn once per
+        env at its anchor: Cycles syncs one instance per env for them all, not one each."""
+        merged = bpy.data.objects.new(name, bpy.data.meshes.new(name))
+        collection.objects.link(merged)
+        merged.matrix_world = anchor.matrix_world
+        for setting in RAY_SETTINGS:  # the same in every member (_static_groups)
+            setattr(merged, setting, getattr(members[0], setting))
+        for setting in CYCLES_SETTINGS:
+            setattr(merged.cycles, setting, getattr(members[0].cycles, setting))
+        modifier = merged.modifiers.new("visualenv static group", "NODES")
+        modifier.node_group = joined = _joined(name, members)
+        # baked into a plain mesh once: a modifier would follow its members' transforms, and Cycles rebuild it each step
+        layer = next(layer for layer in anchor.users_scene[0].view_layers if layer.use)  # the one renders use
+        layer.update()
+        depsgraph = layer.depsgraph
+        empty, merged.data = merged.data, bpy.data.meshes.new_from_object(merged.evaluated_get(depsgraph))
+        merged.data.name = name
+        merged.modifiers.remove(modifier)
+        bpy.data.meshes.remove(empty)
+        bpy.data.node_groups.remove(joined)
+        merged.hide_render = True  # its instances draw it
+        attributes = list(dict.fromkeys(a for o in members for a in self._env_attributes(o)))
+        return self._instancer(collection, merged, None, anchor, attributes)
 
     def write(self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
         """Pose every env's instances: `values` the binding table ``(N, size)``, `offsets` each env's anchor, a
@@ -273,16 +320,7 @@ class InstancedCopies:
             self._anchors = anchors  # the anchors moved: every world matrix with them
             for node in self._nodes:
                 node.world = None
-        bases: dict[int, np.ndarray] = {}
-        if poses is not None and self._posed:  # every body's basis for every env: a few numpy operations for all of them
-            rotations = quat_to_mat3(poses[1][:, self._pose_columns].reshape(-1, 4)).reshape(n, len(self._posed), 3, 3)
-            locations = poses[0][:, self._pose_columns].astype(np.float32)
-            for j, i in enumerate(self._posed):
-                basis = np.zeros((n, 4, 4), dtype=np.float32)
-                basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(np.float32)  # rotation @ scale, as Blender's
-                basis[:, :3, 3] = locations[:, j]
-                basis[:, 3, 3] = 1.0
-                bases[i] = basis
+        bases = self._pose_bases(poses)
         worlds: list[np.ndarray] = []
         for i, node in enumerate(self._nodes):
             if node.world is not None:
@@ -300,8 +338,10 @@ class InstancedCopies:
             worlds.append(world)
             if node.static:
                 node.world = world
+        at_anchors = anchors if anchors.ndim == 3 else _translations(anchors)
         for inst in self._instancers:
-            changed = _write(inst, TRANSFORM, np.ascontiguousarray(worlds[inst.node].transpose(0, 2, 1)))  # Blender's matrices are column-major
+            world = worlds[inst.node] if inst.node is not None else at_anchors
+            changed = _write(inst, TRANSFORM, np.ascontiguousarray(world.transpose(0, 2, 1)))  # Blender's matrices are column-major
             if inst.selected:
                 shown = np.full(n, bool(inst.visible))
                 for part in inst.visible:
@@ -315,6 +355,45 @@ class InstancedCopies:
             if changed:
                 inst.mesh.update_tag()  # the depsgraph evaluates its modifier again
 
+
+    def local_matrices(self, obj: Any, values: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+        """Each env's world matrix of a removed object (a moving camera) in its copy, its anchor left out: ``(N, 4, 4)``
+        float32, composed as :meth:`write` composes it (`values` and `poses` as there)."""
+        n = self.num_envs
+        bases = self._pose_bases(poses)
+        chain: list[int] = []
+        i: int | None = self._index[obj.as_pointer()]
+        while i is not None:
+            chain.append(i)
+            i = self._nodes[i].parent
+        world: np.ndarray | None = None
+        for i in reversed(chain):  # from the node under the anchor down to the object
+            node = self._nodes[i]
+            given = bases.get(i, node.basis)
+            basis = given if given is not None else _basis(node, values, n)
+            if world is None:  # under the anchor, which is left out: the basis itself
+                world = np.broadcast_to(basis, (n, 4, 4)).copy()
+            else:
+                world = mul_m4_m4m4(world if node.parent_inverse is None else mul_m4_m4m4(world, node.parent_inverse), basis)
+        assert world is not None
+        return world
+
+    def _pose_bases(self, poses: tuple[np.ndarray, np.ndarray] | None) -> dict[int, np.ndarray]:
+        """The ``matrix_basis`` ``(N, 4, 4)`` of every node that takes a MuJoCo body's pose, by node (none without poses):
+        a few numpy operations for all of them."""
+        bases: dict[int, np.ndarray] = {}
+        if poses is None or not self._posed:
+            return bases
+        n = self.num_envs
+        rotations = quat_to_mat3(poses[1][:, self._pose_columns].reshape(-1, 4)).reshape(n, len(self._posed), 3, 3)
+        locations = poses[0][:, self._pose_columns].astype(np.float32)
+        for j, i in enumerate(self._posed):
+            basis = np.zeros((n, 4, 4), dtype=np.float32)
+            basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(np.float32)  # rotation @ scale, as Blender's
+            basis[:, :3, 3] = locations[:, j]
+            basis[:, 3, 3] = 1.0
+            bases[i] = basis
+        return bases
 
     def write_env_attributes(self, arrays: Mapping[str, np.ndarray]) -> None:
         """Each env's own numbers, ``(N, 4)`` float32 by attribute name, into the instances whose materials read them."""
@@ -335,6 +414,46 @@ def _write(inst: _Instancer, name: str, array: np.ndarray) -> bool:
     attribute.data.foreach_set("color" if attribute.data_type == "FLOAT_COLOR" else "value", array.ravel())
     inst.last[name] = array
     return True
+
+
+def _translations(places: np.ndarray) -> np.ndarray:
+    """``(N, 4, 4)`` float32 matrices that translate by each of ``(N, 3)`` `places`."""
+    matrices = np.zeros((len(places), 4, 4), dtype=np.float32)
+    matrices[:, [0, 1, 2, 3], [0, 1, 2, 3]] = 1.0
+    matrices[:, :3, 3] = places
+    return matrices
+
+
+def _static_groups(meshes: Sequence[Any]) -> dict[tuple, list[Any]]:
+    """Static meshes in groups that one mesh may draw: those whose object settings Cycles reads (ray visibility, pass
+    index, ...) are the same; only groups of two or more (one alone gains nothing)."""
+    groups: dict[tuple, list[Any]] = {}
+    for obj in meshes:
+        key = tuple(_setting(getattr(obj, s)) for s in RAY_SETTINGS) + tuple(_setting(getattr(obj.cycles, s)) for s in CYCLES_SETTINGS)
+        groups.setdefault(key, []).append(obj)
+    return {key: members for key, members in groups.items() if len(members) > 1}
+
+
+def _setting(value: Any) -> Any:
+    return tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
+
+
+def _joined(name: str, members: Sequence[Any]) -> Any:
+    """A node group that outputs `members` joined into one realized mesh, in the modified object's space."""
+    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    nodes, links = group.nodes, group.links
+    join = nodes.new("GeometryNodeJoinGeometry")
+    for obj in members:
+        info = nodes.new("GeometryNodeObjectInfo")
+        info.transform_space = "RELATIVE"  # in the holder's space: the anchor's
+        info.inputs["Object"].default_value = obj
+        links.new(info.outputs["Geometry"], join.inputs[0])
+    realize = nodes.new("GeometryNodeRealizeInstances")
+    links.new(join.outputs[0], realize.inputs["Geometry"])
+    links.new(realize.outputs["Geometry"], nodes.new("NodeGroupOutput").inputs[0])
+    return group
 
 
 def _matrix(m: Any) -> np.ndarray:
