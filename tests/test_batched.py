@@ -310,10 +310,11 @@ def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
     out = tmp_path / "runs"
     result = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--batched", "2", "--state-only", "--steps", "64", "--eval-every", "64",
                                        "--eval-episodes", "1", "--final-episodes", "1", "--set", "n_steps=32", "--set", "batch_size=32",
-                                       "--out", str(out), "--no-progress"])
+                                       "--device", "cpu", "--out", str(out), "--no-progress"])
     assert result.exit_code == 0, result.output
     (run,) = (out / "VisualCartPole-v0").iterdir()
-    assert json.loads((run / "config.json").read_text())["config"]["batched"] is True
+    config = json.loads((run / "config.json").read_text())["config"]
+    assert config["batched"] is True and config["hyperparams"]["device"] == "cpu"
     log = run / "monitor" / "batch.monitor.csv"
     before = log.read_text().splitlines()
     assert len(before) > 2  # the header lines and at least one episode

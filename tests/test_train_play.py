@@ -123,6 +123,26 @@ def test_bad_hyperparameters_fail_before_anything_starts(tmp_path, args, message
     assert not (tmp_path / "runs").exists()  # no empty run folder left behind
 
 
+def test_devices_are_checked_before_anything_starts(tmp_path):
+    """--device cuda where torch sees no GPU, and sb3's device options with --backend rllib, fail before a run folder;
+    --render-device reaches the training envs' renderer options."""
+    import torch
+
+    from visualenv.train.sb3 import TrainConfig, _vec_kwargs
+
+    out = tmp_path / "runs"
+    if not torch.cuda.is_available():
+        result = CliRunner().invoke(main, ["train", "Goalie-v0", "--device", "cuda", "--no-progress", "--out", str(out)])
+        assert result.exit_code == 1 and "sees no CUDA device" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--device", "cuda", "--set", "device=cpu", "--out", str(out)])
+    assert result.exit_code != 0 and "set device 'cpu' as well" in result.output
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--render-device", "gpu", "--out", str(out)])
+    assert result.exit_code != 0 and "--render-device: not for --backend rllib" in result.output
+    assert not out.exists()
+    assert _vec_kwargs(TrainConfig(spec="Goalie-v0", render_device="gpu")) == {"device": "gpu"}
+    assert _vec_kwargs(TrainConfig(spec="Goalie-v0")) == {}
+
+
 def test_a_config_files_exponent_numbers_are_numbers(tmp_path):
     """YAML 1.1 reads 3e-4 as text; --config reads it as the number --set reads (here n_steps is the one refused)."""
     config = tmp_path / "hyper.yaml"

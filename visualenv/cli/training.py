@@ -47,6 +47,10 @@ def _parse_value(text: str) -> Any:
                    "rllib: in each EnvRunner (replaces --envs-per-runner)")
 @click.option("--workers", "batch_workers", type=click.IntRange(min=1), default=None,
               help="sb3, with --batched N: K processes, each a batch of about N/K envs on its own share of the cores")
+@click.option("--device", "torch_device", default=None, metavar="auto|cpu|cuda[:N]",
+              help="sb3: where the policy acts and learns (SB3's device; default auto: a CUDA GPU if torch sees one)")
+@click.option("--render-device", type=click.Choice(["cpu", "gpu"]), default=None,
+              help="sb3: where the training envs render (default: the spec's render.device)")
 @click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
               help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
 @click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
@@ -56,7 +60,8 @@ def _parse_value(text: str) -> Any:
 def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
           final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
           out_root: str, resume_dir: str | None, no_progress: bool, pin: bool, batched: int | None, backend: str, env_runners: int,
-          envs_per_runner: int, address: str | None, batch_workers: int | None = None) -> None:
+          envs_per_runner: int, address: str | None, batch_workers: int | None = None, torch_device: str | None = None,
+          render_device: str | None = None) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
@@ -68,18 +73,22 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 
     ctx = click.get_current_context()
     hyper = _hyperparameters(config_file, overrides)
+    if torch_device is not None:
+        if "device" in hyper and hyper["device"] != torch_device:
+            raise click.BadParameter(f"the hyperparameters set device {hyper['device']!r} as well", param_hint="--device")
+        hyper["device"] = torch_device
     if _chosen_backend(ctx, backend, resume_dir) == "rllib":
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
         return
     if resume_dir:
-        _refuse_fixed_on_resume(ctx, ("algo", "envs", "batched", "batch_workers", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
+        _refuse_fixed_on_resume(ctx, ("algo", "envs", "batched", "batch_workers", "render_device", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
                                       "out_root"),
                                 "only --steps, --set and --config change on --resume")
         config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
     else:
         config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
                              eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
-                             render=not state_only, hyperparams=hyper, progress=not no_progress, pin=pin)
+                             render=not state_only, hyperparams=hyper, progress=not no_progress, pin=pin, render_device=render_device)
         if batch_workers is not None and not batched:
             raise click.BadParameter("splits a batch among processes: give --batched N as well", param_hint="--workers")
         if batch_workers is not None and batched is not None and batch_workers > batched:
@@ -162,7 +171,7 @@ def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dic
 
 def _given(ctx: click.Context, names: Sequence[str]) -> list[str]:
     """The options among `names` given on the command line, as the user spelt them."""
-    flags = {"out_root": "--out", "batch_workers": "--workers"}
+    flags = {"out_root": "--out", "batch_workers": "--workers", "torch_device": "--device"}
     return [flags.get(n, f"--{n.replace('_', '-')}") for n in names if ctx.get_parameter_source(n) is ParameterSource.COMMANDLINE]
 
 
@@ -172,7 +181,7 @@ def _chosen_backend(ctx: click.Context, backend: str, resume_dir: str | None) ->
     if resume_dir and _given(ctx, ["backend"]) and backend != saved_backend:
         raise click.UsageError(f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend")
     if saved_backend == "rllib" or backend == "rllib":
-        sb3_only = _given(ctx, ["algo", "envs", "batch_workers"])
+        sb3_only = _given(ctx, ["algo", "envs", "batch_workers", "torch_device", "render_device"])
         if sb3_only:
             raise click.UsageError(f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)")
         return "rllib"

@@ -64,6 +64,7 @@ class TrainConfig:
     pin: bool = True  # each training env's process confined to its own cores
     batched: bool = False  # the envs in one process and one Blender (BatchedVectorEnv) instead of one process each
     workers: int | None = None  # with batched: the envs split into this many batches, one process each
+    render_device: str | None = None  # "cpu" or "gpu": where the training envs render (None: the spec's render.device)
 
     def policy(self, observation_space: Any) -> str:
         """SB3's policy for the env: images through a CNN, several cameras through one CNN each, a state vector through an MLP."""
@@ -127,7 +128,9 @@ def resumed_config(config_class: Any, run_dir: Path, *, steps: int | None, hyper
 
 
 def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
-    return {} if config.render else {"render": False}
+    if not config.render:
+        return {"render": False}
+    return {"device": config.render_device} if config.render_device else {}
 
 
 def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None) -> dict[str, Any]:
@@ -275,11 +278,24 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     from visualenv.spec import load_spec
 
     kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})
+    check_torch_device({**kwargs, **changed}.get("device", "auto"))
     loaded = load_spec(resolve(config.spec))
     if config.render:
         check_cnn_input(loaded, config.hyperparams)
     check_replay_buffer(config, {**kwargs, **changed}, loaded)
     return kwargs, changed
+
+
+def check_torch_device(device: Any) -> None:
+    """A CUDA device asked for where torch has none is an error now, not a traceback once the envs have started."""
+    if not str(device).startswith("cuda"):
+        return
+    import torch
+
+    if not torch.cuda.is_available():
+        build = f"built for CUDA {torch.version.cuda}" if torch.version.cuda else "a CPU-only build"
+        raise ConfigError(f"device '{device}': torch {torch.__version__} ({build}) sees no CUDA device on this machine; "
+                          "use --device cpu (or auto), or install a CUDA build of torch where a GPU is")
 
 
 #: the share of the available memory a replay buffer may take (the envs, the model and the evaluation need the rest)
