@@ -39,9 +39,18 @@ must not read where the object is (object or generated coordinates, object
 info: :func:`_reads_placement`), and its copies stay under
 :data:`REALIZED_TRIANGLES`.
 
+Where a moving camera moves the anchors, every static mesh moves with them and
+none is realized; those a merged mesh draws with the same pixels (as for
+realizing, and with the same ray settings) are joined once into one mesh in
+the anchor's space, a *static group*, drawn by one instance per env at its
+anchor: Goalie's eight (its goal line and columns) cost Cycles one instance
+sync per env, not eight. A moving camera is computed too
+(:meth:`InstancedCopies.local_matrices`): its pose per env places the env's
+anchor, with no camera object per env.
+
 What numpy cannot compute so stays a copy (:func:`removable`): lights (a light's
-strength and colour are its own data, not an instance attribute), moving
-cameras, objects with constraints, animation, deltas, rotation modes other than
+strength and colour are its own data, not an instance attribute), objects
+with constraints, animation, deltas, rotation modes other than
 XYZ and quaternion (or a bound rotation in quaternion mode), non-object parents,
 aimed objects, objects whose texture is bound, a MuJoCo body whose location or
 rotation is also bound, and the parents of any copied object (the copy needs its
