@@ -122,41 +122,28 @@ def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
             env.close()
 
 
-def test_a_batch_of_instances_adds_no_objects_per_env():
-    """VisualCartPole's objects all become instances: the scene holds as many objects for 6 envs as for 2, and no binding
-    is written per env."""
+@pytest.mark.parametrize("spec, realized, groups, instancers", [
+    ("visual_cartpole.yaml", {"Track"}, [], 3),  # the moving cart and pole stay instances
+    # Goalie's camera follows the goalie: computed, not copied; its eight plain static meshes are one static group (the
+    # field's texture reads its generated coordinates: its own instancer)
+    ("goalie.yaml", set(), [["Column" + str(i) for i in range(1, 8)] + ["GoalLine"]], 3),
+])
+def test_a_batch_of_instances_adds_no_objects_per_env(spec, realized, groups, instancers):
+    """Every object becomes an instance, and a moving camera is posed from numpy: the scene holds as many objects for
+    6 envs as for 2, and no binding is written per env."""
     from pathlib import Path
 
     from visualenv.spec.loader import load_spec
 
-    loaded = load_spec(Path(__file__).parents[1] / "specs" / "visual_cartpole.yaml")
+    loaded = load_spec(Path(__file__).parents[1] / "specs" / spec)
     counts = {}
     for n in (2, 6):
         env = BatchedVectorEnv(loaded, n)
         renderer = env.renderer  # built, not rendered
         counts[n] = len(renderer.scene.objects)
         assert not renderer._per_copy and all(copy.anchor is None for copy in renderer._copies[1:])
-        assert _instanced(renderer, realized_only=True) == {"Track"}  # the moving cart and pole stay instances
-        env.close()
-    assert counts[2] == counts[6], counts
-
-
-def test_a_moving_camera_adds_no_objects_per_env():
-    """Goalie's camera follows the goalie: its pose is computed from the binding table, so the scene holds as many
-    objects for 6 envs as for 2, and its eight plain static meshes are one static group (the field's texture reads its
-    generated coordinates: its own instancer)."""
-    from pathlib import Path
-
-    from visualenv.spec.loader import load_spec
-
-    loaded = load_spec(Path(__file__).parents[1] / "specs" / "goalie.yaml")
-    counts = {}
-    for n in (2, 6):
-        env = BatchedVectorEnv(loaded, n)
-        renderer = env.renderer  # built, not rendered
-        counts[n] = len(renderer.scene.objects)
-        assert not renderer._per_copy and all(copy.anchor is None for copy in renderer._copies[1:])
-        assert [sorted(group) for group in renderer._instances.groups] == [["Column" + str(i) for i in range(1, 8)] + ["GoalLine"]]
-        assert len(renderer._instances._instancers) == 3  # the field, the ball and the group: one instance each per env
+        assert _instanced(renderer, realized_only=True) == realized
+        assert [sorted(group) for group in renderer._instances.groups] == groups
+        assert len(renderer._instances._instancers) == instancers  # one instance each per env, or one realized mesh
         env.close()
     assert counts[2] == counts[6], counts
