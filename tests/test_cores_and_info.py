@@ -174,3 +174,18 @@ def test_info_says_why_batches_are_unavailable():
               "blender": {"bpy": "5.0.1", "cycles": {}, "gpu_context": {"error": "none"},
                           "batches": {"error": "RuntimeError: Cycles could not compile the batch's custom camera shader"}}}
     assert "batches (N envs per Cycles call, --batched): unavailable (RuntimeError: Cycles could not compile" in format_report(report)
+
+
+def test_info_says_whether_cuda_mps_runs(tmp_path, monkeypatch):
+    """CUDA's Multi-Process Service: not here, installed with its daemon stopped, or its daemon's control pipe present."""
+    from visualenv.tools import info
+
+    monkeypatch.setenv("CUDA_MPS_PIPE_DIRECTORY", str(tmp_path))
+    monkeypatch.setattr(info.shutil, "which", lambda name: None)
+    assert info.cuda_mps() == {"control": None, "pipe_directory": str(tmp_path), "daemon": False}
+    report = gather(command=[sys.executable, "-c", "pass"])
+    assert "CUDA MPS: not here" in format_report(report)
+    monkeypatch.setattr(info.shutil, "which", lambda name: f"/usr/bin/{name}")
+    assert "nvidia-cuda-mps-control -d" in format_report(dict(report, cuda_mps=info.cuda_mps()))
+    (tmp_path / "control").touch()
+    assert info.cuda_mps()["daemon"] and "its daemon runs" in format_report(dict(report, cuda_mps=info.cuda_mps()))

@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import os
 import platform
+import shutil
 import subprocess
 import sys
 from typing import Any
@@ -26,7 +27,7 @@ def gather(*, warm_gpu: bool = False, command: list[str] | None = None, timeout:
     """Everything `info` prints, as a dict (``--json``)."""
     report: dict[str, Any] = {
         "python": platform.python_version(), "visualenv": __version__, "machine": platform.machine(), "mujoco": mujoco_version(),
-        "cores": {"machine": os.cpu_count(), "usable": len(usable_cores())},
+        "cores": {"machine": os.cpu_count(), "usable": len(usable_cores())}, "cuda_mps": cuda_mps(),
     }
     command = (command or PROBE) + (["--warm-gpu"] if warm_gpu else [])
     limit = timeout or (WARM_TIMEOUT if warm_gpu else PROBE_TIMEOUT)
@@ -44,11 +45,30 @@ def gather(*, warm_gpu: bool = False, command: list[str] | None = None, timeout:
     return report
 
 
+def cuda_mps() -> dict[str, Any]:
+    """Whether NVIDIA's Multi-Process Service is here and its daemon runs: worker processes rendering on one GPU
+    (``make_vec(..., batched=True, workers=K)``) then share it without time-slicing. Its control daemon listens on a
+    pipe named ``control`` in ``CUDA_MPS_PIPE_DIRECTORY`` (``/tmp/nvidia-mps`` by default)."""
+    folder = os.environ.get("CUDA_MPS_PIPE_DIRECTORY", "/tmp/nvidia-mps")
+    return {"control": shutil.which("nvidia-cuda-mps-control"), "pipe_directory": folder,
+            "daemon": os.path.exists(os.path.join(folder, "control"))}
+
+
+def _mps_line(mps: dict[str, Any]) -> str:
+    if mps["daemon"]:
+        return f"CUDA MPS: its daemon runs ({mps['pipe_directory']}): GPU workers share the GPU without time-slicing"
+    if mps["control"]:
+        return "CUDA MPS: installed, its daemon not running (start it with `nvidia-cuda-mps-control -d` before GPU workers)"
+    return "CUDA MPS: not here (no nvidia-cuda-mps-control)"
+
+
 def format_report(report: dict[str, Any]) -> str:
     cores = report["cores"]
     lines = [f"visualenv {report['visualenv']}, Python {report['python']} ({report['machine']})",
              f"cores: {cores['usable']} usable of {cores['machine']}",
              f"MuJoCo {report['mujoco']}" if report.get("mujoco") else "MuJoCo: not installed (physics specs need it: pip install 'visualenv[mujoco]')"]
+    if report.get("cuda_mps"):
+        lines.append(_mps_line(report["cuda_mps"]))
     blender = report["blender"]
     if "error" in blender:
         return "\n".join(lines + [f"Blender: {blender['error']}"])
