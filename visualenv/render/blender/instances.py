@@ -284,11 +284,8 @@ class InstancedCopies:
     def _groupable(self, obj: Any) -> bool:
         """Whether a static mesh may join its env's other static meshes in one mesh in the anchor's space (a static
         group): nothing moves, hides or colours it, and a merged mesh draws it with the same pixels (:func:`_realizable`)."""
-        node = self._nodes[self._index[obj.as_pointer()]]
-        return (node.static and not obj.hide_render and "visible" not in node.slices and "color" not in node.slices
-                and not any("visible" in self._nodes[self._index[o.as_pointer()]].slices or
-                            "color" in self._nodes[self._index[o.as_pointer()]].slices for o in list(with_ancestors(obj))[1:]
-                            if o.as_pointer() in self._index)
+        chain = [self._nodes[self._index[o.as_pointer()]] for o in with_ancestors(obj) if o.as_pointer() in self._index]
+        return (chain[0].static and not obj.hide_render and not any({"visible", "color"} & set(node.slices) for node in chain)
                 and _realizable(obj, 1))
 
     def _group_instancer(self, collection: Any, name: str, members: Sequence[Any], anchor: Any) -> _Instancer:
