@@ -5,8 +5,9 @@ whose spacing is larger than the cameras' clip distance plus the scene's size,
 so no camera reaches another copy. Meshes and empties whose world matrices
 numpy can compute (moving or not) are drawn as Geometry Nodes instances, one
 instancer per mesh posed for every env from the binding values (and a MuJoCo
-model's body poses) in one call (:mod:`instances`); cameras that do not move
-are not copied. What remains (lights, moving cameras, objects with constraints,
+model's body poses) in one call (:mod:`instances`); cameras are not copied
+unless aimed (a moving camera's pose per env is computed the same way). What
+remains (lights, aimed cameras, objects with constraints,
 animation or a bound texture, and their parents) is copied N - 1 times as linked
 duplicates, copy k under an anchor empty at k's grid place, its bindings written
 copy by copy (:mod:`copies`, which also gives a sun bound to the state one sun a
@@ -15,7 +16,8 @@ copy, light-linked to its copy: at most 63 envs).
 One render makes one image of ``cols x rows`` tiles, tile k being env k's
 observation, through a Cycles custom camera at the observation camera's pose
 (:mod:`tiles_camera`). A camera bound to the state moves its copy instead: the
-anchor of copy k is shifted so that the camera lands on the shared pose. A
+anchor of copy k (its instances' place, and its anchor empty where it has one)
+is shifted so that the camera lands on the shared pose. A
 camera the state turns (a bound rotation, a look_at) gets a shader with every
 env's own rotation: tile k's rays are turned by copy k's camera rotation, while
 the copies only translate. Turning the copies instead would turn them against
