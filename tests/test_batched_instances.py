@@ -125,7 +125,7 @@ def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
 @pytest.mark.parametrize("spec, realized, groups, instancers", [
     ("visual_cartpole.yaml", {"Track"}, [], 3),  # the moving cart and pole stay instances
     # Goalie's camera follows the goalie: computed, not copied; its eight plain static meshes are one static group (the
-    # field's texture reads its generated coordinates: its own instancer)
+    # field's texture reads its object coordinates: its own instancer)
     ("goalie.yaml", set(), [["Column" + str(i) for i in range(1, 8)] + ["GoalLine"]], 3),
 ])
 def test_a_batch_of_instances_adds_no_objects_per_env(spec, realized, groups, instancers):
