@@ -134,6 +134,8 @@ def test_devices_are_checked_before_anything_starts(tmp_path):
     if not torch.cuda.is_available():
         result = CliRunner().invoke(main, ["train", "Goalie-v0", "--device", "cuda", "--no-progress", "--out", str(out)])
         assert result.exit_code == 1 and "sees no CUDA device" in result.output and "Traceback" not in result.output
+    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--device", "gpu", "--no-progress", "--out", str(out)])
+    assert result.exit_code == 1 and "expected auto, cpu, cuda or cuda:N" in result.output and "Traceback" not in result.output
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--device", "cuda", "--set", "device=cpu", "--out", str(out)])
     assert result.exit_code != 0 and "set device 'cpu' as well" in result.output
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--render-device", "gpu", "--out", str(out)])

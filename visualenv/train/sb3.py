@@ -287,10 +287,18 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
 
 
 def check_torch_device(device: Any) -> None:
-    """A CUDA device asked for where torch has none is an error now, not a traceback once the envs have started."""
-    if not str(device).startswith("cuda"):
-        return
+    """A device torch does not know, or a CUDA device where torch has none, is an error now, not a traceback once the
+    envs have started."""
     import torch
+
+    if device == "auto":
+        return
+    try:
+        kind = torch.device(device).type
+    except (RuntimeError, TypeError):
+        raise ConfigError(f"device {device!r}: expected auto, cpu, cuda or cuda:N (a torch device)") from None
+    if kind != "cuda":
+        return
 
     if not torch.cuda.is_available():
         build = f"built for CUDA {torch.version.cuda}" if torch.version.cuda else "a CPU-only build"
