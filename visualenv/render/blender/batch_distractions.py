@@ -21,7 +21,7 @@ Numbers are written when an env's distraction changes: at its resets, and every 
 
 from __future__ import annotations
 
-from typing import Any, Callable, Sequence
+from typing import Any, Callable
 
 import numpy as np
 
@@ -77,8 +77,8 @@ class BatchDistractions:
             write_backdrops(self._backdrops, self.current, shifts[:, -1])
         self._drawn = list(self.current)
 
-    def orbited(self, camera: int, poses: Sequence[np.ndarray], measure: Callable[[int], float]) -> list[np.ndarray]:
-        """Each env's camera pose (``(4, 4)`` in its own copy) orbited by its distraction about its centre, measured once
+    def orbited(self, camera: int, poses: np.ndarray, measure: Callable[[int], float]) -> list[np.ndarray]:
+        """Each env's camera pose (``(N, 4, 4)``, each in its own copy) orbited by its distraction about its centre, measured once
         per env by `measure` (:func:`~visualenv.render.blender.distractions.focus_distance`) for this `camera` (a pointer)."""
         out = []
         for k, (pose, distraction) in enumerate(zip(poses, self.current)):

@@ -146,7 +146,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if self._distracting is not None:  # its backdrop about the place the first camera's rays start from
             self._distracting.attach(self._env_values)
             if self._distracting.backdropped:
-                centres = np.array([tuple(self._tiled_views[0][1] + self._offset(k)) for k in range(self.num_envs)])
+                centres = self._grid + np.array(tuple(self._tiled_views[0][1]), dtype=np.float32)
                 self._add_backdrop(self._distracting.make_backdrops(self._copies[0].anchor.users_collection[0], centres,
                                                                     self._views[0].camera.data.clip_end))
         self._tiled_view_camera: tuple[View, Any, bool] | None = None  # the view camera's, built at the first view
@@ -523,40 +523,44 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
-        cameras = np.array([pose[:3, 3] for pose in self._camera_poses(camera)], dtype=np.float32)
+        cameras = self._camera_poses(camera)[:, :3, 3].astype(np.float32)
         places = (self._grid + np.array(tuple(reference), dtype=np.float32)) - cameras  # in float32, as mathutils' vectors add
         for k, anchor in self._carrying:
             anchor.location = places[k]
         self._offsets[:] = places
         self._anchors_moved = True
 
-    def _camera_poses(self, camera: Any) -> list[np.ndarray]:
-        """Each env's pose of `camera` in its own copy (relative to its anchor), ``(4, 4)`` float64: a model camera's
+    def _camera_poses(self, camera: Any) -> np.ndarray:
+        """Each env's pose of `camera` in its own copy (relative to its anchor), ``(N, 4, 4)`` float64: a model camera's
         is its env's cam_xpos and cam_xmat (as one env's camera takes them: mjcf.PoseWriter); an observation camera
         that a distraction orbits, orbited as the env's own (:class:`BatchDistractions`)."""
         tracked = self._tracked.get(camera.as_pointer())
-        if tracked is not None:
-            rows = [(r[0][tracked[0]], np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3)) for r in self._camera_rows] \
-                or [(camera.matrix_basis.translation, _rotation(camera.matrix_world))] * self.num_envs  # no poses yet: at qpos0
-            poses = [_pose(place, rotation) for place, rotation in rows]
+        if tracked is not None and self._camera_rows:
+            places = np.array([r[0][tracked[0]] for r in self._camera_rows], dtype=np.float64)
+            rotations = np.array([np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3) for r in self._camera_rows])
+        elif tracked is not None:  # no poses handed yet: where the model puts it at qpos0
+            places = np.tile(tuple(camera.matrix_basis.translation), (self.num_envs, 1))
+            rotations = np.tile(_rotation(camera.matrix_world), (self.num_envs, 1, 1))
         elif camera.as_pointer() in self._removed and self._instances is not None:  # computed: no copies to read
             poses_given = self._body_poses if self._copy_poses is not None else None
             worlds = self._instances.local_matrices(camera, self._table, poses_given).astype(np.float64)
-            rotations = worlds[:, :3, :3] / np.linalg.norm(worlds[:, :3, :3], axis=1, keepdims=True)
-            poses = [_pose(world[:3, 3], rotation) for world, rotation in zip(worlds, rotations)]
+            places, rotations = worlds[:, :3, 3], _unit_columns(worlds[:, :3, :3])
         else:
             name = next(n for n, o in self._objects.items() if o == camera)
             on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
             if not on_anchor:
                 self._layer.update()  # the camera's place depends on its parents: evaluate them (once for all copies)
-            poses = [_pose(copy.objects[name].location if on_anchor else
-                           (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation,
-                           _rotation(self._camera_pose(copy, name))) for copy in self._copies]
+            places = np.array([tuple(copy.objects[name].location if on_anchor else
+                                     (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation)
+                               for copy in self._copies], dtype=np.float64)
+            rotations = np.array([_rotation(self._camera_pose(copy, name)) for copy in self._copies])
+        poses = np.zeros((self.num_envs, 4, 4))
+        poses[:, :3, :3], poses[:, :3, 3], poses[:, 3, 3] = rotations, places, 1.0
         if camera.as_pointer() not in self._orbiting:
             return poses
         assert self._distracting is not None
-        return self._distracting.orbited(camera.as_pointer(), poses, lambda k: focus_distance(
-            self._scene, Matrix(poses[k].tolist()), camera.data.clip_start, Vector(self._offsets[k]), self._posed_for_cast))
+        return np.array(self._distracting.orbited(camera.as_pointer(), poses, lambda k: focus_distance(
+            self._scene, Matrix(poses[k].tolist()), camera.data.clip_start, Vector(self._offsets[k]), self._posed_for_cast)))
 
     def _posed_for_cast(self) -> None:
         """Every env's instances posed, as the next render draws them, for a ray cast."""
@@ -569,17 +573,14 @@ class BatchedBlenderRenderer(BlenderRenderer):
         super().close()
 
 
-def _pose(place: Any, rotation: np.ndarray) -> np.ndarray:
-    """A ``(4, 4)`` float64 pose of a position and a rotation."""
-    pose = np.eye(4)
-    pose[:3, :3], pose[:3, 3] = rotation, tuple(place)
-    return pose
-
-
 def _rotation(matrix: Matrix) -> np.ndarray:
     """The rotation of a 4x4 matrix, in float64, its columns normalised (no scale)."""
-    rotation = np.array(matrix.to_3x3(), dtype=np.float64)
-    return rotation / np.linalg.norm(rotation, axis=0)
+    return _unit_columns(np.array(matrix.to_3x3(), dtype=np.float64))
+
+
+def _unit_columns(rotations: np.ndarray) -> np.ndarray:
+    """3x3 matrices (``(..., 3, 3)``) with each column divided by its length: their rotation, without scale."""
+    return rotations / np.linalg.norm(rotations, axis=-2, keepdims=True)
 
 
 def _instanced(values: tuple) -> None:

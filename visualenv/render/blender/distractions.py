@@ -27,6 +27,7 @@ import numpy as np
 from mathutils import Matrix, Vector
 
 from visualenv.render.blender.env_attributes import env_attribute
+from visualenv.render.blender.instances import geometry_node_group
 from visualenv.render.blender.materials import SHIFTED, color_sockets, ensure_node_tree
 from visualenv.render.distractions import Distraction, background, color_shifts
 
@@ -225,9 +226,7 @@ def write_backdrops(holder: Any, distractions: Sequence[Distraction], sky_shifts
 
 def _instancing(name: str, obj: Any) -> Any:
     """Geometry Nodes: an instance of `obj` on every point (the points' attributes go with it)."""
-    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group = geometry_node_group(name)
     nodes, links = group.nodes, group.links
     info = nodes.new("GeometryNodeObjectInfo")
     info.transform_space = "ORIGINAL"

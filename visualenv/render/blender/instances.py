@@ -332,15 +332,13 @@ class InstancedCopies:
             if node.world is not None:
                 worlds.append(node.world)
                 continue
-            given = bases.get(i, node.basis)
-            basis = given if given is not None else _basis(node, values, n)
-            # as Blender composes it: (parent's world @ parent inverse) @ basis, the anchor's place included (rounding with it)
+            basis = self._node_basis(i, bases, values)
+            # the anchor's place included (rounding with it)
             if node.parent is None and anchors.ndim == 2:  # an anchor that only translates: the basis shifted, to the bit
                 world = np.repeat(basis, n, axis=0) if len(basis) < n else basis.copy()
                 world[:, :3, 3] += anchors
             else:
-                parent = anchors if node.parent is None else worlds[node.parent]
-                world = mul_m4_m4m4(parent if node.parent_inverse is None else mul_m4_m4m4(parent, node.parent_inverse), basis)
+                world = _child_world(anchors if node.parent is None else worlds[node.parent], node, basis)
             worlds.append(world)
             if node.static:
                 node.world = world
@@ -374,15 +372,18 @@ class InstancedCopies:
             i = self._nodes[i].parent
         world: np.ndarray | None = None
         for i in reversed(chain):  # from the node under the anchor down to the object
-            node = self._nodes[i]
-            given = bases.get(i, node.basis)
-            basis = given if given is not None else _basis(node, values, n)
-            if world is None:  # under the anchor, which is left out: the basis itself
-                world = np.broadcast_to(basis, (n, 4, 4)).copy()
-            else:
-                world = mul_m4_m4m4(world if node.parent_inverse is None else mul_m4_m4m4(world, node.parent_inverse), basis)
+            basis = self._node_basis(i, bases, values)
+            # under the anchor, which is left out: the basis itself
+            world = np.broadcast_to(basis, (n, 4, 4)).copy() if world is None else _child_world(world, self._nodes[i], basis)
         assert world is not None
         return world
+
+    def _node_basis(self, i: int, bases: Mapping[int, np.ndarray], values: np.ndarray) -> np.ndarray:
+        """Node i's ``matrix_basis``, ``(N, 4, 4)`` or ``(1, 4, 4)`` where every env's is the same: its body's pose (in
+        `bases`), its fixed basis, else composed from its bindings' values."""
+        node = self._nodes[i]
+        given = bases.get(i, node.basis)
+        return given if given is not None else _basis(node, values, self.num_envs)
 
     def _pose_bases(self, poses: tuple[np.ndarray, np.ndarray] | None) -> dict[int, np.ndarray]:
         """The ``matrix_basis`` ``(N, 4, 4)`` of every node that takes a MuJoCo body's pose, by node (none without poses):
@@ -422,6 +423,11 @@ def _write(inst: _Instancer, name: str, array: np.ndarray) -> bool:
     return True
 
 
+def _child_world(parent: np.ndarray, node: _Node, basis: np.ndarray) -> np.ndarray:
+    """A node's world matrices under its parent's, as Blender composes them: (parent's world @ parent inverse) @ basis."""
+    return mul_m4_m4m4(parent if node.parent_inverse is None else mul_m4_m4m4(parent, node.parent_inverse), basis)
+
+
 def _translations(places: np.ndarray) -> np.ndarray:
     """``(N, 4, 4)`` float32 matrices that translate by each of ``(N, 3)`` `places`."""
     matrices = np.zeros((len(places), 4, 4), dtype=np.float32)
@@ -446,9 +452,7 @@ def _setting(value: Any) -> Any:
 
 def _joined(name: str, members: Sequence[Any]) -> Any:
     """A node group that outputs `members` joined into one realized mesh, in the modified object's space."""
-    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group = geometry_node_group(name)
     nodes, links = group.nodes, group.links
     join = nodes.new("GeometryNodeJoinGeometry")
     for obj in members:
@@ -526,9 +530,7 @@ def _reads_placement(tree: Any) -> bool:
 def _node_group(name: str, obj: Any, selected: bool, realized: bool = False) -> Any:
     """Points -> Instance on Points (`obj` as an instance, the visible attribute as selection) -> Set Instance Transform
     (-> Realize Instances, for a static mesh realized once)."""
-    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
+    group = geometry_node_group(name)
     nodes, links = group.nodes, group.links
     inputs, outputs = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
     info = nodes.new("GeometryNodeObjectInfo")
@@ -549,6 +551,14 @@ def _node_group(name: str, obj: Any, selected: bool, realized: bool = False) -> 
         links.new(last, realize.inputs["Geometry"])
         last = realize.outputs["Geometry"]
     links.new(last, outputs.inputs[0])
+    return group
+
+
+def geometry_node_group(name: str) -> Any:
+    """An empty Geometry Nodes group with one geometry input and one geometry output, for a modifier."""
+    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
+    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
+    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
     return group
 
 
