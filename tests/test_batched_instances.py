@@ -12,8 +12,8 @@ from visualenv.spec import load_spec_text
 pytest.importorskip("bpy")
 
 #: parents three deep (an empty, a mesh, a mesh), bound location, rotation, scale, visibility (of an empty: everything
-#: under it) and colour (of a mesh, and of an empty: its meshes'); a static floor; a point light whose strength is
-#: bound, which stays a copy per env
+#: under it) and colour (of a mesh, and of an empty: its meshes'); a static floor; a sun (a point, spot or area light
+#: would be each copy's own, light-linked, and keep every object a copy: tests/test_batched_scale.py)
 SCENE = """\
 id: Instances-v0
 scene:
@@ -26,7 +26,6 @@ scene:
     Ball:  {primitive: sphere, radius: 0.35, location: [1.6, 0, 0.35], material: {color: [0.9, 0.9, 0.2]}}
     Group: {empty: true, location: [-1.5, 0, 0]}
     Cone:  {primitive: cone, radius: 0.3, depth: 0.8, parent: Group, material: {color: [1, 1, 1]}}
-    Lamp:  {light: point, strength: 300, location: [2, -2, 3]}
     Sun:   {light: sun, strength: 2.0, rotation: [0.6, 0.2, 0.4]}
     Camera: {camera: perspective, location: [0, -6, 3], look_at: [0, 0, 0.5], lens: 30}
 state:
@@ -42,7 +41,6 @@ actors:
   Arm:  {rotation: [a, 0, 0]}
   Ball: {visible: "x > 0", color: [0.9, 0.5 + 0.4 * a, 0.2]}
   Group: {color: [0.2, 0.3, 0.9 - 0.2 * x]}
-  Lamp: {strength: 250 + 100 * a}
 observation: {camera: Camera, resolution: [32, 32], color: rgb}
 render: {engine: cycles, preset: fast, device: cpu}
 reward: 0.0
@@ -60,21 +58,25 @@ def _renderers(env: BatchedVectorEnv) -> tuple:
 
 
 def test_instanced_tiles_equal_copied_tiles():
-    """Parents, visibility, scale and colour through instances: every tile equals the copied objects' tile, pixel for pixel."""
+    """Parents, visibility, scale and colour through instances: every tile equals the copied objects' tile, pixel for
+    pixel but for rounding. An instance's colour is read through an Attribute node, a copy's is its material's own
+    value: Cycles' two shader programs round apart, by one level in one pixel of 4,096 here once the ball's colour
+    passes 1 (with the colour fixed, every step is equal to the bit)."""
     env = BatchedVectorEnv(load_spec_text(SCENE, name="instances.yaml"), 4, render=False)
     env.reset(seed=5)
     instanced, copied = _renderers(env)
     try:
-        names = {instanced.object(n).as_pointer(): n for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Lamp", "Camera")}
+        names = {instanced.object(n).as_pointer(): n for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Sun", "Camera")}
         assert {names[p] for p in instanced._removed if p in names} == {"Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Camera"}
-        assert instanced._per_copy  # the lamp's strength is still written into its copies
+        assert not instanced._per_copy  # no binding is written copy by copy
         assert _instanced(instanced, realized_only=True) == {"Floor"}  # the one mesh nothing moves, hides or colours: one realized mesh
         tiles, seen = [], set()
         x, a = (env.program.state_names.index(name) for name in ("x", "a"))
         for step in range(4):
             table = env.binding_table()
             ours, theirs = instanced.render_batch(table), copied.render_batch(table)
-            assert np.array_equal(ours, theirs), f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
+            difference = np.abs(ours.astype(int) - theirs.astype(int))
+            assert difference.max() <= 1 and (difference > 0).sum() <= 2, f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
             tiles.append(ours)
             seen |= {("ball", bool(v > 0)) for v in env._state[x]} | {("rig", bool(v < 1.2)) for v in env._state[a]}
             env.step(np.array([step % 2] * 4))
@@ -98,11 +100,11 @@ def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
     that a merged mesh draws alike are one mesh in the anchor's space, one instance per env (a static group). Either
     way every tile equals the copied objects' tile."""
     scene = SCENE.replace(
-        "    Lamp:", "    Tiles: {primitive: cube, size: 0.6, location: [-2.4, 1, 0.3], material: {color: [0.9, 0.9, 0.9], "
+        "    Sun:", "    Tiles: {primitive: cube, size: 0.6, location: [-2.4, 1, 0.3], material: {color: [0.9, 0.9, 0.9], "
         "texture: {type: checker, scale: 3}}}\n"
         "    Post: {primitive: cylinder, radius: 0.15, depth: 1.5, location: [2.4, 1.2, 0.75], rotation: [0, 0.3, 0], "
-        "scale: [1, 1.5, 1], material: {color: [0.1, 0.4, 0.9]}}\n    Lamp:")
-    follow = scene.replace("  Lamp: {strength: 250 + 100 * a}", "  Lamp: {strength: 250 + 100 * a}\n  Camera: {location: [0.5 * x, -6, 3]}")
+        "scale: [1, 1.5, 1], material: {color: [0.1, 0.4, 0.9]}}\n    Sun:")
+    follow = scene.replace("  Group: {color:", "  Camera: {location: [0.5 * x, -6, 3]}\n  Group: {color:")
     for text, realized, groups in ((scene, {"Floor", "Post"}, []), (follow, set(), [["Floor", "Post"]])):
         env = BatchedVectorEnv(load_spec_text(text, name="instances.yaml"), 3, render=False)
         env.reset(seed=2)

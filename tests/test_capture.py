@@ -112,3 +112,15 @@ def test_raw_rgb_and_grayscale_are_the_linear_values_as_bytes(capture):
     assert np.array_equal(capture.rgb(raw=True), expected)
     assert np.array_equal(capture.grayscale(raw=True), to_grayscale(expected))
     assert not np.array_equal(capture.rgb(raw=True), capture.rgb())
+
+
+def test_not_a_number_and_infinities_are_black_or_white_on_any_cpu():
+    """A NaN in the pass is black, as a negative value is, without a warning: cast as it came, its level would be the
+    CPU's (0 with SSE's conversion, 65535 with AVX-512's unsigned one). Infinities clamp."""
+    c = Capture().arm(4, 1)
+    c._buffer[:] = np.array([np.nan, np.nan, np.nan, 1, -np.inf, 0.5, np.inf, 1, 1, 1, 1, 1, np.nan, 0, 1, 1], dtype=np.float32)
+    c._filled = True
+    with np.errstate(all="raise"):  # no 'invalid value encountered in cast'
+        rgb, gray, raw = c.rgb(), c.grayscale(), c.raw()
+    assert rgb[0].tolist() == [[0, 0, 0], [0, 188, 255], [255, 255, 255], [0, 0, 255]]
+    assert np.array_equal(gray, to_grayscale(rgb)) and raw[0, :, 0].tolist() == [0, 0, 255, 0]

@@ -275,17 +275,19 @@ ARM = """\
   </worldbody>
 </mujoco>
 """
+BULB = '      <light name="bulb" pos="0 0 0" dir="0 0 -1" cutoff="60"/>\n'
 
 
 def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(tmp_path: Path) -> None:
     """A rendered batch draws the model's bodies (nested, free, a bound colour) as Geometry Nodes instances posed from
-    every env's xpos and xquat at once; a light on a falling body stays a copy per env. Tiles equal those of the copied
-    objects (the path before) pixel for pixel, step after step."""
+    every env's xpos and xquat at once, under a directional light (a spot light per env keeps every object a copy:
+    the next test). Tiles equal those of the copied objects (the path before) pixel for pixel, step after step."""
     from visualenv.env.batched import BatchedVectorEnv
     from visualenv.render.base import RendererOptions
     from visualenv.render.blender.batched import BatchedBlenderRenderer
 
-    (tmp_path / "arm.xml").write_text(ARM, encoding="utf-8")
+    (tmp_path / "arm.xml").write_text(ARM.replace(BULB, "").replace("<worldbody>", '<worldbody>\n    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>'),
+                                      encoding="utf-8")
     path = tmp_path / "arm.yaml"
     path.write_text(textwrap.dedent("""\
         id: Arm-v0
@@ -306,11 +308,10 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
     try:
         obs, _ = batch.reset(seed=4)
         renderer = batch.renderer
-        instanced = {name for name in ("body:arm", "body:tip", "body:lamp", "rod", "ball", "glass", "bulb")
+        instanced = {name for name in ("body:arm", "body:tip", "body:lamp", "rod", "ball", "glass")
                      if renderer.object(name).as_pointer() in renderer._removed}
         assert instanced == {"body:arm", "body:tip", "body:lamp", "rod", "ball", "glass"}, instanced
-        # per copy, only its own light's pose is written; no body of any copy
-        assert [(k, len(w.bodies), len(w.lights)) for k, w in renderer._copy_poses] == [(0, 0, 1), (1, 0, 1), (2, 0, 1)]
+        assert not any(w.bodies for _, w in renderer._copy_poses or [])  # no body of any copy is posed from Python
         frames = []
         for step in range(3):
             copies.set_physics_poses_batch(batch._pose_arrays)
@@ -323,6 +324,45 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
     finally:
         copies.close()
         batch.close()
+
+
+def test_a_spot_light_on_a_falling_body_lights_only_its_own_env(tmp_path: Path) -> None:
+    """A spot light per env (on a falling body): every object is a copy, posed copy by copy, and each copy's spot
+    lights and shadows only its own copy (Cycles' light linking: tests/test_dmc_render.py shows what sharing the spots
+    did). Tiles equal each env rendered alone, so no object of a copy is left out of its light, and the bulb's light
+    moves as its lamp falls."""
+    from visualenv.env.batched import BatchedVectorEnv
+
+    (tmp_path / "arm.xml").write_text(ARM, encoding="utf-8")
+    path = tmp_path / "lamp.yaml"
+    path.write_text("id: Lamp-v0\nphysics: {model: arm.xml, frame_skip: 50, reset: {values: {qpos_hinge: 'uniform(-1, 1)'}}}\n"
+                    "scene: {objects: {Camera: {camera: perspective, location: [0.3, -2.2, 1.2], look_at: [0.3, 0, 0.9], lens: 30}}}\n"
+                    "observation: {camera: Camera, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\nreward: 0.0\n", encoding="utf-8")
+    n = 6
+    batch = BatchedVectorEnv(path, n)
+    singles = [VisualEnv(path) for _ in range(n)]
+    try:
+        obs, _ = batch.reset(seed=2)
+        renderer = batch.renderer
+        assert not renderer._removed  # no instances: light linking is per object
+        assert [(k, len(w.bodies), len(w.lights)) for k, w in renderer._copy_poses] == [(k, 3, 1) for k in range(n)]
+        bulbs = [copy.objects["bulb"] for copy in renderer._copies]
+        for k, bulb in enumerate(bulbs):
+            assert renderer._copies[k].objects["glass"] in set(bulb.light_linking.receiver_collection.objects), k
+            assert bulb.light_linking.blocker_collection == bulb.light_linking.receiver_collection
+        frames = []
+        for step in range(2):
+            for i, env in enumerate(singles):
+                alone = env.reset(seed=2 + i)[0] if step == 0 else env.step(0)[0]
+                difference = np.abs(obs[i].astype(int) - alone.astype(int))
+                assert difference.mean() < 0.5 and (difference <= 8).mean() > 0.99, (step, i, difference.mean())
+            frames.append(obs.copy())
+            obs, *_ = batch.step(np.zeros(n, dtype=np.int64))
+        assert not np.array_equal(frames[0][0], frames[1][0])  # the lamp fell: its light moved
+    finally:
+        batch.close()
+        for env in singles:
+            env.close()
 
 
 def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:

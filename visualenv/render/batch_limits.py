@@ -2,7 +2,7 @@
 
 A batch renders every env through one custom camera with one world; a bound sun
 is copied per env and lights only its own copy (Cycles' light linking, at most
-:data:`MAX_OWN_SUNS` envs). A camera the state turns (a bound rotation, a
+:data:`MAX_LINKED_ENVS` envs). A camera the state turns (a bound rotation, a
 ``look_at``, an aimed camera that moves; a MuJoCo model's camera on a moving body or
 aimed at one; an observation camera a distraction orbits) is followed by turning each env's rays in the
 camera's shader, up to :data:`MAX_TURNING_ENVS` envs (a model camera that only moves, ``track`` or
@@ -30,9 +30,10 @@ UNFOLLOWED = ("scale",)
 #: again whenever a rotation changes, measured about 35 ms a change at 64 envs and 0.64 s at 1,024 (quiet 2-core CPU);
 #: more were not tried
 MAX_TURNING_ENVS = 1024
-#: envs with their own sun in one batch: Cycles' light linking tells 64 light sets apart, one of them the default set;
-#: measured: 63 envs' tiles equal their own renders, at 64 every tile is wrong (31 % of pixels within 8 levels)
-MAX_OWN_SUNS = 63
+#: envs with lights of their own (a bound sun; point, spot and area lights) in one batch: Cycles' light linking tells
+#: 64 light sets apart, one of them the default set; measured with suns: 63 envs' tiles equal their own renders, at 64
+#: every tile is wrong (31 % of pixels within 8 levels)
+MAX_LINKED_ENVS = 63
 ONE_PROCESS_EACH = "use one process per env (visualenv.make_vec(..., batched=False))"
 
 
@@ -61,8 +62,8 @@ def world_error(plan: RenderPlan, name: str) -> SpecError:
 
 def sun_error(plan: RenderPlan, name: str, num_envs: int) -> SpecError:
     return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: each env of a batch then has "
-                      f"its own sun, lighting only its own copy through Cycles' light linking, which tells at most {MAX_OWN_SUNS} "
-                      f"such sets apart, not {num_envs}; use batches of at most {MAX_OWN_SUNS} envs (make_vec(..., workers=K) "
+                      f"its own sun, lighting only its own copy through Cycles' light linking, which tells at most {MAX_LINKED_ENVS} "
+                      f"such sets apart, not {num_envs}; use batches of at most {MAX_LINKED_ENVS} envs (make_vec(..., workers=K) "
                       f"runs several), or {ONE_PROCESS_EACH}", key=True)])
 
 
@@ -97,7 +98,7 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
         if name == WORLD_ACTOR and name not in objects and not plan.scene.file:
             raise world_error(plan, name)
         spec = objects.get(name)
-        if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > MAX_OWN_SUNS:
+        if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > MAX_LINKED_ENVS:
             raise sun_error(plan, name, num_envs)
         if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > 1 and plan.scene.world is not None \
                 and plan.scene.world.image is not None:

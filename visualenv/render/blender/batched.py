@@ -11,7 +11,8 @@ remains (lights, aimed cameras, objects with constraints,
 animation or a bound texture, and their parents) is copied N - 1 times as linked
 duplicates, copy k under an anchor empty at k's grid place, its bindings written
 copy by copy (:mod:`copies`, which also gives a sun bound to the state one sun a
-copy, light-linked to its copy: at most 63 envs).
+copy, light-linked to its copy: at most 63 envs; point, spot and area lights are
+linked likewise up to 63 envs, which keeps every object of such a scene a copy).
 
 One render makes one image of ``cols x rows`` tiles, tile k being env k's
 observation, through a Cycles custom camera at the observation camera's pose
@@ -37,6 +38,7 @@ less than every tile again (:func:`~batch_calls.alone_limit`). It extends
 from __future__ import annotations
 
 import os
+import warnings
 from dataclasses import replace
 from typing import Any, Sequence
 
@@ -46,14 +48,15 @@ from mathutils import Matrix, Quaternion, Vector
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.distractions import Distraction
-from visualenv.render.batch_limits import (MAX_OWN_SUNS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
+from visualenv.render.batch_limits import (MAX_LINKED_ENVS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
 from visualenv.render.blender.batch_calls import MAX_IMAGE_SIDE, alone_limit, envs_per_call
 from visualenv.render.blender.batch_distractions import BatchDistractions
 from visualenv.render.blender.distractions import focus_distance
 from visualenv.render.blender.env_attributes import CAMERA_TURN, EnvAttributes, read_per_env, turn_to_env_cameras
 from visualenv.render.blender.instances import InstancedCopies, removable
-from visualenv.render.blender.copies import Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, make_copy, one_colour
+from visualenv.render.blender.copies import (LOCAL_LIGHTS, Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights,
+                                             make_copy, one_colour)
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
 from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make_tiles_camera, tile, tiles_text
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
@@ -114,7 +117,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._own_suns = {built.objects[t.object].as_pointer() for t in self.plan.bindings
                           if t.object in built.objects and is_sun(built.objects[t.object])}
         copied = [o for o in scene.objects if (not is_sun(o) or o.as_pointer() in self._own_suns) and not hidden(o)]
-        if self._own_suns and self.num_envs > MAX_OWN_SUNS:  # a .blend file's sun (the spec's were refused at build)
+        #: the lights that light only their own copy (light linking): bound suns, and every copied local light where
+        #: Cycles can tell the copies apart (:func:`~copies.linked_local_lights`)
+        self._own_lights = self._own_suns | linked_local_lights(copied, self.num_envs)
+        self._warn_shared_lights(copied)
+        if self._own_suns and self.num_envs > MAX_LINKED_ENVS:  # a .blend file's sun (the spec's were refused at build)
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
             raise sun_error(self.plan, name, self.num_envs)
         if self._own_suns and self.num_envs > 1 and not one_colour(scene.world):  # a .blend file's world (the spec's: at build)
@@ -124,7 +131,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._removed = self._removable(copied)
         self._copy_poses: list[tuple[int, Any]] | None = None  # the pose writers of the copies (None: no poses handed yet)
         self._body_poses: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))  # every env's xpos and xquat
-        self._copies = [make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_suns=self._own_suns)
+        self._copies = [make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_lights=self._own_lights)
                         for k in range(self.num_envs)]
         for copy in self._copies:
             self._objects, self._last = copy.objects, None
@@ -165,11 +172,22 @@ class BatchedBlenderRenderer(BlenderRenderer):
         return {camera.as_pointer(): (i, info.turns) for i, (info, camera) in enumerate(zip(physics.cameras, poses.cameras))
                 if info.moves and self._objects.get(info.name) == camera}
 
+    def _warn_shared_lights(self, copied: list[Any]) -> None:
+        """Past 63 envs a copied point, spot or area light cannot be linked to its copy: say that the tiles are lit otherwise."""
+        if self.num_envs <= MAX_LINKED_ENVS:
+            return
+        lamps = sorted(o.name for o in copied if o.type == "LIGHT" and o.data.type in LOCAL_LIGHTS)
+        if lamps:
+            warnings.warn(f"visualenv: a batch of {self.num_envs} envs shares light {lamps[0]!r} of every "
+                          f"env in Cycles' light tree (light linking tells at most {MAX_LINKED_ENVS} envs apart), so its tiles are "
+                          f"lit otherwise than each env alone; keep at most {MAX_LINKED_ENVS} envs per batch (make_vec(..., "
+                          f"batched=True, workers=K) splits them into K batches)", RuntimeWarning, stacklevel=2)
+
     def _removable(self, copied: list[Any]) -> set[int]:
-        """The objects to draw as instances (:func:`instances.removable`): none without instancing, or with a sun of each
+        """The objects to draw as instances (:func:`instances.removable`): none without instancing, or with a light of each
         copy's own (light linking is per object, and one instancer's instances share it). A MuJoCo body's objects are
         instanced too: the instancers take every env's body poses at once (:meth:`set_physics_poses_batch`)."""
-        if not self.instanced or self._own_suns:
+        if not self.instanced or self._own_lights:
             return set()
         return removable(copied, self.plan.bindings, self._objects, {name for _, name in self._aimed}, self._posed_bodies())
 

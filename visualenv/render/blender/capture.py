@@ -107,7 +107,9 @@ class Capture:
 
         Ufuncs with ``out=`` on the contiguous pass: numpy 1.x's ``np.clip`` with
         scalar bounds, fresh arrays and a flipped (negative-stride) input each
-        cost more than the arithmetic itself.
+        cost more than the arithmetic itself. NaN becomes level 0 (``np.fmax``):
+        cast to an integer, its level would be whatever the CPU's conversion
+        instruction makes of it (0 with SSE's, 65535 with AVX-512's unsigned one).
         """
         width = self._shape[1]
         band = slice(rows.start * width * 4, rows.stop * width * 4)
@@ -115,7 +117,7 @@ class Capture:
         np.multiply(self._buffer[band], np.float32(top), out=scaled)
         np.add(scaled, np.float32(0.5), out=scaled)
         np.minimum(scaled, np.float32(top), out=scaled)
-        np.maximum(scaled, np.float32(0.0), out=scaled)
+        np.fmax(scaled, np.float32(0.0), out=scaled)  # NaN too
         levels = self._levels[band]
         levels[...] = scaled  # truncates: with the + 0.5, rounds half up
         return levels.reshape(rows.stop - rows.start, width, 4)
