@@ -266,3 +266,38 @@ def test_a_state_only_batch_steps_each_envs_own_simulation() -> None:
 def test_an_input_for_an_actuator_that_does_not_exist(tmp_path: Path) -> None:
     message = errors_of(write(tmp_path, spec_with("actions: {continuous: {ctrl_torqe: {low: -1, high: 1}}}\n")))
     assert "no actuator 'torqe' in the model for 'ctrl_torqe' (did you mean 'ctrl_torque'?" in message and "spec.yaml:" in message
+
+
+#: MjModel arrays a model without textures may differ in: the textures' own, the materials' links to them, the names,
+#: the sizes of them all
+TEXTURE_ARRAYS = ("tex_", "mat_texid", "name_", "names", "paths", "_sizes")
+
+
+@pytest.mark.parametrize("model_file", sorted(str(p.relative_to(Path(__file__).parents[1]))
+                                              for p in (Path(__file__).parents[1] / "specs").glob("*/assets/*.xml")))
+def test_each_env_copies_the_model_without_its_textures_and_steps_the_same(model_file: str) -> None:
+    """An env's MjModel holds no texture (dm_control's skybox is 11.8 MB an env otherwise): every other array equals
+    the model's, and 30 steps under the same controls give the same state to the bit."""
+    import mujoco
+
+    from visualenv.physics.model import load_model
+    from visualenv.physics.simulation import Simulation
+
+    physics = load_model(Path(__file__).parents[1] / model_file)
+    full, dynamics = physics.model, physics.dynamics
+    assert dynamics.ntex == 0 and Simulation(physics, 1).model.ntexdata == 0
+    if full.ntex:
+        assert dynamics is not full and full.ntexdata > 0
+    for name in dir(full):
+        value = getattr(full, name)
+        if isinstance(value, np.ndarray) and not name.startswith(TEXTURE_ARRAYS):
+            np.testing.assert_array_equal(value, getattr(dynamics, name), err_msg=name)
+    states = []
+    for model in (full, dynamics):
+        data = mujoco.MjData(model)
+        rng = np.random.default_rng(0)
+        for _ in range(30):
+            data.ctrl[:] = rng.uniform(-1, 1, model.nu)
+            mujoco.mj_step(model, data)
+        states.append(np.concatenate([data.qpos, data.qvel, data.act]))
+    np.testing.assert_array_equal(states[0], states[1])

@@ -121,6 +121,12 @@ class PhysicsModel:
     path: Path
     model: Any  # mujoco.MjModel
     names: NameTables
+    #: the model without its textures, which each env's MjModel copies (:func:`without_textures`)
+    dynamics: Any = None
+
+    def __post_init__(self) -> None:
+        if self.dynamics is None:
+            self.dynamics = self.model
 
     @property
     def timestep(self) -> float:
@@ -175,7 +181,30 @@ def load_model(path: Path) -> PhysicsModel:
     except ValueError as exc:
         message = " ".join(str(exc).split())
         raise PhysicsError(f"MuJoCo cannot load {path}: {message}") from None
-    return PhysicsModel(path, model, name_tables(model))
+    return PhysicsModel(path, model, name_tables(model), without_textures(path, model))
+
+
+def without_textures(path: Path, model: Any) -> Any:
+    """`model` compiled again from `path` without its textures: what each env's MjModel copies
+    (:class:`~visualenv.physics.simulation.Simulation`).
+
+    Textures only draw, and the renderer reads them from the model once. Kept, every env would hold its own copy of
+    them (dm_control's skybox alone is 11.8 MB: 3 GB in a batch of 256 envs). MuJoCo's MjSpec deletes them and
+    compiles the rest: every other array is the same (``tests/test_physics_model.py``). Where this MuJoCo's MjSpec
+    cannot (no ``delete``), the model as it is.
+    """
+    if not model.ntex:
+        return model
+    mujoco = mujoco_module()
+    try:
+        spec = mujoco.MjSpec.from_file(str(path))
+        for texture in list(spec.textures):
+            spec.delete(texture)
+        for material in spec.materials:
+            material.textures = [""] * len(material.textures)
+        return spec.compile()
+    except (AttributeError, TypeError, ValueError):
+        return model
 
 
 #: element kinds whose names a spec uses as they are (contacts' geoms, reset.keyframe, cameras) and, for

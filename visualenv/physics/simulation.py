@@ -52,7 +52,8 @@ def integration_state(data: Any) -> np.ndarray:
     return state
 
 class Simulation:
-    """An env's MjModel (its own copy, so randomising one env's model leaves the others alone) and MjData."""
+    """An env's MjModel (its own copy, so randomising one env's model leaves the others alone, without the textures
+    only the renderer reads: :attr:`PhysicsModel.dynamics`) and MjData."""
 
     def __init__(self, physics: PhysicsModel, frame_skip: int, contacts: dict[str, tuple[int, int]] | None = None,
                  convention: str = "gymnasium") -> None:
@@ -61,7 +62,7 @@ class Simulation:
         self.convention = convention
         self.physics_step = step_function(convention, self.mujoco)
         self.physics = physics
-        self.model = copy.copy(physics.model)
+        self.model = copy.copy(physics.dynamics)
         self.data = self.mujoco.MjData(self.model)
         self.frame_skip = frame_skip
         self.contacts = dict(contacts or {})
