@@ -38,7 +38,6 @@ less than every tile again (:func:`~batch_calls.alone_limit`). It extends
 from __future__ import annotations
 
 import os
-import warnings
 from dataclasses import replace
 from typing import Any, Sequence
 
@@ -55,8 +54,8 @@ from visualenv.render.blender.batch_distractions import BatchDistractions
 from visualenv.render.blender.distractions import focus_distance
 from visualenv.render.blender.env_attributes import CAMERA_TURN, EnvAttributes, read_per_env, turn_to_env_cameras
 from visualenv.render.blender.instances import InstancedCopies, removable
-from visualenv.render.blender.copies import (LOCAL_LIGHTS, Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights,
-                                             make_copy, one_colour)
+from visualenv.render.blender.copies import (Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights, make_copy,
+                                             one_colour, warn_shared_lights)
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
 from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make_tiles_camera, tile, tiles_text
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
@@ -120,7 +119,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         #: the lights that light only their own copy (light linking): bound suns, and every copied local light where
         #: Cycles can tell the copies apart (:func:`~copies.linked_local_lights`)
         self._own_lights = self._own_suns | linked_local_lights(copied, self.num_envs)
-        self._warn_shared_lights(copied)
+        warn_shared_lights(copied, self.num_envs)
         if self._own_suns and self.num_envs > MAX_LINKED_ENVS:  # a .blend file's sun (the spec's were refused at build)
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
             raise sun_error(self.plan, name, self.num_envs)
@@ -171,17 +170,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
             return {}
         return {camera.as_pointer(): (i, info.turns) for i, (info, camera) in enumerate(zip(physics.cameras, poses.cameras))
                 if info.moves and self._objects.get(info.name) == camera}
-
-    def _warn_shared_lights(self, copied: list[Any]) -> None:
-        """Past 63 envs a copied point, spot or area light cannot be linked to its copy: say that the tiles are lit otherwise."""
-        if self.num_envs <= MAX_LINKED_ENVS:
-            return
-        lamps = sorted(o.name for o in copied if o.type == "LIGHT" and o.data.type in LOCAL_LIGHTS)
-        if lamps:
-            warnings.warn(f"visualenv: a batch of {self.num_envs} envs shares light {lamps[0]!r} of every "
-                          f"env in Cycles' light tree (light linking tells at most {MAX_LINKED_ENVS} envs apart), so its tiles are "
-                          f"lit otherwise than each env alone; keep at most {MAX_LINKED_ENVS} envs per batch (make_vec(..., "
-                          f"batched=True, workers=K) splits them into K batches)", RuntimeWarning, stacklevel=2)
 
     def _removable(self, copied: list[Any]) -> set[int]:
         """The objects to draw as instances (:func:`instances.removable`): none without instancing, or with a light of each

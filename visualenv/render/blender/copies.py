@@ -9,6 +9,7 @@ Point, spot and area lights, one per copy, are linked the same way up to 63 copi
 
 from __future__ import annotations
 
+import warnings
 from typing import Any
 
 import bpy
@@ -112,13 +113,24 @@ def linked_local_lights(copied: list[Any], num_envs: int) -> set[int]:
 
     At 1 sample Cycles' light tree picks one light per shading point, and it cannot rule out the other copies'
     lights from the bounds of a cluster of them: it spends some samples on lights that reach nothing there, and a
-    tile's light is missing or doubled in places (a spot-lit DMC task's tiles differed from one env alone by 5 to 14
-    levels from 6 envs up). Linked, each copy's objects see only their copy's lights. Light linking tells 64 light
+    tile's light is missing or doubled in places (a spot-lit DMC task's worst tile, 8 to 16 envs, was 4 to 43 levels
+    off on average: results/benchmarks/batch-lights.md). Linked, each copy's objects see only their copy's lights. Light linking tells 64 light
     sets apart (:data:`~visualenv.render.batch_limits.MAX_LINKED_ENVS`); past that, the lights stay shared by the tree.
     """
     if not 1 < num_envs <= MAX_LINKED_ENVS:
         return set()
     return {o.as_pointer() for o in copied if o.type == "LIGHT" and o.data.type in LOCAL_LIGHTS}
+
+
+def warn_shared_lights(copied: list[Any], num_envs: int) -> None:
+    """Past MAX_LINKED_ENVS envs the copied point, spot and area lights cannot be linked to their copies: say that the
+    tiles are lit otherwise than each env alone (:func:`linked_local_lights`)."""
+    lamps = sorted(o.name for o in copied if o.type == "LIGHT" and o.data.type in LOCAL_LIGHTS)
+    if num_envs > MAX_LINKED_ENVS and lamps:
+        warnings.warn(f"visualenv: a batch of {num_envs} envs shares light {lamps[0]!r} of every env in Cycles' light tree "
+                      f"(light linking tells at most {MAX_LINKED_ENVS} envs apart), so its tiles are lit otherwise than each "
+                      f"env alone; keep at most {MAX_LINKED_ENVS} envs per batch (make_vec(..., batched=True, workers=K) "
+                      "splits them into K batches)", RuntimeWarning, stacklevel=3)
 
 
 def aim_copy(copy: Copy) -> None:
