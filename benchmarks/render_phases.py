@@ -21,12 +21,15 @@ from __future__ import annotations
 
 import argparse
 import statistics
+import sys
 import tempfile
 import time
 from pathlib import Path
 from typing import Any
 
 import yaml
+
+from visualenv.errors import VisualEnvError
 
 
 def _timed_engine(engine: Any, phases: dict[str, list[float]]) -> None:
@@ -98,7 +101,9 @@ def drawn_instances(renderer: Any) -> int:
     """What Cycles syncs object by object once anything moves: each env's instance of every instancer not realized
     into one static mesh, and every object of the copies (their anchors and lights, and cameras left as copies)."""
     instancers = renderer._instances._instancers if renderer._instances is not None else []
-    copied = sum(len(copy.anchor.children_recursive) + 1 for copy in renderer._copies if copy.anchor is not None)
+    # copy 0's anchor also holds the originals its instancers draw, hidden: not synced
+    copied = sum(sum(o.as_pointer() not in renderer._removed for o in copy.anchor.children_recursive) + 1
+                 for copy in renderer._copies if copy.anchor is not None)
     return renderer.num_envs * sum(not inst.realized for inst in instancers) + copied
 
 
@@ -120,7 +125,10 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as folder:
         spec = Path(folder) / Path(args.spec).name
         spec.write_text(yaml.safe_dump(data, sort_keys=False))
-        figures = measure(str(spec), args.envs, args.steps, args.device)
+        try:
+            figures = measure(str(spec), args.envs, args.steps, args.device)
+        except VisualEnvError as exc:  # e.g. a resolution the spec's checks refuse
+            sys.exit(f"{args.spec} at {args.resolution}x{args.resolution}: {exc}")
     static = "instanced" if args.static_instanced else "realized"
     print(f"{args.spec} at {args.resolution}x{args.resolution}, {args.envs} envs, device {args.device or 'of the spec'}, "
           f"static meshes {static}; ms per render call (medians)")
