@@ -197,12 +197,14 @@ def without_textures(path: Path, model: Any) -> Any:
         return model
     mujoco = mujoco_module()
     try:
-        spec = mujoco.MjSpec.from_file(str(path))
-        for texture in list(spec.textures):
-            spec.delete(texture)
-        for material in spec.materials:
-            material.textures = [""] * len(material.textures)
-        return spec.compile()
+        with warnings.catch_warnings():  # the model's compile has said them (a deprecated attribute, ...)
+            warnings.simplefilter("ignore")
+            spec = mujoco.MjSpec.from_file(str(path))
+            for texture in list(spec.textures):
+                spec.delete(texture)
+            for material in spec.materials:
+                material.textures = [""] * len(material.textures)
+            return spec.compile()
     except (AttributeError, TypeError, ValueError):
         return model
 
