@@ -273,7 +273,7 @@ def test_a_lamp_per_env_lights_only_its_own_copy_under_any_world(light: str):
     """A point or spot lamp bound to the state, under an image sky, six envs: each copy's lamp lights only its own copy
     (Cycles' light linking), so each tile agrees with the env's own render on >= 95 % of pixels within 8 levels (the
     lamp's size adds a little noise). Shared by Cycles' light tree, the other envs' lamps took some of a pixel's one
-    sample: 29 to 74 % of the pixels agreed."""
+    sample: 28 to 45 % of the pixels agreed (results/benchmarks/batch-lights.md)."""
     from visualenv.spec import load_spec_text
 
     sky = (Path(__file__).parents[1] / "specs" / "assets" / "goalie" / "sky.png").resolve()
