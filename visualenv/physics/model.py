@@ -122,11 +122,7 @@ class PhysicsModel:
     model: Any  # mujoco.MjModel
     names: NameTables
     #: the model without its textures, which each env's MjModel copies (:func:`without_textures`)
-    dynamics: Any = None
-
-    def __post_init__(self) -> None:
-        if self.dynamics is None:
-            self.dynamics = self.model
+    dynamics: Any
 
     @property
     def timestep(self) -> float:

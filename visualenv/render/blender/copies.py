@@ -92,6 +92,7 @@ def make_copy(k: int, built: BuiltScene, originals: list[Any], places: dict[int,
     objects = {name: mapping.get(obj.as_pointer(), obj) for name, obj in built.objects.items()}
     return Copy(anchor, objects)
 
+
 def link_lights(k: int, scene: Any, originals: list[Any], mapping: dict[int, Any], own_lights: set[int]) -> None:
     """Copy k's own lights light and shadow only copy k's objects (a receiver and blocker collection of them)."""
     receivers = bpy.data.collections.new(f"{scene.name}-lit{k}")
@@ -114,19 +115,22 @@ def linked_local_lights(copied: list[Any], num_envs: int) -> set[int]:
     At 1 sample Cycles' light tree picks one light per shading point, and it cannot rule out the other copies'
     lights from the bounds of a cluster of them: it spends some samples on lights that reach nothing there, and a
     tile's light is missing or doubled in places (a spot-lit DMC task's worst tile, 8 to 16 envs, was 4 to 43 levels
-    off on average: results/benchmarks/batch-lights.md). Linked, each copy's objects see only their copy's lights. Light linking tells 64 light
-    sets apart (:data:`~visualenv.render.batch_limits.MAX_LINKED_ENVS`); past that, the lights stay shared by the tree.
+    off on average: results/benchmarks/batch-lights.md). Linked, each copy's objects see only their copy's lights.
+    Light linking tells 64 light sets apart (:data:`~visualenv.render.batch_limits.MAX_LINKED_ENVS`); past that, the
+    lights stay shared by the tree.
     """
     if not 1 < num_envs <= MAX_LINKED_ENVS:
         return set()
-    return {o.as_pointer() for o in copied if o.type == "LIGHT" and o.data.type in LOCAL_LIGHTS}
+    return {o.as_pointer() for o in copied if is_local_light(o)}
 
 
 def warn_shared_lights(copied: list[Any], num_envs: int) -> None:
     """Past MAX_LINKED_ENVS envs the copied point, spot and area lights cannot be linked to their copies: say that the
     tiles are lit otherwise than each env alone (:func:`linked_local_lights`)."""
-    lamps = sorted(o.name for o in copied if o.type == "LIGHT" and o.data.type in LOCAL_LIGHTS)
-    if num_envs > MAX_LINKED_ENVS and lamps:
+    if num_envs <= MAX_LINKED_ENVS:
+        return
+    lamps = sorted(o.name for o in copied if is_local_light(o))
+    if lamps:
         warnings.warn(f"visualenv: a batch of {num_envs} envs shares light {lamps[0]!r} of every env in Cycles' light tree "
                       f"(light linking tells at most {MAX_LINKED_ENVS} envs apart), so its tiles are lit otherwise than each "
                       f"env alone; keep at most {MAX_LINKED_ENVS} envs per batch (make_vec(..., batched=True, workers=K) "
@@ -155,13 +159,14 @@ def one_colour(world: Any) -> bool:
     return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") and node.name != SKYBOX for node in tree.nodes)
 
 
-#: lights at a place (not directional): the light tree weighs them by where they are
-LOCAL_LIGHTS = frozenset({"POINT", "SPOT", "AREA"})
-
-
 def is_sun(obj: Any) -> bool:
     """A sun light: directional, so one serves every copy unless the state binds it."""
     return bool(obj.type == "LIGHT" and obj.data.type == "SUN")
+
+
+def is_local_light(obj: Any) -> bool:
+    """A point, spot or area light: at a place, so each copy has its own and the light tree weighs it by where it is."""
+    return bool(obj.type == "LIGHT" and obj.data.type in ("POINT", "SPOT", "AREA"))
 
 
 def hidden(obj: Any) -> bool:
