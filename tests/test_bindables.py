@@ -5,7 +5,7 @@ from __future__ import annotations
 import re
 from pathlib import Path
 
-from visualenv.spec.bindables import BINDABLES, camera_problem, type_problem
+from visualenv.bindables import BINDABLES, camera_problem, type_problem
 from visualenv.spec.models import Actor
 
 DOCS = Path(__file__).resolve().parent.parent / "docs" / "spec.md"

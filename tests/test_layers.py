@@ -12,7 +12,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "visualenv"
 
 #: each module's layer, by its longest matching prefix; a module may import its own layer or lower ones
 LAYERS = {
-    "visualenv.errors": 0, "visualenv.files": 0, "visualenv.versions": 0, "visualenv.compat": 0,
+    "visualenv.errors": 0, "visualenv.files": 0, "visualenv.bindables": 0, "visualenv.source_map": 0, "visualenv.versions": 0, "visualenv.compat": 0,
     "visualenv.spec": 1, "visualenv.expr": 1, "visualenv.physics": 1,
     "visualenv.render": 2,
     "visualenv.compiler": 3,

@@ -14,7 +14,7 @@ from visualenv.expr.codegen import FunctionBuilder, Site, const, local, lower, n
 from visualenv.render.base import BindingTarget
 from visualenv.compiler import physics as phys
 from visualenv.errors import did_you_mean
-from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, WORLD_PROPERTIES, camera_problem, type_problem
+from visualenv.bindables import BINDABLES, WORLD_ACTOR, WORLD_PROPERTIES, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject
 
 #: the expression type of each kind of binding value (BINDABLES' ``value``); a colour's size (3 or 4) is checked apart

@@ -20,7 +20,7 @@ from visualenv.expr import BOOL, NUM, Type
 from visualenv.expr.codegen import local, name, tuple_of
 from visualenv.physics.model import SETTABLE, PhysicsError, PhysicsModel, load_model, resolve_model_path
 from visualenv.physics.scene import PhysicsScene, physics_scene
-from visualenv.spec.bindables import BINDABLES
+from visualenv.bindables import BINDABLES
 from visualenv.spec.models import Physics
 
 #: the generated functions' globals that call into one env's simulation (bound by Program.functions)

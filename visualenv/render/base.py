@@ -21,7 +21,7 @@ from gymnasium import spaces
 from visualenv.errors import RenderError
 from visualenv.spec.options import RENDER_OVERRIDES, check_make_options
 from visualenv.spec.models import CameraView, Observation, RenderSettings, Scene
-from visualenv.spec.source import SourceMap
+from visualenv.source_map import SourceMap
 
 CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1, "segmentation": 1}
 
@@ -44,7 +44,7 @@ class BindingTarget:
     """One scene property a renderer sets before each render."""
 
     object: str
-    property: str  # a key of visualenv.spec.bindables.BINDABLES
+    property: str  # a key of visualenv.bindables.BINDABLES
     size: int  # how many values the binding function yields for it (1 for scalars)
 
 

@@ -18,10 +18,11 @@ from pydantic import BaseModel, ValidationError
 from pydantic.fields import FieldInfo
 
 from visualenv.errors import Diagnostic, SpecError, did_you_mean, in_file_order
+from visualenv.source_map import COMMA_HINT
 from visualenv.spec.models import Spec
 from visualenv.spec.source import BASE60, SourceMap, format_path, load_document, load_toml_text, load_yaml_text
 from visualenv.spec.unused import unused_fields
-from visualenv.spec.yaml_pitfalls import COMMA_HINT, split_at_comma
+from visualenv.spec.yaml_pitfalls import split_at_comma
 
 _OBJECT_KINDS = ("primitive", "mesh", "light", "camera", "empty")
 #: what the patterns of the models mean, in words

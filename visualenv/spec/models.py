@@ -14,7 +14,7 @@ from typing import Annotated, Any, Literal, Optional, Union
 from pydantic import BaseModel, ConfigDict, Discriminator, Field, Tag, ValidationInfo, create_model, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
-from visualenv.spec.bindables import BINDABLES
+from visualenv.bindables import BINDABLES
 
 #: An expression: a number, a boolean or the text of an expression such as ``"x + tau * x_dot"``.
 Expr = Annotated[Union[bool, int, float, str], Field(description="a number or an expression")]

@@ -17,7 +17,7 @@ from pydantic import Field, ValidationError, field_validator
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
 from visualenv.spec.models import Distractions, Name, RenderSettings, StrictModel
-from visualenv.spec.source import SourceMap
+from visualenv.source_map import SourceMap
 
 #: where option errors are reported (in place of file:line)
 WHERE = "visualenv.make()"

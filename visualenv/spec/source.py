@@ -1,7 +1,7 @@
 """Read YAML or TOML into plain data plus a map from field paths to positions.
 
 Pydantic validates plain data, so positions must be kept aside: a
-:class:`SourceMap` maps each path (a tuple of keys and list indexes) to the
+:class:`~visualenv.source_map.SourceMap` maps each path (a tuple of keys and list indexes) to the
 line and column where its value starts, and to where the key itself is
 written. Syntax errors become :class:`~visualenv.errors.SpecError` with the
 parser's own position, explained (:mod:`visualenv.spec.yaml_pitfalls`). Duplicate keys, which YAML
@@ -13,82 +13,15 @@ from __future__ import annotations
 
 import re
 import tomllib
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, NoReturn
 
 import yaml
 
 from visualenv.errors import Diagnostic, SpecError
-from visualenv.spec.text_places import Places, toml_places, yaml_places
-from visualenv.spec.yaml_pitfalls import COMMA_HINT, EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, opens_and_closes
-
-#: where a value sits in the spec: keys and list indexes from the top
-SpecPath = tuple[str | int, ...]
-
-
-@dataclass
-class Position:
-    line: int
-    column: int
-    #: for single-line string scalars: how many characters precede the text
-    #: (1 for a quoted scalar), so an expression column can be added to it.
-    text_offset: int | None = None
-    #: for multi-line strings: the line and column of each of the value's characters (text_places.py)
-    places: Places | None = None
-
-
-@dataclass
-class SourceMap:
-    """Where each value (and each mapping key) of a loaded document is written."""
-
-    file: str
-    values: dict[SpecPath, Position] = field(default_factory=dict)
-    keys: dict[SpecPath, Position] = field(default_factory=dict)
-    #: YAML flow collections (``{...}`` or ``[...]``, by their bracket) that a comma split in the middle of an expression
-    split: dict[SpecPath, str] = field(default_factory=dict)
-
-    def locate(self, path: SpecPath, *, key: bool = False) -> Position | None:
-        """The position of `path`, or of its closest ancestor that has one."""
-        path = tuple(path)
-        if key and path in self.keys:
-            return self.keys[path]
-        while path:
-            if path in self.values:
-                return self.values[path]
-            path = path[:-1]
-        return self.values.get(())
-
-    def diagnostic(self, path: SpecPath, message: str, *, key: bool = False, column_offset: int | None = None) -> Diagnostic:
-        pos = self.locate(path, key=key)
-        line = pos.line if pos else None
-        column = pos.column if pos else None
-        if pos and column_offset is not None and pos.text_offset is not None and tuple(path) in self.values:
-            column = pos.column + pos.text_offset + column_offset
-        elif pos and column_offset is not None and pos.places and tuple(path) in self.values:  # a multi-line value: its own line
-            line, column = pos.places[min(max(column_offset, 0), len(pos.places) - 1)]
-        return Diagnostic(self.file, line, column, format_path(path), self._with_comma_hint(tuple(path), message))
-
-    def _with_comma_hint(self, path: SpecPath, message: str) -> str:
-        """Every problem inside a flow collection that YAML split at a comma says so: it is the likely cause."""
-        for i in range(len(path), -1, -1):
-            bracket = self.split.get(path[:i])
-            if bracket is not None:
-                hint = COMMA_HINT[bracket]
-                return message if hint in message else f"{message} ({hint})"
-        return message
-
-
-def format_path(path: SpecPath) -> str:
-    """`('state', 'theta', 'init')` -> `state.theta.init`; list indexes as `[0]`."""
-    out = ""
-    for part in path:
-        if isinstance(part, int):
-            out += f"[{part}]"
-        else:
-            out += ("." if out else "") + str(part)
-    return out
-
+from visualenv.source_map import Position, SourceMap, SpecPath, format_path
+from visualenv.spec.text_places import toml_places, yaml_places
+from visualenv.spec.yaml_pitfalls import EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, opens_and_closes
 
 def load_document(path: str | Path) -> tuple[Any, SourceMap]:
     """Load a spec file (by extension: .yaml/.yml or .toml) with its source map."""

@@ -12,8 +12,7 @@ from __future__ import annotations
 
 from typing import Any
 
-#: (line, column) of each character of a value, both 1-based
-Places = tuple[tuple[int, int], ...]
+from visualenv.source_map import Places
 
 
 def places(value: str, text: str, start: int, line: int, column: int) -> Places | None:

@@ -3,7 +3,7 @@
 
 :mod:`visualenv.spec.source` asks :func:`explain_syntax_error` for the message of a syntax error (PyYAML's own
 words first, then what they mean for a spec) and reads the number and boolean rules here; the loader adds
-:data:`COMMA_HINT` to every problem inside a ``{...}`` or ``[...]`` that YAML split at a comma. docs/spec.md's
+:data:`~visualenv.source_map.COMMA_HINT` to every problem inside a ``{...}`` or ``[...]`` that YAML split at a comma. docs/spec.md's
 "YAML pitfalls" table lists each trap; tests/test_yaml_pitfalls.py feeds every row.
 """
 
@@ -21,11 +21,6 @@ YAML11_BOOLEANS = {"yes": True, "no": False, "on": True, "off": False}
 TAB_HINT = "YAML indents with spaces only: replace the tab with spaces"
 INDENT_RULE = ("the keys of one mapping, and the '-' items of one list, start in the same column, "
                "and what belongs to a key is indented further than the key (with spaces)")
-#: what an expression cut in two at a comma of a YAML flow mapping or list needs
-COMMA_HINT = {
-    "{": "an expression with a comma inside {...} was split by YAML; quote it, e.g. {init: \"uniform(-1, 1)\"}",
-    "[": "an expression with a comma inside [...] was split by YAML; quote it, e.g. [\"clip(x, -1, 1)\", 0, 0]",
-}
 
 
 def split_at_comma(text: str) -> bool:

@@ -59,7 +59,7 @@ from visualenv.render.blender.copies import (Copy, aim_copy, copy_spacing, grid_
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
 from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make_tiles_camera, tile, tiles_text
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
-from visualenv.spec.bindables import BINDABLES
+from visualenv.bindables import BINDABLES
 from visualenv.spec.models import CameraObject
 
 class BatchedBlenderRenderer(BlenderRenderer):

@@ -22,7 +22,7 @@ import bpy
 
 from visualenv.errors import SpecError
 from visualenv.spec.models import Material, Texture, World
-from visualenv.spec.source import SourceMap
+from visualenv.source_map import SourceMap
 
 DEFAULT_WORLD = World()
 

@@ -28,7 +28,7 @@ from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
 from visualenv.render.blender.mujoco_look import ambient, backdrop, light_scene, raw_images
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
-from visualenv.spec.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
+from visualenv.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
 from visualenv.spec.models import CameraObject, Material
 
 _instances = itertools.count()
@@ -566,7 +566,7 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 
 
 #: setters of the bindable properties that need only the object; look_at and color need the renderer's state
-#: (BlenderRenderer._setter). Together they cover visualenv.spec.bindables.BINDABLES (tests/test_bindables.py checks).
+#: (BlenderRenderer._setter). Together they cover visualenv.bindables.BINDABLES (tests/test_bindables.py checks).
 SETTERS_WITH_STATE = ("look_at", "color", "texture")
 #: the setter maker of each bindable property that needs only the object
 SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {

@@ -34,7 +34,7 @@ from visualenv.render.blender.log import blender_output, marked
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
 from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
 from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
-from visualenv.spec.source import SourceMap
+from visualenv.source_map import SourceMap
 
 #: bpy.data collections whose new datablocks a renderer owns
 ID_COLLECTIONS = (
