@@ -32,7 +32,8 @@ from visualenv.compiler import physics as phys
 from visualenv.compiler.physics_reset import build_reset
 from visualenv.compiler.python_hook import checked_dynamics
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
-from visualenv.render.base import BindingTarget, RenderPlan
+from visualenv.compiler.render_plan import scene_plan, to_plan, views_plan
+from visualenv.render.plan import BindingTarget, RenderPlan
 from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.models import Spec
 
@@ -65,6 +66,7 @@ class Program:
     physics: "phys.PhysicsPlan | None" = None  # the MuJoCo model and what the generated code reads from it (docs/physics.md)
     _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
     _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
+    _render_plan: RenderPlan | None = field(default=None, repr=False)
 
     @property
     def spec(self) -> Spec:
@@ -99,14 +101,18 @@ class Program:
         return BatchFunctions(vectorize(self._builders["step"]), vectorize(self._builders["bind"]))
 
     def render_plan(self) -> RenderPlan:
-        """What a renderer needs: the scene, the observation cameras, the settings and the binding targets."""
+        """What a renderer needs: the scene, the observation cameras, the settings and the binding targets (built once)."""
+        if self._render_plan is None:
+            self._render_plan = self._build_render_plan()
+        return self._render_plan
+
+    def _build_render_plan(self) -> RenderPlan:
         spec = self.spec
-        views = spec.observation.views() if spec.observation is not None else {}
         return RenderPlan(
-            scene=spec.scene,
-            views=views,
+            scene=scene_plan(spec.scene),
+            views=views_plan(spec.observation),
             single=spec.observation is None or spec.observation.cameras is None,
-            settings=spec.render,
+            settings=to_plan(spec.render),
             bindings=tuple(self.bindings),
             base_dir=self.loaded.base_dir,
             source=self.loaded.source,

@@ -37,12 +37,13 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
+from visualenv.compiler.render_plan import distractions_plan, observation_space, to_plan
 from visualenv.compiler.vector_functions import float_errors
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError, StepError
-from visualenv.render.base import RenderPlan, RendererOptions, load_backend, observation_space
+from visualenv.render.base import RenderPlan, RendererOptions, load_backend
 from visualenv.render.batch_limits import check_batchable
 from visualenv.render.distractions import Distraction, EpisodeDistractions
 from visualenv.render.sensor import sensor_models
@@ -182,7 +183,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._autoreset = np.zeros(n, dtype=bool)
         self._was_reset = False
         #: each env's distractions, drawn from its own generator as the env alone draws them (its lane's seed)
-        self._distractions = [EpisodeDistractions(self.distractions) for _ in range(n)] if self.distractions is not None else []
+        self._distractions = [EpisodeDistractions(to_plan(self.distractions)) for _ in range(n)] if self.distractions is not None else []
 
     @property
     def lanes(self) -> list[VisualEnv]:
@@ -427,7 +428,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     def _render_plan(self) -> RenderPlan:
         """The program's render plan with the options' overrides and the distractions the envs will draw."""
-        return replace(self.program.render_plan().with_options(self._renderer_options), distractions=self.distractions)
+        return replace(self.program.render_plan().with_options(self._renderer_options), distractions=distractions_plan(self.distractions))
 
     @property
     def segmentation_ids(self) -> dict[str, int]:

@@ -13,13 +13,14 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program, compile_spec
+from visualenv.compiler.render_plan import observation_space, to_plan
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.physics.conventions import legacy_stream
 from visualenv.physics.model_fields import restore_fields, written_fields
 from visualenv.physics.simulation import integration_state
-from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer, observation_space
+from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer
 from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
@@ -179,7 +180,7 @@ class VisualEnv(gym.Env):
         self._observed = program.observed
         #: what the observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = distraction_settings(distractions, s.distractions)
-        self._distractions = EpisodeDistractions(self.distractions) if self.distractions is not None and self.uses_camera else None
+        self._distractions = EpisodeDistractions(to_plan(self.distractions)) if self.distractions is not None and self.uses_camera else None
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 

@@ -1,5 +1,6 @@
-"""Rendering: the renderer interface and the Blender (bpy) backend."""
+"""Rendering: the renderer interface, its plan and the Blender (bpy) backend."""
 
-from visualenv.render.base import BindingTarget, RenderPlan, Renderer, create_renderer, observation_space
+from visualenv.render.base import Renderer, create_renderer
+from visualenv.render.plan import BindingTarget, RenderPlan
 
-__all__ = ["BindingTarget", "RenderPlan", "Renderer", "create_renderer", "observation_space"]
+__all__ = ["BindingTarget", "RenderPlan", "Renderer", "create_renderer"]

@@ -1,8 +1,8 @@
 """The renderer interface the env talks to, and what a renderer is given.
 
-The compiler produces a :class:`RenderPlan` (``Program.render_plan()``): the
+The compiler produces a :class:`~visualenv.render.plan.RenderPlan` (``Program.render_plan()``): the
 scene description, the observation cameras, the render settings and the list
-of binding targets. Before each render the env passes the current binding values
+of binding targets, in render's own types. Before each render the env passes the current binding values
 (a flat tuple in :attr:`RenderPlan.bindings` order). A renderer turns those
 into pixels; it knows nothing of rewards or episodes.
 """
@@ -11,8 +11,7 @@ from __future__ import annotations
 
 import importlib
 from abc import ABC, abstractmethod
-from dataclasses import dataclass, replace
-from pathlib import Path
+from dataclasses import dataclass
 from typing import Any, Callable, Literal, Mapping, Sequence, get_args
 
 import numpy as np
@@ -20,61 +19,15 @@ from gymnasium import spaces
 
 from visualenv.errors import RenderError
 from visualenv.spec.options import RENDER_OVERRIDES, check_make_options
-from visualenv.spec.models import CameraView, Observation, RenderSettings, Scene
-from visualenv.source_map import SourceMap
+from visualenv.render.plan import BindingTarget, CameraView, RenderPlan  # noqa: F401 - BindingTarget and RenderPlan re-exported
 
 CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1, "segmentation": 1}
 
 
 def view_space(view: CameraView) -> spaces.Box:
+    """The observation space of one camera: (height, width, channels) bytes."""
     width, height = view.resolution
     return spaces.Box(0, 255, (height, width, CHANNELS[view.color]), np.uint8)
-
-
-def observation_space(observation: Observation) -> spaces.Space:
-    """Box for one camera, Dict keyed by name for several."""
-    views = observation.views()
-    if observation.cameras is None:
-        return view_space(next(iter(views.values())))
-    return spaces.Dict({key: view_space(view) for key, view in views.items()})
-
-
-@dataclass(frozen=True)
-class BindingTarget:
-    """One scene property a renderer sets before each render."""
-
-    object: str
-    property: str  # a key of visualenv.bindables.BINDABLES
-    size: int  # how many values the binding function yields for it (1 for scalars)
-
-
-@dataclass(frozen=True)
-class RenderPlan:
-    """Everything a renderer needs, produced by the compiler (``Program.render_plan()``)."""
-
-    scene: Scene
-    views: dict[str, CameraView]  # observation cameras by observation key
-    single: bool  # one camera (Box) rather than several (Dict)
-    settings: RenderSettings
-    bindings: tuple[BindingTarget, ...]
-    base_dir: Path
-    source: SourceMap
-    cameras: tuple[tuple[tuple, str], ...] = ()  # every camera the spec names, with its field's path (Spec.camera_uses)
-    physics: Any = None  # a physics spec's drawable model (visualenv.physics.scene.PhysicsScene), posed by set_physics_poses
-    #: the distractions the env will ask for (visualenv.spec.models.Distractions): a batch builds its scene for them
-    distractions: Any = None
-
-    def with_options(self, options: "RendererOptions") -> "RenderPlan":
-        """This plan with the options' overrides written into its render settings (RendererOptions checked them when it was made)."""
-        overrides = options.overrides()
-        return replace(self, settings=self.settings.model_copy(update=overrides)) if overrides else self
-
-    @property
-    def view_camera(self) -> str | None:
-        """The camera of the human view: render.view.camera, else the first observation camera."""
-        if self.settings.view.camera:
-            return self.settings.view.camera
-        return next(iter(self.views.values())).camera if self.views else None
 
 
 class Renderer(ABC):

@@ -20,7 +20,7 @@ from __future__ import annotations
 from visualenv.errors import SpecError
 from visualenv.render.base import RenderPlan
 from visualenv.bindables import WORLD_ACTOR
-from visualenv.spec.models import CameraObject, LightObject
+from visualenv.render.plan import CameraObject, LightObject
 
 #: properties that turn a camera (bound on it or on an ancestor): a batch follows them by turning each env's rays
 TURNS = ("rotation", "look_at")

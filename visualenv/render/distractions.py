@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from visualenv.spec.models import Distractions
+from visualenv.render.plan import Distractions
 
 #: the spawn key that derives the distractions' generator from the env's seed (the letters "DS")
 SPAWN_KEY = 0x4453

@@ -4,14 +4,14 @@ Applied after readback (never in Blender), so it costs the same whatever the
 engine and keeps Cycles' image cache intact. Noise comes from the generator the
 env hands in (seeded at reset), so the same seed gives the same noisy frames and
 env i of a batch draws what a single env seeded s + i draws. The order of the
-stages and the meaning of each figure are those of :class:`visualenv.spec.models.Sensor`.
+stages and the meaning of each figure are those of the spec's ``Sensor``.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from visualenv.spec.models import Sensor
+from visualenv.render.plan import Sensor
 
 
 class SensorModel:

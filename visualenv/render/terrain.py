@@ -12,7 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
-from visualenv.spec.models import Craters
+from visualenv.render.plan import Craters
 
 
 def crater_field(craters: Craters, extent: tuple[float, float]) -> np.ndarray:

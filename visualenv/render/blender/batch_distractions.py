@@ -28,7 +28,7 @@ import numpy as np
 from visualenv.render.blender.distractions import distracted_materials, make_backdrops, orbit, shift_by_attribute, write_backdrops
 from visualenv.render.blender.env_attributes import EnvAttributes, shift_name
 from visualenv.render.distractions import Distraction, color_shifts
-from visualenv.spec.models import Distractions
+from visualenv.render.plan import Distractions
 
 
 class BatchDistractions:

@@ -60,7 +60,7 @@ from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, w
 from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make_tiles_camera, tile, tiles_text
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
 from visualenv.bindables import BINDABLES
-from visualenv.spec.models import CameraObject
+from visualenv.render.plan import CameraObject
 
 class BatchedBlenderRenderer(BlenderRenderer):
     """Renders `num_envs` copies of a plan's scene in one Blender scene, one Cycles call per observation camera.
@@ -85,7 +85,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self.num_envs = num_envs
         # Cycles draws each pixel's random numbers from its place in the image, so tile k would carry other
         # noise than env k alone; with shared noise a tile equals the env's own render (noise="shared")
-        plan = replace(plan, settings=plan.settings.model_copy(update={"noise": "shared"}))
+        plan = replace(plan, settings=replace(plan.settings, noise="shared"))
         super().__init__(plan, options)
 
     # -- construction -------------------------------------------------------------------------------

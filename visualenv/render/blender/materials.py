@@ -21,10 +21,8 @@ from typing import Any, Callable, Sequence
 import bpy
 
 from visualenv.errors import SpecError
-from visualenv.spec.models import Material, Texture, World
+from visualenv.render.plan import Material, Texture, World
 from visualenv.source_map import SourceMap
-
-DEFAULT_WORLD = World()
 
 
 def rgba(color: Sequence[float]) -> tuple[float, float, float, float]:
@@ -75,12 +73,12 @@ def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir:
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     coords = nodes.new("ShaderNodeTexCoord")
     if tex.type == "image":
-        files = tex.image if isinstance(tex.image, list) else [str(tex.image)]
-        where = [path + ("image", i) for i in range(len(files))] if isinstance(tex.image, list) else [path + ("image",)]
+        files = list(tex.image) if isinstance(tex.image, tuple) else [str(tex.image)]
+        where = [path + ("image", i) for i in range(len(files))] if isinstance(tex.image, tuple) else [path + ("image",)]
         images = [_load_image(base_dir / f, source, at, track) for f, at in zip(files, where)]
         node = nodes.new("ShaderNodeTexImage")
         node.image = images[0]
-        if isinstance(tex.image, list):
+        if isinstance(tex.image, tuple):
             node[TEXTURE_SET] = "\n".join(image.name for image in images)  # the names Blender gave them (a taken name gets .001)
         links.new(coords.outputs["UV"], node.inputs["Vector"])
         node["visualenv_needs_uv"] = True
@@ -264,7 +262,7 @@ def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir:
     The image lights the scene and shows behind it (Cycles and EEVEE; Workbench shows the tint colour).
     """
     world = track(bpy.data.worlds.new(name))
-    tint = rgba(spec.tint())
+    tint = rgba(spec.tint)
     set_background(world, tint, spec.strength)
     if spec.image is None:
         return world
@@ -283,7 +281,7 @@ def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir:
     links.new(mapping.outputs["Vector"], env.inputs["Vector"])
     links.new(env.outputs["Color"], texture)
     links.new(tinted, bg.inputs["Color"])
-    rotation = spec.rotation if isinstance(spec.rotation, list) else [0.0, 0.0, spec.rotation]
+    rotation = list(spec.rotation) if isinstance(spec.rotation, tuple) else [0.0, 0.0, spec.rotation]
     mapping.inputs["Rotation"].default_value = rotation
     # Cycles samples the sky by an importance map of it: its automatic size cost 2.2 s at every env start and
     # again whenever a binding changed the world (64 x 32 sky, 2-core CPU); 512 x 256 costs 0.05 s

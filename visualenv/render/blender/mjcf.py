@@ -14,7 +14,7 @@ geoms of their shape, ``site:<name>``.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import bmesh
@@ -27,7 +27,7 @@ from visualenv.physics.scene import GeomShape, LightInfo, PhysicsScene
 from visualenv.physics.texcoords import cube_uv, planar_uv
 from visualenv.render.blender.materials import make_material, show_skybox, tint_image, world_writer
 from visualenv.render.blender.mujoco_look import ambient, light_data, light_material
-from visualenv.spec.models import Material
+from visualenv.render.plan import Material
 
 #: round shapes' segments: enough for smooth silhouettes at observation sizes
 SEGMENTS = 24
@@ -80,12 +80,13 @@ class PoseWriter:
                 light.rotation_quaternion = Vector(light_xdir[i].tolist()).to_track_quat("-Z", "Y")
 
 
-def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool) -> PoseWriter:
+def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool,
+                          material: Material) -> PoseWriter:
     """Every drawable geom, light and camera of the model in `built`'s collection (names added to built.objects).
 
     An object the spec declares (or its .blend holds) under a body's name stands for
     that body: it takes the body's pose (its origin at the body's frame) and the
-    body's own geoms are not drawn.
+    body's own geoms are not drawn. A geom's material is `material` (the spec's default) in its colour.
     """
     collection = built.collection
     empties: dict[int, Any] = {}
@@ -113,7 +114,7 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
         if geom.body in own:
             continue
-        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco)
+        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material)
         if lighting is not None:
             light_material(obj.data.materials[0], *lighting, emission=geom.emission, specular=geom.specular, shininess=geom.shininess)
         collection.objects.link(obj)
@@ -259,7 +260,7 @@ def _uv_map(mesh: Any, geom: GeomShape, points: np.ndarray, made: list[int]) -> 
     layer.data.foreach_set("uv", uv.astype(np.float32).reshape(-1))
 
 
-def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any], split_caps: bool) -> Any:
+def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any], split_caps: bool, material: Material) -> Any:
     """The geom's mesh object and material. `split_caps`: a cylinder's (or capsule's) side is smoothed apart from its flat
     ends, its normals straight out as MuJoCo's (smoothed with them, the side's normals tilt up to 45 degrees toward the
     ends; kept so in physics.look 'physical', whose frames a shipped agent was trained on)."""
@@ -273,7 +274,7 @@ def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[in
     bm.to_mesh(mesh)
     bm.free()
     obj = bpy.data.objects.new(geom.name, mesh)
-    material = Material(color=list(geom.rgba), roughness=0.6)
+    material = replace(material, color=tuple(float(v) for v in geom.rgba), roughness=0.6)
     mat = make_material(f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d)
     if geom.texture is not None:  # MuJoCo multiplies the texture by the geom's colour
         _uv_map(mesh, geom, points, made)

@@ -29,7 +29,7 @@ from visualenv.render.blender.mujoco_look import ambient, backdrop, light_scene,
 from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
 from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
-from visualenv.spec.models import CameraObject, Material
+from visualenv.render.plan import CameraObject
 
 _instances = itertools.count()
 
@@ -93,13 +93,13 @@ class BlenderRenderer(Renderer):
         try:
             built = build_scene(plan.scene, base_dir=plan.base_dir, source=plan.source, prefix=f"visualenv{next(_instances)}")
             self._poses = None if plan.physics is None else build_physics_objects(
-                plan.physics, built, base_dir=plan.base_dir, source=plan.source,
+                plan.physics, built, base_dir=plan.base_dir, source=plan.source, material=plan.scene.default_material,
                 add_light=not plan.physics.lights and not any(o.type == "LIGHT" for o in built.objects.values()))
             if plan.physics is not None and plan.scene.world is None and not plan.scene.file:  # the spec's world wins
                 show_model_sky(plan.physics, built.scene.world)
             #: colours written as they are (physics.look: mujoco, as MuJoCo's renderer writes them), not through sRGB
             self._raw_colors = plan.physics is not None and plan.physics.look == "mujoco"
-            if self._raw_colors:
+            if self._raw_colors and plan.physics is not None:
                 backdrop(built.scene.world)
                 light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))  # the spec's own objects as geoms
             self._check_names(built)
@@ -258,7 +258,7 @@ class BlenderRenderer(Renderer):
         if material is not None and material.as_pointer() in self._owned:
             return material
         copy = material.copy() if material is not None else make_material(
-            f"{mesh_obj.name}-bound", Material(), base_dir=self.plan.base_dir, source=self.plan.source, path=(), track=lambda d: d)
+            f"{mesh_obj.name}-bound", self.plan.scene.default_material, base_dir=self.plan.base_dir, source=self.plan.source, path=(), track=lambda d: d)
         slot.link = "OBJECT"
         slot.material = copy
         self._owned.add(copy.as_pointer())

@@ -32,8 +32,8 @@ from visualenv.render.blender.autorun import turn_autorun_off
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
-from visualenv.render.blender.materials import DEFAULT_WORLD, fix_uv_coordinates, make_material, make_world
-from visualenv.spec.models import CameraObject, EmptyObject, LightObject, Material, MeshObject, PrimitiveObject, Scene
+from visualenv.render.blender.materials import fix_uv_coordinates, make_material, make_world
+from visualenv.render.plan import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Scene
 from visualenv.source_map import SourceMap
 
 #: bpy.data collections whose new datablocks a renderer owns
@@ -143,7 +143,7 @@ def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str)
         if isinstance(obj_spec, CameraObject) and obj_spec.look_at is not None:
             aim(built.objects[name], obj_spec.look_at)  # after parenting: the target is a world point
     if spec.world is not None or scene.world is None:
-        scene.world = make_world(f"{prefix}-world", spec.world or DEFAULT_WORLD, _keep, base_dir=base_dir, source=source)
+        scene.world = make_world(f"{prefix}-world", spec.world or spec.default_world, _keep, base_dir=base_dir, source=source)
     return built
 
 
@@ -230,7 +230,7 @@ def _build_object(name: str, spec: Any, built: BuiltScene, *, base_dir: Path, so
         mesh = bpy.data.meshes.new(name)
         _primitive_mesh(mesh, spec, heights)
         obj = bpy.data.objects.new(name, mesh)
-        mat = make_material(name, spec.material or Material(), base_dir=base_dir, source=source, path=path + ("material",), track=_keep)
+        mat = make_material(name, spec.material, base_dir=base_dir, source=source, path=path + ("material",), track=_keep)
         mesh.materials.append(mat)
         fix_uv_coordinates(mat, mesh)
     elif isinstance(spec, MeshObject):
@@ -304,7 +304,7 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject, heights: np.ndarray | None
     bm = bmesh.new()
     bm.loops.layers.uv.new("UVMap")
     kind, n = spec.primitive, spec.segments
-    size = spec.size if isinstance(spec.size, list) else [spec.size] * 3
+    size = spec.size if isinstance(spec.size, tuple) else (spec.size,) * 3
     if kind == "cube":
         bmesh.ops.create_cube(bm, size=1.0, calc_uvs=True)
         bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)

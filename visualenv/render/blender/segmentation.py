@@ -27,7 +27,7 @@ from visualenv.render.base import RenderPlan
 from visualenv.render.blender.materials import ensure_node_tree, set_background
 from visualenv.render.blender.scene import BuiltScene
 from visualenv.render.blender.settings import EngineConfig
-from visualenv.spec.models import MeshObject, PrimitiveObject
+from visualenv.render.plan import MeshObject, PrimitiveObject
 
 #: one ray per pixel, through its centre (Cycles' least filter width): exact ids, the same at every render
 SEGMENTATION_CONFIG = EngineConfig("cycles", 1, 0, False, "BOX", 0.01)

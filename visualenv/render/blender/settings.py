@@ -31,7 +31,7 @@ import bpy
 
 from visualenv.compat.blender import use_cached_kernels
 from visualenv.render.blender.devices import compile_notice, detect_gpu, kernel_facts
-from visualenv.spec.models import RenderSettings
+from visualenv.render.plan import RenderSettings
 
 log = logging.getLogger("visualenv.render")
 
