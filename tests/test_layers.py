@@ -144,3 +144,29 @@ def test_no_module_imports_another_modules_private_names(tmp_path: Path) -> None
     planted = tmp_path / "planted.py"
     planted.write_text("from visualenv.spec.loader import _private\n")
     assert private_imports(planted) == ["visualenv.spec.loader._private"]
+
+
+def test_render_imports_nothing_from_the_spec() -> None:
+    """render/ reads its own plan (visualenv.render.plan), built by the compiler: never the spec's models."""
+    edges = graph()
+    found = sorted(f"{a} imports {b}" for a, targets in edges.items() if a.split(".")[:2] == ["visualenv", "render"]
+                   for b in targets if b.split(".")[:2] == ["visualenv", "spec"])
+    assert found == [], "\n".join(found)
+
+
+def test_the_render_plan_has_no_field_of_type_any() -> None:
+    """Every field of every dataclass in render/plan.py (RenderPlan among them) names its type."""
+    import dataclasses
+    import typing
+
+    from visualenv.render import plan
+
+    def holds_any(hint: object) -> bool:
+        return hint is typing.Any or any(holds_any(arg) for arg in typing.get_args(hint))
+
+    classes = [c for c in vars(plan).values()
+               if isinstance(c, type) and dataclasses.is_dataclass(c) and c.__module__ == plan.__name__]
+    assert plan.RenderPlan in classes and len(classes) > 10
+    untyped = [f"{c.__name__}.{f.name}" for c in classes for f in dataclasses.fields(c)
+               if holds_any(typing.get_type_hints(c)[f.name])]
+    assert untyped == []

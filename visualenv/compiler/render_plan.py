@@ -13,8 +13,9 @@ from gymnasium import spaces
 from pydantic import BaseModel
 
 from visualenv.render import plan as p
-from visualenv.render.base import view_space
+from visualenv.render.base import RendererOptions, view_space
 from visualenv.spec import models as m
+from visualenv.spec.options import check_make_options
 
 #: each spec model and the plan type made of it
 PLAN_TYPES: dict[type[BaseModel], type] = {
@@ -72,3 +73,11 @@ def observation_space(observation: m.Observation) -> spaces.Space:
     if observation.cameras is None:
         return view_space(next(iter(views.values())))
     return spaces.Dict({key: view_space(view) for key, view in views.items()})
+
+
+def checked_options(given: Mapping[str, Any] | RendererOptions | None) -> RendererOptions:
+    """The renderer options of `given` (:meth:`RendererOptions.parse`), a value the spec's ``render`` would refuse
+    refused now, in its words, and not at the first render."""
+    options = RendererOptions.parse(given)
+    check_make_options(**options.overrides())
+    return options

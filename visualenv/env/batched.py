@@ -37,7 +37,7 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.render_plan import distractions_plan, observation_space, to_plan
+from visualenv.compiler.render_plan import checked_options, distractions_plan, observation_space, to_plan
 from visualenv.compiler.vector_functions import float_errors
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.registration import resolve
@@ -160,7 +160,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
                 physics.close()
         else:
             self._batch = program.batch_functions()
-        self._renderer_options = RendererOptions.parse(renderer_options)
+        self._renderer_options = checked_options(renderer_options)
         if self.uses_camera and backend == BATCH_BACKEND:
             check_batchable(self._render_plan(), n)  # refused now, not at the first render
         self._backend = backend

@@ -12,7 +12,7 @@ from visualenv.compat.gymnasium import make_time_limit
 from visualenv.env.registration import ENTRY_POINT, NAMESPACE, VECTOR_ENTRY_POINT, resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.env.wrappers import wrap_observation
-from visualenv.render.base import RendererOptions
+from visualenv.compiler.render_plan import checked_options
 from visualenv.spec.loader import load_spec
 from visualenv.spec.options import check_make_options
 
@@ -60,7 +60,7 @@ def make(
         max_episode_steps = make_time_limit()  # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
     check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize,
                        max_episode_steps=max_episode_steps, action_repeat=action_repeat, distractions=distractions)
-    options = RendererOptions.parse(renderer_options)
+    options = checked_options(renderer_options)
     path = resolve(target)
     unwrapped = VisualEnv(load_spec(path), render=render, render_mode=render_mode, params=params, renderer_options=options,
                           max_episode_steps=max_episode_steps, action_repeat=action_repeat, distractions=distractions)

@@ -99,14 +99,14 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         """The spec compiled, and what a batch of `size` envs cannot render refused, as one batch would (located, typed)."""
         from visualenv.compiler.program import compile_spec
         from visualenv.env.registration import resolve
-        from visualenv.render.base import RendererOptions
+        from visualenv.compiler.render_plan import checked_options
         from visualenv.render.batch_limits import check_batchable
         from visualenv.spec.loader import load_spec
 
         program = compile_spec(load_spec(resolve(target)), kwargs.get("params"))
         if kwargs.get("render") is not False and program.spec.observation is not None:
             own = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
-            options = RendererOptions.parse({k: v for k, v in kwargs.items() if k not in own})
+            options = checked_options({k: v for k, v in kwargs.items() if k not in own})
             check_batchable(program.render_plan().with_options(options), size)
 
     # -- Gymnasium API ------------------------------------------------------------------------------

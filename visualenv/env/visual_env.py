@@ -13,7 +13,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.render_plan import observation_space, to_plan
+from visualenv.compiler.render_plan import checked_options, observation_space, to_plan
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
@@ -132,7 +132,7 @@ class VisualEnv(gym.Env):
         self.render_mode = render_mode
         self.uses_camera = s.observation is not None and render is not False
         self._backend = backend
-        self._renderer_options = RendererOptions.parse(renderer_options)
+        self._renderer_options = checked_options(renderer_options)
         self._renderer: Renderer | None = None
         self._display: Any = None  # render_mode="human": the page this env's steps are shown on, opened by the first step shown
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode

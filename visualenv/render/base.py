@@ -18,7 +18,6 @@ import numpy as np
 from gymnasium import spaces
 
 from visualenv.errors import RenderError
-from visualenv.spec.options import RENDER_OVERRIDES, check_make_options
 from visualenv.render.plan import BindingTarget, CameraView, RenderPlan  # noqa: F401 - BindingTarget and RenderPlan re-exported
 
 CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1, "segmentation": 1}
@@ -62,15 +61,19 @@ class Renderer(ABC):
 
 Readback = Literal["auto", "memory", "file"]
 READBACKS: tuple[str, ...] = get_args(Readback)
+#: the render fields an option of the same name overrides
+RENDER_OVERRIDES = ("engine", "samples", "device", "threads", "noise")
 
 
 @dataclass(frozen=True)
 class RendererOptions:
     """What a renderer is told besides the plan: overrides of the spec's render settings given in Python, and the readback.
 
-    Made once from the keyword options of ``visualenv.make`` (or ``VisualEnv(renderer_options=...)``)
-    and merged into the plan's settings once (:meth:`RenderPlan.with_options`), so a backend
-    reads one ``RenderSettings`` and never looks at loose keyword arguments.
+    Made once from the keyword options of ``visualenv.make`` (or ``VisualEnv(renderer_options=...)``),
+    where the env checks the overrides as the spec's ``render`` section checks them
+    (:func:`visualenv.compiler.render_plan.checked_options`), and merged into the plan's settings once
+    (:meth:`RenderPlan.with_options`), so a backend reads one ``RenderSettings`` and never looks at loose
+    keyword arguments.
 
     ``readback`` says how pixels leave Blender: ``"memory"`` (Cycles only: the render result
     copied in place), ``"file"`` (a BMP in shared memory, any engine) or ``"auto"`` (memory where possible).
@@ -84,10 +87,8 @@ class RendererOptions:
     readback: Readback = "auto"
 
     def __post_init__(self) -> None:
-        """Checked when made, not at the first render: a value the spec's ``render`` would refuse is refused here, in its words."""
         if self.readback not in READBACKS:
             raise ValueError(f"unknown readback {self.readback!r}: use {', '.join(READBACKS)}")
-        check_make_options(**self.overrides())
 
     @classmethod
     def parse(cls, options: "Mapping[str, Any] | RendererOptions | None") -> "RendererOptions":

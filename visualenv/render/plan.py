@@ -204,7 +204,7 @@ class RenderPlan:
     distractions: Distractions | None = None  # the distractions the env will ask for: a batch builds its scene for them
 
     def with_options(self, options: Overrides) -> RenderPlan:
-        """This plan with the options' overrides written into its render settings (RendererOptions checked them when it was made)."""
+        """This plan with the options' overrides written into its render settings (checked when the env made them)."""
         overrides = options.overrides()
         return replace(self, settings=replace(self.settings, **overrides)) if overrides else self
 

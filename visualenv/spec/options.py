@@ -21,8 +21,6 @@ from visualenv.source_map import SourceMap
 
 #: where option errors are reported (in place of file:line)
 WHERE = "visualenv.make()"
-#: the render fields an option of the same name overrides (render.base.RendererOptions holds them)
-RENDER_OVERRIDES = ("engine", "samples", "device", "threads", "noise")
 
 _Pixels = Annotated[int, Field(ge=1, le=8192)]
 #: the Distracting Control Suite's levels, by the names its paper gives them
@@ -79,16 +77,19 @@ class _DistractionsSection(StrictModel):
 def check_make_options(**options: Any) -> None:
     """Raise :class:`SpecError` for any of the given options a spec would refuse.
 
-    The render overrides are validated by the spec's own ``RenderSettings`` model (``RendererOptions``
-    asks for them when it is made), the rest by :class:`MakeOptions` (``make`` asks).
+    The render overrides (any field of ``RenderSettings``) are validated by the spec's own ``RenderSettings``
+    model (the env asks, for its ``RendererOptions``), the rest by :class:`MakeOptions` (``make`` asks).
     """
     if isinstance(options.get("resize"), list):  # [w, h] reads as well as (w, h)
         options["resize"] = tuple(options["resize"])
     problems = []
-    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [(RenderSettings, RENDER_OVERRIDES), (MakeOptions, tuple(MakeOptions.model_fields))]
+    render = tuple(RenderSettings.model_fields)
+    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [(RenderSettings, render),
+                                                               (MakeOptions, tuple(MakeOptions.model_fields))]
     if isinstance(options.get("distractions"), Mapping):  # checked as the spec's section alone, not as either branch of the option
         options["distractions"] = dict(options["distractions"])
-        checks = [(RenderSettings, RENDER_OVERRIDES), (MakeOptions, tuple(k for k in MakeOptions.model_fields if k != "distractions")),
+        checks = [(RenderSettings, render),
+                  (MakeOptions, tuple(k for k in MakeOptions.model_fields if k != "distractions")),
                   (_DistractionsSection, ("distractions",))]
     for model, names in checks:
         given = {k: options[k] for k in names if options.get(k) is not None}
