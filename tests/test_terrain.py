@@ -2,17 +2,25 @@
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
 
+from visualenv.compiler.render_plan import to_plan
+from visualenv.render.plan import Craters
 from visualenv.render.terrain import crater_field, crater_heights
-from visualenv.spec.models import Craters
+from visualenv.spec import models
+
+
+def craters_plan(**fields: object) -> Craters:
+    """The render plan's craters of the spec's section with these fields."""
+    return to_plan(models.Craters(**fields))
 
 
 def test_a_crater_has_a_bowl_a_rim_and_ejecta():
-    craters = Craters(count=1, radius=[2.0, 2.0], depth=0.2, rim=0.05, seed=3)
+    craters = craters_plan(count=1, radius=[2.0, 2.0], depth=0.2, rim=0.05, seed=3)
     (cx, cy, radius), = crater_field(craters, (40.0, 40.0))
     assert radius == pytest.approx(2.0)
     r = np.array([0.0, 0.5, 1.0, 2.0, 8.0]) * radius
@@ -25,10 +33,10 @@ def test_a_crater_has_a_bowl_a_rim_and_ejecta():
 
 
 def test_craters_are_drawn_from_their_seed_inside_the_ground():
-    craters = Craters(count=200, radius=[0.5, 6.0], seed=1)
+    craters = craters_plan(count=200, radius=[0.5, 6.0], seed=1)
     field = crater_field(craters, (100.0, 60.0))
     assert np.array_equal(field, crater_field(craters, (100.0, 60.0)))
-    assert not np.array_equal(field, crater_field(craters.model_copy(update={"seed": 2}), (100.0, 60.0)))
+    assert not np.array_equal(field, crater_field(replace(craters, seed=2), (100.0, 60.0)))
     assert (np.abs(field[:, 0]) <= 50).all() and (np.abs(field[:, 1]) <= 30).all()
     assert field[:, 2].min() >= 0.5 and field[:, 2].max() <= 6.0
     assert np.median(field[:, 2]) < (0.5 + 6.0) / 2      # log-uniform: small craters are the common ones
@@ -57,8 +65,8 @@ def test_a_low_sun_leaves_the_near_wall_of_a_crater_in_shadow(tmp_path: Path, su
     from visualenv.spec import load_spec_text
 
     # a seed whose one crater lies well inside the 40 m ground, so the view holds nothing but ground
-    seed = next(s for s in range(100) if np.abs(crater_field(Craters(count=1, seed=s), (40.0, 40.0))[0, :2]).max() < 12)
-    craters = Craters(count=1, radius=[3.0, 3.0], depth=0.2, rim=0.04, seed=seed)
+    seed = next(s for s in range(100) if np.abs(crater_field(craters_plan(count=1, seed=s), (40.0, 40.0))[0, :2]).max() < 12)
+    craters = craters_plan(count=1, radius=[3.0, 3.0], depth=0.2, rim=0.04, seed=seed)
     (cx, cy, radius), = crater_field(craters, (40.0, 40.0))
     view = 2.4 * radius
 
