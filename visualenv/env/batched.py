@@ -37,7 +37,7 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.render_plan import checked_options, distractions_plan, observation_space, to_plan
+from visualenv.compiler.render_plan import checked_options, distractions_plan, observation_space, to_plan, views_plan
 from visualenv.compiler.vector_functions import float_errors
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.registration import resolve
@@ -169,7 +169,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self.action_space = batch_space(single.action_space, n)
         self.single_observation_space = observation_space(observation) if self.uses_camera else single.observation_space  # type: ignore[arg-type]
         self.observation_space = batch_space(self.single_observation_space, n)
-        views = observation.views() if observation is not None and self.uses_camera else {}
+        views = views_plan(observation) if self.uses_camera else {}
         space = self.single_observation_space
         shapes = {key: sub.shape for key, sub in space.spaces.items()} if isinstance(space, gym.spaces.Dict) else {key: space.shape for key in views}
         self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]

@@ -13,7 +13,7 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.render_plan import checked_options, observation_space, to_plan
+from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
@@ -161,7 +161,7 @@ class VisualEnv(gym.Env):
         else:
             lows, highs = zip(*program.continuous)
             self.action_space = spaces.Box(np.array(lows, np.float32), np.array(highs, np.float32), dtype=np.float32)
-        views = s.observation.views() if s.observation is not None else {}
+        views = views_plan(s.observation)
         #: a generator for sensor noise, seeded at reset from the env's seed (lanes of a batch keep one too)
         self._has_sensor = any(view.sensor is not None for view in views.values())
         self._sensor_rng: np.random.Generator | None = None

@@ -9,9 +9,11 @@ stages and the meaning of each figure are those of the spec's ``Sensor``.
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+
 import numpy as np
 
-from visualenv.render.plan import Sensor
+from visualenv.render.plan import CameraView, Sensor
 
 
 class SensorModel:
@@ -56,7 +58,7 @@ class SensorModel:
         return v.astype(np.uint8)
 
 
-def sensor_models(views: dict, spaces: dict[str, tuple[int, ...]]) -> dict[str, SensorModel]:
+def sensor_models(views: Mapping[str, CameraView], spaces: Mapping[str, tuple[int, ...]]) -> dict[str, SensorModel]:
     """The sensor of each observation key whose camera declares one (``views``: key -> CameraView; ``spaces``: key -> shape)."""
     return {key: SensorModel(view.sensor, spaces[key]) for key, view in views.items() if view.sensor is not None}
 
