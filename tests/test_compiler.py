@@ -325,3 +325,32 @@ def test_conditional_vector_binding_gives_each_element():
     assert env.binding_values() == (0.5, 0.0, 1.0, 2.0, 2.0, 2.0)
     env.step(0)
     assert env.binding_values() == (0.0, -0.5, 2.0, 2.0, 2.0, 2.0)
+
+
+@pytest.mark.parametrize("name", ["goalie_randomized.yaml", "lunar_landing.yaml", "dmc/finger_spin.yaml"])
+def test_the_render_plan_holds_render_types_only_and_is_built_once(name):
+    """Program.render_plan() converts the spec's models into render/plan.py's dataclasses, once."""
+    import dataclasses
+    from pathlib import Path
+
+    from pydantic import BaseModel
+
+    from visualenv.compiler.program import compile_spec
+    from visualenv.spec import load_spec
+
+    program = compile_spec(load_spec(Path(visualenv.__file__).parent / "specs" / name))
+    plan = program.render_plan()
+    assert program.render_plan() is plan
+
+    def models(value) -> list:
+        if isinstance(value, BaseModel):
+            return [value]
+        if dataclasses.is_dataclass(value) and not isinstance(value, type):
+            return [m for f in dataclasses.fields(value) for m in models(getattr(value, f.name))]
+        if isinstance(value, dict):
+            return [m for v in value.values() for m in models(v)]
+        if isinstance(value, (list, tuple)):
+            return [m for v in value for m in models(v)]
+        return []
+
+    assert models(plan) == [] and plan.views
