@@ -33,7 +33,7 @@ from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.log import blender_output, marked
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
 from visualenv.render.blender.materials import fix_uv_coordinates, make_material, make_world
-from visualenv.render.plan import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Scene
+from visualenv.render.plan import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Scene, SceneObject
 from visualenv.source_map import SourceMap
 
 #: bpy.data collections whose new datablocks a renderer owns
@@ -218,7 +218,7 @@ def _resolve_blender_path(blender_path: str, blend: Path) -> Path:
 # -- objects -----------------------------------------------------------------------------------------
 
 
-def _build_object(name: str, spec: Any, built: BuiltScene, *, base_dir: Path, source: SourceMap) -> Any:
+def _build_object(name: str, spec: SceneObject, built: BuiltScene, *, base_dir: Path, source: SourceMap) -> Any:
     path = ("scene", "objects", name)
     if isinstance(spec, PrimitiveObject):
         heights = None
