@@ -16,6 +16,7 @@ from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
+from visualenv.env.human import HumanDisplay, open_human_display
 from visualenv.physics.conventions import legacy_stream
 from visualenv.physics.model_fields import restore_fields, written_fields
 from visualenv.physics.simulation import integration_state
@@ -80,8 +81,8 @@ class VisualEnv(gym.Env):
 
     ## Render modes
     ``"rgb_array"``: ``render()`` returns the high-resolution view (``render.view``). ``"human"``: every reset and
-    step is shown live on a local web page (:mod:`visualenv.viewer.human`; the URL is printed once) and ``render()``
-    returns None, as Gymnasium specifies.
+    step is shown live on the registered display (:mod:`visualenv.env.human`: the viewer's local web page, whose URL
+    is printed once) and ``render()`` returns None, as Gymnasium specifies.
 
     ## Renderer backend
     ``backend`` names the renderer class as ``module:attribute`` (default:
@@ -133,7 +134,7 @@ class VisualEnv(gym.Env):
         self._backend = backend
         self._renderer_options = RendererOptions.parse(renderer_options)
         self._renderer: Renderer | None = None
-        self._display: Any = None  # render_mode="human": the page this env's steps are shown on, opened by the first step shown
+        self._display: HumanDisplay | None = None  # render_mode="human": where the steps are shown, opened at the first
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
         #: dm_control's task stream (a spec with ``physics.convention: dm_control``): RandomState(seed), continued across episodes
@@ -443,11 +444,9 @@ class VisualEnv(gym.Env):
         return self.renderer.render_view(self._bind())
 
     def _show(self, reward: float | None, info: dict[str, Any]) -> None:
-        """render_mode="human": the observation, the values and (while a page watches) the view on the viewer's page."""
+        """render_mode="human": the observation, the values and the view (called only when shown) on the display."""
         if self._display is None:
-            from visualenv.viewer.human import HumanDisplay
-
-            self._display = HumanDisplay()
+            self._display = open_human_display()
         self._display.show(self.program.spec.id, self._last_obs if self.uses_camera else None, {"reward": reward, **info}, self._view)
 
     def _observe(self) -> Any:

@@ -45,7 +45,10 @@ def shared_board() -> tuple[Board, str]:
 
 
 class HumanDisplay:
-    """One env's frames on the shared page: its observation, its values and, while the page is open, its view."""
+    """One env's frames on the shared page: its observation, its values and, while the page is open, its view.
+
+    It meets :class:`visualenv.env.human.HumanDisplay`; :func:`visualenv.viewer.open_display` makes one per env.
+    """
 
     def __init__(self) -> None:
         self.board, self.url = shared_board()
