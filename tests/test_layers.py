@@ -19,10 +19,8 @@ LAYERS = {
     "visualenv.env": 4,
     "visualenv.train": 5,
     "visualenv.tools": 6,
-    # the viewer: its page, server and board take frames from the envs (render_mode="human"), so they sit with the renderers;
-    # the session that steps an env, loads an agent and watches the files sits with the tools
+    # the viewer steps envs and loads agents; render_mode="human" reaches it through a hook (visualenv.env.human)
     "visualenv.viewer": 6,
-    "visualenv.viewer.board": 2, "visualenv.viewer.page": 2, "visualenv.viewer.server": 2, "visualenv.viewer.human": 2,
     "visualenv.cli": 7, "visualenv": 7,
 }
 
