@@ -18,7 +18,7 @@ from visualenv.env.human import HumanDisplay, register_human_display
 
 def open_display() -> HumanDisplay:
     """A new display on the viewer's shared page (the page's server starts with the first one)."""
-    from visualenv.viewer.human import HumanDisplay as PageDisplay
+    from visualenv.viewer.human import PageDisplay
 
     return PageDisplay()
 

@@ -44,7 +44,7 @@ def shared_board() -> tuple[Board, str]:
         return _shared.board, _shared.url
 
 
-class HumanDisplay:
+class PageDisplay:
     """One env's frames on the shared page: its observation, its values and, while the page is open, its view.
 
     It meets :class:`visualenv.env.human.HumanDisplay`; :func:`visualenv.viewer.open_display` makes one per env.
