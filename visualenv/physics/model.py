@@ -185,9 +185,9 @@ def without_textures(path: Path, model: Any) -> Any:
     (:class:`~visualenv.physics.simulation.Simulation`).
 
     Textures only draw, and the renderer reads them from the model once. Kept, every env would hold its own copy of
-    them (dm_control's skybox alone is 11.8 MB: 3 GB in a batch of 256 envs). MuJoCo's MjSpec deletes them and
-    compiles the rest: every other array is the same (``tests/test_physics_spec.py``). Where this MuJoCo's MjSpec
-    cannot (no ``delete``), the model as it is.
+    them: gigabytes in a batch of DMC envs (results/benchmarks/model-without-textures.md). MuJoCo's MjSpec deletes
+    them and compiles the rest: every other array is the same (``tests/test_physics_spec.py``). Where this MuJoCo's
+    MjSpec cannot (no ``delete``), the model as it is.
     """
     if not model.ntex:
         return model
