@@ -12,6 +12,7 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
+from visualenv.compat.gymnasium import restore_space_generator, space_generator
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
@@ -504,7 +505,8 @@ class VisualEnv(gym.Env):
         episode = {
             "state": self._state, "steps": self._steps, "fired": self._fired, "done": self._done, "success": self._success,
             "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
-            "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs, "legacy_random": self._legacy_random,
+            "action_space_rng": space_generator(self.action_space), "last_obs": self._last_obs,
+            "legacy_random": self._legacy_random,
             "physics": self._physics_state(), "model": written_fields(self._sim.model) if self._sim is not None else None,
             "distractions": self._distractions,
         }
@@ -536,7 +538,7 @@ class VisualEnv(gym.Env):
         self._sensor_rng = episode["sensor_rng"]
         self._distractions = episode.get("distractions", self._distractions)
         if episode["action_space_rng"] is not None:
-            self.action_space._np_random = episode["action_space_rng"]
+            restore_space_generator(self.action_space, episode["action_space_rng"])
         self._last_obs = episode["last_obs"]
         self._was_reset = True
 
