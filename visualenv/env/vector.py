@@ -119,8 +119,9 @@ def warn_gpu_workers(target: str, n: int, kwargs: dict[str, Any]) -> None:
             return
     if device == "gpu":
         _warned_gpu = True
-        print(f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly (16 such processes made "
-              "159 env-steps/s on an H100, 16 CPU workers 1,941): one worker per core on the CPU is faster today; "
+        print(f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly "
+              "(several Blender processes on one GPU step slower than as many CPU workers): one worker per core on the CPU is "
+              "faster today; "
               "see docs/performance.md#which-device", file=sys.stderr, flush=True)
 
 

@@ -71,7 +71,7 @@ def sun_world_error(plan: RenderPlan, name: str) -> SpecError:
     return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state while the world is not one "
                       "colour (an image sky, or a .blend file's world with textures): each env of a batch then has its own sun "
                       "(Cycles' light linking), and with such a world Cycles' light sampling lit all but one env's copy otherwise "
-                      "than one env alone (measured: 31-59 % of pixels within 8 levels); use a world colour, or "
+                      "than one env alone (most of a tile's pixels off); use a world colour, or "
                       f"{ONE_PROCESS_EACH}", key=True)])
 
 
