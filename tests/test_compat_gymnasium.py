@@ -3,11 +3,13 @@ tests/test_first_hour.py checks the outcome through visualenv's own ids (truncat
 
 from __future__ import annotations
 
+import pickle
+
 import gymnasium as gym
 import numpy as np
 import pytest
 
-from visualenv.compat.gymnasium import CHECKED, checked, make_time_limit
+from visualenv.compat.gymnasium import CHECKED, checked, make_time_limit, restore_space_generator, space_generator
 
 ID = "CompatProbe-v0"
 
@@ -57,3 +59,19 @@ def test_the_limit_is_kept_outside_the_env_and_read_from_make(registered):
         assert env.spec.max_episode_steps == limit and env.unwrapped.limit == limit
     assert gym.make(ID, max_episode_steps=-1).unwrapped.limit is None  # no TimeLimit at all
     assert make_probe().limit is None  # another caller than gymnasium.make
+
+
+def test_a_space_generator_is_read_without_making_one_and_put_back():
+    """Why the attribute is read and written: ``np_random`` makes a generator on first use and has no setter. When this
+    fails because Gymnasium gives it a setter (or a documented reader), use that instead."""
+    space = gym.spaces.Discrete(5)
+    assert space_generator(space) is None and space_generator(space) is None  # reading made none
+    assert type(space).np_random.fset is None, "Space.np_random has a setter now: restore the generator through it"
+    space.seed(3)
+    generator = space_generator(space)
+    assert generator is space.np_random
+    expected = [space.sample() for _ in range(5)]
+    other = gym.spaces.Discrete(5)
+    restore_space_generator(other, pickle.loads(pickle.dumps(generator)))
+    restore_space_generator(space, pickle.loads(pickle.dumps(generator)))
+    assert [other.sample() for _ in range(5)] == [space.sample() for _ in range(5)] != expected

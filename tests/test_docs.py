@@ -105,6 +105,32 @@ def test_the_manuals_pages_stay_within_their_size(page: str, limit: int):
     assert lines <= limit, f"{page} has {lines} lines, over {limit}: measurements go to results/benchmarks/ as records"
 
 
+#: a measured figure: a time, a size, a share, a rate or a speed-up (not a count, a resolution or a version)
+FIGURE = re.compile(r"\d[\d,.–-]*\s?(?:ms|µs|us|ns|s|MB|GB|%|(?:env[- ])?steps/s|samples/s)(?!\w)|\d\.\d+x(?!\w)")
+
+
+def test_the_performance_page_keeps_its_figures_in_one_table_with_their_commands_and_records():
+    """docs/performance.md is a manual: its prose says what to choose and why, and its figures stand in one table whose
+    rows each give the command that reproduces them and the record they come from (issue 60)."""
+    tables: list[list[str]] = []
+    prose_figures = []
+    previous = ""
+    for line in prose(ROOT / "docs" / "performance.md").splitlines():
+        if line.startswith("|"):
+            if not previous.startswith("|"):
+                tables.append([])
+            tables[-1].append(line)
+        elif FIGURE.search(re.sub(r"`[^`]*`", "", line)):
+            prose_figures.append(line)
+        previous = line
+    assert not prose_figures, f"figures outside the table (move them to a record): {prose_figures}"
+    with_figures = [t for t in tables if any(FIGURE.search(re.sub(r"`[^`]*`", "", row)) for row in t)]
+    assert len(with_figures) == 1, f"{len(with_figures)} tables of figures, not one"
+    rows = with_figures[0][2:]
+    unsourced = [row for row in rows if "`" not in row or "results/benchmarks/" not in row]
+    assert len(rows) >= 10 and not unsourced, f"rows without a command or a record: {unsourced}"
+
+
 def test_every_benchmark_record_says_how_where_and_when_it_was_measured():
     """A record starts with its commands, the machine and the date; the index lists every file of the folder."""
     records = sorted(p for p in RECORDS.glob("*.md") if p.name != "README.md")

@@ -27,12 +27,13 @@ from PIL import Image
 
 from visualenv.cli import main
 from visualenv.compiler.program import compile_spec
+from visualenv.env.human import grid
 from visualenv.env.registration import resolve
 from visualenv.spec.loader import load_spec
 from visualenv.viewer import board as board_module
 from visualenv.viewer import server as server_module
 from visualenv.viewer import session as session_module
-from visualenv.viewer.board import VIEW, Board, ViewPacer, grid
+from visualenv.viewer.board import VIEW, Board, ViewPacer
 from visualenv.viewer.controls import controls_for
 from visualenv.viewer.server import ViewerServer
 from visualenv.viewer.session import Session, ViewOptions
@@ -408,7 +409,8 @@ def test_a_batch_split_among_workers_refuses_human_mode():
 
 
 def test_import_visualenv_loads_no_web_library():
-    code = "import sys, visualenv, visualenv.cli; assert not {'werkzeug', 'visualenv.viewer.server'} & set(sys.modules), 'the viewer was imported'"
+    code = ("import sys, visualenv, visualenv.cli; "
+            "assert not {'werkzeug', 'visualenv.viewer.server', 'visualenv.viewer.human'} & set(sys.modules)")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert result.returncode == 0, result.stderr
 

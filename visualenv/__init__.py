@@ -21,8 +21,10 @@ from visualenv.versions import __version__
 from visualenv.env.sb3_vec import make_sb3_vec
 from visualenv.env.vector import make_vec
 from visualenv.env.wrappers import FrameStack, Grayscale, Resize, wrap_observation
+from visualenv.viewer import register_human_mode
 
 register_bundled()
+register_human_mode()  # render_mode="human" shows on the viewer's page, imported by the first human-mode env
 
 __all__ = [
     "__version__",

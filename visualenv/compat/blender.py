@@ -199,10 +199,9 @@ def basis_matrices(location: np.ndarray, rotation: np.ndarray, scale: np.ndarray
 # -- render results, one per scene name -----------------------------------------------------------------------------
 # Blender keeps one render per scene name (RE_NewSceneRender), holding the buffers of its last frame, in a list it
 # never shrinks; removing the scene does not free it (a later render of that name may, not in every process: the
-# test counts malloc's bytes). Reusing names alone bounds the list but keeps last frames: 16-env Goalie batches made
-# and closed in one process grew by 16 MB in 10 rounds (a 400x400 tiles image each), against 0.5 MB with a last 4x4
-# render of the emptied scene at close (measured on the 2-core VM; the render costs about 100 ms of the close). So
-# both: names reused, and a last tiny frame at close.
+# test counts malloc's bytes). Reusing names alone bounds the list but keeps each name's last frame, which a last 4x4
+# render of the emptied scene at close replaces (results/benchmarks/env-rounds-memory.md). So both: names reused, and
+# a last tiny frame at close.
 
 #: the names of the scenes renderers build: the first of these that no scene holds
 SCENE_NAME = "visualenv-scene-{}"

@@ -11,9 +11,8 @@ Cycles' render buffers, tens to hundreds of MB. By default glibc serves blocks o
 most 32 MB) with ``mmap`` and returns them with ``munmap``, so every call faults every page in again and the
 kernel zeroes it. With ``M_MMAP_MAX=0`` every block comes from the heap, and ``M_TRIM_THRESHOLD`` = 1 GiB keeps
 up to 1 GiB freed at its top: the process's resident memory stays at its peak instead of rising and falling
-each call. Measured: a 4-megapixel call on an H200 took 66 ms instead of 153; on a 2-core VM's CPU
-``benchmarks/render_phases.py --envs 1024 --resolution 100`` took 829-886 ms a call instead of 941-976 (see
-``docs/performance.md``).
+each call. Large render calls then spend far less time in the kernel, on a GPU and a CPU alike
+(``results/benchmarks/allocator-policy.md``).
 
 The setting is the whole process's, torch's and numpy's blocks included, so it is **opt-in**: visualenv's CLI
 commands and the worker processes visualenv starts (vector env and batch workers, RLlib env runners) apply it
@@ -111,8 +110,8 @@ def release_free_memory() -> None:
     """Hand the heaps' free memory back to the system (``malloc_trim``); changes no setting.
 
     Why: glibc keeps what Blender's render threads free in their arenas, so each env or batch made and closed in
-    one process left it larger (twenty 16-env Goalie batches grew it by 68 MB, 20 MB with this; with Blender's last
-    frames released as well, -6.1 MB: ``benchmarks/env_rounds.py batch 22``). Called when a renderer removes its scene.
+    one process left it larger (``benchmarks/env_rounds.py batch 22``; results/benchmarks/env-rounds-memory.md).
+    Called when a renderer removes its scene.
     """
     libc = _glibc()
     if libc is not None:

@@ -1,4 +1,7 @@
-"""Gymnasium's ``make``: the ``max_episode_steps`` its TimeLimit wrapper truncates at, for the env inside it.
+"""Gymnasium's internals visualenv reads: the limit ``make``'s TimeLimit wrapper truncates at, a space's generator.
+
+**The limit of** ``make`` (:func:`make_time_limit`): the ``max_episode_steps`` of the TimeLimit wrapper, for the env
+inside it.
 
 Why the env needs it: Gymnasium truncates in the ``TimeLimit`` wrapper that ``gymnasium.make`` puts around the
 env, outside it, where ``info["outcome"]`` cannot be set; a visualenv env truncates at the same step itself and
@@ -14,16 +17,23 @@ gives None (the env then truncates at its spec's ``max_steps``). ``tests/test_co
 Gymnasium moves: another version, or a ``make`` that sets the limit on the env's spec (the documented route
 this module should then take instead).
 
-Checked against Gymnasium 1.0.0, 1.1.1 and 1.2.2, whose ``make`` is the same code.
+**A space's generator** (:func:`space_generator`, :func:`restore_space_generator`): a pickled env carries its action
+space's generator over, so that ``action_space.sample()`` goes on as it would have. The space makes its generator on
+first use of ``space.np_random`` (seeding a new one from the OS), which a pickled env must not do to an unused space;
+the generator it holds, or None, is in ``space._np_random``, and there alone can it be put back (``np_random`` has no
+setter; ``space.seed`` makes a new generator). Gymnasium's own pickling of a space carries it in that attribute too.
+
+Checked against Gymnasium 1.0.0, 1.1.1 and 1.2.2, whose ``make`` and ``Space`` are the same code in these parts.
 """
 
 from __future__ import annotations
 
 import sys
+from typing import Any
 
 import gymnasium
 
-#: the Gymnasium versions (major.minor) whose ``make`` was read for what :func:`make_time_limit` relies on
+#: the Gymnasium versions (major.minor) whose ``make`` and ``Space`` were read for what this module relies on
 CHECKED = ("1.0", "1.1", "1.2")
 
 
@@ -47,3 +57,14 @@ def make_time_limit() -> int | None:
     if steps is None:
         steps = getattr(frame.f_locals.get("env_spec"), "max_episode_steps", None)
     return steps if isinstance(steps, int) and not isinstance(steps, bool) and steps > 0 else None
+
+
+def space_generator(space: gymnasium.spaces.Space[Any]) -> Any:
+    """The generator `space` samples from (a numpy Generator), or None where it has made none yet; read without making
+    one (``space.np_random`` would)."""
+    return getattr(space, "_np_random", None)
+
+
+def restore_space_generator(space: gymnasium.spaces.Space[Any], generator: Any) -> None:
+    """`generator` (from :func:`space_generator`) put back as the one `space` samples from."""
+    space._np_random = generator

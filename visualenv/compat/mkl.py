@@ -5,7 +5,7 @@ it runs the same code on every CPU (:mod:`visualenv.train.reproducible` says why
 MKL takes its mode once, at its first call in a process.
 
 **The documented way**, used wherever it can work: ``MKL_CBWR=COMPATIBLE`` in the environment, which MKL reads at
-its first call (measured with torch 2.13: honoured when set after ``import torch`` and before the first matrix
+its first call (checked with torch 2.13: honoured when set after ``import torch`` and before the first matrix
 product, ignored when set after it). visualenv's ``eval`` and ``play`` commands run inside
 :func:`compatible_mode`, which sets it before torch loads; the processes they start inherit it.
 

@@ -14,8 +14,8 @@ Three things stand in the way, and each is handled here:
   math function's NaN from numbers or infinity from finite numbers, CPython's own rule;
   ``floor`` of an infinity...); the batch then steps its envs one by one, each raising
   its own located fault. numpy's floating-point error flags are not used: checking
-  them after every ufunc call (``np.errstate(all="call")``) made VisualCartPole's
-  vectorised step of 256 envs 70 % slower, and they fire where Python raises nothing;
+  them after every ufunc call (``np.errstate(all="call")``) slows every step
+  (results/benchmarks/code-choices.md), and they fire where Python raises nothing;
 * a few definitions differ (``clip`` with low above high; NaN in ``min``, ``max`` and
   ``sign``, where Python's answer depends on the order): written as Python's, or noted.
 """

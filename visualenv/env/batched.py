@@ -40,6 +40,7 @@ from visualenv.compiler.program import Program, compile_spec
 from visualenv.compiler.render_plan import checked_options, distractions_plan, observation_space, to_plan, views_plan
 from visualenv.compiler.vector_functions import float_errors
 from visualenv.env.episode import EpisodeRules, step_limit
+from visualenv.env.human import HumanDisplay, grid, open_human_display
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError, StepError
@@ -86,8 +87,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     its own from a generator its lane's seed starts, as env i alone draws them (at each of its resets, and every step
     when dynamic), and its tile shows them (:mod:`visualenv.render.blender.batch_distractions`).
 
-    ``render_mode="human"`` shows a grid of the observations live on a local web page after every reset and step
-    (:mod:`visualenv.viewer.human`) and ``render()`` returns None.
+    ``render_mode="human"`` shows a grid of the observations live after every reset and step on the registered display
+    (:mod:`visualenv.env.human`: the viewer's local web page) and ``render()`` returns None.
     """
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array", "human"], "render_fps": 30}
@@ -133,7 +134,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if render_mode == "human" and not self.uses_camera:
             raise ValueError("render_mode='human' shows a grid of the observations, and a state-only batch has none: "
                              "use render_mode='rgb_array' for the views")
-        self._display: Any = None  # render_mode="human": the page the grid is shown on, opened by the first step shown
+        self._display: HumanDisplay | None = None  # render_mode="human": where the grid is shown, opened at first
         #: what each env's observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = distraction_settings(distractions, program.spec.distractions) if self.uses_camera else None
         #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
@@ -268,8 +269,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return tuple(self.renderer.render_view_batch(self.binding_table()))
 
     def close_extras(self, **kwargs: Any) -> None:
-        if getattr(self, "_display", None) is not None:
-            self._display.close()
+        if (display := getattr(self, "_display", None)) is not None:
+            display.close()
             self._display = None
         if getattr(self, "_physics", None) is not None:
             self._physics.close()
@@ -278,12 +279,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._renderer = None
 
     def _show(self, obs: Any) -> None:
-        """render_mode="human": the observations as a grid (one per camera), and env 0's step, on the viewer's page."""
-        from visualenv.viewer.board import grid
-        from visualenv.viewer.human import HumanDisplay
-
+        """render_mode="human": the observations as a grid (one per camera), and env 0's step, on the display."""
         if self._display is None:
-            self._display = HumanDisplay()
+            self._display = open_human_display()
         pictures = {key: grid(frames) for key, frames in obs.items()} if isinstance(obs, dict) else grid(obs)
         values = {"envs": self.num_envs, "steps": int(self._steps[0]), "state": {n: float(v) for n, v in zip(self.program.state_names, self._state[:, 0])}}
         self._display.show(self.program.spec.id, pictures, values)

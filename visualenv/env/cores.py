@@ -4,9 +4,9 @@ Worker shares follow this process's affinity mask (:func:`usable_cores`), which 
 a batch scheduler or ``taskset`` may make smaller than the machine.
 
 Why confine: Blender sizes its thread pools (scene evaluation, not only rendering) to the cores
-it may run on when it starts. Sixteen unconfined workers on a 16-core machine each started pools
-for all 16 cores, and together made 307 env-steps/s where eight made 1,782; confined to one core
-each, sixteen made 1,941. So n workers on c cores each get their own c/n cores (one core each, round
+it may run on when it starts, so unconfined workers past half a machine's cores each start pools
+for every core and together run slower than half as many (results/benchmarks/parallel-workers.md).
+So n workers on c cores each get their own c/n cores (one core each, round
 robin, when n > c), are confined to them before Blender starts, and render with that many threads.
 ``pin=False`` (``--no-pin``) turns it off, for a machine shared with other jobs that pin themselves.
 RLlib's runners, which Ray places itself, each claim a free core of their node (:func:`claim_core`).

@@ -7,6 +7,8 @@ from typing import Any
 import numpy as np
 from stable_baselines3.common.vec_env import VecEnv
 
+from visualenv.compat.sb3 import vec_env_indices
+
 
 class SB3Batch(VecEnv):
     """SB3's VecEnv API over a :class:`BatchedVectorEnv` reset in the same step (``terminal_observation`` in infos)."""
@@ -51,20 +53,21 @@ class SB3Batch(VecEnv):
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
         if not hasattr(self.batch, "lanes"):  # batches in worker processes (MultiBatchVectorEnv): their lanes answer there
             values = self.batch.get_attr(attr_name)
-            return [values[i] for i in self._get_indices(indices)]
-        return [getattr(self.batch.lanes[i], attr_name) for i in self._get_indices(indices)]
+            return [values[i] for i in vec_env_indices(self, indices)]
+        return [getattr(self.batch.lanes[i], attr_name) for i in vec_env_indices(self, indices)]
 
     def set_attr(self, attr_name: str, value: Any, indices: Any = None) -> None:
         if not hasattr(self.batch, "lanes"):
             raise NotImplementedError("set_attr on batches in worker processes: set it in the spec's params instead")
-        for i in self._get_indices(indices):
+        for i in vec_env_indices(self, indices):
             setattr(self.batch.lanes[i], attr_name, value)
 
     def env_method(self, method_name: str, *method_args: Any, indices: Any = None, **method_kwargs: Any) -> list[Any]:
         if not hasattr(self.batch, "lanes"):
             values = self.batch.call(method_name, *method_args, **method_kwargs)
-            return [values[i] for i in self._get_indices(indices)]
-        return [getattr(self.batch.lanes[i], method_name)(*method_args, **method_kwargs) for i in self._get_indices(indices)]
+            return [values[i] for i in vec_env_indices(self, indices)]
+        lanes = [self.batch.lanes[i] for i in vec_env_indices(self, indices)]
+        return [getattr(lane, method_name)(*method_args, **method_kwargs) for lane in lanes]
 
     def env_is_wrapped(self, wrapper_class: type, indices: Any = None) -> list[bool]:
-        return [False for _ in self._get_indices(indices)]
+        return [False for _ in vec_env_indices(self, indices)]

@@ -103,8 +103,8 @@ def with_render_threads(kwargs: dict[str, Any], share: Share | None, n: int, thr
 
 
 def warn_gpu_workers(target: str, n: int, kwargs: dict[str, Any]) -> None:
-    """Once per process: several per-process envs rendering on one GPU share it badly (measured on an H100: 16 processes,
-    159 env-steps/s in all, against 1,941 for 16 CPU workers)."""
+    """Once per process: several per-process envs rendering on one GPU share it badly, far below as many CPU workers
+    (results/benchmarks/which-device.md)."""
     global _warned_gpu
     if _warned_gpu or n < 2 or kwargs.get("render") is False:
         return
@@ -119,8 +119,9 @@ def warn_gpu_workers(target: str, n: int, kwargs: dict[str, Any]) -> None:
             return
     if device == "gpu":
         _warned_gpu = True
-        print(f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly (16 such processes made "
-              "159 env-steps/s on an H100, 16 CPU workers 1,941): one worker per core on the CPU is faster today; "
+        print(f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly "
+              "(several Blender processes on one GPU step slower than as many CPU workers): one worker per core on the CPU is "
+              "faster today; "
               "see docs/performance.md#which-device", file=sys.stderr, flush=True)
 
 

@@ -12,11 +12,13 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
+from visualenv.compat.gymnasium import restore_space_generator, space_generator
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
+from visualenv.env.human import HumanDisplay, open_human_display
 from visualenv.physics.conventions import legacy_stream
 from visualenv.physics.model_fields import restore_fields, written_fields
 from visualenv.physics.simulation import integration_state
@@ -81,8 +83,8 @@ class VisualEnv(gym.Env):
 
     ## Render modes
     ``"rgb_array"``: ``render()`` returns the high-resolution view (``render.view``). ``"human"``: every reset and
-    step is shown live on a local web page (:mod:`visualenv.viewer.human`; the URL is printed once) and ``render()``
-    returns None, as Gymnasium specifies.
+    step is shown live on the registered display (:mod:`visualenv.env.human`: the viewer's local web page, whose URL
+    is printed once) and ``render()`` returns None, as Gymnasium specifies.
 
     ## Renderer backend
     ``backend`` names the renderer class as ``module:attribute`` (default:
@@ -134,7 +136,7 @@ class VisualEnv(gym.Env):
         self._backend = backend
         self._renderer_options = checked_options(renderer_options)
         self._renderer: Renderer | None = None
-        self._display: Any = None  # render_mode="human": the page this env's steps are shown on, opened by the first step shown
+        self._display: HumanDisplay | None = None  # render_mode="human": where the steps are shown, opened at the first
         self._last_obs: Any = None  # the latest camera observation, returned again if a fault ends the episode
         self._random = RandomSource()
         #: dm_control's task stream (a spec with ``physics.convention: dm_control``): RandomState(seed), continued across episodes
@@ -444,11 +446,9 @@ class VisualEnv(gym.Env):
         return self.renderer.render_view(self._bind())
 
     def _show(self, reward: float | None, info: dict[str, Any]) -> None:
-        """render_mode="human": the observation, the values and (while a page watches) the view on the viewer's page."""
+        """render_mode="human": the observation, the values and the view (called only when shown) on the display."""
         if self._display is None:
-            from visualenv.viewer.human import HumanDisplay
-
-            self._display = HumanDisplay()
+            self._display = open_human_display()
         self._display.show(self.program.spec.id, self._last_obs if self.uses_camera else None, {"reward": reward, **info}, self._view)
 
     def _observe(self) -> Any:
@@ -506,7 +506,8 @@ class VisualEnv(gym.Env):
         episode = {
             "state": self._state, "steps": self._steps, "fired": self._fired, "done": self._done, "success": self._success,
             "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
-            "action_space_rng": getattr(self.action_space, "_np_random", None), "last_obs": self._last_obs, "legacy_random": self._legacy_random,
+            "action_space_rng": space_generator(self.action_space), "last_obs": self._last_obs,
+            "legacy_random": self._legacy_random,
             "physics": self._physics_state(), "model": written_fields(self._sim.model) if self._sim is not None else None,
             "distractions": self._distractions,
         }
@@ -538,7 +539,7 @@ class VisualEnv(gym.Env):
         self._sensor_rng = episode["sensor_rng"]
         self._distractions = episode.get("distractions", self._distractions)
         if episode["action_space_rng"] is not None:
-            self.action_space._np_random = episode["action_space_rng"]
+            restore_space_generator(self.action_space, episode["action_space_rng"])
         self._last_obs = episode["last_obs"]
         self._was_reset = True
 

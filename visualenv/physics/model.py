@@ -34,6 +34,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from visualenv.compat.mujoco import ctrl_limited, spec_deletes
 from visualenv.errors import VisualEnvError
 from visualenv.files import PACKAGE_PREFIX, package_file
 from visualenv.physics.model_fields import MODEL_FIELDS, model_values
@@ -135,7 +136,7 @@ class PhysicsModel:
     def ctrl_range(self, actuator: int) -> tuple[float, float]:
         """An actuator's ctrlrange where it is limited (as Gymnasium's action space), else unbounded."""
         m = self.model
-        limited = bool(m.actuator_ctrllimited[actuator]) if hasattr(m, "actuator_ctrllimited") else True
+        limited = ctrl_limited(m, actuator)
         lo, hi = (float(v) for v in m.actuator_ctrlrange[actuator])
         return (lo, hi) if limited and lo < hi else (float("-inf"), float("inf"))
 
@@ -185,13 +186,16 @@ def without_textures(path: Path, model: Any) -> Any:
     (:class:`~visualenv.physics.simulation.Simulation`).
 
     Textures only draw, and the renderer reads them from the model once. Kept, every env would hold its own copy of
-    them (dm_control's skybox alone is 11.8 MB: 3 GB in a batch of 256 envs). MuJoCo's MjSpec deletes them and
-    compiles the rest: every other array is the same (``tests/test_physics_spec.py``). Where this MuJoCo's MjSpec
-    cannot (no ``delete``), the model as it is.
+    them: gigabytes in a batch of DMC envs (results/benchmarks/model-without-textures.md). MuJoCo's MjSpec deletes
+    them and compiles the rest: every other array is the same (``tests/test_physics_spec.py``). Where this MuJoCo's
+    MjSpec cannot (no ``delete``: :func:`~visualenv.compat.mujoco.spec_deletes`), or MuJoCo refuses to compile the
+    spec (a ValueError, as MuJoCo's Python calls raise its errors), the model as it is.
     """
     if not model.ntex:
         return model
     mujoco = mujoco_module()
+    if not spec_deletes(mujoco):
+        return model
     try:
         with warnings.catch_warnings():  # the model's compile has said them (a deprecated attribute, ...)
             warnings.simplefilter("ignore")
@@ -201,7 +205,7 @@ def without_textures(path: Path, model: Any) -> Any:
             for material in spec.materials:
                 material.textures = [""] * len(material.textures)
             return spec.compile()
-    except (AttributeError, TypeError, ValueError):
+    except ValueError:
         return model
 
 

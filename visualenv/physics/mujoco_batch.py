@@ -24,11 +24,12 @@ Where it does not fit, :func:`batch_module` says so and the batch steps the lane
 
 from __future__ import annotations
 
-import importlib
 from types import SimpleNamespace
 from typing import Any, Sequence
 
 import numpy as np
+
+from visualenv.compat.mujoco import batch_api
 
 #: MjData arrays a renderer poses the drawn model from (:func:`visualenv.physics.geom_poses.render_poses`)
 POSE_ARRAYS = ("xpos", "xquat", "cam_xpos", "cam_xmat", "light_xpos", "light_xdir", "geom_xpos", "geom_xmat")
@@ -39,10 +40,7 @@ def batch_module(convention: str, contacts: bool, moved: bool) -> Any | None:
     mujoco has none (before 3.17), the spec declares contacts, or it moves mocap bodies under dm_control's convention."""
     if contacts or (moved and convention == "dm_control"):
         return None
-    try:
-        return importlib.import_module("mujoco.batch")
-    except ImportError:
-        return None
+    return batch_api()
 
 
 class MujocoBatch:

@@ -19,6 +19,7 @@ from typing import Any
 
 import numpy as np
 
+from visualenv.compat.mujoco import light_directional, texture_channels
 from visualenv.physics.model import PhysicsError, PhysicsModel, mujoco_module
 from visualenv.physics.texcoords import cube_to_equirect
 
@@ -49,7 +50,7 @@ class GeomShape:
     unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
     texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
     #: added to a finite plane's vertices before its 2-D texture's mapping: MuJoCo 3.17's renderer lays the texture from
-    #: the plane's (-x, +y) corner, not its centre (measured against mujoco.Renderer: tests/test_physics_texcoords.py)
+    #: the plane's (-x, +y) corner, not its centre (checked against mujoco.Renderer: tests/test_physics_texcoords.py)
     texorigin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: its material's emission (times its colour), specular and shininess, as MuJoCo's renderer lights it (no material: 0, 0.5, 0.5)
     emission: float = 0.0
@@ -133,7 +134,8 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True, look: str = "m
                                "(hidden) or replace it with a mesh or boxes")
         geoms.append(_geom(model, g, GEOM_KINDS[gtype], idents["geom"][g], textures))
     lights = tuple(
-        LightInfo(idents["light"][i], bool(_light_directional(model, i)), _floats(data.light_xpos[i]), _floats(data.light_xdir[i]),  # type: ignore[arg-type]
+        LightInfo(idents["light"][i], light_directional(model, i),
+                  _floats(data.light_xpos[i]), _floats(data.light_xdir[i]),  # type: ignore[arg-type]
                   _floats(model.light_diffuse[i]), float(model.light_cutoff[i]), _floats(model.light_ambient[i]),  # type: ignore[arg-type]
                   bool(model.light_castshadow[i]), float(model.light_exponent[i]), _floats(model.light_attenuation[i]))  # type: ignore[arg-type]
         for i in range(model.nlight))
@@ -189,12 +191,6 @@ def _quat(mujoco: Any, mat: np.ndarray) -> tuple[float, ...]:
     quat = np.zeros(4)
     mujoco.mju_mat2Quat(quat, np.asarray(mat, dtype=np.float64).reshape(9))
     return tuple(float(v) for v in quat)
-
-
-def _light_directional(model: Any, i: int) -> bool:
-    if hasattr(model, "light_type"):
-        return int(model.light_type[i]) == 1  # mjLIGHT_DIRECTIONAL
-    return bool(model.light_directional[i])
 
 
 def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarray]) -> GeomShape:
@@ -285,7 +281,7 @@ def _mesh_texcoords(model: Any, mesh: int) -> np.ndarray | None:
 def _pixels(model: Any, tex: int) -> np.ndarray:
     """A texture as MuJoCo compiled it (builtin checker, gradient, flat, or an image: all are pixels by then)."""
     w, h = int(model.tex_width[tex]), int(model.tex_height[tex])
-    channels = int(model.tex_nchannel[tex]) if hasattr(model, "tex_nchannel") else 3
+    channels = texture_channels(model, tex)
     adr = int(model.tex_adr[tex])
     pixels = np.asarray(model.tex_data[adr:adr + w * h * channels], dtype=np.float32).reshape(h, w, channels) / 255.0
     rgba = np.ones((h, w, 4), np.float32)

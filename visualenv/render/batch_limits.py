@@ -27,12 +27,12 @@ TURNS = ("rotation", "look_at")
 #: properties a batch cannot follow: a scale bound on a camera or an ancestor, and the camera's own lens
 UNFOLLOWED = ("scale",)
 #: envs of a batch whose camera turns: its tiles shader holds 4 parameters an env (a quaternion) and Cycles compiles it
-#: again whenever a rotation changes, measured about 35 ms a change at 64 envs and 0.64 s at 1,024 (quiet 2-core CPU);
+#: again whenever a rotation changes, at a cost that grows with N (results/benchmarks/batched-suns-and-cameras.md);
 #: more were not tried
 MAX_TURNING_ENVS = 1024
 #: envs with lights of their own (a bound sun; point, spot and area lights) in one batch: Cycles' light linking tells
-#: 64 light sets apart, one of them the default set; measured with suns: 63 envs' tiles equal their own renders, at 64
-#: every tile is wrong (31 % of pixels within 8 levels)
+#: 64 light sets apart, one of them the default set: with suns, 63 envs' tiles equal their own renders, at 64 every
+#: tile is wrong (results/benchmarks/batched-suns-and-cameras.md)
 MAX_LINKED_ENVS = 63
 ONE_PROCESS_EACH = "use one process per env (visualenv.make_vec(..., batched=False))"
 
@@ -71,7 +71,7 @@ def sun_world_error(plan: RenderPlan, name: str) -> SpecError:
     return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state while the world is not one "
                       "colour (an image sky, or a .blend file's world with textures): each env of a batch then has its own sun "
                       "(Cycles' light linking), and with such a world Cycles' light sampling lit all but one env's copy otherwise "
-                      "than one env alone (measured: 31-59 % of pixels within 8 levels); use a world colour, or "
+                      "than one env alone (most of a tile's pixels off); use a world colour, or "
                       f"{ONE_PROCESS_EACH}", key=True)])
 
 

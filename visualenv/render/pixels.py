@@ -41,7 +41,7 @@ def to_grayscale(rgb: np.ndarray) -> np.ndarray:
     r, g, b = LUMA_601
     luma = rgb[..., 0].astype(np.uint32)
     luma *= r
-    for channel, weight in ((1, g), (2, b)):  # in place, channel by channel: faster than a uint32 matmul (docs/performance.md)
+    for channel, weight in ((1, g), (2, b)):  # in place, per channel: faster than a uint32 matmul
         part = rgb[..., channel].astype(np.uint32)
         part *= weight
         luma += part

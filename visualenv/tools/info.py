@@ -20,7 +20,7 @@ from visualenv.versions import __version__, mujoco_version
 
 PROBE = [sys.executable, "-m", "visualenv.render.blender.probe"]
 PROBE_TIMEOUT = 120.0
-WARM_TIMEOUT = 1800.0  # compiling Cycles' kernels from PTX took 356 s on an H100
+WARM_TIMEOUT = 1800.0  # compiling Cycles' kernels from PTX takes minutes (sm_90)
 
 
 def gather(*, warm_gpu: bool = False, command: list[str] | None = None, timeout: float | None = None) -> dict[str, Any]:

@@ -172,8 +172,8 @@ def _check_teacher(teacher: Any, spec_path: str) -> None:
 
 def _student(vec_env: Any, start: Any = None) -> Any:
     """SB3's PPO CNN policy on the env's stacked, channels-first frames (`start`'s weights: a policy of the same
-    spaces), laid out channels last: oneDNN's convolutions on a CPU fit it 2.5 times as fast so (a batch of 64
-    frames 9x84x84: 0.41 s an update, 1.0-1.1 s without)."""
+    spaces), laid out channels last: oneDNN's convolutions on a CPU fit it more than twice as fast so
+    (results/benchmarks/code-choices.md)."""
     import torch
     from stable_baselines3.common.policies import ActorCriticCnnPolicy
 

@@ -329,7 +329,8 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
 
 #: a replay on a machine unlike the recording one (another CPU's renderer kernels, other versions) must give every
 #: episode the same outcome, a length within this many steps and a return within RETURN_TOLERANCE of its magnitude:
-#: the largest drift measured, LunarLanding's first episode under Cycles' SSE4.2 kernel, was 0.06 of 14.34 (0.4 %)
+#: the largest drift seen, LunarLanding's first episode under Cycles' SSE4.2 kernel, was well within it
+#: (results/benchmarks/cross-machine-replay.md)
 LENGTH_TOLERANCE = 2
 RETURN_TOLERANCE = 0.02
 TOLERANCE_TEXT = f"the same outcome, length within {LENGTH_TOLERANCE} steps, return within {RETURN_TOLERANCE:.0%}"

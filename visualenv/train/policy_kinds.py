@@ -13,6 +13,7 @@ from __future__ import annotations
 import inspect
 from typing import Any, Callable
 
+from visualenv.compat.sb3 import constructor_parameters
 from visualenv.errors import VisualEnvError
 
 #: SB3 constructor arguments a policy file leaves out: the spaces have their own keys, and the optimizer (its class,
@@ -115,7 +116,7 @@ def as_data(value: Any, what: str) -> Any:
 def sb3_kind(policy: Any) -> tuple[str, dict[str, Any]]:
     """The policy's kind and its network arguments as data, for policy.json."""
     name = name_of(sb3_policies(), type(policy), "the policy class")
-    parameters = dict(policy._get_constructor_parameters())  # SB3's own record of what rebuilds the policy
+    parameters = constructor_parameters(policy)  # SB3's own record of what rebuilds the policy
     if "share_features_extractor" in inspect.signature(type(policy)).parameters:
         parameters["share_features_extractor"] = policy.share_features_extractor  # SB3's record leaves it out
     arguments: dict[str, Any] = {}

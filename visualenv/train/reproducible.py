@@ -4,11 +4,11 @@ A policy's float arithmetic follows the CPU's vector instructions: oneDNN (torch
 convolutions) and MKL (its matrix products) pick AVX-512, AVX2 or SSE code at run
 time, and each sums in its own order. Discrete agents hide the last-digit
 differences behind argmax; continuous ones act on them, and over an episode they
-grow (LunarLanding's first episode returned 14.3436 under AVX2, 14.3419 under
-AVX-512). So evaluations and play run the policy with oneDNN off (torch's own
+grow (LunarLanding's first episode, AVX2 against AVX-512:
+results/benchmarks/cross-machine-replay.md). So evaluations and play run the policy with oneDNN off (torch's own
 convolution, whose products go through MKL) and MKL in its *conditional numerical
 reproducibility* mode ``COMPATIBLE``, which runs the same code on every CPU.
-Measured on the development machine: the same returns, to the last bit, under
+Checked on the development machine: the same returns, to the last bit, under
 ``ONEDNN_MAX_CPU_ISA=SSE41`` and ``ATEN_CPU_CAPABILITY=default``.
 
 MKL takes its mode once, before its first call in a process: a process that
@@ -46,8 +46,8 @@ def pinned_inference() -> Iterator[bool]:
     """Torch on one thread, oneDNN off and MKL pinned while a policy acts; yields whether MKL could be pinned.
 
     One thread: a forward pass on one observation gains nothing from more, and beside
-    Blender or another run each parallel region waits for a busy core (VisualCartPole's
-    agent took 139 ms a step on 2 threads beside a training run, 10 ms on one). Torch is
+    Blender or another run each parallel region waits for a busy core, which made a step
+    many times slower (results/benchmarks/code-choices.md). Torch is
     left alone if nothing imported it (random actions).
     """
     torch = sys.modules.get("torch")

@@ -31,6 +31,7 @@ from gymnasium import spaces
 from ray.rllib.callbacks.callbacks import RLlibCallback
 
 from visualenv.compat.glibc import apply_policy
+from visualenv.compat.ray import DEPRECATION_LOGGER, local_cluster_addresses
 from visualenv.errors import ConfigError, did_you_mean
 
 ENV_PREFIX = "visualenv-rllib:"
@@ -294,7 +295,7 @@ def quiet_deprecations() -> Iterator[None]:
     """RLlib's deprecation warnings silenced: it warns about its own deprecated constructor while building its own modules."""
     import logging
 
-    rllib_log = logging.getLogger("ray._common.deprecation")
+    rllib_log = logging.getLogger(DEPRECATION_LOGGER)
     level = rllib_log.level
     rllib_log.setLevel(logging.ERROR)
     try:
@@ -317,9 +318,7 @@ def check_address(address: str | None) -> None:
     if address == "auto":
         import os
 
-        from ray._private.services import find_gcs_addresses  # what ray.init("auto") reads
-
-        if not os.environ.get("RAY_ADDRESS") and not find_gcs_addresses():
+        if not os.environ.get("RAY_ADDRESS") and local_cluster_addresses() == frozenset():  # None: this Ray cannot tell
             raise ConfigError("--address auto: no Ray cluster runs on this machine (start one with `ray start --head`)")
         return
     host, _, port = address.rpartition(":")

@@ -20,8 +20,6 @@ import numpy as np
 OBSERVATION, VIEW = "observation", "view"
 #: at most this share of the stepping thread's time goes to rendering views while it runs (see :class:`ViewPacer`)
 VIEW_SHARE = 0.25
-#: the most envs a grid shows (a batch of thousands would make a picture nobody can read)
-GRID_LIMIT = 64
 
 
 @dataclass(frozen=True)
@@ -148,19 +146,6 @@ def observation_pictures(observation: Any) -> dict[str, np.ndarray]:
     if isinstance(observation, Mapping):
         return {str(key): value for key, value in observation.items() if _is_image(value)}
     return {"observation": observation} if _is_image(observation) else {}
-
-
-def grid(batch: np.ndarray, limit: int = GRID_LIMIT) -> np.ndarray:
-    """The first `limit` images of an (N, H, W, C) batch tiled row by row in a near-square grid, 1 px apart."""
-    images = np.asarray(batch)[:limit]
-    n, h, w, c = images.shape
-    columns = int(np.ceil(np.sqrt(n)))
-    rows = int(np.ceil(n / columns))
-    out = np.zeros((rows * (h + 1) - 1, columns * (w + 1) - 1, c), dtype=images.dtype)
-    for i in range(n):
-        r, k = divmod(i, columns)
-        out[r * (h + 1):r * (h + 1) + h, k * (w + 1):k * (w + 1) + w] = images[i]
-    return out
 
 
 def plain(value: Any) -> Any:

@@ -44,8 +44,11 @@ def shared_board() -> tuple[Board, str]:
         return _shared.board, _shared.url
 
 
-class HumanDisplay:
-    """One env's frames on the shared page: its observation, its values and, while the page is open, its view."""
+class PageDisplay:
+    """One env's frames on the shared page: its observation, its values and, while the page is open, its view.
+
+    It meets :class:`visualenv.env.human.HumanDisplay`; :func:`visualenv.viewer.open_display` makes one per env.
+    """
 
     def __init__(self) -> None:
         self.board, self.url = shared_board()

@@ -7,12 +7,12 @@ import math
 
 from visualenv.render.blender.tiles_camera import grid_shape
 
-#: the largest image one render call makes; past it a batch is rendered in several calls. Measured: a
-#: larger image comes back black from the in-memory readback (Cycles' result then reaches Blender in
-#: tiles, after the engine's render returns), 2,000 x 2,000 and 2,080 x 800 did not; the file readback is unaffected
+#: the largest image one render call makes; past it a batch is rendered in several calls: a larger image
+#: comes back black from the in-memory readback (Cycles' result then reaches Blender in tiles, after the
+#: engine's render returns; results/benchmarks/batched-cpu-vm.md); the file readback is unaffected
 MAX_IMAGE_PIXELS = 2048 * 2048
 #: what rendering a few envs alone costs beyond their own tiles, in tiles: switching the scene's camera to the
-#: one-tile camera and back makes Cycles re-synchronise, measured 37 ms against 2.5 ms a tile (2-core CPU, N = 16)
+#: one-tile camera and back makes Cycles re-synchronise (results/benchmarks/code-choices.md)
 ALONE_OVERHEAD_TILES = 16
 #: reset envs rendered alone, at most, per square root of N (:func:`alone_limit`): Cycles on the CPU, times the
 #: square root of its render threads; Cycles on a GPU
@@ -26,9 +26,9 @@ def alone_limit(num_envs: int, device: str, threads: int) -> float:
     """How many reset envs a batch renders alone (one env-sized call each) before rendering all N tiles again is cheaper.
 
     One env alone is a render call over the whole scene, whose cost grows with N; the grid again costs N tiles, and a
-    tile costs less the more threads trace it, and little on a GPU. Break-even measured at 100x100
-    (docs/performance.md, *Reset envs rendered alone*): 3.4 to 6.8 times the square root of N on 2 CPU threads,
-    1.3 on 16, 0.3 to 0.8 on an H200 with OptiX. Below about 16 envs the camera switch (ALONE_OVERHEAD_TILES) decides.
+    tile costs less the more threads trace it, and little on a GPU, so the break-even grows as the square root of N
+    and falls with the threads (docs/performance.md, *Reset envs rendered alone*; the measured break-evens:
+    results/benchmarks/batched-reset-alone.md). Below about 16 envs the camera switch (ALONE_OVERHEAD_TILES) decides.
     """
     per_root = ALONE_PER_ROOT_GPU if device == "GPU" else ALONE_PER_ROOT_CPU / math.sqrt(max(1, threads))
     return min(per_root * math.sqrt(num_envs), num_envs - ALONE_OVERHEAD_TILES)

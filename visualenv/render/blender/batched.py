@@ -349,7 +349,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
                        for k, copy in enumerate(self._copies)]
             self._copy_poses = [(k, writer) for k, writer in enumerate(writers) if not writer.empty]
         if self._instances is not None and self._instances.posed:
-            for part, out in enumerate(self._body_poses):  # one C loop over the envs' arrays (0.1 ms at N = 256)
+            for part, out in enumerate(self._body_poses):  # one C loop over the envs' arrays
                 np.concatenate([p[part] for p in poses], out=out.reshape(-1, out.shape[2]))
         for k, writer in self._copy_poses:
             writer.write(*poses[k])
@@ -400,9 +400,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
         A batch past one image is rendered in parts of whole rows of the grid of copies, each
         part by the same camera translated by its rows: moving a camera is a transform update,
-        while changing which envs its shader shows makes Cycles compile it again (55 ms a call
-        at 441 envs). A camera whose row of tiles does not fit one image (a large view) changes
-        its parameters per part instead.
+        while changing which envs its shader shows makes Cycles compile it again
+        (results/benchmarks/batched-split-images.md). A camera whose row of tiles does not fit
+        one image (a large view) changes its parameters per part instead.
         """
         per_call = envs_per_call(self.num_envs, view.width, view.height)
         rows = per_call // self._cols
@@ -454,7 +454,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
         A second custom camera, fixed at one tile of env 0, is moved onto each env's
         place: moving it is a transform update, while changing the tiles camera's
-        parameters (which envs it shows) recompiles its shader, measured 55 ms.
+        parameters (which envs it shows) recompiles its shader.
         """
         view, _, _ = self._tiled_views[j]
         if j not in self._alone:

@@ -70,7 +70,8 @@ class _Reader:
                 raise BlendReadError(f"Blender did not finish reading {path} in {timeout:.0f} s")
             if code == 0 and attempt == 0:
                 continue  # it went idle just as the request came: ask a new one
-            how = f"signal {signal.Signals(-code).name}" if code < 0 and -code in signal.Signals._value2member_map_ else f"exit status {code}"
+            named = code < 0 and -code in {s.value for s in signal.Signals}
+            how = f"signal {signal.Signals(-code).name}" if named else f"exit status {code}"
             raise BlendReadError(f"Blender crashed ({how}) while reading {path}: open it in Blender and save it again "
                                  "(File > Save As), or use a file saved by another Blender version")
         raise AssertionError("unreachable")  # pragma: no cover

@@ -4,7 +4,7 @@ Blender's background mode gives Python no access to a finished render: the
 'Render Result' image has no pixels and the compositor's Viewer node is never
 run. The portable route (see :mod:`readback`) writes a file and reads it back,
 which costs about as much as the render itself at 100x100 (``visualenv bench --readback file``
-against the default; docs/performance.md).
+against the default; results/benchmarks/single-env-vm.md).
 
 A render engine, however, can read its own result while it renders. This
 module wraps Cycles' ``RenderEngine.render`` (:func:`~visualenv.compat.blender.wrap_cycles_render`) so that, when a renderer has armed

@@ -2,11 +2,11 @@
 
 bpy 5.0.1 ships CUDA binaries (``kernel_sm_XX.cubin.zst``) for some architectures and PTX
 (``kernel_compute_XY.ptx.zst``) for the rest. On an H100 or H200 (sm_90) the driver compiles that
-PTX at the first GPU frame, OptiX included (it runs Cycles' CUDA kernels beside its own): 356 s
-measured, cached per machine in ``~/.nv/ComputeCache``. A machine that starts bare (a cloud
+PTX at the first GPU frame, OptiX included (it runs Cycles' CUDA kernels beside its own): minutes,
+cached per machine in ``~/.nv/ComputeCache``. A machine that starts bare (a cloud
 instance, a container) pays it at every start. Compiled once with the CUDA toolkit's ``ptxas``,
-the first frame of a batch took 8.2 s on an H200 (docs/performance.md, *On a GPU*). The binary goes
-to visualenv's kernel cache (``$XDG_CACHE_HOME/visualenv/cycles``, keyed by bpy's version and the
+the first frame takes seconds (docs/performance.md, *On a GPU*; results/benchmarks/batched-gpu-h200.md).
+The binary goes to visualenv's kernel cache (``$XDG_CACHE_HOME/visualenv/cycles``, keyed by bpy's version and the
 PTX's hash), never into bpy's installed package; a process that renders on the GPU points Cycles at
 it (:func:`visualenv.compat.blender.use_cached_kernels`). Compile in the image the machines start from
 (or with ``XDG_CACHE_HOME`` on a shared disk), with a ``ptxas`` no newer than their driver supports.
@@ -51,7 +51,7 @@ def compile_cuda_kernels(arch: str, *, lib: Path | None = None, ptxas: str | Non
     """Compile bpy's Cycles PTX for `arch` ('sm_90') into the kernel cache, as ``kernel_<arch>.cubin.zst``
     (:func:`visualenv.compat.blender.cached_kernel`); `lib`: the folder of the PTX (default: bpy's).
 
-    Takes minutes (433 s of one core for sm_90): ptxas compiles Cycles' whole kernel. The file is
+    Takes minutes of one core: ptxas compiles Cycles' whole kernel. The file is
     written whole or not at all. Returns its path.
     """
     import zstandard  # a dependency of bpy: Cycles reads its kernels zstd-compressed

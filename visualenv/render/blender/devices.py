@@ -6,8 +6,8 @@
 Also the one-line notice before a process's first Cycles GPU render when Blender must first
 compile its kernels for this GPU: bpy 5.0.1 ships CUDA binaries for some architectures only
 (``kernel_sm_XX.cubin``), and OptiX runs those CUDA kernels beside its own; the driver then caches
-the compiled PTX, so it happens once per machine. On an H100 (sm_90) that first frame took 356 s; with an sm_90
-binary compiled ahead (docs/performance.md, *On a GPU*), 8 s on an H200 (OptiX's own modules).
+the compiled PTX, so it happens once per machine. On an H100 or H200 (sm_90) that first frame takes minutes; with an
+sm_90 binary compiled ahead (docs/performance.md, *On a GPU*), seconds (OptiX's own modules).
 """
 
 from __future__ import annotations
@@ -43,7 +43,7 @@ def kernels_to_compile(facts: KernelFacts) -> str | None:
     if facts.backend not in NVIDIA or any(filled for _, filled in facts.caches):
         return None
     missing = [arch for arch in facts.gpu_archs if arch not in facts.shipped_archs]
-    if not missing:  # OptiX still builds its own modules from PTX, but in seconds (8 s measured on an H200)
+    if not missing:  # OptiX still builds its own modules from PTX, but in seconds
         return None
     if facts.backend == "OPTIX":
         return f"OptiX runs Cycles' CUDA kernels too, and bpy has no CUDA binary for {', '.join(missing)}: the driver compiles its PTX"

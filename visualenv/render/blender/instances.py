@@ -1,9 +1,9 @@
 """A batch's meshes as Geometry Nodes instances, their poses written from numpy: :class:`InstancedCopies`.
 
-Moving N linked duplicates costs Blender a Python write, a depsgraph evaluation
-and a Cycles sync per object: about 60 ms a step for VisualCartPole's 2,048
-moving objects at N = 1,024. And every object in the scene, moving or not, adds
-to Blender's update of a moved one (2,048 static objects: about 20 ms). Here
+Moving N linked duplicates of each moving object costs Blender a Python write,
+a depsgraph evaluation and a Cycles sync per copy. And every object in the
+scene, moving or not, adds to Blender's update of a moved one
+(results/benchmarks/batched-scene-update.md). Here
 each mesh is one *instancer*: a mesh of N points (one per env) whose Geometry
 Nodes modifier puts an instance of the original mesh on every point and gives
 it the point's 4x4 transform attribute as its world matrix. A step computes
@@ -27,10 +27,10 @@ and a bound colour an instance attribute that the mesh's own materials read
 with an Attribute node (type Instancer), as each env's distraction of the
 colours and its camera's turn (:meth:`InstancedCopies.write_env_attributes`). Moving instances stay instances:
 realizing them, or merging the meshes, makes Cycles rebuild the geometry every
-step (about four times the cost); Cycles' persistent data keeps them.
+step, which costs more than syncing them; Cycles' persistent data keeps them.
 
 Static meshes are the other way round. Once anything moves, Cycles syncs every
-instance in the scene, moved or not (about 6 us each on the 2-core VM), so
+instance in the scene, moved or not, so
 VisualCartPole's 1,024 track instances cost as much a step as its carts. A
 static mesh whose every env's copy stands still (no binding moves, hides or
 colours it, no camera moves the anchors) is *realized*: one mesh of every env's
@@ -121,7 +121,7 @@ def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects:
               posed: Collection[int] = ()) -> set[int]:
     """Pointers of the objects that need no copies, with only such objects (or objects never copied) under them:
     meshes and empties whose world matrices numpy computes (:func:`_computable`; the meshes are drawn as instances,
-    moving or not: every object in the scene adds to Blender's update of a moved one, about 10 us each), and cameras
+    moving or not: every object in the scene adds to Blender's update of a moved one), and cameras
     that are not aimed and that nothing moves or whose pose numpy computes too (a batch renders through its own tiles
     camera; a moving camera's pose, :meth:`InstancedCopies.local_matrices`, places its env's anchor)
     `posed`: pointers of the objects that take MuJoCo bodies' poses (:class:`InstancedCopies` computes them too)."""

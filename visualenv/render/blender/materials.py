@@ -283,8 +283,8 @@ def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir:
     links.new(tinted, bg.inputs["Color"])
     rotation = list(spec.rotation) if isinstance(spec.rotation, tuple) else [0.0, 0.0, spec.rotation]
     mapping.inputs["Rotation"].default_value = rotation
-    # Cycles samples the sky by an importance map of it: its automatic size cost 2.2 s at every env start and
-    # again whenever a binding changed the world (64 x 32 sky, 2-core CPU); 512 x 256 costs 0.05 s
+    # Cycles samples the sky by an importance map of it: its automatic size cost seconds at every env start and
+    # again whenever a binding changed the world; 512 wide costs little (results/benchmarks/spec-features-cost.md)
     world.cycles.sampling_method = "MANUAL"
     world.cycles.sample_map_resolution = SKY_MAP_RESOLUTION
     return world

@@ -145,7 +145,7 @@ def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "inde
     r.dither_intensity = 0.0  # dithering adds noise to 8-bit output
     r.use_compositing = False
     r.use_sequencer = False
-    r.use_persistent_data = True  # keeps Cycles' scene between renders (docs/performance.md: measured)
+    r.use_persistent_data = True  # keeps Cycles' scene between renders (results/benchmarks/single-env-vm.md)
     r.use_motion_blur = False
     r.use_simplify = False
     if threads:

@@ -74,8 +74,8 @@ def turning_source(num_envs: int) -> str:
     """The tiles shader for a camera the state turns: as :data:`TILES_OSL`, and each env's rays are turned by its
     own camera's rotation relative to this camera's, in Cycles' camera space: a unit quaternion an env (r<k>_0 its
     w, r<k>_1..3 its x, y, z), every rotation starting as the identity. A change of rotations compiles the shader
-    again, and four parameters an env compile faster than nine (a 3x3 matrix): 84 against 213 ms a change at 256
-    envs."""
+    again, and four parameters an env compile faster than nine (a 3x3 matrix;
+    results/benchmarks/batched-suns-and-cameras.md)."""
     names = [f"r{k}_{i}" for k in range(num_envs) for i in range(4)]
     rotations = "".join(f"    float r{k}_{i} = {1 if i == 0 else 0},\n" for k in range(num_envs) for i in range(4))
     return (_TILES_TEMPLATE.replace("@NAME@", TURNING_NAME).replace("@TURNED@", " and turned by the env's own camera rotation")

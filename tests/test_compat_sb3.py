@@ -1,0 +1,43 @@
+"""Stable-Baselines3's protected methods (visualenv/compat/sb3.py), checked on the installed SB3: a policy's constructor
+arguments are the record SB3 saves with it, and a VecEnv's indices read as SB3's own VecEnvs read them."""
+
+from __future__ import annotations
+
+import gymnasium as gym
+import numpy as np
+import pytest
+
+sb3 = pytest.importorskip("stable_baselines3")
+torch = pytest.importorskip("torch")
+from visualenv.compat import sb3 as compat  # noqa: E402
+
+
+def test_sb3_is_a_version_this_module_was_checked_against():
+    """Fails when Stable-Baselines3 moves: read BaseModel._get_constructor_parameters and VecEnv._get_indices in it,
+    then add its version to CHECKED."""
+    assert compat.checked(), f"stable-baselines3 {sb3.__version__} is not in compat/sb3.py's CHECKED {compat.CHECKED}"
+
+
+def test_a_policys_constructor_parameters_are_what_sb3_saves_and_rebuild_it(tmp_path):
+    from stable_baselines3.common.policies import ActorCriticPolicy
+
+    observations, actions = gym.spaces.Box(-1, 1, (3,), np.float32), gym.spaces.Discrete(2)
+    policy = ActorCriticPolicy(observations, actions, lambda _: 3e-4, net_arch=[8])
+    parameters = compat.constructor_parameters(policy)
+    assert parameters["observation_space"] == observations and parameters["net_arch"] == [8]
+    policy.save(str(tmp_path / "policy.pt"))
+    saved = torch.load(tmp_path / "policy.pt", weights_only=False)["data"]
+    assert saved.keys() == parameters.keys()
+    rebuilt = ActorCriticPolicy(**parameters)
+    assert [p.shape for p in rebuilt.parameters()] == [p.shape for p in policy.parameters()]
+
+
+def test_a_vec_envs_indices_read_as_sb3_reads_them():
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    venv = DummyVecEnv([lambda: gym.make("CartPole-v1")] * 3)
+    try:
+        read = [list(compat.vec_env_indices(venv, indices)) for indices in (None, 1, [0, 2])]
+        assert read == [[0, 1, 2], [1], [0, 2]]
+    finally:
+        venv.close()
