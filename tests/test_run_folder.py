@@ -14,13 +14,14 @@ RESULTS = Path(__file__).resolve().parents[1] / "results"
 SB3_FIRST = {"spec": "Goalie-v0", "algo": "ppo", "steps": 1000, "envs": 2, "frame_stack": 4, "eval_every": 500,
              "eval_episodes": 10, "final_eval_episodes": 20, "seed": 3, "render": True, "hyperparams": {"n_steps": 64},
              "progress": False}  # an SB3 run's settings before pin, batched, workers and render_device
-FIGURES = {"eval_seed": 2**33 + 3, "episodes": 2, "mean_reward": 1.5, "std_reward": 0.5, "mean_length": 10.0, "success_rate": 0.5,
-           "per_episode": {"returns": [1.0, 2.0], "lengths": [10, 10], "successes": [True, False]}}
+FIGURES = {"eval_seed": 2**33 + 3, "episodes": 2, "mean_reward": 1.5, "std_reward": 0.5, "mean_length": 10.0,
+           "success_rate": 0.5, "per_episode": {"returns": [1.0, 2.0], "lengths": [10, 10], "successes": [True, False]}}
 
 
 def current(config=None, **record):
+    added = {"pin": True, "batched": False, "workers": None, "render_device": None}
     return {"backend": "sb3", "command": "visualenv train Goalie-v0",
-            "config": {**SB3_FIRST, "pin": True, "batched": False, "workers": None, "render_device": None, **(config or {})},
+            "config": {**SB3_FIRST, **added, **(config or {})},
             "versions": {"visualenv": "0.1.0"}, "spec_path": "specs/goalie.yaml", **record}
 
 
@@ -31,21 +32,25 @@ def test_every_committed_run_reads_through_the_run_folder():
     backends = {}
     for path in configs:
         run = read_run(path.parent)
-        assert run.record["format_version"] == FORMAT_VERSION and set(run.config) == set(settings(run.record["backend"]))
+        assert run.record["format_version"] == FORMAT_VERSION
+        assert set(run.config) == set(settings(run.record["backend"]))
         backends[path.parent.relative_to(RESULTS).as_posix()] = run.record["backend"]
         if run.results is not None:
             assert run.note is None and isinstance(run.results["eval_seed"], int)
-    assert backends["Goalie-v0"] == "sb3" and backends["Goalie-v0-rllib"] == "rllib" and backends["DMC-cartpole-swingup-v0"] == "distill"
+    assert backends["Goalie-v0"] == "sb3" and backends["Goalie-v0-rllib"] == "rllib"
+    assert backends["DMC-cartpole-swingup-v0"] == "distill"
     for env_id in ("Goalie-v0", "Goalie-v0-rllib", "LunarLanding-v0", "VisualCartPole-v0"):
         assert RunFolder(RESULTS / env_id).shipped_policy.is_file()
-        assert json.loads((RESULTS / env_id / "config.json").read_text()).get("format_version") is None  # read, not rewritten
+        on_disk = json.loads((RESULTS / env_id / "config.json").read_text())
+        assert on_disk.get("format_version") is None  # read, not rewritten
 
 
 def test_config_round_trips_with_its_format_version(tmp_path):
     record = current(resumes=[{"command": "visualenv train --resume x", "hyperparams": {"ent_coef": 0.01}}])
     path = write_config(tmp_path, record)
     on_disk = json.loads(path.read_text())
-    assert on_disk["format"] == FORMAT and on_disk["format_version"] == FORMAT_VERSION and path == RunFolder(tmp_path).config
+    assert on_disk["format"] == FORMAT and on_disk["format_version"] == FORMAT_VERSION
+    assert path == RunFolder(tmp_path).config
     assert read_config(tmp_path) == {"format": FORMAT, "format_version": FORMAT_VERSION, **record}
     assert write_results(tmp_path, FIGURES) == RunFolder(tmp_path).results and read_run(tmp_path).results == FIGURES
 
@@ -55,7 +60,8 @@ def test_a_resumed_older_run_is_written_in_the_current_format(tmp_path):
     resumed = {**SB3_FIRST, "steps": 2000, "pin": True, "batched": False, "workers": None, "render_device": None}
     record_run(tmp_path, resumed, "specs/goalie.yaml", backend="sb3", resume=True, changes={"ent_coef": 0.02})
     record = json.loads((tmp_path / "config.json").read_text())
-    assert record["format_version"] == FORMAT_VERSION and record["backend"] == "sb3" and record["config"]["steps"] == 2000
+    assert record["format_version"] == FORMAT_VERSION and record["backend"] == "sb3"
+    assert record["config"]["steps"] == 2000
     assert record["resumes"][-1]["hyperparams"] == {"ent_coef": 0.02}
 
 
@@ -68,9 +74,10 @@ def test_older_configs_are_migrated():
     rllib_config.update(env_runners=2, envs_per_runner=1, algo="ppo", backend="rllib")
     rllib = migrate({"command": "c", "backend": "rllib", "config": rllib_config}).record
     assert rllib["backend"] == "rllib" and rllib["config"]["pin"] is True and rllib["config"]["batched"] is False
-    distill_config = {"spec": "Goalie-v0", "teacher": "t.safetensors", "rounds": 2, "episodes": 4, "mixing": 0, "epochs": 1.0,
-                      "batch_size": 64, "learning_rate": 3e-4, "shift": 4, "frame_stack": 3, "eval_episodes": 2,
-                      "final_eval_episodes": 2, "seed": 0, "progress": True, "algo": "dagger", "render": True}
+    distill_config = {"spec": "Goalie-v0", "teacher": "t.safetensors", "rounds": 2, "episodes": 4, "mixing": 0,
+                      "epochs": 1.0, "batch_size": 64, "learning_rate": 3e-4, "shift": 4, "frame_stack": 3,
+                      "eval_episodes": 2, "final_eval_episodes": 2, "seed": 0, "progress": True, "algo": "dagger",
+                      "render": True}
     distill = migrate({"command": "c", "config": distill_config, "teacher": {"path": "t", "sha256": "0"}}).record
     assert distill["backend"] == "distill" and distill["config"]["student"] is None
     assert migrate(sb3).record == sb3  # the current format stays as it is
@@ -113,10 +120,11 @@ def test_broken_or_foreign_run_folders_are_refused(tmp_path):
     with pytest.raises(RunFolderError, match="is not a run folder of visualenv"):
         read_config(tmp_path)
     assert read_run(tmp_path).record is None and read_run(tmp_path).results is None
+    no_steps = {"command": "c", "config": {k: v for k, v in SB3_FIRST.items() if k != "steps"}}
+    later = {**current(), "format": FORMAT, "format_version": FORMAT_VERSION + 1}
     for text, message in [("{", "not JSON"), ('{"config": {}}', "a sb3 run's config lacks spec"),
-                          ("[]", "no 'config' mapping"), (json.dumps({"command": "c", "config": {k: v for k, v in SB3_FIRST.items() if k != "steps"}}),
-                                                          "lacks steps"),
-                          (json.dumps({**current(), "format": FORMAT, "format_version": FORMAT_VERSION + 1}), "written by a later visualenv")]:
+                          ("[]", "no 'config' mapping"), (json.dumps(no_steps), "lacks steps"),
+                          (json.dumps(later), "written by a later visualenv")]:
         (tmp_path / "config.json").write_text(text)
         with pytest.raises(RunFolderError, match=message):
             read_config(tmp_path)

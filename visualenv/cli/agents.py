@@ -168,7 +168,8 @@ def _write_results(results: dict, model_path: str, spec: str) -> Path:
     kept = read_run(Path(model_path).parent).results or {}
     kept.pop("resets_before", None)  # the new evaluation's replay, if it needs one, is in `results`
     command = f"visualenv eval {spec} --model {model_path} --seed {results['eval_seed']} --episodes {results['episodes']}"
-    return write_results(Path(model_path).parent, {**kept, **results, "evaluated": {"file": Path(model_path).name, "command": command}})
+    evaluated = {"file": Path(model_path).name, "command": command}
+    return write_results(Path(model_path).parent, {**kept, **results, "evaluated": evaluated})
 
 
 @main.command()

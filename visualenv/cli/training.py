@@ -208,7 +208,8 @@ def _resumed(config_class: Any, resume_dir: str, steps: int | None, hyper: dict[
 
 
 def _run_backend(run_dir: str) -> str:
-    """The backend a run folder was trained with (an older run's as :func:`~visualenv.train.run_folder.migrate` reads it)."""
+    """The backend a run folder was trained with (an older run's as :func:`~visualenv.train.run_folder.migrate`
+    reads it)."""
     from visualenv.train.run_folder import read_config
 
     try:

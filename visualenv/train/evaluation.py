@@ -201,9 +201,10 @@ def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
     render = config["render"]
     common = {"algo": config["algo"], "render": render, "frame_stack": config["frame_stack"] if render else 0}
     if results is None:
-        return RecordedEvaluation(seed=legacy_eval_seed(config["seed"]), episodes=config["final_eval_episodes"], **common)
-    return RecordedEvaluation(seed=results["eval_seed"], episodes=results["episodes"], resets_before=results.get("resets_before", 0),
-                              results=results, note=run.note, **common)
+        return RecordedEvaluation(seed=legacy_eval_seed(config["seed"]), episodes=config["final_eval_episodes"],
+                                  **common)
+    return RecordedEvaluation(seed=results["eval_seed"], episodes=results["episodes"], results=results,
+                              resets_before=results.get("resets_before", 0), note=run.note, **common)
 
 
 class RandomPolicy:

@@ -83,17 +83,17 @@ class RunFolder:
 
     @property
     def logs(self) -> Path:
-        """Logs/: progress.csv, TensorBoard events."""
+        """``logs/``: progress.csv and TensorBoard events."""
         return self.path / LOGS
 
     @property
     def progress(self) -> Path:
-        """Logs/progress.csv: the training log of the last segment."""
+        """``logs/progress.csv``: the training log of the last segment."""
         return self.path / LOGS / PROGRESS
 
     @property
     def env_steps_by_node(self) -> Path:
-        """Logs/env_steps_by_node.json: an RLlib run's env steps per Ray node."""
+        """``logs/env_steps_by_node.json``: an RLlib run's env steps per Ray node."""
         return self.path / LOGS / "env_steps_by_node.json"
 
     @property
@@ -138,7 +138,7 @@ class RunFolder:
 
     @property
     def latest_zip(self) -> Path:
-        """Checkpoints/latest.zip: SB3's newest model, for --resume."""
+        """``checkpoints/latest.zip``: SB3's newest model, for ``--resume``."""
         return self.path / "checkpoints" / "latest.zip"
 
     @property
@@ -153,7 +153,7 @@ class RunFolder:
 
     @property
     def latest_dir(self) -> Path:
-        """Checkpoints/latest/: RLlib's newest checkpoint folder, for --resume."""
+        """``checkpoints/latest/``: RLlib's newest checkpoint folder, for ``--resume``."""
         return self.path / "checkpoints" / "latest"
 
     def is_run(self) -> bool:
@@ -161,7 +161,7 @@ class RunFolder:
         return self.config.is_file()
 
     def log_folder(self) -> Path:
-        """logs/, or the folder itself where a shipped agent's folder keeps its logs beside config.json."""
+        """``logs/``, or the folder itself where a shipped agent's folder keeps its logs beside config.json."""
         flat = not self.logs.is_dir() and (self.path / PROGRESS).is_file()
         return self.path if flat else self.logs
 

@@ -104,7 +104,8 @@ def resumed_config(config_class: Any, run_dir: Path, *, steps: int | None, hyper
     the changed hyperparameters and the progress display of this command. Used by both backends (`config_class`)."""
     record = read_config(run_dir)
     if record["backend"] not in ("sb3", "rllib"):
-        raise ConfigError(f"{run_dir} is a run of `visualenv {record['backend']}`, which `visualenv train` cannot resume")
+        raise ConfigError(f"{run_dir} is a run of `visualenv {record['backend']}`, which `visualenv train` "
+                          "cannot resume")
     saved = record["config"]
     return config_class(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyperparams}, "progress": progress})
 
@@ -153,7 +154,8 @@ def _make_envs(config: TrainConfig, spec_path: str, folder: RunFolder, resume: b
     frame_stack = config.frame_stack if config.render else 0
     if config.batched:
         train_env = make_sb3_batched(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, workers=config.workers,
-                                     pin=config.pin, monitor_dir=str(folder.monitor), monitor_append=resume, **_vec_kwargs(config))
+                                     pin=config.pin, monitor_dir=str(folder.monitor), monitor_append=resume,
+                                     **_vec_kwargs(config))
     else:
         train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
                                  monitor_dir=str(folder.monitor), monitor_append=resume, **_vec_kwargs(config))
@@ -177,7 +179,8 @@ def _make_model(config: TrainConfig, train_env: Any, checkpoint: Path | None, kw
         raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
 
 
-def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, latest: Path, stopper: _StopOnSignal, resume: bool) -> None:
+def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, latest: Path, stopper: _StopOnSignal,
+           resume: bool) -> None:
     """Learn up to config.steps with periodic evaluation, checkpoints and the progress bar; save the latest and final models."""
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
@@ -204,7 +207,8 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, la
     save_policy(model, folder.final_policy, half=False, algorithm=config.algo, run_dir=folder.path)
 
 
-def _finish(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float, stopped_early: bool) -> dict[str, Any]:
+def _finish(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float,
+            stopped_early: bool) -> dict[str, Any]:
     """The best model as a policy file, its final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
 
@@ -216,8 +220,9 @@ def _finish(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *
         results = final_evaluation(load_model(evaluated), eval_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         eval_env.close()
-    results.update({"selection": selection_record(folder.path, selection_seed(config.seed)), "steps": int(model.num_timesteps),
-                    "wall_time_s": round(wall, 1), "model": evaluated.name, "stopped_early": stopped_early})
+    results.update({"selection": selection_record(folder.path, selection_seed(config.seed)),
+                    "steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": evaluated.name,
+                    "stopped_early": stopped_early})
     write_results(folder, results)
     training_plots(folder.path)
     return results
