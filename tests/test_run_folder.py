@@ -117,7 +117,7 @@ def test_settings_out_of_bounds_are_refused_with_what_was_expected(tmp_path, cha
 
 
 def test_broken_or_foreign_run_folders_are_refused(tmp_path):
-    with pytest.raises(RunFolderError, match="is not a run folder of visualenv"):
+    with pytest.raises(RunFolderError, match="is not a run folder of `visualenv train`"):
         read_config(tmp_path)
     assert read_run(tmp_path).record is None and read_run(tmp_path).results is None
     no_steps = {"command": "c", "config": {k: v for k, v in SB3_FIRST.items() if k != "steps"}}

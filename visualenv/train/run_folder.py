@@ -377,7 +377,8 @@ def read_config(run: str | Path | RunFolder) -> dict[str, Any]:
     """config.json in the current format (an older run's migrated, see :func:`migrate`), its settings checked."""
     folder = _folder(run)
     if not folder.is_run():
-        raise RunFolderError(f"{folder.path} is not a run folder of visualenv (no {folder.config.name})")
+        raise RunFolderError(f"{folder.path} is not a run folder of `visualenv train` nor `visualenv distill` "
+                             f"(no {folder.config.name})")
     record = migrate(_read_json(folder.config), where=str(folder.config)).record
     assert record is not None
     return record
