@@ -217,11 +217,11 @@ class Rule:
         number = isinstance(value, (int, float)) and not isinstance(value, bool)
         of_kind = isinstance(value, self.kind) and (self.kind is bool) == isinstance(value, bool)
         if not (number if self.kind is float else of_kind):
-            return f"expected {_KIND_NAMES[self.kind]}, got {type(value).__name__} {value!r}"
+            return f"expected {_NAMES[self.kind]}, got {type(value).__name__} {value!r}"
         if self.choices and value not in self.choices:
             return f"expected one of {', '.join(self.choices)}, got {value!r}"
         if number and not (math.isfinite(value) and self._within(value)):
-            return f"expected {_KIND_NAMES[self.kind]}{self._bounds()}, got {value!r}"
+            return f"expected {_NAMES[self.kind]}{self._bounds()}, got {value!r}"
         if self.kind is str and not value:
             return "expected a non-empty text"
         return None
@@ -240,23 +240,23 @@ def _number(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else f"{x:g}"
 
 
-_KIND_NAMES = {int: "an integer", float: "a number", bool: "true or false", str: "a text", dict: "a mapping",
-               list: "a list"}
+_NAMES = {int: "an integer", float: "a number", bool: "true or false", str: "a text", dict: "a mapping", list: "a list"}
 
 COUNT = Rule(int, 1, 2**16)  # envs, runners, workers
 STEPS = Rule(int, 1, 10**12)
 EPISODES = Rule(int, 1, 10**6)
 SETTINGS: dict[str, Rule] = {
-    "spec": Rule(str), "algo": Rule(str, choices=("ppo", "a2c", "dqn", "sac", "dagger")), "steps": STEPS,
-    "envs": COUNT, "env_runners": COUNT, "envs_per_runner": COUNT, "workers": Rule(int, 1, 2**16, optional=True),
-    "frame_stack": Rule(int, 1, 64), "eval_every": STEPS, "eval_episodes": EPISODES, "final_eval_episodes": EPISODES,
-    "seed": Rule(int, 0, MAX_TRAIN_SEED), "render": Rule(bool), "hyperparams": Rule(dict), "progress": Rule(bool),
-    "pin": Rule(bool), "batched": Rule(bool), "render_device": Rule(str, choices=("cpu", "gpu"), optional=True),
-    "backend": Rule(str, choices=("rllib",)),
+    **dict.fromkeys(("spec", "teacher"), Rule(str)),
+    **dict.fromkeys(("steps", "eval_every"), STEPS),
+    **dict.fromkeys(("envs", "env_runners", "envs_per_runner"), COUNT),
+    **dict.fromkeys(("eval_episodes", "final_eval_episodes", "rounds", "episodes"), EPISODES),
+    **dict.fromkeys(("render", "progress", "pin", "batched"), Rule(bool)),
+    "algo": Rule(str, choices=("ppo", "a2c", "dqn", "sac", "dagger")), "workers": Rule(int, 1, 2**16, optional=True),
+    "frame_stack": Rule(int, 1, 64), "seed": Rule(int, 0, MAX_TRAIN_SEED), "hyperparams": Rule(dict),
+    "render_device": Rule(str, choices=("cpu", "gpu"), optional=True), "backend": Rule(str, choices=("rllib",)),
     # distillation
-    "teacher": Rule(str), "student": Rule(str, optional=True), "rounds": EPISODES, "episodes": EPISODES,
-    "mixing": Rule(float, 0, 1), "epochs": Rule(float, 0, 10**6, above_low=True), "batch_size": Rule(int, 1, 2**20),
-    "learning_rate": Rule(float, 0, 1, above_low=True), "shift": Rule(int, 0, 1024),
+    "student": Rule(str, optional=True), "mixing": Rule(float, 0, 1), "epochs": Rule(float, 0, 10**6, above_low=True),
+    "batch_size": Rule(int, 1, 2**20), "learning_rate": Rule(float, 0, 1, above_low=True), "shift": Rule(int, 0, 1024),
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
 #: each backend's settings: those of its first format, then (with the value an older run takes) those added since
@@ -272,10 +272,10 @@ ADDED: dict[str, dict[str, Any]] = {
 }
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
 RECORD_KEYS: dict[str, Rule] = {
+    **dict.fromkeys(("command", "spec_path"), Rule(str)),
+    **dict.fromkeys(("config", "versions", "teacher", "student"), Rule(dict)),
     "format": Rule(str, choices=(FORMAT,)), "format_version": Rule(int, 1, FORMAT_VERSION),
-    "backend": Rule(str, choices=BACKENDS),
-    "command": Rule(str), "config": Rule(dict), "versions": Rule(dict), "spec_path": Rule(str), "resumes": Rule(list),
-    "teacher": Rule(dict), "student": Rule(dict),
+    "backend": Rule(str, choices=BACKENDS), "resumes": Rule(list),
 }
 
 
@@ -323,11 +323,12 @@ def check_record(record: Any, where: str = "config.json") -> dict[str, Any]:
 
 
 RESULT_RULES: dict[str, Rule] = {
-    "episodes": EPISODES, "mean_reward": Rule(float), "std_reward": Rule(float, 0), "mean_length": Rule(float, 0),
-    "success_rate": Rule(float, 0, 1), "eval_seed": Rule(int, 0, 2**63 - 1), "resets_before": Rule(int, 0, 10**9),
-    "per_episode": Rule(dict), "machine": Rule(dict, optional=True), "selection": Rule(dict, optional=True),
-    "steps": Rule(int, 0, 10**12), "wall_time_s": Rule(float, 0), "model": Rule(str), "stopped_early": Rule(bool),
-    "evaluated": Rule(dict),
+    **dict.fromkeys(("per_episode", "evaluated"), Rule(dict)),
+    **dict.fromkeys(("machine", "selection"), Rule(dict, optional=True)),
+    **dict.fromkeys(("std_reward", "mean_length", "wall_time_s"), Rule(float, 0)),
+    "episodes": EPISODES, "mean_reward": Rule(float), "success_rate": Rule(float, 0, 1),
+    "eval_seed": Rule(int, 0, 2**63 - 1), "resets_before": Rule(int, 0, 10**9), "steps": Rule(int, 0, 10**12),
+    "model": Rule(str), "stopped_early": Rule(bool),
 }
 #: what results.json has always held
 RESULT_KEYS = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate")
