@@ -8,8 +8,9 @@ import pytest
 
 from hypothesis import given, strategies as st
 
-from visualenv.train.evaluation import (FRESH_SEED, MAX_TRAIN_SEED, bootstrap_mean_interval, differences, final_seed, legacy_eval_seed, replays_prefix,
+from visualenv.train.evaluation import (FRESH_SEED, bootstrap_mean_interval, differences, final_seed, replays_prefix,
                                         recorded_evaluation, seed_purpose, selection_record, selection_seed, wilson_interval)
+from visualenv.train.run_folder import MAX_TRAIN_SEED, legacy_eval_seed
 
 
 def test_wilson_interval_matches_the_formula_and_reaches_the_bounds():
@@ -29,8 +30,10 @@ def test_bootstrap_interval_is_reproducible_and_brackets_the_mean():
 
 def _run_folder(path, *, results, evaluations=(), first_logged=None, per_iteration=512, eval_episodes=20):
     path.mkdir()
-    config = {"spec": "Goalie-v0", "algo": "ppo", "envs": 4, "frame_stack": 4, "eval_episodes": eval_episodes,
-              "final_eval_episodes": 50, "seed": 3, "render": True, "hyperparams": {"n_steps": 128}}
+    # an SB3 run of the first format (before pin, batched, workers and render_device)
+    config = {"spec": "Goalie-v0", "algo": "ppo", "steps": 100_000, "envs": 4, "frame_stack": 4, "eval_every": 10_000,
+              "eval_episodes": eval_episodes, "final_eval_episodes": 50, "seed": 3, "render": True,
+              "hyperparams": {"n_steps": 128}, "progress": False}
     (path / "config.json").write_text(json.dumps({"command": "visualenv train Goalie-v0", "config": config}))
     (path / "results.json").write_text(json.dumps(results))
     np.savez(path / "evaluations.npz", timesteps=np.array(evaluations), results=np.zeros((len(evaluations), eval_episodes)))

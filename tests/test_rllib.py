@@ -145,7 +145,11 @@ def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
 
 
 def test_a_resumed_run_keeps_its_backend(tmp_path):
-    (tmp_path / "config.json").write_text(json.dumps({"config": {"spec": "Goalie-v0"}}))  # an SB3 run: no 'backend' key
+    config = {"spec": "Goalie-v0", "algo": "ppo", "steps": 1000, "envs": 2, "frame_stack": 4, "eval_every": 500,
+              "eval_episodes": 2, "final_eval_episodes": 2, "seed": 0, "render": True, "hyperparams": {},
+              "progress": False}
+    # an SB3 run before format 2: no 'backend' key
+    (tmp_path / "config.json").write_text(json.dumps({"config": config}))
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--resume", str(tmp_path)])
     assert result.exit_code == 2 and "was trained with --backend sb3; a resumed run keeps its backend" in result.output
 

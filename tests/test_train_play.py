@@ -105,7 +105,7 @@ def test_eval_of_a_model_alone_and_its_refusals(run_dir, tmp_path):
 def test_linear_schedule_lowers_the_learning_rate_over_the_run(run_dir):
     from visualenv.train.plots import read_progress
 
-    rates = read_progress(run_dir / "logs")["train/learning_rate"]
+    rates = read_progress(run_dir)["train/learning_rate"]
     rates = rates[~np.isnan(rates)]
     # the first update comes after 128 of the run's 256 steps: lin_3e-4 is half way down (a constant would log 3e-4)
     assert rates[0] == pytest.approx(1.5e-4)
@@ -192,7 +192,7 @@ def test_train_resumes_from_the_latest_checkpoint_and_keeps_the_history(run_dir,
     assert len((run_dir / "logs" / "progress-1.csv").read_text().splitlines()) == rows_before  # the first segment, kept
     from visualenv.train.plots import read_progress
 
-    steps = read_progress(run_dir / "logs")["time/total_timesteps"]
+    steps = read_progress(run_dir)["time/total_timesteps"]
     assert steps[0] < 256 < steps[-1]  # the plots see both segments
 
 

@@ -161,14 +161,15 @@ def eval_command(spec: str, model_path: str, trust_pickle: bool, algo: str | Non
 def _write_results(results: dict, model_path: str, spec: str) -> Path:
     """`eval --write-results`: the evaluation becomes results.json beside the model; what the run recorded besides the
     figures (selection, steps, wall time) is kept, and `evaluated` says which file and command made them."""
+    from visualenv.train.run_folder import read_run, write_results
+
     if model_path == RANDOM:
         raise click.BadParameter("random actions have no results.json of their own", param_hint="--write-results")
-    path = Path(model_path).parent / "results.json"
-    kept = json.loads(path.read_text()) if path.is_file() else {}
-    kept.pop("reevaluated", None)
+    kept = read_run(Path(model_path).parent).results or {}
+    kept.pop("resets_before", None)  # the new evaluation's replay, if it needs one, is in `results`
     command = f"visualenv eval {spec} --model {model_path} --seed {results['eval_seed']} --episodes {results['episodes']}"
-    path.write_text(json.dumps({**kept, **results, "evaluated": {"file": Path(model_path).name, "command": command}}, indent=2) + "\n")
-    return path
+    evaluated = {"file": Path(model_path).name, "command": command}
+    return write_results(Path(model_path).parent, {**kept, **results, "evaluated": evaluated})
 
 
 @main.command()

@@ -69,7 +69,8 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     """
     from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
-    from visualenv.train.sb3 import TrainConfig, check_config, new_run_dir, train as run_training
+    from visualenv.train.run_folder import new_run_dir
+    from visualenv.train.sb3 import TrainConfig, check_config, train as run_training
 
     ctx = click.get_current_context()
     hyper = _hyperparameters(config_file, overrides)
@@ -207,11 +208,14 @@ def _resumed(config_class: Any, resume_dir: str, steps: int | None, hyper: dict[
 
 
 def _run_backend(run_dir: str) -> str:
-    """The backend a run folder was trained with (config.json's 'backend'; SB3 runs predate the key)."""
+    """The backend a run folder was trained with (an older run's as :func:`~visualenv.train.run_folder.migrate`
+    reads it)."""
+    from visualenv.train.run_folder import read_config
+
     try:
-        return json.loads((Path(run_dir) / "config.json").read_text()).get("backend", "sb3")
-    except (OSError, ValueError, AttributeError):
-        return "sb3"  # the SB3 path reports the broken folder
+        return read_config(run_dir)["backend"]
+    except ConfigError as exc:
+        raise click.BadParameter(str(exc), param_hint="--resume") from None
 
 
 def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[str, Any], resume_dir: str | None, out_root: str,
@@ -224,7 +228,7 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
     from visualenv.env.registration import resolve
     from visualenv.train.rllib_setup import check_address
     from visualenv.spec.loader import load_spec
-    from visualenv.train.sb3 import new_run_dir
+    from visualenv.train.run_folder import new_run_dir
 
     import logging
 
@@ -252,4 +256,6 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
 def _report(results: dict[str, Any], run_dir: Path) -> None:
     click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
                f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %")
-    click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {run_dir / 'plots'}")
+    from visualenv.train.run_folder import RunFolder
+
+    click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {RunFolder(run_dir).plots}")

@@ -24,9 +24,6 @@ from __future__ import annotations
 
 import csv
 import hashlib
-import json
-import shlex
-import sys
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,6 +33,7 @@ import numpy as np
 
 from visualenv.compat import mkl
 from visualenv.errors import ConfigError
+from visualenv.train.run_folder import RunFolder, new_run_dir, record_run, write_results
 
 ROUNDS_COLUMNS = ("round", "frames", "rollout_return", "loss", "eval_return", "wall_s")
 
@@ -70,7 +68,6 @@ def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str],
     from visualenv.spec.loader import load_spec
     from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_seed
     from visualenv.train.models import load_model, save_policy
-    from visualenv.train.sb3 import new_run_dir
 
     spec_path = str(resolve(config.spec))
     mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there
@@ -82,14 +79,15 @@ def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str],
     try:
         student = _student(rollouts, load_model(config.student) if config.student else None)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
+        folder = RunFolder(run_dir)
         log(f"run folder: {run_dir}")
-        _record_run(run_dir, config, spec_path)
+        _record_run(folder, config, spec_path)
         started = time.perf_counter()
-        best_score, best_weights, frames = _rounds(student, teacher, rollouts, evaluator, config, run_dir / "rounds.csv", log)
+        best_score, best_weights, frames = _rounds(student, teacher, rollouts, evaluator, config, folder.rounds, log)
         student.to(memory_format=torch.contiguous_format)  # safetensors stores contiguous tensors
-        save_policy(student, run_dir / "final_model.safetensors", half=False, algorithm="dagger", run_dir=run_dir)
+        save_policy(student, folder.final_policy, half=False, algorithm="dagger", run_dir=run_dir)
         student.load_state_dict(best_weights)
-        best_path = save_policy(student, run_dir / "best_model.safetensors", half=False, algorithm="dagger", run_dir=run_dir)
+        best_path = save_policy(student, folder.best_policy, half=False, algorithm="dagger", run_dir=run_dir)
     finally:
         rollouts.close()
         evaluator.close()
@@ -100,7 +98,7 @@ def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str],
         final_env.close()
     results.update({"selection": {"eval_seed": selection_seed(config.seed), "mean_reward": best_score, "episodes": config.eval_episodes},
                     "frames": frames, "wall_time_s": round(time.perf_counter() - started, 1), "model": best_path.name})
-    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    write_results(folder, results)
     return run_dir, results
 
 
@@ -139,19 +137,14 @@ def _rounds(student: Any, teacher: Any, rollouts: Any, evaluator: Any, config: D
     return best[0], best[1], sum(len(x) for x in frames)
 
 
-def _record_run(run_dir: Path, config: DistillConfig, spec_path: str) -> None:
+def _record_run(folder: RunFolder, config: DistillConfig, spec_path: str) -> None:
     """config.json: the command, the settings under the keys `eval` and `export-policy` read, the versions, and the
     teacher's file and the student's it started from (path and sha256)."""
-    from visualenv.versions import versions
-
     def named(path: str) -> dict[str, str]:
         return {"path": path, "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
 
-    record = {"command": shlex.join(sys.argv), "config": {**asdict(config), "algo": "dagger", "render": True}, "versions": versions(),
-              "spec_path": spec_path, "teacher": named(config.teacher)}
-    if config.student:
-        record["student"] = named(config.student)
-    (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
+    extra = {"teacher": named(config.teacher), **({"student": named(config.student)} if config.student else {})}
+    record_run(folder, {**asdict(config), "algo": "dagger", "render": True}, spec_path, backend="distill", extra=extra)
 
 
 def _check_teacher(teacher: Any, spec_path: str) -> None:

@@ -7,7 +7,7 @@ plays the same episodes and prints the same numbers as the run's results.json.
 Seeds come in bands that never meet, so the figure a run reports is measured on
 episodes that neither trained nor picked its model (picking the best of many close
 evaluations biases the winner's score upward). A run seeded ``s`` (below
-:data:`MAX_TRAIN_SEED`) trains on ``s, s+1, ...``, picks its best model on the stream
+:data:`~visualenv.train.run_folder.MAX_TRAIN_SEED`) trains on ``s, s+1, ...``, picks its best model on the stream
 :func:`selection_seed` ``(s)`` and reports :func:`final_seed` ``(s)``; ``visualenv eval``
 of a model without a run plays :data:`FRESH_SEED`.
 
@@ -19,8 +19,6 @@ where the normal approximation leaves [0, 1]).
 
 from __future__ import annotations
 
-import csv
-import json
 import math
 from dataclasses import dataclass
 from pathlib import Path
@@ -32,18 +30,16 @@ from visualenv.compat import mkl
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.train.models import load_model, stacked_like
 from visualenv.train.reproducible import machine_record, pinned_inference
+from visualenv.train.run_folder import RESULT_KEYS, RunFolder, legacy_eval_seed, read_run
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
-MAX_TRAIN_SEED = 2**31 - 1  # `train --seed`: with up to 2**31 envs, training seeds stay in band 0
 SELECTION_BAND, FINAL_BAND, FRESH_BAND = 1, 2, 3
 FRESH_SEED = FRESH_BAND * SEED_BAND  # `eval` of a model without a run: no run trains, selects or reports on these episodes
 FINAL_EPISODES = 100  # the final evaluation's episodes by default
-LEGACY_EVAL_OFFSET = 10_000  # runs before the bands picked and reported on one stream, seeded the run's seed + this
 CONFIDENCE = 0.95
 Z_95 = 1.959963984540054  # standard normal quantile of 0.975
 BOOTSTRAP_RESAMPLES = 10_000
 CI_METHOD = "95 %: percentile bootstrap of the mean (10,000 resamples) for return and length, Wilson score for the success rate"
-RESULT_KEYS = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate")  # what results.json has always held
 
 
 def selection_seed(train_seed: int) -> int:
@@ -61,15 +57,10 @@ def seed_purpose(seed: int) -> str:
     return ("training", "selection", "final", "fresh")[min(seed // SEED_BAND, FRESH_BAND)]
 
 
-def legacy_eval_seed(train_seed: int) -> int:
-    """The one evaluation stream of runs made before selection and report were split."""
-    return train_seed + LEGACY_EVAL_OFFSET
-
-
 def selection_record(run_dir: Path, seed: int) -> dict[str, Any] | None:
     """The periodic evaluation that picked the best model (the first with the highest mean return, as SB3's EvalCallback picks)."""
     try:
-        with np.load(run_dir / "evaluations.npz") as saved:
+        with np.load(RunFolder(run_dir).evaluations) as saved:
             timesteps, returns = saved["timesteps"], saved["results"]
             successes = saved["successes"] if "successes" in saved.files else None
     except (OSError, KeyError, ValueError):
@@ -200,64 +191,20 @@ class RecordedEvaluation:
 def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
     """The final evaluation recorded in `run_dir` (results.json, config.json); None without config.json.
 
-    results.json names its ``eval_seed`` since `eval` exists. Earlier SB3 runs evaluated on
-    the env of their periodic evaluations, seeded ``seed + 10000`` at the start of the
-    run's last segment (its start or latest ``--resume``), reset once then and
-    ``eval_episodes + 1`` times by each periodic evaluation since: the replay makes the
-    same resets, counted from evaluations.npz and the segment's progress.csv.
+    An older run's is migrated (:func:`~visualenv.train.run_folder.migrate`): runs before ``eval_seed`` replay
+    after the resets their periodic evaluations made. A run without results.json replays the legacy stream.
     """
-    try:
-        record = json.loads((run_dir / "config.json").read_text())
-        config = record["config"]
-    except (OSError, ValueError, KeyError, TypeError):
+    run = read_run(run_dir)
+    if run.record is None:
         return None
-    try:
-        results = json.loads((run_dir / "results.json").read_text())
-    except (OSError, ValueError):
-        results = None
-    render = bool(config.get("render", True))
-    episodes = int(results.get("episodes", 0) if results else 0) or int(config.get("final_eval_episodes", 50))
-    common = {"episodes": episodes, "algo": str(config.get("algo", "ppo")), "render": render,
-              "frame_stack": int(config.get("frame_stack", 1)) if render else 0, "results": results}
-    if results is not None and "eval_seed" in results:
-        return RecordedEvaluation(seed=int(results["eval_seed"]), **common)
-    seed = legacy_eval_seed(int(config.get("seed", 0)))
+    config, results = run.config, run.results
+    render = config["render"]
+    common = {"algo": config["algo"], "render": render, "frame_stack": config["frame_stack"] if render else 0}
     if results is None:
-        return RecordedEvaluation(seed=seed, **common)
-    periodic = _periodic_evaluations_in_last_segment(run_dir) if record.get("backend", "sb3") == "sb3" else None
-    if periodic is None:
-        return RecordedEvaluation(seed=seed, **common, note="results.json predates eval_seed: the periodic evaluations before its final one "
-                                                              "(on the same env) cannot be counted, so its episodes differ")
-    return RecordedEvaluation(seed=seed, **common, resets_before=1 + periodic * (int(config.get("eval_episodes", 10)) + 1))
-
-
-def _periodic_evaluations_in_last_segment(run_dir: Path) -> int | None:
-    """Evaluations (evaluations.npz) since the last segment of the run started; None if its start is unknown."""
-    try:
-        with np.load(run_dir / "evaluations.npz") as saved:
-            timesteps = saved["timesteps"]
-    except (OSError, KeyError, ValueError):
-        timesteps = np.zeros(0)
-    start = _last_segment_start(run_dir)
-    return None if start is None else int(np.sum(timesteps > start))
-
-
-def _last_segment_start(run_dir: Path) -> int | None:
-    """The step the run's last segment started at, from its progress.csv (SB3's on-policy rows: iterations, total steps)."""
-    progress = next((p for p in (run_dir / "logs" / "progress.csv", run_dir / "progress.csv") if p.is_file()), None)
-    if progress is None:
-        return None
-    try:
-        with progress.open(newline="") as f:
-            rows = [(float(r["time/iterations"]), float(r["time/total_timesteps"])) for r in csv.DictReader(f)
-                    if r.get("time/iterations") and r.get("time/total_timesteps")]
-    except (OSError, KeyError, ValueError, csv.Error):
-        return None
-    if len(rows) < 2 or rows[1][0] == rows[0][0]:
-        return None
-    (i1, t1), (i2, t2) = rows[:2]
-    per_iteration = (t2 - t1) / (i2 - i1)
-    return round(t1 - i1 * per_iteration)
+        return RecordedEvaluation(seed=legacy_eval_seed(config["seed"]), episodes=config["final_eval_episodes"],
+                                  **common)
+    return RecordedEvaluation(seed=results["eval_seed"], episodes=results["episodes"], results=results,
+                              resets_before=results.get("resets_before", 0), note=run.note, **common)
 
 
 class RandomPolicy:

@@ -23,10 +23,10 @@ from typing import Any
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.errors import VisualEnvError
 from visualenv.train.policy_format import WEIGHTS, is_policy_file, read_meta, read_policy, write_policy
+from visualenv.train.run_folder import RunFolder, RunFolderError, read_config
 
 #: the shipped agents live in the source checkout: results/<Id>/policy.safetensors with its policy.json
 RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"
-SHIPPED_POLICY = "policy" + WEIGHTS
 
 
 class PickleRefused(VisualEnvError):
@@ -154,14 +154,14 @@ def run_record(run_dir: Path | None) -> dict[str, Any]:
     from visualenv.spec.loader import load_spec
 
     record: dict[str, Any] = {"algorithm": None, "frame_stack": None, "spec": None}
-    try:
-        config = json.loads((Path(run_dir) / "config.json").read_text())["config"] if run_dir else None
-    except (OSError, ValueError, KeyError, TypeError):
-        config = None
-    if not isinstance(config, dict) or "spec" not in config:
+    if run_dir is None or not RunFolder(run_dir).is_run():
         return record
-    record["algorithm"] = config.get("algo")
-    record["frame_stack"] = int(config.get("frame_stack", 1)) if config.get("render", True) else 0
+    try:
+        config = read_config(run_dir)["config"]
+    except RunFolderError:
+        return record  # a config.json that is not a run's (a model file kept beside another tool's): it says nothing
+    record["algorithm"] = config["algo"]
+    record["frame_stack"] = config["frame_stack"] if config["render"] else 0
     try:
         source = resolve(str(config["spec"]))
         record["spec"] = {"id": load_spec(source).spec.id, "sha256": hashlib.sha256(Path(source).read_bytes()).hexdigest()}
@@ -172,7 +172,7 @@ def run_record(run_dir: Path | None) -> dict[str, Any]:
 
 def pretrained_model(env_id: str) -> Path:
     """The shipped agent of a bundled env: results/<Id>/policy.safetensors (with its policy.json) in the source checkout."""
-    path = RESULTS_DIR / env_id / SHIPPED_POLICY
+    path = RunFolder(RESULTS_DIR / env_id).shipped_policy
     if not path.is_file():
         raise VisualEnvError(f"no shipped model for {env_id}: {path} does not exist "
                              "(the shipped models come with a checkout of the repository; train one with `visualenv train`)")

@@ -7,6 +7,8 @@ from pathlib import Path
 
 import numpy as np
 
+from visualenv.train.run_folder import RunFolder
+
 
 def _read_progress(path: Path) -> dict[str, np.ndarray]:
     if not path.exists():
@@ -20,16 +22,9 @@ def _read_progress(path: Path) -> dict[str, np.ndarray]:
     return {k: np.array(v) for k, v in columns.items()}
 
 
-def progress_parts(logs: Path) -> list[Path]:
-    """progress-1.csv, progress-2.csv, ... (segments before each resume), then progress.csv."""
-    parts = [p for p in logs.glob("progress-*.csv") if p.stem.rsplit("-", 1)[1].isdigit()]
-    parts.sort(key=lambda p: int(p.stem.rsplit("-", 1)[1]))
-    return parts + [logs / "progress.csv"]
-
-
-def read_progress(logs: Path) -> dict[str, np.ndarray]:
+def read_progress(run_dir: str | Path) -> dict[str, np.ndarray]:
     """Every segment of a (possibly resumed) run's SB3 progress log, joined in order."""
-    tables = [t for t in (_read_progress(p) for p in progress_parts(logs)) if t]
+    tables = [t for t in (_read_progress(p) for p in RunFolder(run_dir).progress_parts()) if t]
     keys = {k for t in tables for k in t}
     joined: dict[str, np.ndarray] = {}
     for key in keys:
@@ -46,12 +41,12 @@ def training_plots(run_dir: str | Path) -> list[Path]:
     from matplotlib.ticker import EngFormatter
 
     steps_axis = EngFormatter(sep="")  # 200k, 1M: full step counts run into each other past 100,000
-    run = Path(run_dir)
-    out = run / "plots"
+    run = RunFolder(run_dir)
+    out = run.plots
     out.mkdir(exist_ok=True)
-    progress = read_progress(run / "logs")
+    progress = read_progress(run_dir)
     steps = progress.get("time/total_timesteps", np.array([]))
-    evaluations = np.load(run / "evaluations.npz") if (run / "evaluations.npz").exists() else None
+    evaluations = np.load(run.evaluations) if run.evaluations.exists() else None
     paths = []
     for name, rollout_key, eval_key, label in [
         ("rewards", "rollout/ep_rew_mean", "results", "mean episode reward"),

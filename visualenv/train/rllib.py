@@ -35,6 +35,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.train.evaluation import FINAL_EPISODES, evaluation_line
+from visualenv.train.run_folder import CHECKPOINT_STEPS, RunFolder, record_run, write_results
 
 BACKEND = "rllib"
 PROGRESS_COLUMNS = ("time/total_timesteps", "time/iterations", "time/fps", "time/time_elapsed", "rollout/ep_rew_mean",
@@ -120,7 +121,7 @@ def save_checkpoint(algo: Any, path: Path, steps: int) -> None:
     fresh, old = path.with_name(path.name + ".saving"), path.with_name(path.name + ".old")
     shutil.rmtree(fresh, ignore_errors=True)
     algo.save_to_path(str(fresh.resolve()))
-    (fresh / "visualenv.json").write_text(json.dumps({"steps": int(steps)}) + "\n")
+    (fresh / CHECKPOINT_STEPS).write_text(json.dumps({"steps": int(steps)}) + "\n")
     if path.exists():
         shutil.rmtree(old, ignore_errors=True)
         path.rename(old)
@@ -130,9 +131,9 @@ def save_checkpoint(algo: Any, path: Path, steps: int) -> None:
 
 def latest_checkpoint(run_dir: Path) -> Path | None:
     """checkpoints/latest, or the one it was replacing when a save was interrupted."""
-    for name in ("latest", "latest.old"):
-        path = run_dir / "checkpoints" / name
-        if (path / "visualenv.json").is_file():
+    latest = RunFolder(run_dir).latest_dir
+    for path in (latest, latest.with_name(latest.name + ".old")):
+        if (path / CHECKPOINT_STEPS).is_file():
             return path
     return None
 
@@ -215,7 +216,6 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
           address: str | None = None) -> dict[str, Any]:
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
     from visualenv.train.plots import training_plots
-    from visualenv.train.sb3 import record_run
     from visualenv.env.registration import resolve
     from visualenv.train.models import load_model
     from visualenv.train.rllib_setup import check_address
@@ -225,7 +225,8 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     check_address(address)
     algo_config = algorithm_config(config)
     run_dir.mkdir(parents=True, exist_ok=True)
-    (run_dir / "logs").mkdir(exist_ok=True)
+    folder = RunFolder(run_dir)
+    folder.logs.mkdir(exist_ok=True)
     frame_stack = config.frame_stack if config.render else 0
     eval_env = make_eval_env(config.spec, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
     stop = _StopRequest()
@@ -235,12 +236,11 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
             algo = algo_config.build_algo()
             try:
                 steps = _restore(algo, run_dir) if resume else 0
-                record_run(run_dir, config, str(resolve(config.spec)), resume=resume, changes=dict(changes or {}), backend=BACKEND)
-                results = _train_loop(config, run_dir, algo, eval_env, stop, steps)
+                record_run(folder, config, str(resolve(config.spec)), backend=BACKEND, resume=resume, changes=changes)
+                results = _train_loop(config, folder, algo, eval_env, stop, steps)
             finally:
                 algo.stop()
-        best = run_dir / "best_model.safetensors"
-        model = best if best.exists() else run_dir / "final_model.safetensors"
+        model = folder.best_policy if folder.best_policy.exists() else folder.final_policy
         results.update(final_evaluation(load_model(model), eval_env, config.final_eval_episodes, final_seed(config.seed)))
     finally:
         eval_env.close()
@@ -248,7 +248,7 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     results["selection"] = selection_record(run_dir, selection_seed(config.seed))
     results = {k: results[k] for k in ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "reward_ci95", "length_ci95",
                                        "success_ci95", "ci_method", "eval_seed", "selection", "steps", "wall_time_s", "model", "stopped_early")}
-    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
+    write_results(folder, results)
     training_plots(run_dir)
     return results
 
@@ -266,18 +266,19 @@ def _restore(algo: Any, run_dir: Path) -> int:
         detail = " ".join(str(exc).split())[:300]
         raise ConfigError(f"cannot resume {run_dir}: its checkpoint does not fit this run's model (saved by another version of "
                           f"visualenv or with other settings?): {detail}") from None
-    return int(json.loads((earlier / "visualenv.json").read_text())["steps"])
+    return int(json.loads((earlier / CHECKPOINT_STEPS).read_text())["steps"])
 
 
-def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: Any, stop: _StopRequest, steps: int) -> dict[str, Any]:
+def _train_loop(config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env: Any, stop: _StopRequest,
+                steps: int) -> dict[str, Any]:
     from tqdm import tqdm
 
     from visualenv.train.models import save_rllib_module
     from visualenv.train.rllib_setup import RLlibPolicy
 
-    evaluations = _Evaluations(run_dir / "evaluations.npz")
+    evaluations = _Evaluations(folder.evaluations)
     last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps
-    latest = run_dir / "checkpoints" / "latest"
+    latest = folder.latest_dir
     latest.parent.mkdir(exist_ok=True)
     started = time.perf_counter()
     bar = tqdm(total=config.steps, initial=steps, unit="step", dynamic_ncols=True, disable=not config.progress)
@@ -286,9 +287,9 @@ def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: An
             result = algo.train()
             sampled = int(result.get("env_runners", {}).get("num_env_steps_sampled", 0))
             steps += sampled
-            _count_nodes(run_dir / "logs" / "env_steps_by_node.json", result)
+            _count_nodes(folder.env_steps_by_node, result)
             row = _progress_row(result, steps, time.perf_counter() - started, sampled)
-            _append_progress(run_dir / "logs" / "progress.csv", row)
+            _append_progress(folder.progress, row)
             bar.update(steps - bar.n)
             reward = row["rollout/ep_rew_mean"]
             bar.set_postfix(reward=f"{reward:.1f}" if reward != "" else "-", runners=result.get("fault_tolerance", {}).get("num_healthy_workers", "?"))
@@ -300,12 +301,12 @@ def _train_loop(config: RLlibTrainConfig, run_dir: Path, algo: Any, eval_env: An
                 if not config.progress:
                     print(evaluation_line(steps, returns, successes), flush=True)
                 if improved:
-                    save_checkpoint(algo, run_dir / "best_model", steps)
-                    save_rllib_module(algo.get_module(), run_dir / "best_model.safetensors", half=False, run_dir=run_dir)
+                    save_checkpoint(algo, folder.best_dir, steps)
+                    save_rllib_module(algo.get_module(), folder.best_policy, half=False, run_dir=folder.path)
                 save_checkpoint(algo, latest, steps)
     if stop.requested:
         print(f"stopped early at {steps} steps", file=sys.stderr)
     save_checkpoint(algo, latest, steps)
-    save_checkpoint(algo, run_dir / "final_model", steps)
-    save_rllib_module(algo.get_module(), run_dir / "final_model.safetensors", half=False, run_dir=run_dir)
+    save_checkpoint(algo, folder.final_dir, steps)
+    save_rllib_module(algo.get_module(), folder.final_policy, half=False, run_dir=folder.path)
     return {"steps": steps, "wall_time_s": round(time.perf_counter() - started, 1), "stopped_early": stop.requested}

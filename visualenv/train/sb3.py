@@ -1,18 +1,11 @@
 """`visualenv train`: PPO (or another SB3 algorithm) from pixels, as in the paper.
 
-A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes:
-
-* ``config.json``     the exact command, settings and versions
-* ``logs/``           SB3's ``progress.csv`` and TensorBoard events
-* ``monitor/``        per-episode returns and lengths of the training envs
-* ``evaluations.npz`` periodic evaluation results (SB3's EvalCallback)
-* ``best_model.zip``  the model with the best evaluation reward
-* ``best_model.safetensors`` and ``final_model.safetensors`` (each with its ``.json``): the best and the final policy
-                      as policy files, which ``eval`` and ``play`` load without unpickling (float32 weights)
-* ``checkpoints/latest.zip`` the newest model, for ``--resume`` (SB3's zip: a pickle, read back only from the run's own folder)
-* ``plots/``          the paper's figures: rewards, episode lengths, samples per second
-* ``results.json``    the best policy file's final evaluation on fresh seeds (reward, length, success rate) and the
-                      periodic evaluation that selected it (see :mod:`visualenv.train.evaluation`)
+A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes (:mod:`visualenv.train.run_folder` lists
+it): the command and settings, the logs, the periodic evaluations, the best and final models as SB3 zips and as
+policy files (float32 weights, which ``eval`` and ``play`` load without unpickling), ``checkpoints/latest.zip`` for
+``--resume`` (SB3's zip: a pickle, read back only from the run's own folder), the plots, and results.json: the best
+policy file's final evaluation on fresh seeds and the periodic evaluation that selected it
+(see :mod:`visualenv.train.evaluation`).
 
 Stopping a run early (Ctrl-C, or ``kill`` with SIGTERM) ends training at the next
 step and still saves, evaluates and plots what was learnt so far.
@@ -20,8 +13,6 @@ step and still saves, evaluates and plots what was learnt so far.
 
 from __future__ import annotations
 
-import json
-import shlex
 import signal
 import sys
 import threading
@@ -29,8 +20,7 @@ import time
 import warnings
 from collections.abc import Iterator
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass, field
-from datetime import datetime
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -42,6 +32,7 @@ from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.train.evaluation import (FINAL_EPISODES, evaluation_line, final_evaluation, final_seed, make_eval_env, selection_record,
                                         selection_seed)
 from visualenv.train.models import algorithm_class, load_model, save_policy
+from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
 SET_BY_TRAIN = ("policy", "env", "seed", "verbose", "tensorboard_log", "_init_setup_model")  # not hyperparameters
@@ -108,22 +99,14 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
     return kwargs
 
 
-def new_run_dir(root: str | Path, env_id: str) -> Path:
-    from visualenv.files import make_dir
-
-    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
-    run = make_dir(Path(root) / env_id) / stamp
-    run.mkdir(exist_ok=False)
-    return run
-
-
 def resumed_config(config_class: Any, run_dir: Path, *, steps: int | None, hyperparams: dict[str, Any], progress: bool) -> Any:
     """The configuration of the run in `run_dir`, carried on: its settings as saved, with the total steps (if given),
     the changed hyperparameters and the progress display of this command. Used by both backends (`config_class`)."""
-    try:
-        saved = json.loads((run_dir / "config.json").read_text())["config"]
-    except (OSError, ValueError, KeyError, TypeError) as exc:
-        raise ConfigError(f"{run_dir} is not a run folder of `visualenv train` (config.json: {exc})") from None
+    record = read_config(run_dir)
+    if record["backend"] not in ("sb3", "rllib"):
+        raise ConfigError(f"{run_dir} is a run of `visualenv {record['backend']}`, which `visualenv train` "
+                          "cannot resume")
+    saved = record["config"]
     return config_class(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyperparams}, "progress": progress})
 
 
@@ -145,48 +128,37 @@ def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: 
     changes = dict(changes or {})
     kwargs, changed_kwargs = check_config(config, changes)
     run_dir.mkdir(parents=True, exist_ok=True)
-    record_run(run_dir, config, spec_path, resume=resume, changes=changes)
+    folder = RunFolder(run_dir)
+    record_run(folder, config, spec_path, backend="sb3", resume=resume, changes=changes)
     if resume:
-        _keep_earlier_logs(run_dir / "logs")
-    train_env, eval_env = _make_envs(config, spec_path, run_dir, resume)
-    latest = run_dir / "checkpoints" / "latest.zip"
+        folder.keep_earlier_progress()
+    train_env, eval_env = _make_envs(config, spec_path, folder, resume)
+    latest = folder.latest_zip
     started = time.perf_counter()
     stopper = _StopOnSignal()
     try:
         model = _make_model(config, train_env, latest if resume else None, kwargs, changed_kwargs)
-        _learn(model, config, eval_env, run_dir, latest, stopper, resume)
+        _learn(model, config, eval_env, folder, latest, stopper, resume)
     except BaseException:
         eval_env.close()
         raise
     finally:
         train_env.close()
-    return _finish(model, config, eval_env, run_dir, latest, wall=time.perf_counter() - started, stopped_early=stopper.requested)
+    return _finish(model, config, eval_env, folder, wall=time.perf_counter() - started, stopped_early=stopper.requested)
 
 
-def record_run(run_dir: Path, config: Any, spec_path: str, *, resume: bool, changes: dict[str, Any], **extra: Any) -> None:
-    """config.json: the command, settings and versions of a new run; a resumed run appends its command and changed hyperparameters."""
-    from visualenv.versions import versions
-
-    if not resume:
-        record = {"command": shlex.join(sys.argv), "config": asdict(config), "versions": versions(), "spec_path": spec_path, **extra}
-    else:
-        record = json.loads((run_dir / "config.json").read_text())
-        record["config"] = asdict(config)
-        record.setdefault("resumes", []).append({"command": shlex.join(sys.argv), "hyperparams": changes})
-    (run_dir / "config.json").write_text(json.dumps(record, indent=2) + "\n")
-
-
-def _make_envs(config: TrainConfig, spec_path: str, run_dir: Path, resume: bool) -> tuple[Any, Any]:
+def _make_envs(config: TrainConfig, spec_path: str, folder: RunFolder, resume: bool) -> tuple[Any, Any]:
     """The training envs (subprocesses, one Blender each) and the evaluation env, which renders once now to fail early."""
     from visualenv.env.sb3_vec import make_sb3_batched, make_sb3_vec
 
     frame_stack = config.frame_stack if config.render else 0
     if config.batched:
         train_env = make_sb3_batched(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, workers=config.workers,
-                                     pin=config.pin, monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
+                                     pin=config.pin, monitor_dir=str(folder.monitor), monitor_append=resume,
+                                     **_vec_kwargs(config))
     else:
         train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
-                                 monitor_dir=str(run_dir / "monitor"), monitor_append=resume, **_vec_kwargs(config))
+                                 monitor_dir=str(folder.monitor), monitor_append=resume, **_vec_kwargs(config))
     try:
         eval_env = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render)
         eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
@@ -207,16 +179,17 @@ def _make_model(config: TrainConfig, train_env: Any, checkpoint: Path | None, kw
         raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
 
 
-def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest: Path, stopper: _StopOnSignal, resume: bool) -> None:
+def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, latest: Path, stopper: _StopOnSignal,
+           resume: bool) -> None:
     """Learn up to config.steps with periodic evaluation, checkpoints and the progress bar; save the latest and final models."""
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
 
-    model.set_logger(configure(str(run_dir / "logs"), ["csv", "tensorboard"]))
+    model.set_logger(configure(str(folder.logs), ["csv", "tensorboard"]))
     per_env = max(1, config.eval_every // config.envs)
     callbacks = [
-        _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(run_dir),
-                       best_model_save_path=str(run_dir), deterministic=True, verbose=0,
+        _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(folder.path),
+                       best_model_save_path=str(folder.path), deterministic=True, verbose=0,
                        callback_after_eval=None if config.progress else _EvalLine()),
         _LatestCheckpoint(latest, every=per_env),
         _PhaseThreads(),
@@ -230,26 +203,28 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest
         warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
         model.learn(total_timesteps=max(0, config.steps - done), callback=CallbackList(callbacks), reset_num_timesteps=not resume)
     model.save(latest)
-    model.save(run_dir / "final_model.zip")
-    save_policy(model, run_dir / "final_model.safetensors", half=False, algorithm=config.algo, run_dir=run_dir)
+    model.save(folder.final_zip)
+    save_policy(model, folder.final_policy, half=False, algorithm=config.algo, run_dir=folder.path)
 
 
-def _finish(model: Any, config: TrainConfig, eval_env: Any, run_dir: Path, latest: Path, *, wall: float, stopped_early: bool) -> dict[str, Any]:
+def _finish(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float,
+            stopped_early: bool) -> dict[str, Any]:
     """The best model as a policy file, its final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
 
-    best, evaluated = run_dir / "best_model.zip", run_dir / "final_model.safetensors"
+    best, evaluated = folder.best_zip, folder.final_policy
     try:
         if best.exists():  # EvalCallback's zip, of this run's own folder: trusted, as --resume trusts its checkpoint
-            evaluated = save_policy(load_model(best, config.algo, trust_pickle=True), run_dir / "best_model.safetensors", half=False,
-                                    algorithm=config.algo, run_dir=run_dir)
+            evaluated = save_policy(load_model(best, config.algo, trust_pickle=True), folder.best_policy, half=False,
+                                    algorithm=config.algo, run_dir=folder.path)
         results = final_evaluation(load_model(evaluated), eval_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         eval_env.close()
-    results.update({"selection": selection_record(run_dir, selection_seed(config.seed)), "steps": int(model.num_timesteps),
-                    "wall_time_s": round(wall, 1), "model": evaluated.name, "stopped_early": stopped_early})
-    (run_dir / "results.json").write_text(json.dumps(results, indent=2) + "\n")
-    training_plots(run_dir)
+    results.update({"selection": selection_record(folder.path, selection_seed(config.seed)),
+                    "steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": evaluated.name,
+                    "stopped_early": stopped_early})
+    write_results(folder, results)
+    training_plots(folder.path)
     return results
 
 
@@ -347,16 +322,6 @@ def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
         raise ConfigError(f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
                           f"are available: set a smaller buffer_size (--set buffer_size=...), and optimize_memory_usage=true "
                           "(one copy of each observation; SB3 then needs replay_buffer_kwargs: {handle_timeout_termination: false})")
-
-
-def _keep_earlier_logs(logs: Path) -> None:
-    """SB3 starts progress.csv afresh: keep the earlier segment as progress-<n>.csv (the plots join them)."""
-    current = logs / "progress.csv"
-    if current.exists():
-        n = 1
-        while (logs / f"progress-{n}.csv").exists():
-            n += 1
-        current.rename(logs / f"progress-{n}.csv")
 
 
 class _ResumableEval(EvalCallback):

@@ -1,0 +1,532 @@
+"""The run folder: the files a training run writes, the format of its config.json, and the migration of older runs.
+
+Every module that writes or reads a run goes through here; none other spells a file name of a run.
+A run folder ``runs/<Id>/<timestamp>/`` (:func:`new_run_dir`) holds:
+
+* ``config.json``      the command, the settings and the versions (:func:`write_config`, :func:`read_config`)
+* ``results.json``     the final evaluation on fresh seeds and the periodic one that picked the model
+* ``evaluations.npz``  the periodic evaluations, in the arrays of SB3's EvalCallback (which names the file)
+* ``logs/``            ``progress.csv`` (``progress-1.csv``, ... for the segments before each ``--resume``),
+                       TensorBoard events; RLlib runs add ``env_steps_by_node.json``
+* ``monitor/``         per-episode returns and lengths of SB3's training envs
+* ``best_model.safetensors``, ``final_model.safetensors`` (each with its ``.json``): the best and the last policy
+                       as policy files, which ``eval`` and ``play`` load without unpickling
+* SB3: ``best_model.zip`` (EvalCallback's name), ``final_model.zip``, ``checkpoints/latest.zip`` (for ``--resume``);
+  RLlib: the checkpoint folders ``best_model/``, ``final_model/``, ``checkpoints/latest/``; all pickles
+* ``plots/``           the paper's figures; distillation: ``rounds.csv``, one row per DAgger round
+
+A shipped agent's folder (``results/<Id>/``) keeps ``config.json``, ``results.json``, ``evaluations.npz``, the
+plots and the logs beside them (no ``logs/``), and the best policy as ``policy.safetensors``.
+
+config.json (format :data:`FORMAT_VERSION`) holds ``format`` and ``format_version``, ``backend`` (``sb3``, ``rllib``
+or ``distill``), ``command``, ``config`` (the settings: :class:`~visualenv.train.sb3.TrainConfig`,
+:class:`~visualenv.train.rllib.RLlibTrainConfig` or :class:`~visualenv.train.distill.DistillConfig` as a mapping),
+``versions``, ``spec_path``; ``resumes`` (each resume's command and changed hyperparameters); a distillation's
+``teacher`` and ``student`` (path and sha256). Reading checks the type and the bounds of every setting.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import shlex
+import sys
+from dataclasses import asdict, dataclass, is_dataclass
+from datetime import datetime
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from visualenv.errors import ConfigError
+from visualenv.train.policy_format import WEIGHTS
+
+FORMAT = "visualenv-run"
+FORMAT_VERSION = 2  # 1: config.json before this module (no format key); see migrate
+BACKENDS = ("sb3", "rllib", "distill")
+MAX_TRAIN_SEED = 2**31 - 1  # `train --seed`: with up to 2**31 envs, training seeds stay below the selection band
+LEGACY_EVAL_OFFSET = 10_000  # runs before the seed bands picked and reported on one stream: the run's seed + this
+
+LOGS, PROGRESS = "logs", "progress.csv"
+SHIPPED_POLICY = "policy" + WEIGHTS
+CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained
+
+
+class RunFolderError(ConfigError):
+    """A run folder's config.json or results.json that this code did not write, or that holds a value out of bounds."""
+
+
+class RunFolder:
+    """The paths of the files a run folder holds (see the module's docstring), named once."""
+
+    def __init__(self, path: str | Path) -> None:
+        self.path = Path(path)
+
+    def __repr__(self) -> str:
+        return f"RunFolder({str(self.path)!r})"
+
+    @property
+    def config(self) -> Path:
+        """The command, the settings and the versions."""
+        return self.path / "config.json"
+
+    @property
+    def results(self) -> Path:
+        """The final evaluation."""
+        return self.path / "results.json"
+
+    @property
+    def evaluations(self) -> Path:
+        """The periodic evaluations (SB3's EvalCallback names it, given log_path=path)."""
+        return self.path / "evaluations.npz"
+
+    @property
+    def logs(self) -> Path:
+        """``logs/``: progress.csv and TensorBoard events."""
+        return self.path / LOGS
+
+    @property
+    def progress(self) -> Path:
+        """``logs/progress.csv``: the training log of the last segment."""
+        return self.path / LOGS / PROGRESS
+
+    @property
+    def env_steps_by_node(self) -> Path:
+        """``logs/env_steps_by_node.json``: an RLlib run's env steps per Ray node."""
+        return self.path / LOGS / "env_steps_by_node.json"
+
+    @property
+    def monitor(self) -> Path:
+        """The training envs' monitor files (SB3's Monitor)."""
+        return self.path / "monitor"
+
+    @property
+    def plots(self) -> Path:
+        """The training figures."""
+        return self.path / "plots"
+
+    @property
+    def rounds(self) -> Path:
+        """A distillation's rounds."""
+        return self.path / "rounds.csv"
+
+    @property
+    def best_policy(self) -> Path:
+        """The best model's policy file (with best_model.json)."""
+        return self.path / f"best_model{WEIGHTS}"
+
+    @property
+    def final_policy(self) -> Path:
+        """The last model's policy file (with final_model.json)."""
+        return self.path / f"final_model{WEIGHTS}"
+
+    @property
+    def shipped_policy(self) -> Path:
+        """A shipped agent's policy file (results/<Id>/policy.safetensors, with policy.json)."""
+        return self.path / SHIPPED_POLICY
+
+    @property
+    def best_zip(self) -> Path:
+        """SB3's best model (EvalCallback names it, given best_model_save_path=path)."""
+        return self.path / "best_model.zip"
+
+    @property
+    def final_zip(self) -> Path:
+        """SB3's last model."""
+        return self.path / "final_model.zip"
+
+    @property
+    def latest_zip(self) -> Path:
+        """``checkpoints/latest.zip``: SB3's newest model, for ``--resume``."""
+        return self.path / "checkpoints" / "latest.zip"
+
+    @property
+    def best_dir(self) -> Path:
+        """RLlib's checkpoint folder of the best model."""
+        return self.path / "best_model"
+
+    @property
+    def final_dir(self) -> Path:
+        """RLlib's checkpoint folder of the last model."""
+        return self.path / "final_model"
+
+    @property
+    def latest_dir(self) -> Path:
+        """``checkpoints/latest/``: RLlib's newest checkpoint folder, for ``--resume``."""
+        return self.path / "checkpoints" / "latest"
+
+    def is_run(self) -> bool:
+        """Whether the folder holds a config.json (a run's, or a shipped agent's)."""
+        return self.config.is_file()
+
+    def log_folder(self) -> Path:
+        """``logs/``, or the folder itself where a shipped agent's folder keeps its logs beside config.json."""
+        flat = not self.logs.is_dir() and (self.path / PROGRESS).is_file()
+        return self.path if flat else self.logs
+
+    def progress_parts(self) -> list[Path]:
+        """progress-1.csv, progress-2.csv, ... (the segments before each resume), then progress.csv."""
+        logs = self.log_folder()
+        parts = [p for p in logs.glob("progress-*.csv") if p.stem.rsplit("-", 1)[1].isdigit()]
+        parts.sort(key=lambda p: int(p.stem.rsplit("-", 1)[1]))
+        return parts + [logs / PROGRESS]
+
+    def keep_earlier_progress(self) -> None:
+        """SB3 starts progress.csv afresh on a resume: keep the earlier segment as progress-<n>.csv."""
+        current = self.progress
+        if current.exists():
+            n = 1
+            while (self.logs / f"progress-{n}.csv").exists():
+                n += 1
+            current.rename(self.logs / f"progress-{n}.csv")
+
+
+def new_run_dir(root: str | Path, env_id: str) -> Path:
+    """A new, empty run folder ``root/<env_id>/<timestamp>``."""
+    from visualenv.files import make_dir
+
+    stamp = datetime.now().strftime("%Y%m%d-%H%M%S")
+    run = make_dir(Path(root) / env_id) / stamp
+    run.mkdir(exist_ok=False)
+    return run
+
+
+def _folder(run: str | Path | RunFolder) -> RunFolder:
+    return run if isinstance(run, RunFolder) else RunFolder(run)
+
+
+# -- the settings config.json may hold, and their bounds ------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class Rule:
+    """What a setting may be: a value of `kind` from `low` to `high`, one of `choices`, or None where `optional`."""
+
+    kind: type
+    low: float | None = None
+    high: float | None = None
+    choices: tuple[str, ...] = ()
+    optional: bool = False
+    above_low: bool = False  # low itself excluded
+
+    def problem(self, value: Any) -> str | None:
+        """Why `value` breaks the rule, or None."""
+        if value is None:
+            return None if self.optional else "expected a value, got null"
+        number = isinstance(value, (int, float)) and not isinstance(value, bool)
+        of_kind = isinstance(value, self.kind) and (self.kind is bool) == isinstance(value, bool)
+        if not (number if self.kind is float else of_kind):
+            return f"expected {_NAMES[self.kind]}, got {type(value).__name__} {value!r}"
+        if self.choices and value not in self.choices:
+            return f"expected one of {', '.join(self.choices)}, got {value!r}"
+        if number and not (math.isfinite(value) and self._within(value)):
+            return f"expected {_NAMES[self.kind]}{self._bounds()}, got {value!r}"
+        if self.kind is str and not value:
+            return "expected a non-empty text"
+        return None
+
+    def _within(self, value: float) -> bool:
+        above = self.low is None or (value > self.low if self.above_low else value >= self.low)
+        return above and (self.high is None or value <= self.high)
+
+    def _bounds(self) -> str:
+        low = "" if self.low is None else f" {'above' if self.above_low else 'from'} {_number(self.low)}"
+        high = "" if self.high is None else f" {'to' if low else 'up to'} {_number(self.high)}"
+        return low + high or " (finite)"
+
+
+def _number(x: float) -> str:
+    return str(int(x)) if float(x).is_integer() else f"{x:g}"
+
+
+_NAMES = {int: "an integer", float: "a number", bool: "true or false", str: "a text", dict: "a mapping", list: "a list"}
+
+COUNT = Rule(int, 1, 2**16)  # envs, runners, workers
+STEPS = Rule(int, 1, 10**12)
+EPISODES = Rule(int, 1, 10**6)
+SETTINGS: dict[str, Rule] = {
+    **dict.fromkeys(("spec", "teacher"), Rule(str)),
+    **dict.fromkeys(("steps", "eval_every"), STEPS),
+    **dict.fromkeys(("envs", "env_runners", "envs_per_runner"), COUNT),
+    **dict.fromkeys(("eval_episodes", "final_eval_episodes", "rounds", "episodes"), EPISODES),
+    **dict.fromkeys(("render", "progress", "pin", "batched"), Rule(bool)),
+    "algo": Rule(str, choices=("ppo", "a2c", "dqn", "sac", "dagger")), "workers": Rule(int, 1, 2**16, optional=True),
+    "frame_stack": Rule(int, 1, 64), "seed": Rule(int, 0, MAX_TRAIN_SEED), "hyperparams": Rule(dict),
+    "render_device": Rule(str, choices=("cpu", "gpu"), optional=True), "backend": Rule(str, choices=("rllib",)),
+    # distillation
+    "student": Rule(str, optional=True), "mixing": Rule(float, 0, 1), "epochs": Rule(float, 0, 10**6, above_low=True),
+    "batch_size": Rule(int, 1, 2**20), "learning_rate": Rule(float, 0, 1, above_low=True), "shift": Rule(int, 0, 1024),
+}
+_COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
+#: each backend's settings: those of its first format, then (with the value an older run takes) those added since
+KEYS: dict[str, tuple[str, ...]] = {
+    "sb3": (*_COMMON, "steps", "envs", "eval_every", "hyperparams"),
+    "rllib": (*_COMMON, "steps", "env_runners", "envs_per_runner", "eval_every", "hyperparams", "backend"),
+    "distill": (*_COMMON, "teacher", "rounds", "episodes", "mixing", "epochs", "batch_size", "learning_rate", "shift"),
+}
+ADDED: dict[str, dict[str, Any]] = {
+    "sb3": {"pin": True, "batched": False, "workers": None, "render_device": None},
+    "rllib": {"pin": True, "batched": False},
+    "distill": {"student": None},
+}
+ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
+RECORD_KEYS: dict[str, Rule] = {
+    **dict.fromkeys(("command", "spec_path"), Rule(str)),
+    **dict.fromkeys(("config", "versions", "teacher", "student"), Rule(dict)),
+    "format": Rule(str, choices=(FORMAT,)), "format_version": Rule(int, 1, FORMAT_VERSION),
+    "backend": Rule(str, choices=BACKENDS), "resumes": Rule(list),
+}
+
+
+def settings(backend: str) -> tuple[str, ...]:
+    """The settings a current config.json of `backend` holds, each exactly once."""
+    return KEYS[backend] + tuple(ADDED[backend])
+
+
+def _check(rules: dict[str, Rule], values: dict[str, Any], where: str, name: str) -> None:
+    for key, value in values.items():
+        rule = rules.get(key)
+        if rule is None:
+            raise RunFolderError(f"{where}: unknown key {name}{key}")
+        problem = rule.problem(value)
+        if problem:
+            raise RunFolderError(f"{where}: {name}{key}: {problem}")
+
+
+def check_record(record: Any, where: str = "config.json") -> dict[str, Any]:
+    """`record` if it is a current config.json: every setting of its backend there, of its type and in bounds."""
+    if not isinstance(record, dict) or not isinstance(record.get("config"), dict):
+        raise RunFolderError(f"{where}: not the config.json of a visualenv run (no 'config' mapping of settings)")
+    _check(RECORD_KEYS, record, where, "")
+    if record.get("format_version") != FORMAT_VERSION or "backend" not in record:
+        raise RunFolderError(f"{where}: expected format_version {FORMAT_VERSION} and a backend "
+                             "(read_config migrates an older run's)")
+    backend, config = record["backend"], record["config"]
+    missing = [k for k in settings(backend) if k not in config]
+    if missing:
+        raise RunFolderError(f"{where}: a {backend} run's config lacks {', '.join(missing)}")
+    extra = [k for k in config if k not in settings(backend)]
+    if extra:
+        raise RunFolderError(f"{where}: unknown setting config.{extra[0]} for a {backend} run")
+    _check(SETTINGS, config, where, "config.")
+    if config["algo"] not in ALGORITHMS[backend]:
+        raise RunFolderError(f"{where}: config.algo: a {backend} run trains {', '.join(ALGORITHMS[backend])}, "
+                             f"not {config['algo']!r}")
+    if config.get("workers") is not None and config["workers"] > config["envs"]:
+        raise RunFolderError(f"{where}: config.workers: {config['workers']} workers for {config['envs']} envs")
+    for resume in record.get("resumes", []):
+        if not (isinstance(resume, dict) and isinstance(resume.get("command"), str)
+                and isinstance(resume.get("hyperparams"), dict)):
+            raise RunFolderError(f"{where}: resumes: expected a command and its hyperparameters, got {resume!r}")
+    return record
+
+
+RESULT_RULES: dict[str, Rule] = {
+    **dict.fromkeys(("per_episode", "evaluated"), Rule(dict)),
+    **dict.fromkeys(("machine", "selection"), Rule(dict, optional=True)),
+    **dict.fromkeys(("std_reward", "mean_length", "wall_time_s"), Rule(float, 0)),
+    "episodes": EPISODES, "mean_reward": Rule(float), "success_rate": Rule(float, 0, 1),
+    "eval_seed": Rule(int, 0, 2**63 - 1), "resets_before": Rule(int, 0, 10**9), "steps": Rule(int, 0, 10**12),
+    "model": Rule(str), "stopped_early": Rule(bool),
+}
+#: what results.json has always held
+RESULT_KEYS = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate")
+
+
+def check_results(results: Any, where: str = "results.json") -> dict[str, Any]:
+    """`results` if its figures are of their type and in bounds (other keys are kept as they are)."""
+    if not isinstance(results, dict):
+        raise RunFolderError(f"{where}: expected a mapping of the evaluation's figures, got {type(results).__name__}")
+    missing = [k for k in RESULT_KEYS if k not in results]
+    if missing:
+        raise RunFolderError(f"{where}: not the results of a visualenv evaluation (no {', '.join(missing)})")
+    _check(RESULT_RULES, {k: v for k, v in results.items() if k in RESULT_RULES}, where, "")
+    per_episode = results.get("per_episode", {})
+    for key in ("returns", "lengths", "successes"):
+        episodes = per_episode.get(key, [])
+        if key in per_episode and not (isinstance(episodes, list) and len(episodes) == results["episodes"]):
+            raise RunFolderError(f"{where}: per_episode.{key}: expected a list of {results['episodes']} episodes")
+    return results
+
+
+# -- reading and writing --------------------------------------------------------------------------------------------
+
+
+def _read_json(path: Path) -> Any:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise RunFolderError(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    except ValueError as exc:
+        raise RunFolderError(f"{path}: not JSON ({exc})") from None
+
+
+def _write_json(path: Path, value: dict[str, Any]) -> None:
+    path.write_text(json.dumps(value, indent=2) + "\n", encoding="utf-8")
+
+
+def write_config(run: str | Path | RunFolder, record: dict[str, Any]) -> Path:
+    """Write config.json: `record` in the current format (format and version set), checked first."""
+    folder = _folder(run)
+    record = check_record({"format": FORMAT, "format_version": FORMAT_VERSION, **record}, str(folder.config))
+    _write_json(folder.config, record)
+    return folder.config
+
+
+def read_config(run: str | Path | RunFolder) -> dict[str, Any]:
+    """config.json in the current format (an older run's migrated, see :func:`migrate`), its settings checked."""
+    folder = _folder(run)
+    if not folder.is_run():
+        raise RunFolderError(f"{folder.path} is not a run folder of `visualenv train` nor `visualenv distill` "
+                             f"(no {folder.config.name})")
+    record = migrate(_read_json(folder.config), where=str(folder.config)).record
+    assert record is not None
+    return record
+
+
+def write_results(run: str | Path | RunFolder, results: dict[str, Any]) -> Path:
+    """Write results.json, its figures checked first."""
+    folder = _folder(run)
+    _write_json(folder.results, check_results(results, str(folder.results)))
+    return folder.results
+
+
+def record_run(run: str | Path | RunFolder, config: Any, spec_path: str, *, backend: str, resume: bool = False,
+               changes: dict[str, Any] | None = None, extra: dict[str, Any] | None = None) -> None:
+    """config.json of a new run (the command, `config`'s settings, the versions, `extra` keys); a resumed run's
+    keeps its record, takes the settings now in force and appends the command and the changed hyperparameters."""
+    from visualenv.versions import versions
+
+    folder = _folder(run)
+    settings_now = asdict(config) if is_dataclass(config) and not isinstance(config, type) else dict(config)
+    command = shlex.join(sys.argv)
+    if resume:
+        record = read_config(folder)
+        record["config"] = settings_now
+        record.setdefault("resumes", []).append({"command": command, "hyperparams": dict(changes or {})})
+    else:
+        record = {"backend": backend, "command": command, "config": settings_now, "versions": versions(),
+                  "spec_path": spec_path, **(extra or {})}
+    write_config(folder, record)
+
+
+@dataclass
+class Run:
+    """A run folder's config.json and results.json in the current format."""
+
+    folder: RunFolder | None
+    record: dict[str, Any] | None  # config.json; None where the folder has none (a model file's folder)
+    results: dict[str, Any] | None  # results.json; None where the folder has none
+    note: str | None = None  # what an older run does not record: why replaying its final evaluation may differ
+
+    @property
+    def config(self) -> dict[str, Any]:
+        return self.record["config"] if self.record else {}
+
+
+def read_run(run: str | Path | RunFolder) -> Run:
+    """The config.json and results.json of `run` that exist, migrated to the current format and checked."""
+    folder = _folder(run)
+    record = _read_json(folder.config) if folder.is_run() else None
+    results = _read_json(folder.results) if folder.results.is_file() else None
+    return migrate(record, results, folder, where=str(folder.path))
+
+
+# -- older runs -----------------------------------------------------------------------------------------------------
+
+
+def legacy_eval_seed(train_seed: int) -> int:
+    """The one evaluation stream of runs made before selection and report were split."""
+    return train_seed + LEGACY_EVAL_OFFSET
+
+
+def migrate(record: Any, results: Any = None, folder: RunFolder | None = None, *, where: str = "run folder") -> Run:
+    """A run's config.json `record` and `results` (each may be None) in the current format, checked.
+
+    The older formats this reads (config.json without ``format_version`` is format 1):
+
+    * every run before format 2 has no ``format``, ``format_version`` nor, except RLlib runs (``"rllib"``), a
+      ``backend``: a distillation's config has ``algo`` ``"dagger"``, any other run is SB3's;
+    * SB3 runs before ``pin``, ``batched``, ``workers`` and ``render_device`` existed lack them; they resume as
+      the defaults then were: pinned, one process per env, the spec's render device. RLlib runs before ``pin`` and
+      ``batched`` likewise; distillations before ``--student`` lack ``student`` (none);
+    * results.json before ``eval_seed`` (SB3 and RLlib runs): the final evaluation ran on the env of the periodic
+      evaluations, seeded the run's seed + 10000 at the start of the run's last segment (its start or latest
+      ``--resume``), reset once then and ``eval_episodes + 1`` times by each periodic evaluation since. ``eval_seed``
+      becomes that seed and ``resets_before`` those resets, counted from evaluations.npz and the segment's
+      progress.csv; where they cannot be counted (an RLlib run, a lost log) ``note`` says so;
+    * results.json of shipped agents re-evaluated before ``evaluated`` existed have ``reevaluated``: dropped.
+
+    A config.json of a later format than :data:`FORMAT_VERSION` is refused: this version cannot know its meaning.
+    """
+    older = isinstance(record, dict) and "format_version" not in record
+    if record is not None:
+        record = _migrated_record(record, where)
+    note = None
+    if results is not None:
+        results = check_results({k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict)
+                                else results, where)
+        if record is not None and "eval_seed" not in results:
+            if not older:
+                raise RunFolderError(f"{where}: results.json has no eval_seed, which every run of format 2 records")
+            results, note = _with_legacy_seed(results, record, folder)
+    return Run(folder, record, results, note)
+
+
+def _migrated_record(record: Any, where: str) -> dict[str, Any]:
+    if not isinstance(record, dict) or not isinstance(record.get("config"), dict):
+        raise RunFolderError(f"{where}: not the config.json of a visualenv run (no 'config' mapping of settings)")
+    version = record.get("format_version", 1)
+    if isinstance(version, int) and not isinstance(version, bool) and version > FORMAT_VERSION:
+        raise RunFolderError(f"{where}: written by a later visualenv (run folder format {version}); this one reads "
+                             f"formats up to {FORMAT_VERSION}: upgrade visualenv")
+    record = {**record, "config": dict(record["config"])}
+    if version == 1:
+        config = record["config"]
+        backend = record.get("backend") or ("distill" if config.get("algo") == "dagger" else "sb3")
+        record = {"format": FORMAT, "format_version": FORMAT_VERSION, "backend": backend, **record}
+        if backend in ADDED:
+            record["config"] = {**config, **{k: v for k, v in ADDED[backend].items() if k not in config}}
+    return check_record(record, where)
+
+
+def _with_legacy_seed(results: dict[str, Any], record: dict[str, Any], folder: RunFolder | None
+                      ) -> tuple[dict[str, Any], str | None]:
+    config = record["config"]
+    results = {**results, "eval_seed": legacy_eval_seed(config["seed"])}
+    periodic = _periodic_evaluations_in_last_segment(folder) if folder and record["backend"] == "sb3" else None
+    if periodic is None:
+        return results, ("results.json predates eval_seed: the periodic evaluations before its final one "
+                         "(on the same env) cannot be counted, so its episodes differ")
+    return {**results, "resets_before": 1 + periodic * (config["eval_episodes"] + 1)}, None
+
+
+def _periodic_evaluations_in_last_segment(folder: RunFolder) -> int | None:
+    """Evaluations (evaluations.npz) since the last segment of the run started; None if its start is unknown."""
+    try:
+        with np.load(folder.evaluations) as saved:
+            timesteps = saved["timesteps"]
+    except (OSError, KeyError, ValueError):
+        timesteps = np.zeros(0)
+    start = _last_segment_start(folder)
+    return None if start is None else int(np.sum(timesteps > start))
+
+
+def _last_segment_start(folder: RunFolder) -> int | None:
+    """The step the run's last segment started at, from its progress.csv (SB3's on-policy rows: iterations and
+    total steps)."""
+    progress = folder.log_folder() / PROGRESS
+    if not progress.is_file():
+        return None
+    try:
+        with progress.open(newline="") as f:
+            rows = [(float(r["time/iterations"]), float(r["time/total_timesteps"])) for r in csv.DictReader(f)
+                    if r.get("time/iterations") and r.get("time/total_timesteps")]
+    except (OSError, KeyError, ValueError, csv.Error):
+        return None
+    if len(rows) < 2 or rows[1][0] == rows[0][0]:
+        return None
+    (i1, t1), (i2, t2) = rows[:2]
+    per_iteration = (t2 - t1) / (i2 - i1)
+    return round(t1 - i1 * per_iteration)
