@@ -29,9 +29,9 @@ PATHS = ("copies", "instanced", "realized")
 
 def _run(spec: str, n: int, steps: int, path: str, queue: "multiprocessing.Queue[dict]") -> None:
     if path == "instanced":
-        from visualenv.render.blender import instances
+        from visualenv.render.blender import instance_nodes
 
-        instances.REALIZED_TRIANGLES = 0  # no static mesh is small enough to realize: every mesh stays an instance
+        instance_nodes.REALIZED_TRIANGLES = 0  # no static mesh is small enough to realize: every mesh stays an instance
     queue.put(measure_batch(spec, n, steps, instanced=path != "copies"))
 
 

@@ -117,9 +117,9 @@ def main() -> None:
     parser.add_argument("--static-instanced", action="store_true", help="keep static meshes as instances (not realized)")
     args = parser.parse_args()
     if args.static_instanced:
-        from visualenv.render.blender import instances
+        from visualenv.render.blender import instance_nodes
 
-        instances.REALIZED_TRIANGLES = 0
+        instance_nodes.REALIZED_TRIANGLES = 0
     data = yaml.safe_load(Path(args.spec).read_text())
     data["observation"]["resolution"] = [args.resolution, args.resolution]
     with tempfile.TemporaryDirectory() as folder:

@@ -27,7 +27,7 @@ import numpy as np
 from mathutils import Matrix, Vector
 
 from visualenv.render.blender.env_attributes import env_attribute
-from visualenv.render.blender.instances import geometry_node_group
+from visualenv.render.blender.instance_nodes import geometry_node_group
 from visualenv.render.blender.materials import SHIFTED, color_sockets, ensure_node_tree
 from visualenv.render.distractions import Distraction, background, color_shifts
 

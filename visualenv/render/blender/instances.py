@@ -34,9 +34,9 @@ instance in the scene, moved or not, so
 VisualCartPole's 1,024 track instances cost as much a step as its carts. A
 static mesh whose every env's copy stands still (no binding moves, hides or
 colours it, no camera moves the anchors) is *realized*: one mesh of every env's
-copy, built once and never synced again (:func:`_realizable`). Its materials
+copy, built once and never synced again (:func:`realizable`). Its materials
 must not read where the object is (object or generated coordinates, object
-info: :func:`_reads_placement`), and its copies stay under
+info: :func:`reads_placement`), and its copies stay under
 :data:`REALIZED_TRIANGLES`.
 
 Where a moving camera moves the anchors, every static mesh moves with them and
@@ -67,28 +67,22 @@ import numpy as np
 
 from visualenv.compat.blender import basis_matrices, check_bpy, mul_m4_m4m4, quat_to_mat3
 from visualenv.render.base import BindingTarget
-from visualenv.render.blender.materials import color_sockets
+from visualenv.render.blender.instance_nodes import (
+    COLOR,
+    CYCLES_SETTINGS,
+    RAY_SETTINGS,
+    TRANSFORM,
+    VISIBLE,
+    instancer_node_group,
+    joined_mesh_group,
+    read_instance_color,
+    realizable,
+    static_groups,
+)
 from visualenv.render.blender.scene import with_ancestors
 
 #: the bindable properties the instanced path computes; any other binding keeps its object a copy
 COMPUTED = frozenset({"location", "rotation", "scale", "visible", "color"})
-#: attribute names on the instancers' points (and so on their instances)
-TRANSFORM, VISIBLE, COLOR = "visualenv_transform", "visualenv_visible", "visualenv_color"
-#: the most triangles a static mesh's realized copies (every env's, in one mesh) may hold; past it they stay instances
-REALIZED_TRIANGLES = 250_000
-#: what Cycles reads from an instance's own object, given to the object that holds the realized mesh
-RAY_SETTINGS = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter",
-                "visible_shadow", "is_shadow_catcher", "is_holdout", "pass_index", "color", "lightgroup",
-                "shadow_terminator_shading_offset", "shadow_terminator_geometry_offset")
-CYCLES_SETTINGS = ("is_caustics_caster", "is_caustics_receiver", "ao_distance")
-#: shader nodes that read the object itself (its place, index, instancer or particles): a realized mesh would differ
-PLACEMENT_NODES = frozenset({"ShaderNodeObjectInfo", "ShaderNodeParticleInfo", "ShaderNodeHairInfo", "ShaderNodePointInfo",
-                             "ShaderNodeScript", "ShaderNodeDisplacement", "ShaderNodeVectorDisplacement",
-                             "ShaderNodeTexPointDensity"})
-#: textures whose unlinked vector is the generated coordinates (an Image texture's is the UV map: the same once realized)
-GENERATED_BY_DEFAULT = frozenset({"ShaderNodeTexBrick", "ShaderNodeTexChecker", "ShaderNodeTexGabor", "ShaderNodeTexGradient",
-                                  "ShaderNodeTexMagic", "ShaderNodeTexNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
-                                  "ShaderNodeTexWhiteNoise", "ShaderNodeTexEnvironment"})
 
 
 def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Collection[int] = ()) -> bool:
@@ -174,7 +168,7 @@ class _Instancer:
     selected: bool  # whether the points carry a visible attribute
     color: slice | None
     attributes: Sequence[str] = ()  # each env's own numbers (write_env_attributes)
-    realized: bool = False  # every env's copy in one static mesh, built once (:func:`_realizable`)
+    realized: bool = False  # every env's copy in one static mesh, built once (:func:`realizable`)
     last: dict[str, np.ndarray] = field(default_factory=dict)
 
 
@@ -228,7 +222,7 @@ class InstancedCopies:
         self.posed = bool(self._posed)
         self._env_attributes = env_attributes
         self._instancers: list[_Instancer] = []
-        groups = {} if realize_static else _static_groups([o for o in originals if o.type == "MESH" and self._groupable(o)])
+        groups = {} if realize_static else static_groups([o for o in originals if o.type == "MESH" and self._groupable(o)])
         grouped = {o.as_pointer() for members in groups.values() for o in members}
         #: every static group's members' names, one list per group (one instance per env draws each group)
         self.groups = [[o.name for o in members] for members in groups.values()]
@@ -264,29 +258,29 @@ class InstancedCopies:
             mesh.attributes.new(COLOR, "FLOAT_COLOR", "POINT")
             for slot in obj.material_slots:
                 if slot.material is not None:
-                    _read_instance_color(slot.material)
+                    read_instance_color(slot.material)
         attributes = list(self._env_attributes(obj)) if node is not None else list(group_attributes)
         for name in attributes:
             mesh.attributes.new(name, "FLOAT_COLOR", "POINT")
         holder = bpy.data.objects.new(f"{obj.name}-instances", mesh)
         collection.objects.link(holder)
         realized = (node is not None and self._realize_static and self._nodes[node].static and not selected and color is None
-                    and not attributes and _realizable(obj, self.num_envs))
+                    and not attributes and realizable(obj, self.num_envs))
         if realized:  # Cycles reads these from an instance's object, and from the holder of a realized mesh
             for name in RAY_SETTINGS:
                 setattr(holder, name, getattr(obj, name))
             for name in CYCLES_SETTINGS:
                 setattr(holder.cycles, name, getattr(obj.cycles, name))
         modifier = holder.modifiers.new("visualenv instances", "NODES")
-        modifier.node_group = _node_group(f"{obj.name}-instances", obj, selected, realized)
+        modifier.node_group = instancer_node_group(f"{obj.name}-instances", obj, selected, realized)
         return _Instancer(node, mesh, visible, selected, color, attributes, realized)
 
     def _groupable(self, obj: Any) -> bool:
         """Whether a static mesh may join its env's other static meshes in one mesh in the anchor's space (a static
-        group): nothing moves, hides or colours it, and a merged mesh draws it with the same pixels (:func:`_realizable`)."""
+        group): nothing moves, hides or colours it, and a merged mesh draws it with the same pixels (:func:`realizable`)."""
         chain = [self._nodes[self._index[o.as_pointer()]] for o in with_ancestors(obj) if o.as_pointer() in self._index]
         return (chain[0].static and not obj.hide_render and not any({"visible", "color"} & set(node.slices) for node in chain)
-                and _realizable(obj, 1))
+                and realizable(obj, 1))
 
     def _group_instancer(self, collection: Any, name: str, members: Sequence[Any], anchor: Any) -> _Instancer:
         """One object whose mesh joins `members` in the anchor's space (realized once by Geometry Nodes), drawn once per
@@ -294,12 +288,12 @@ class InstancedCopies:
         merged = bpy.data.objects.new(name, bpy.data.meshes.new(name))
         collection.objects.link(merged)
         merged.matrix_world = anchor.matrix_world
-        for setting in RAY_SETTINGS:  # the same in every member (_static_groups)
+        for setting in RAY_SETTINGS:  # the same in every member (static_groups)
             setattr(merged, setting, getattr(members[0], setting))
         for setting in CYCLES_SETTINGS:
             setattr(merged.cycles, setting, getattr(members[0].cycles, setting))
         modifier = merged.modifiers.new("visualenv static group", "NODES")
-        modifier.node_group = joined = _joined(name, members)
+        modifier.node_group = joined = joined_mesh_group(name, members)
         # baked into a plain mesh once: a modifier would follow its members' transforms, and Cycles rebuild it each step
         layer = next(layer for layer in anchor.users_scene[0].view_layers if layer.use)  # the one renders use
         layer.update()
@@ -436,36 +430,6 @@ def _translations(places: np.ndarray) -> np.ndarray:
     return matrices
 
 
-def _static_groups(meshes: Sequence[Any]) -> dict[tuple, list[Any]]:
-    """Static meshes in groups that one mesh may draw: those whose object settings Cycles reads (ray visibility, pass
-    index, ...) are the same; only groups of two or more (one alone gains nothing)."""
-    groups: dict[tuple, list[Any]] = {}
-    for obj in meshes:
-        key = tuple(_setting(getattr(obj, s)) for s in RAY_SETTINGS) + tuple(_setting(getattr(obj.cycles, s)) for s in CYCLES_SETTINGS)
-        groups.setdefault(key, []).append(obj)
-    return {key: members for key, members in groups.items() if len(members) > 1}
-
-
-def _setting(value: Any) -> Any:
-    return tuple(value) if hasattr(value, "__len__") and not isinstance(value, str) else value
-
-
-def _joined(name: str, members: Sequence[Any]) -> Any:
-    """A node group that outputs `members` joined into one realized mesh, in the modified object's space."""
-    group = geometry_node_group(name)
-    nodes, links = group.nodes, group.links
-    join = nodes.new("GeometryNodeJoinGeometry")
-    for obj in members:
-        info = nodes.new("GeometryNodeObjectInfo")
-        info.transform_space = "RELATIVE"  # in the holder's space: the anchor's
-        info.inputs["Object"].default_value = obj
-        links.new(info.outputs["Geometry"], join.inputs[0])
-    realize = nodes.new("GeometryNodeRealizeInstances")
-    links.new(join.outputs[0], realize.inputs["Geometry"])
-    links.new(realize.outputs["Geometry"], nodes.new("NodeGroupOutput").inputs[0])
-    return group
-
-
 def _matrix(m: Any) -> np.ndarray:
     return np.array([list(row) for row in m], dtype=np.float32)
 
@@ -484,101 +448,3 @@ def _basis(node: _Node, values: np.ndarray, n: int) -> np.ndarray:
     return basis_matrices(column("location", node.location), rotation, column("scale", node.scale))
 
 
-def _realizable(obj: Any, num_envs: int) -> bool:
-    """Whether every env's copy of this static mesh may be one realized mesh, with the same pixels as its instances:
-    its materials do not read its placement, no object-level material, light linking or modifier sets it apart, and
-    the copies' triangles stay under :data:`REALIZED_TRIANGLES`."""
-    if obj.light_linking.receiver_collection is not None or obj.light_linking.blocker_collection is not None:
-        return False
-    if any(slot.link == "OBJECT" for slot in obj.material_slots):  # an object's own materials are not realized with it
-        return False
-    if any(slot.material is not None and _reads_placement(slot.material.node_tree) for slot in obj.material_slots):
-        return False
-    if obj.modifiers:  # their triangles are not known before evaluation (a subdivision's can be many): kept instanced
-        return False
-    return num_envs * _triangles(obj.data) <= REALIZED_TRIANGLES
-
-
-def _triangles(mesh: Any) -> int:
-    totals = np.empty(len(mesh.polygons), dtype=np.int64)
-    mesh.polygons.foreach_get("loop_total", totals)
-    return int((totals - 2).sum())
-
-
-#: per shader node kind, whether such a node reads its object's placement (see :func:`_reads_placement`)
-_PLACEMENT_READERS: dict[str, Callable[[Any], bool]] = {
-    "ShaderNodeTexCoord": lambda n: n.from_instancer or any(n.outputs[o].is_linked for o in ("Generated", "Object", "Normal")),
-    "ShaderNodeAttribute": lambda n: n.attribute_type in ("OBJECT", "INSTANCER"),
-    "ShaderNodeUVMap": lambda n: n.from_instancer,
-    "ShaderNodeNormalMap": lambda n: n.space not in ("TANGENT", "WORLD"),
-    "ShaderNodeVectorTransform": lambda n: "OBJECT" in (n.convert_from, n.convert_to),
-    "ShaderNodeTangent": lambda n: n.direction_type == "RADIAL",  # around the generated coordinates' axis
-    "ShaderNodeTexImage": lambda n: n.projection != "FLAT",  # box, sphere and tube projections are in object space
-    "ShaderNodeOutputMaterial": lambda n: n.inputs["Displacement"].is_linked,
-    "ShaderNodeGroup": lambda n: _reads_placement(n.node_tree),
-    **{kind: lambda n: True for kind in PLACEMENT_NODES},
-    **{kind: lambda n: not n.inputs["Vector"].is_linked for kind in GENERATED_BY_DEFAULT},
-}
-
-
-def _reads_placement(tree: Any) -> bool:
-    """Whether a shader node tree reads where its object is (object, generated or instancer coordinates, object
-    info, object space), which differs between an instance and a realized copy; node groups are searched too."""
-    return tree is not None and any(_PLACEMENT_READERS.get(node.bl_idname, lambda n: False)(node) for node in tree.nodes)
-
-
-def _node_group(name: str, obj: Any, selected: bool, realized: bool = False) -> Any:
-    """Points -> Instance on Points (`obj` as an instance, the visible attribute as selection) -> Set Instance Transform
-    (-> Realize Instances, for a static mesh realized once)."""
-    group = geometry_node_group(name)
-    nodes, links = group.nodes, group.links
-    inputs, outputs = nodes.new("NodeGroupInput"), nodes.new("NodeGroupOutput")
-    info = nodes.new("GeometryNodeObjectInfo")
-    info.transform_space = "ORIGINAL"  # the mesh in its own space: the transform attribute is its whole world matrix
-    info.inputs["Object"].default_value = obj
-    info.inputs["As Instance"].default_value = True  # an instance of the object: Cycles keeps its geometry between steps
-    on_points = nodes.new("GeometryNodeInstanceOnPoints")
-    links.new(inputs.outputs[0], on_points.inputs["Points"])
-    links.new(info.outputs["Geometry"], on_points.inputs["Instance"])
-    if selected:
-        links.new(_named(nodes, "BOOLEAN", VISIBLE), on_points.inputs["Selection"])
-    transform = nodes.new("GeometryNodeSetInstanceTransform")
-    links.new(on_points.outputs["Instances"], transform.inputs["Instances"])
-    links.new(_named(nodes, "FLOAT4X4", TRANSFORM), transform.inputs["Transform"])
-    last = transform.outputs["Instances"]
-    if realized:
-        realize = nodes.new("GeometryNodeRealizeInstances")
-        links.new(last, realize.inputs["Geometry"])
-        last = realize.outputs["Geometry"]
-    links.new(last, outputs.inputs[0])
-    return group
-
-
-def geometry_node_group(name: str) -> Any:
-    """An empty Geometry Nodes group with one geometry input and one geometry output, for a modifier."""
-    group = bpy.data.node_groups.new(name, "GeometryNodeTree")
-    group.interface.new_socket(name="Geometry", in_out="INPUT", socket_type="NodeSocketGeometry")
-    group.interface.new_socket(name="Geometry", in_out="OUTPUT", socket_type="NodeSocketGeometry")
-    return group
-
-
-def _named(nodes: Any, data_type: str, name: str) -> Any:
-    node = nodes.new("GeometryNodeInputNamedAttribute")
-    node.data_type = data_type
-    node.inputs["Name"].default_value = name
-    return node.outputs["Attribute"]
-
-
-def _read_instance_color(material: Any) -> None:
-    """The material's bound-colour sockets (:func:`color_sockets`) read each instance's colour attribute."""
-    sockets = color_sockets(material)
-    if sockets is None:
-        return  # the renderer's colour setter said why (a spec error) when it compiled the bindings
-    target, alpha = sockets
-    nodes, links = material.node_tree.nodes, material.node_tree.links
-    attribute = nodes.new("ShaderNodeAttribute")
-    attribute.attribute_type = "INSTANCER"
-    attribute.attribute_name = COLOR
-    links.new(attribute.outputs["Color"], target)
-    if alpha is not None:
-        links.new(attribute.outputs["Alpha"], alpha)
