@@ -1,4 +1,4 @@
-"""Per-render overhead of BlenderRenderer: render_observation vs Blender's raw render call.
+"""Per-render overhead of BlenderRenderer: render(Frames) vs Blender's raw render call.
 
     .venv/bin/python benchmarks/blender_render_overhead.py [spec] [n]
 
@@ -16,6 +16,7 @@ import numpy as np
 
 from visualenv.env import VisualEnv
 from visualenv.render.pixels import read_bmp, to_grayscale
+from visualenv.render.frames import Frames
 
 
 def main(spec: str = "specs/visual_cartpole.yaml", n: int = 200) -> None:
@@ -29,7 +30,7 @@ def main(spec: str = "specs/visual_cartpole.yaml", n: int = 200) -> None:
         if env._done if hasattr(env, "_done") else False:
             env.reset()
     for v in values[:10]:  # warm up
-        renderer.render_observation(v)
+        renderer.render(Frames((v,)))
 
     def timed(fn) -> float:
         best = []
@@ -39,16 +40,16 @@ def main(spec: str = "specs/visual_cartpole.yaml", n: int = 200) -> None:
             best.append((time.perf_counter() - t) / n * 1000)
         return min(best)
 
-    obs = timed(lambda: [renderer.render_observation(v) for v in values])
+    obs = timed(lambda: [renderer.render(Frames((v,))) for v in values])
     raw = timed(lambda: [renderer.raw_render() for _ in range(n)])
     moved = timed(lambda: [(renderer.apply(v), renderer.raw_render()) for v in values])
     apply_ms = timed(lambda: [renderer.apply(v) for v in values])
     read_ms = timed(lambda: [read_bmp(renderer._output.path) for _ in range(n)])
     image = read_bmp(renderer._output.path)
     gray_ms = timed(lambda: [to_grayscale(image) for _ in range(n)])
-    shape = np.asarray(renderer.render_observation(values[0])).shape
+    shape = np.asarray(renderer.render(Frames((values[0],)))[0]).shape
     print(f"spec {spec}, observation {shape}, {n} renders, best of 3")
-    print(f"render_observation: {obs:.3f} ms/call")
+    print(f"render(Frames): {obs:.3f} ms/call")
     print(f"raw bpy.ops.render.render(write_still=True): {raw:.3f} ms/call")
     print(f"raw render of a scene whose objects moved (apply + render call): {moved:.3f} ms/call")
     print(f"overhead vs the unchanged-scene render: {obs - raw:.3f} ms/call ({(obs - raw) / obs * 100:.1f}%)")

@@ -53,6 +53,8 @@ def _timed_engine(engine: Any, phases: dict[str, list[float]]) -> None:
 def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, dict[str, float]]:
     """Median ms per render call of each phase, for moved and still calls."""
     from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.render.frames import Frames
+    from visualenv.render.profile import Profile
     from visualenv.tools.bench import device_option, timed
 
     env = BatchedVectorEnv(spec, envs, autoreset_mode="next_step", renderer_options=device_option(device))
@@ -72,20 +74,19 @@ def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, d
         for kind in ("moved", "still"):
             phases: dict[str, list[float]] = {"update": [], "render": [], "call": [], "copy": [], "convert": []}
             _timed_engine(engine, phases)
-            call, read = renderer.raw_render, renderer._read_capture
-            renderer.raw_render = timed(call, phases["call"])  # instance attributes over the methods
-            renderer._read_capture = timed(read, phases["convert"])
+            profile = renderer.profile = Profile()  # the renderer's phases: its render call, the readback
+            phases["call"], phases["convert"] = profile.times["render"], profile.times["readback"]
             Capture._copy_from = timed(copy_from, phases["copy"])  # type: ignore[method-assign]
             try:
                 for _ in range(steps):
                     if kind == "moved":
                         env.step(env.action_space.sample())
                     else:
-                        renderer.render_batch(env.binding_table())  # the same tiles again: nothing moved
+                        renderer.render(Frames(env.binding_table()))  # the same tiles again: nothing moved
             finally:
                 engine.update, engine.render = update, render
                 Capture._copy_from = copy_from  # type: ignore[method-assign]
-                del renderer.raw_render, renderer._read_capture
+                renderer.profile = None
             median = {name: 1000 * statistics.median(values) for name, values in phases.items()}
             median["around"] = median["call"] - median["update"] - median["render"]
             median["calls per step"] = len(phases["call"]) / steps

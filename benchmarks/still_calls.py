@@ -11,6 +11,7 @@ import sys
 import time
 
 from visualenv.env.batched import BatchedVectorEnv
+from visualenv.render.frames import Frames
 
 
 def main() -> None:
@@ -23,7 +24,7 @@ def main() -> None:
     print("pixels a call", renderer.scene.render.resolution_x * renderer.scene.render.resolution_y, flush=True)
     start = time.perf_counter()
     for _ in range(calls):
-        renderer.render_batch(env.binding_table())
+        renderer.render(Frames(env.binding_table()))
     print(f"{1000 * (time.perf_counter() - start) / calls:.1f} ms a call", flush=True)
     env.close()
 

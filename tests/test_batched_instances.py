@@ -8,6 +8,7 @@ import pytest
 from visualenv.env.batched import BatchedVectorEnv
 from visualenv.render.base import RendererOptions
 from visualenv.spec import load_spec_text
+from visualenv.render.frames import Frames
 
 pytest.importorskip("bpy")
 
@@ -74,7 +75,7 @@ def test_instanced_tiles_equal_copied_tiles():
         x, a = (env.program.state_names.index(name) for name in ("x", "a"))
         for step in range(4):
             table = env.binding_table()
-            ours, theirs = instanced.render_batch(table), copied.render_batch(table)
+            ours, theirs = instanced.render(Frames(table)), copied.render(Frames(table))
             difference = np.abs(ours.astype(int) - theirs.astype(int))
             assert difference.max() <= 1 and (difference > 0).sum() <= 2, f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
             tiles.append(ours)
@@ -115,7 +116,7 @@ def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
             assert sorted(sorted(group) for group in instanced._instances.groups) == groups
             for step in range(2):
                 table = env.binding_table()
-                ours, theirs = instanced.render_batch(table), copied.render_batch(table)
+                ours, theirs = instanced.render(Frames(table)), copied.render(Frames(table))
                 assert np.array_equal(ours, theirs), f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
                 env.step(np.array([1, 0, 1]))
         finally:

@@ -12,6 +12,7 @@ import visualenv
 from visualenv.env.batched import BatchedVectorEnv
 from visualenv.env.multi_batch import batch_sizes, merge_infos
 from visualenv.env.visual_env import VisualEnv
+from visualenv.render.frames import Frames
 
 SPECS = Path(__file__).parents[1] / "specs"
 
@@ -368,7 +369,7 @@ def test_a_turning_camera_renders_reset_envs_alone_split_batches_and_views(monke
         obs, _ = batch.reset(seed=1)
         own = [env.reset(seed=1 + i)[0] for i, env in enumerate(singles)]
         assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [agreement(obs[i], own[i]) for i in range(3)]
-        alone = batch.renderer.render_batch(batch.binding_values(), envs=[0, 2])
+        alone = batch.renderer.render(Frames(batch.binding_values(), envs=[0, 2]))
         assert agreement(alone[0], own[0]) >= 0.98 and agreement(alone[1], own[2]) >= 0.98
         views = batch.render()
         assert all(agreement(views[i], env.render()) >= 0.98 for i, env in enumerate(singles))

@@ -19,6 +19,7 @@ pytest.importorskip("mujoco")
 import visualenv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError  # noqa: E402
+from visualenv.render.frames import Frames
 
 POLE = """\
 id: Pole-v0
@@ -246,7 +247,7 @@ def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
         # the poses handed are the ones drawn, also where the list handed before now holds other arrays
         poses = batch._pose_arrays
         poses[:] = [tuple(np.array(a, copy=True) for a in poses[j]) for j in (2, 0, 1)]
-        renderer.set_physics_poses_batch(poses)
+        renderer.render(Frames(batch.binding_table(), poses))
         assert not np.array_equal(poses[0][1], poses[1][1])   # env 2's pole leans otherwise than env 0's
         assert all(np.array_equal(renderer._body_poses[part][i], poses[i][part]) for i in range(3) for part in (0, 1))
     finally:
@@ -314,8 +315,7 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
         assert not any(w.bodies for _, w in renderer._copy_poses or [])  # no body of any copy is posed from Python
         frames = []
         for step in range(3):
-            copies.set_physics_poses_batch(batch._pose_arrays)
-            theirs = copies.render_batch(batch.binding_table())
+            theirs = copies.render(Frames(batch.binding_table(), batch._pose_arrays))
             assert np.array_equal(obs, theirs), f"step {step}: {(obs != theirs).any(axis=-1).sum()} pixels differ"
             frames.append(obs.copy())
             obs, *_ = batch.step(np.zeros(3, dtype=np.int64))

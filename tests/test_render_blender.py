@@ -19,6 +19,7 @@ bpy = pytest.importorskip("bpy")
 from visualenv.env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError  # noqa: E402
 from visualenv.spec import load_spec_text  # noqa: E402
+from visualenv.render.frames import Frames  # noqa: E402
 
 OBJECTS = """\
     Box:  {primitive: cube, size: 1.0, material: {color: [0.9, 0.9, 0.9]}}
@@ -243,7 +244,7 @@ def test_two_cameras_give_a_dict_of_different_images(tmp_path):
         assert view.shape == (48, 64, 3) and view.dtype == np.uint8
         assert view.max() > 60
         assert obs["front"].shape == (32, 32, 3)  # switching back to the observation settings
-        assert np.array_equal(e.renderer.render_observation(e.binding_values())["front"], obs["front"])
+        assert np.array_equal(e.renderer.render(Frames((e.binding_values(),)))["front"][0], obs["front"])
     finally:
         e.close()
 

@@ -2,7 +2,7 @@
 
 import pickle
 import textwrap
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import pytest
@@ -10,6 +10,7 @@ import pytest
 from visualenv import VisualEnv, load_spec_text
 from visualenv.errors import SpecError
 from visualenv.render.base import RenderPlan, Renderer, RendererOptions, load_backend
+from visualenv.render.frames import Frames
 
 SPEC = """
 id: Mover-v0
@@ -47,15 +48,16 @@ class FakeRenderer(Renderer):
         self.closed = False
         FakeRenderer.made.append(self)
 
-    def render_observation(self, values: Sequence[Any]) -> np.ndarray:
+    def render(self, frames: Frames) -> np.ndarray:
         view = next(iter(self.plan.views.values()))
         width, height = view.resolution
-        image = np.zeros((height, width, 1), np.uint8)
-        image.flat[: len(values)] = values
-        return image
+        images = np.zeros((frames.n, height, width, 1), np.uint8)
+        for image, values in zip(images, frames.values):
+            image.flat[: len(values)] = values
+        return images
 
-    def render_view(self, values: Sequence[Any]) -> np.ndarray:
-        return np.zeros((4, 4, 3), np.uint8)
+    def render_view(self, frames: Frames) -> np.ndarray:
+        return np.zeros((frames.n, 4, 4, 3), np.uint8)
 
     def close(self) -> None:
         self.closed = True

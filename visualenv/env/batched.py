@@ -27,6 +27,7 @@ in its lane without stepping MuJoCo again, to the same value or located fault.
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import replace
 from typing import Any, Mapping
 
@@ -44,9 +45,11 @@ from visualenv.env.human import HumanDisplay, grid, open_human_display
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError, StepError
-from visualenv.render.base import RenderPlan, RendererOptions, load_backend
+from visualenv.render.base import RenderPlan, Renderer, RendererOptions, load_backend
 from visualenv.render.batch_limits import check_batchable
 from visualenv.render.distractions import Distraction, EpisodeDistractions
+from visualenv.render.frames import Frames
+from visualenv.render.profile import Profile
 from visualenv.render.sensor import sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 from visualenv.spec.options import distraction_settings
@@ -114,6 +117,8 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         self.render_mode = render_mode
         self._renderer: Any = None
+        #: the step's phase timings, recorded while set (visualenv bench); the renderer's own are its ``profile``
+        self.profile: Profile | None = None
         modes = {m.name: m for m in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP)}
         mode = autoreset_mode.name if isinstance(autoreset_mode, AutoresetMode) else str(autoreset_mode).upper()
         if mode not in modes:
@@ -222,7 +227,10 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         resetting = self._autoreset.copy()
         stepping = ~resetting
         if stepping.any():
+            start = time.perf_counter()
             self._repeat(actions, stepping, rewards, terminated, truncated)
+            if self.profile is not None:
+                self.profile.add("dynamics", time.perf_counter() - start)
         for i in np.flatnonzero(stepping & (self._errors == None)) if self._distractions else ():  # noqa: E711 - as one env, not after a fault
             self._distractions[i].advance()
         for i in np.flatnonzero(resetting):
@@ -265,8 +273,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             return None
         if not self.uses_camera:
             raise gym.error.Error("a state-only batch (render=False) has no Blender scene to render a view of")
-        self._pose_copies()
-        return tuple(self.renderer.render_view_batch(self.binding_table()))
+        return tuple(self.renderer.render_view(self._frames()))
 
     def close_extras(self, **kwargs: Any) -> None:
         if (display := getattr(self, "_display", None)) is not None:
@@ -418,7 +425,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     # -- observations and info ----------------------------------------------------------------------
 
     @property
-    def renderer(self) -> Any:
+    def renderer(self) -> Renderer:
         """The batch renderer, built on first use."""
         if self._renderer is None:
             self._renderer = load_backend(self._backend)(self._render_plan(), self._renderer_options, num_envs=self.num_envs)
@@ -435,17 +442,22 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             return {}
         return dict(getattr(self.renderer, "segmentation_ids", {}))
 
-    def _pose_copies(self) -> None:
-        """A physics spec: each env's copy of the model takes its own lane's MuJoCo poses; each env's distraction is drawn."""
-        if self._distractions:
-            self.renderer.distract_batch([d.current or Distraction() for d in self._distractions])
+    def _frames(self, envs: np.ndarray | None = None) -> Frames:
+        """Every env's state to draw: the binding table, a physics spec's lanes' MuJoCo poses, each env's distraction."""
+        distractions = [d.current or Distraction() for d in self._distractions] if self._distractions else None
+        poses = None
         if self.program.physics is not None:
             plan = self.program.physics
             sources = self._physics.pose_sources() if self._physics is not None else [lane.data for lane in self._lanes]
             if self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources:  # live views, made once (moved geoms: copies)
                 self._pose_arrays = [plan.poses(source) for source in sources]
                 self._pose_sources = sources
-            self.renderer.set_physics_poses_batch(self._pose_arrays)
+            poses = self._pose_arrays
+        start = time.perf_counter()
+        table = self.binding_table()
+        if self.profile is not None:
+            self.profile.add("bind", time.perf_counter() - start)
+        return Frames(table, poses, distractions, None if envs is None else [int(i) for i in envs])
 
     def _observe(self, envs: np.ndarray | None = None) -> Any:
         """Every env's observation, or those of `envs` (ascending indices) only."""
@@ -454,8 +466,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if not self.uses_camera:
             observed = self._state[self.program.observed].T.astype(np.float32)
             return observed if envs is None else observed[envs]
-        self._pose_copies()
-        obs = self.renderer.render_batch(self.binding_table(), envs)
+        obs = self.renderer.render(self._frames(envs))
         if self._sensors:
             obs = self._through_sensors(obs, envs)
         return obs

@@ -24,6 +24,7 @@ from visualenv.physics.model_fields import restore_fields, written_fields
 from visualenv.physics.simulation import integration_state
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer
 from visualenv.render.distractions import EpisodeDistractions
+from visualenv.render.frames import Frames
 from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
 from visualenv.spec.options import distraction_settings
@@ -433,17 +434,15 @@ class VisualEnv(gym.Env):
         assert self._fns.observe is not None, "not a physics spec"
         return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
 
-    def _pose(self) -> None:
-        """Before a render: a physics spec's bodies and cameras take MuJoCo's poses; the episode's distraction is drawn."""
-        if self._sim is not None:
-            self.renderer.set_physics_poses(*self.program.physics.poses(self._sim.data))  # type: ignore[union-attr]
-        if self._distractions is not None and self._distractions.current is not None:
-            self.renderer.distract(self._distractions.current)
+    def _frames(self) -> Frames:
+        """What the renderer draws of the current state: the binding values, a physics spec's MuJoCo poses, the episode's distraction."""
+        poses = None if self._sim is None else (self.program.physics.poses(self._sim.data),)  # type: ignore[union-attr]
+        drawn = self._distractions.current if self._distractions is not None else None
+        return Frames((self._bind(),), poses, None if drawn is None else (drawn,))
 
     def _view(self) -> np.ndarray:
         """The high-resolution view of the current state."""
-        self._pose()
-        return self.renderer.render_view(self._bind())
+        return self.renderer.render_view(self._frames())[0]
 
     def _show(self, reward: float | None, info: dict[str, Any]) -> None:
         """render_mode="human": the observation, the values and the view (called only when shown) on the display."""
@@ -453,8 +452,8 @@ class VisualEnv(gym.Env):
 
     def _observe(self) -> Any:
         if self.uses_camera:
-            self._pose()
-            obs = self.renderer.render_observation(self._bind())
+            frames = self.renderer.render(self._frames())
+            obs = frames[0] if isinstance(frames, np.ndarray) else {key: value[0] for key, value in frames.items()}
             self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs
         return self.state_observation()

@@ -2,9 +2,9 @@
 
 The compiler produces a :class:`~visualenv.render.plan.RenderPlan` (``Program.render_plan()``): the
 scene description, the observation cameras, the render settings and the list
-of binding targets, in render's own types. Before each render the env passes the current binding values
-(a flat tuple in :attr:`RenderPlan.bindings` order). A renderer turns those
-into pixels; it knows nothing of rewards or episodes.
+of binding targets, in render's own types. Each render is given :class:`~visualenv.render.frames.Frames`:
+the binding values of N envs (a flat tuple each, in :attr:`RenderPlan.bindings` order), their physics
+poses and distractions. A renderer turns those into pixels; it knows nothing of rewards or episodes.
 """
 
 from __future__ import annotations
@@ -12,12 +12,13 @@ from __future__ import annotations
 import importlib
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
-from typing import Any, Callable, Literal, Mapping, Sequence, get_args
+from typing import Any, Callable, Literal, Mapping, get_args
 
 import numpy as np
 from gymnasium import spaces
 
-from visualenv.errors import RenderError
+from visualenv.render.frames import Frames
+from visualenv.render.profile import Profile
 from visualenv.render.plan import BindingTarget, CameraView, RenderPlan  # noqa: F401 - BindingTarget and RenderPlan re-exported
 
 CHANNELS = {"rgb": 3, "grayscale": 1, "depth": 1, "segmentation": 1}
@@ -30,33 +31,31 @@ def view_space(view: CameraView) -> spaces.Box:
 
 
 class Renderer(ABC):
-    """Turns binding values into observation arrays and a human view.
+    """Turns the state of N envs (:class:`~visualenv.render.frames.Frames`) into observation arrays and views, N first.
 
-    A backend is created as ``cls(plan, options)`` by :func:`create_renderer`: the plan's
+    A renderer is built for :attr:`n` envs: a single env's is built for one
+    (``cls(plan, options)`` by :func:`create_renderer`), a batch's for any N. The plan's
     settings already hold the options' overrides; the options add the readback.
     """
 
     plan: RenderPlan
+    #: how many envs each call renders (the rows of its Frames)
+    n: int = 1
+    #: where a render's time goes, recorded while set (:class:`~visualenv.render.profile.Profile`; None: nothing timed)
+    profile: Profile | None = None
 
     @abstractmethod
-    def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
-        """Apply `values` to the bound properties and render every observation camera."""
+    def render(self, frames: Frames) -> np.ndarray | dict[str, np.ndarray]:
+        """Every observation camera for the envs of `frames`: ``(N, H, W, C)`` uint8, or a dict of those by
+        observation key for several cameras (N: ``len(frames.envs)`` where envs are chosen)."""
 
     @abstractmethod
-    def render_view(self, values: Sequence[Any]) -> np.ndarray:
-        """Apply `values` and render the high-resolution RGB view, (H, W, 3) uint8."""
+    def render_view(self, frames: Frames) -> np.ndarray:
+        """The high-resolution RGB view of each env of `frames`, ``(N, H, W, 3)`` uint8."""
 
     @abstractmethod
     def close(self) -> None:
         """Free everything this renderer created (idempotent)."""
-
-    def distract(self, distraction: Any) -> None:
-        """Draw a :class:`~visualenv.render.distractions.Distraction` in the next renders (a backend that cannot refuses)."""
-        raise RenderError(f"the {type(self).__name__} renderer draws no distractions")
-
-    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,  # noqa: B027 - optional
-                          light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
-        """A physics spec's poses for the next render: MjData's body, camera and light arrays (a backend without physics ignores them)."""
 
 
 Readback = Literal["auto", "memory", "file"]

@@ -32,6 +32,9 @@ import gymnasium as gym
 import numpy as np
 import psutil
 
+from visualenv.render.frames import Frames
+from visualenv.render.profile import Profile
+
 
 @dataclass
 class Figures:
@@ -179,7 +182,7 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     timings = env.timings()
     render_times, outside = timings["render"], timings["outside"]
     # the raw floor: Blender's render call alone, same scene and settings as the last observation
-    base.renderer.render_observation(base.binding_values())
+    base.renderer.render(Frames((base.binding_values(),)))
     scene = renderer.scene
     floor = render_call_times(scene.name, floor_renders)
     figures.moved_floor_ms_median = 1000 * float(np.median(_moved_floor(env, actions[warmup:warmup + floor_renders], seed + 3)))
@@ -314,8 +317,9 @@ class StepTimes(gym.Wrapper):
         """Record from now on, into fresh lists (the renderer exists once the env has been reset)."""
         self._stop_timing()
         self._steps, self._renders, self._outside = [], [], []
-        renderer = self.env.unwrapped.renderer  # type: ignore[attr-defined]  # a VisualEnv
-        renderer.raw_render = timed(renderer.raw_render, self._renders)
+        profile = Profile()
+        self._renders = profile.times["render"]
+        self.env.unwrapped.renderer.profile = profile  # type: ignore[attr-defined]  # a VisualEnv's renderer: its public hook
         self._timing = True
 
     def step(self, action: Any) -> Any:
@@ -335,7 +339,7 @@ class StepTimes(gym.Wrapper):
 
     def _stop_timing(self) -> None:
         if self._timing:
-            del self.env.unwrapped.renderer.raw_render  # type: ignore[attr-defined]  # the instance attribute: back to the class's method
+            self.env.unwrapped.renderer.profile = None  # type: ignore[attr-defined]
             self._timing = False
 
 

@@ -38,18 +38,17 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     """
     import psutil
 
-    from visualenv.env.batched import BatchedVectorEnv
-    from visualenv.tools.bench import device_option, timed
+    from visualenv.env.batched import BATCH_BACKEND, BatchedVectorEnv
+    from visualenv.render.blender import BlenderRenderer
+    from visualenv.render.frames import Frames
+    from visualenv.render.profile import Profile
+    from visualenv.tools.bench import device_option
 
     process = psutil.Process()
     before = process.memory_info().rss
     start = time.perf_counter()
-    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset, renderer_options=device_option(device))
-    if not instanced:
-        from visualenv.render.blender.batched import BatchedBlenderRenderer
-
-        plan = env.program.render_plan().with_options(env._renderer_options)
-        env._renderer = BatchedBlenderRenderer(plan, env._renderer_options, num_envs=n, instanced=False)
+    backend = BATCH_BACKEND if instanced else f"{__name__}:copied_renderer"
+    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset, renderer_options=device_option(device), backend=backend)
     env.reset(seed=seed)
     build_s = time.perf_counter() - start
     rng = np.random.default_rng(seed)
@@ -57,25 +56,25 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     for _ in range(5):
         env.step(env.action_space.sample())
     renderer = env.renderer
-    times: dict[str, list[float]] = {"dynamics": [], "bind": [], "write": [], "render": [], "readback": []}
-    for obj, name, into in ((env, "_advance", "dynamics"), (env, "binding_table", "bind"), (renderer, "raw_render", "render"),
-                            (renderer, "_read_capture", "readback"), (renderer, "_write_copies", "write"),
-                            (renderer, "_write_instances", "write")):
-        setattr(obj, name, timed(getattr(obj, name), times[into]))  # an instance attribute over the method
+    profile = Profile()
+    env.profile = renderer.profile = profile  # the public hooks: the step's phases, the renderer's
     start = time.perf_counter()
     for _ in range(steps):
         env.step(env.action_space.sample())
     elapsed = time.perf_counter() - start
+    env.profile = renderer.profile = None  # the renders below are not steps
+    times = profile.times
     still: list[float] = []
+    assert isinstance(renderer, BlenderRenderer)  # Blender's render call with the scene as it is: raw_render
     for _ in range(max(3, min(steps, 20))):  # the same call with nothing moved: Blender's floor for this image
         t = time.perf_counter()
-        renderer.__class__.raw_render(renderer)
+        renderer.raw_render()
         still.append(time.perf_counter() - t)
-    del renderer.raw_render  # the timed instance attribute: the renders below are not steps
     alone: list[float] = []
-    for _ in range(6):  # one env rendered alone, as a partial re-render of a reset env does (the first call also makes its camera)
+    frames = Frames(env.binding_table(), envs=[0])
+    for _ in range(6):  # env 0's observation alone, as the re-render of a reset env (the first call also makes its camera)
         t = time.perf_counter()
-        renderer._render_alone(0, [0])
+        renderer.render(frames)
         alone.append(time.perf_counter() - t)
     rss = process.memory_info().rss
     env.close()
@@ -89,6 +88,13 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
         "calls_per_step": len(times["render"]) / steps, "autoreset": autoreset,
         "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n, "python_mb": before / 2**20,
     }
+
+
+def copied_renderer(plan: Any, options: Any, *, num_envs: int) -> Any:
+    """The batch renderer that copies every object (no instances), as a backend entry point: the figures before instancing."""
+    from visualenv.render.blender.batched import BatchedBlenderRenderer
+
+    return BatchedBlenderRenderer(plan, options, num_envs=num_envs, instanced=False)
 
 
 def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, device: str | None, queue: Any) -> None:
@@ -171,7 +177,7 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
             f"{'calls':>6} {'alone':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
             "  (ms per step of all envs, medians; write: the bindings written into the scene, per step; render and readback: per call;"
             " update: the render call minus the same call with nothing moved (the scene update is write + update); calls: render calls per step;"
-            " alone: one env rendered by itself, as a reset env is; +MB/env: memory growth per env over the smallest batch)"]
+            " alone: env 0's observation re-rendered, as a reset env's is; +MB/env: memory growth per env over the smallest batch)"]
     ok = [b for b in batches if "error" not in b and "workers" not in b]
     smallest = min(ok, key=lambda b: b["envs"]) if ok else None
     split = [b for b in batches if "workers" in b]

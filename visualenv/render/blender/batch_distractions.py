@@ -47,7 +47,7 @@ class BatchDistractions:
         if self.shifting:
             for i, material in enumerate(materials):
                 shift_by_attribute(material, shift_name(i))
-        #: each env's distraction, as its env handed it (:meth:`BatchedBlenderRenderer.distract_batch`)
+        #: each env's distraction, as its env handed it (``Frames.distractions``)
         self.current = [Distraction()] * num_envs
         self._drawn: list[Distraction | None] = [None] * num_envs
         self._values: EnvAttributes | None = None  # where each env's shifts go

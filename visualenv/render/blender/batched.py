@@ -38,6 +38,7 @@ less than every tile again (:func:`~batch_calls.alone_limit`). It extends
 from __future__ import annotations
 
 import os
+import time
 from dataclasses import replace
 from typing import Any, Sequence
 
@@ -47,6 +48,7 @@ from mathutils import Matrix, Quaternion, Vector
 from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.distractions import Distraction
+from visualenv.render.frames import Frames, Poses
 from visualenv.render.batch_limits import (MAX_LINKED_ENVS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
 from visualenv.render.blender.batch_calls import MAX_IMAGE_SIDE, alone_limit, envs_per_call
@@ -57,7 +59,8 @@ from visualenv.render.blender.instances import InstancedCopies, removable
 from visualenv.render.blender.copies import (Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights, make_copy,
                                              one_colour, warn_shared_lights)
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
-from visualenv.render.blender.tiles_camera import TURNING_NAME, grid_shape, make_tiles_camera, tile, tiles_text
+from visualenv.render.blender.tiles_camera import (TURNING_NAME, grid_shape, make_tiles_camera, rotation_of, tile, tiles_text,
+                                                   unit_columns)
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
 from visualenv.bindables import BINDABLES
 from visualenv.render.plan import CameraObject
@@ -65,10 +68,9 @@ from visualenv.render.plan import CameraObject
 class BatchedBlenderRenderer(BlenderRenderer):
     """Renders `num_envs` copies of a plan's scene in one Blender scene, one Cycles call per observation camera.
 
-    ``render_batch(values)`` takes one tuple of binding values per env (or
-    an ``(N, values)`` array, as :meth:`BatchedVectorEnv.binding_table` gives) and
-    returns what :meth:`BlenderRenderer.render_observation` returns for one env,
-    stacked: ``(N, H, W, C)`` uint8, or a dict of those for several cameras.
+    ``render(frames)`` takes :class:`~visualenv.render.frames.Frames` of N envs (their values one
+    tuple per env, or an ``(N, values)`` array, as :meth:`BatchedVectorEnv.binding_table` gives) and
+    returns every env's tile, ``(N, H, W, C)`` uint8, or a dict of those for several cameras.
     """
 
     #: the Camera Data node measures depth from the custom camera's pose (copy 0's); a ray starts at its own copy's camera
@@ -82,7 +84,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         engine = plan.settings.engine
         if engine != "cycles":
             raise ValueError(engine_message(engine))
-        self.num_envs = num_envs
+        self.n = num_envs
         # Cycles draws each pixel's random numbers from its place in the image, so tile k would carry other
         # noise than env k alone; with shared noise a tile equals the env's own render (noise="shared")
         plan = replace(plan, settings=replace(plan.settings, noise="shared"))
@@ -95,11 +97,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._removed: set[int] = set()  # objects drawn as instances rather than copied (none while the base class compiles)
         super()._setup(built, threads)
         settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
-        self._distracting = BatchDistractions(settings, built.scene, self.num_envs) if settings is not None else None
+        self._distracting = BatchDistractions(settings, built.scene, self.n) if settings is not None else None
         orbiting = self._distracting is not None and self._distracting.orbiting
         self._orbiting = {self._objects[v.camera].as_pointer() for v in self.plan.views.values()} if orbiting else set()
         #: the MuJoCo model's cameras that move (tracking a body or hanging on one), by object pointer: (their row of
-        #: cam_xpos and cam_xmat, whether they turn); each env's pose is its lane's (:meth:`set_physics_poses_batch`)
+        #: cam_xpos and cam_xmat, whether they turn); each env's pose is its lane's (:meth:`_pose_envs`)
         self._tracked = self._tracked_cameras()
         self._camera_rows: list[tuple[np.ndarray, np.ndarray]] = []  # each env's cam_xpos and cam_xmat, as last handed
         self._refuse_turning_cameras()
@@ -118,12 +120,12 @@ class BatchedBlenderRenderer(BlenderRenderer):
         copied = [o for o in scene.objects if (not is_sun(o) or o.as_pointer() in self._own_suns) and not hidden(o)]
         #: the lights that light only their own copy (light linking): bound suns, and every copied local light where
         #: Cycles can tell the copies apart (:func:`~copies.linked_local_lights`)
-        self._own_lights = self._own_suns | linked_local_lights(copied, self.num_envs)
-        warn_shared_lights(copied, self.num_envs)
-        if self._own_suns and self.num_envs > MAX_LINKED_ENVS:  # a .blend file's sun (the spec's were refused at build)
+        self._own_lights = self._own_suns | linked_local_lights(copied, self.n)
+        warn_shared_lights(copied, self.n)
+        if self._own_suns and self.n > MAX_LINKED_ENVS:  # a .blend file's sun (the spec's were refused at build)
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
-            raise sun_error(self.plan, name, self.num_envs)
-        if self._own_suns and self.num_envs > 1 and not one_colour(scene.world):  # a .blend file's world (the spec's: at build)
+            raise sun_error(self.plan, name, self.n)
+        if self._own_suns and self.n > 1 and not one_colour(scene.world):  # a .blend file's world (the spec's: at build)
             name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
             raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
@@ -131,21 +133,21 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._copy_poses: list[tuple[int, Any]] | None = None  # the pose writers of the copies (None: no poses handed yet)
         self._body_poses: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))  # every env's xpos and xquat
         self._copies = [make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_lights=self._own_lights)
-                        for k in range(self.num_envs)]
+                        for k in range(self.n)]
         for copy in self._copies:
             self._objects, self._last = copy.objects, None
             copy.setters = [s for s in self._compile_bindings() if s[2] is not _instanced]
             copy.aimed, copy.targets = self._aimed, self._targets
         self._objects = built.objects
         self._per_copy = bool(self._copies[0].setters or self._copies[0].aimed)  # whether any binding is written per copy
-        self._grid = np.array([tuple(self._offset(k)) for k in range(self.num_envs)], dtype=np.float32)  # the copies' grid places
+        self._grid = np.array([tuple(self._offset(k)) for k in range(self.n)], dtype=np.float32)  # the copies' grid places
         self._offsets = self._grid.astype(np.float64)  # each copy's anchor, as its instances see it
         self._instances = self._instance(copied)
         #: the anchors that carry an object drawn as itself, by env: only they follow a moving camera (the others
         #: hold nothing, or copy 0's originals that instances draw)
         self._carrying = [(k, copy.anchor) for k, copy in enumerate(self._copies) if copy.anchor is not None
                           and any(o.as_pointer() not in self._removed for o in copy.anchor.children_recursive)]
-        self._table = np.zeros((self.num_envs, self._instances.size if self._instances is not None else 0))
+        self._table = np.zeros((self.n, self._instances.size if self._instances is not None else 0))
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         #: what each env's shaders read of their own (its colour shifts, its camera's turn)
         self._env_values = EnvAttributes.of_copies(self._copies, [o for o in copied if o.as_pointer() not in self._removed], self._instances)
@@ -174,7 +176,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _removable(self, copied: list[Any]) -> set[int]:
         """The objects to draw as instances (:func:`instances.removable`): none without instancing, or with a light of each
         copy's own (light linking is per object, and one instancer's instances share it). A MuJoCo body's objects are
-        instanced too: the instancers take every env's body poses at once (:meth:`set_physics_poses_batch`)."""
+        instanced too: the instancers take every env's body poses at once (:meth:`_pose_envs`)."""
         if not self.instanced or self._own_lights:
             return set()
         return removable(copied, self.plan.bindings, self._objects, {name for _, name in self._aimed}, self._posed_bodies())
@@ -191,7 +193,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         anchor = self._copies[0].anchor
         cameras = [view.camera for view in self._views] + ([self._view.camera] if self._view is not None else [])
         anchored = not any(self._camera_moves(camera) for camera in cameras)  # anchors that stay put: static meshes realized
-        return InstancedCopies(anchor.users_collection[0], anchor, removed, self.plan.bindings, self._objects, self.num_envs,
+        return InstancedCopies(anchor.users_collection[0], anchor, removed, self.plan.bindings, self._objects, self.n,
                                self._posed_bodies(), realize_static=anchored, env_attributes=read_per_env)
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Any:
@@ -208,7 +210,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             if why:
                 raise turning_error(plan, view.camera, why)
             if self._turns(view.camera):
-                check_turning(plan, view.camera, view.color, self.num_envs)
+                check_turning(plan, view.camera, view.color, self.n)
         for name in dict.fromkeys(target.object for target in plan.bindings):
             if is_world(name, self._objects):
                 raise world_error(plan, name)
@@ -245,8 +247,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _grid_columns(self) -> int:
         """Columns of the grid of copies: the most square grid, or, for a batch past one image, the columns of one
         image's grid, so that each image shows whole rows of copies (:meth:`_render_rows`)."""
-        per_call = min((envs_per_call(self.num_envs, v.width, v.height) for v in self._views), default=self.num_envs)
-        return grid_shape(self.num_envs if per_call >= self.num_envs else per_call)[0]
+        per_call = min((envs_per_call(self.n, v.width, v.height) for v in self._views), default=self.n)
+        return grid_shape(self.n if per_call >= self.n else per_call)[0]
 
     def _offset(self, k: int) -> Vector:
         return grid_offset(k, self._cols, self._spacing)
@@ -271,23 +273,23 @@ class BatchedBlenderRenderer(BlenderRenderer):
 
     # -- rendering ----------------------------------------------------------------------------------
 
-    def render_batch(self, values: Sequence[Sequence[Any]] | np.ndarray, envs: Sequence[int] | None = None) -> np.ndarray | dict[str, np.ndarray]:
-        """Apply each env's binding values to its copy and render every observation camera for all envs.
+    def render(self, frames: Frames) -> np.ndarray | dict[str, np.ndarray]:
+        """Apply each env's poses, distraction and binding values to its copy and render every observation camera for all envs.
 
-        With `envs` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``:
-        the envs an autoreset just reset. They are rendered alone where that costs less than
-        all N tiles again (:func:`alone_limit`), so a large batch does not pay for every
-        other tile again.
+        With ``frames.envs`` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``: the envs
+        an autoreset just reset. They are rendered alone where that costs less than all N tiles again (:func:`alone_limit`).
         """
+        envs, values = frames.envs, frames.values
         self._check_open()
-        if len(values) != self.num_envs:
-            raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
+        if len(values) != self.n:
+            raise ValueError(f"expected binding values for {self.n} envs, got {len(values)}")
         chosen = None if envs is None else [int(i) for i in envs]
         if chosen is not None and (not chosen or any(b <= a for a, b in zip(chosen, chosen[1:]))
-                                   or not 0 <= chosen[0] <= chosen[-1] < self.num_envs):
-            raise ValueError(f"envs must be ascending indices below {self.num_envs}, got {chosen}")
+                                   or not 0 <= chosen[0] <= chosen[-1] < self.n):
+            raise ValueError(f"envs must be ascending indices below {self.n}, got {chosen}")
+        self._take_envs(frames)
         self._write_copies(values, chosen)
-        alone = chosen is not None and len(chosen) < alone_limit(self.num_envs, self.device, self._threads)  # else every tile is cheaper
+        alone = chosen is not None and len(chosen) < alone_limit(self.n, self.device, self._threads)  # else every tile is cheaper
         images = {}
         for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
             self._place_copies(reference, source.camera if moving else None)
@@ -300,7 +302,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
                 images[view.key] = tiles if chosen is None else tiles[chosen]
         return next(iter(images.values())) if self.plan.single else images
 
-    def render_view_batch(self, values: Sequence[Sequence[Any]] | np.ndarray) -> np.ndarray:
+    def render_view(self, frames: Frames) -> np.ndarray:
         """Every env's high-resolution RGB view, ``(N, H, W, 3)``: the view camera's tiles, in as few calls as fit.
 
         The view's render settings differ from the observations', so the next observation
@@ -315,20 +317,28 @@ class BatchedBlenderRenderer(BlenderRenderer):
             if why:
                 raise RenderError(f"the view camera '{camera_name}' cannot be batched ({why}): a batch renders "
                                   "every env through one custom camera with one lens; record a view with one env (visualenv.make)")
-            if camera_name is not None and self._turns(camera_name) and self.num_envs > MAX_TURNING_ENVS:
+            if camera_name is not None and self._turns(camera_name) and self.n > MAX_TURNING_ENVS:
                 raise RenderError(f"the view camera '{camera_name}' turns with the state: a batch's tiles shader turns the rays "
-                                  f"of at most {MAX_TURNING_ENVS} envs, not {self.num_envs}; record a view with one env (visualenv.make)")
+                                  f"of at most {MAX_TURNING_ENVS} envs, not {self.n}; record a view with one env (visualenv.make)")
             self._tiled_view_camera = self._tiled_view(self._view)
-        if len(values) != self.num_envs:
-            raise ValueError(f"expected binding values for {self.num_envs} envs, got {len(values)}")
-        self._write_copies(values, None)
+        if len(frames.values) != self.n:
+            raise ValueError(f"expected binding values for {self.n} envs, got {len(frames.values)}")
+        self._take_envs(frames)
+        self._write_copies(frames.values, None)
         view, reference, moving = self._tiled_view_camera
         self._place_copies(reference, self._view.camera if moving else None)
         self._aim_rays(view.camera, self._view.camera)
         self._write_instances()
         return self._render_tiles(view)
 
-    def set_physics_poses_batch(self, poses: Sequence[tuple]) -> None:
+    def _take_envs(self, frames: Frames) -> None:
+        """Each env's distraction and MuJoCo poses, where `frames` has them."""
+        if frames.distractions is not None:
+            self._distract_envs(frames.distractions)
+        if frames.poses is not None:
+            self._pose_envs(frames.poses)
+
+    def _pose_envs(self, poses: Sequence[Poses]) -> None:
         """Each env's MuJoCo poses (xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir) for its copy of the model.
 
         The bodies drawn as instances take every env's ``xpos`` and ``xquat`` at once, gathered into two
@@ -342,42 +352,48 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._camera_rows = [(p[2], p[3]) for p in poses]
         if self._copy_poses is None:  # the writers depend on the model alone: made at the first call
             nbody = len(poses[0][0])
-            self._body_poses = (np.empty((self.num_envs, nbody, 3)), np.empty((self.num_envs, nbody, 4)))
+            self._body_poses = (np.empty((self.n, nbody, 3)), np.empty((self.n, nbody, 4)))
             # copy 0 holds the originals: all but the instanced bodies; another copy: its duplicates (lights, bodies left as copies)
             originals = {obj.as_pointer() for obj in self._copies[0].objects.values()}
             writers = [self._poses.for_objects(copy.objects).without(originals if k else self._removed, keep_cameras=not k)
                        for k, copy in enumerate(self._copies)]
             self._copy_poses = [(k, writer) for k, writer in enumerate(writers) if not writer.empty]
         if self._instances is not None and self._instances.posed:
-            for part, out in enumerate(self._body_poses):  # one C loop over the envs' arrays
-                np.concatenate([p[part] for p in poses], out=out.reshape(-1, out.shape[2]))
+            for parts, out in zip(([p[0] for p in poses], [p[1] for p in poses]), self._body_poses):  # one C loop each
+                np.concatenate(parts, out=out.reshape(-1, out.shape[2]))
         for k, writer in self._copy_poses:
             writer.write(*poses[k])
 
-    def distract_batch(self, distractions: Sequence[Distraction]) -> None:
+    def _distract_envs(self, distractions: Sequence[Distraction]) -> None:
         """Each env's distraction in the next renders, drawn as the env alone draws it (:mod:`batch_distractions`)."""
         if self._distracting is None:
             raise RenderError("this batch draws no distractions: its plan had none when it was built")
-        if len(distractions) != self.num_envs:
-            raise ValueError(f"expected a distraction for each of {self.num_envs} envs, got {len(distractions)}")
+        if len(distractions) != self.n:
+            raise ValueError(f"expected a distraction for each of {self.n} envs, got {len(distractions)}")
         self._distracting.current = list(distractions)
 
     def _write_copies(self, values: Sequence[Sequence[Any]] | np.ndarray, envs: Sequence[int] | None) -> None:
         """Each env's binding values into its copy (the bindings of copied objects, env by env; `envs` only, when given)
         and into the table its instances are posed from (:meth:`_write_instances`, every env: the others are not shown)."""
+        start = time.perf_counter()
         if self._per_copy:
             rows = values.tolist() if isinstance(values, np.ndarray) else values
-            for i in range(self.num_envs) if envs is None else envs:
+            for i in range(self.n) if envs is None else envs:
                 self._apply_copy(self._copies[i], tuple(rows[i]))
         if self._instances is not None:
-            self._table = np.asarray(values, dtype=np.float64).reshape(self.num_envs, self._instances.size)
+            self._table = np.asarray(values, dtype=np.float64).reshape(self.n, self._instances.size)
         if self._distracting is not None:
             self._distracting.draw()
+        if self.profile is not None:
+            self.profile.add("write", time.perf_counter() - start)
 
     def _write_instances(self) -> None:
         """Pose every env's instances from the last binding table, at their copies' anchors (moved by :meth:`_place_copies`)."""
         if self._instances is not None:
+            start = time.perf_counter()
             self._instances.write(self._table, self._offsets, self._body_poses if self._copy_poses is not None else None)
+            if self.profile is not None:
+                self.profile.add("write", time.perf_counter() - start)
 
     def _apply_copy(self, copy: Copy, values: tuple) -> None:
         if values != copy.last:
@@ -404,15 +420,15 @@ class BatchedBlenderRenderer(BlenderRenderer):
         (results/benchmarks/batched-split-images.md). A camera whose row of tiles does not fit
         one image (a large view) changes its parameters per part instead.
         """
-        per_call = envs_per_call(self.num_envs, view.width, view.height)
+        per_call = envs_per_call(self.n, view.width, view.height)
         rows = per_call // self._cols
         turned = view.camera.as_pointer() in self._rays  # its rotations are indexed by env: shown by parameters (first)
-        if (per_call < self.num_envs and rows >= 1 and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE
+        if (per_call < self.n and rows >= 1 and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE
                 and not turned):
             return self._render_rows(view, rows)
         parts = []
-        for first in range(0, self.num_envs, per_call):
-            count = min(per_call, self.num_envs - first)
+        for first in range(0, self.n, per_call):
+            count = min(per_call, self.n - first)
             cols, rows = grid_shape(count)
             self._set_shown(view.camera, first, count, cols)
             big = View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
@@ -427,10 +443,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
         big = View(view.key, view.camera, self._cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
         parts = []
         try:
-            for p, first in enumerate(range(0, self.num_envs, count)):
+            for p, first in enumerate(range(0, self.n, count)):
                 if p:
                     view.camera.matrix_world = Matrix.Translation((0.0, p * rows * self._spacing, 0.0)) @ base
-                parts.append(tile(self._render(big), min(count, self.num_envs - first), view.height, view.width))
+                parts.append(tile(self._render(big), min(count, self.n - first), view.height, view.width))
         finally:
             view.camera.matrix_world = base
         return np.concatenate(parts)
@@ -466,7 +482,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._alone[j] = alone
         alone = self._alone[j]
         if self._turned_headlights:  # the one-tile camera stands at each env's own pose: no turn
-            self._env_values.write({CAMERA_TURN: np.zeros((self.num_envs, 3))})
+            self._env_values.write({CAMERA_TURN: np.zeros((self.n, 3))})
         pose = view.camera.matrix_world.copy()
         images = []
         for i in envs:
@@ -477,7 +493,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _shader_text(self, source: Any) -> Any:
         """The tiles shader of a camera: with every env's own ray rotation if the state turns it."""
         name = next(n for n, o in self._objects.items() if o == source)
-        return tiles_text(self.num_envs if self._turns(name) else 0)
+        return tiles_text(self.n if self._turns(name) else 0)
 
     def _aim_rays(self, tiles: Any, source: Any) -> None:
         """Turn each env's rays by its camera's rotation relative to the tiles camera (a turning camera only).
@@ -492,7 +508,7 @@ class BatchedBlenderRenderer(BlenderRenderer):
         # in float64, from the matrices Blender composes from location, rotation and scale (those Cycles renders):
         # rounding here shows as whole rows of a fine floor texture flipping between its checks
         flip = np.diag([1.0, 1.0, -1.0])
-        to_camera = flip @ np.linalg.inv(_rotation(tiles.matrix_basis))
+        to_camera = flip @ np.linalg.inv(rotation_of(tiles.matrix_basis))
         values, turns = {}, []
         for k, pose in enumerate(self._camera_poses(source)):
             rotation = to_camera @ pose[:3, :3] @ flip
@@ -545,12 +561,12 @@ class BatchedBlenderRenderer(BlenderRenderer):
             places = np.array([r[0][tracked[0]] for r in self._camera_rows], dtype=np.float64)
             rotations = np.array([np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3) for r in self._camera_rows])
         elif tracked is not None:  # no poses handed yet: where the model puts it at qpos0
-            places = np.tile(tuple(camera.matrix_basis.translation), (self.num_envs, 1))
-            rotations = np.tile(_rotation(camera.matrix_world), (self.num_envs, 1, 1))
+            places = np.tile(tuple(camera.matrix_basis.translation), (self.n, 1))
+            rotations = np.tile(rotation_of(camera.matrix_world), (self.n, 1, 1))
         elif camera.as_pointer() in self._removed and self._instances is not None:  # computed: no copies to read
             poses_given = self._body_poses if self._copy_poses is not None else None
             worlds = self._instances.local_matrices(camera, self._table, poses_given).astype(np.float64)
-            places, rotations = worlds[:, :3, 3], _unit_columns(worlds[:, :3, :3])
+            places, rotations = worlds[:, :3, 3], unit_columns(worlds[:, :3, :3])
         else:
             name = next(n for n, o in self._objects.items() if o == camera)
             on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
@@ -559,8 +575,8 @@ class BatchedBlenderRenderer(BlenderRenderer):
             places = np.array([tuple(copy.objects[name].location if on_anchor else
                                      (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation)
                                for copy in self._copies], dtype=np.float64)
-            rotations = np.array([_rotation(self._camera_pose(copy, name)) for copy in self._copies])
-        poses = np.zeros((self.num_envs, 4, 4))
+            rotations = np.array([rotation_of(self._camera_pose(copy, name)) for copy in self._copies])
+        poses = np.zeros((self.n, 4, 4))
         poses[:, :3, :3], poses[:, :3, 3], poses[:, 3, 3] = rotations, places, 1.0
         if camera.as_pointer() not in self._orbiting:
             return poses
@@ -577,16 +593,6 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._copies = []
         self._instances = None
         super().close()
-
-
-def _rotation(matrix: Matrix) -> np.ndarray:
-    """The rotation of a 4x4 matrix, in float64, its columns normalised (no scale)."""
-    return _unit_columns(np.array(matrix.to_3x3(), dtype=np.float64))
-
-
-def _unit_columns(rotations: np.ndarray) -> np.ndarray:
-    """3x3 matrices (``(..., 3, 3)``) with each column divided by its length: their rotation, without scale."""
-    return rotations / np.linalg.norm(rotations, axis=-2, keepdims=True)
 
 
 def _instanced(values: tuple) -> None:

@@ -5,6 +5,7 @@ from __future__ import annotations
 import contextlib
 import itertools
 import math
+import time
 from dataclasses import dataclass, replace
 from typing import Any, Callable, Sequence
 
@@ -17,6 +18,7 @@ from visualenv.errors import Diagnostic, RenderError, SpecError, did_you_mean, i
 from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
 from visualenv.render.distractions import Distraction
+from visualenv.render.frames import Frames
 from visualenv.render.blender import settings as cfg
 from visualenv.render.blender import user_file
 from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
@@ -194,7 +196,7 @@ class BlenderRenderer(Renderer):
         self._set_mode("color")
         self._setters = self._compile_bindings()
         self._last: tuple | None = None
-        self._rig: DistractionRig | None = None  # made by the first distract()
+        self._rig: DistractionRig | None = None  # made by the first distraction drawn
         self._distraction = Distraction()
 
     def _free_bound_objects(self, built: BuiltScene) -> None:
@@ -344,15 +346,36 @@ class BlenderRenderer(Renderer):
         if self._rig is not None:
             self._rig.apply(self._distraction)
 
-    def set_physics_poses(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
-                          light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
-        """Every moving body's, and the model's cameras' and lights' poses from MuJoCo's arrays (:mod:`mjcf`)."""
-        if self._poses is not None:
-            self._poses.write(xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir)
+    def render(self, frames: Frames) -> np.ndarray | dict[str, np.ndarray]:
+        """The observation cameras for the one env of `frames`, ``(1, H, W, C)`` (views of the image just read)."""
+        self._take(frames)
+        if self.plan.single:
+            if not self._views:
+                raise RenderError("the spec has no observation camera")
+            return self._render(self._views[0])[None]
+        return {v.key: self._render(v)[None] for v in self._views}
 
-    def distract(self, distraction: Distraction) -> None:
-        """Draw `distraction` in the next renders: observation cameras moved, colours shifted (:mod:`distractions`)."""
+    def render_view(self, frames: Frames) -> np.ndarray:
+        """The high-resolution view of the one env of `frames`, ``(1, H, W, 3)``."""
         self._check_open()
+        if self._view is None:
+            raise RenderError("the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')")
+        self._take(frames)
+        return self._render(self._view)[None]
+
+    def _take(self, frames: Frames) -> None:
+        """Pose, distract and bind the scene as the one env of `frames` is (a renderer of one env refuses more)."""
+        self._check_open()
+        if len(frames.values) != 1:
+            raise ValueError(f"this renderer draws one env, got binding values for {len(frames.values)}")
+        if frames.poses is not None and self._poses is not None:
+            self._poses.write(*frames.poses[0])
+        if frames.distractions is not None:
+            self._distract(frames.distractions[0])
+        self.apply(frames.values[0])
+
+    def _distract(self, distraction: Distraction) -> None:
+        """Draw `distraction` in the next renders: observation cameras moved, colours shifted (:mod:`distractions`)."""
         if self._rig is None:
             tracker = DataTracker()
             self._rig = DistractionRig(self._scene, [v.camera for v in self._views],
@@ -365,22 +388,6 @@ class BlenderRenderer(Renderer):
             if self._view is not None and self._view.camera.name in children:
                 self._view = replace(self._view, camera=children[self._view.camera.name])
         self._distraction = distraction
-
-    def render_observation(self, values: Sequence[Any]) -> np.ndarray | dict[str, np.ndarray]:
-        self._check_open()
-        self.apply(values)
-        if self.plan.single:
-            if not self._views:
-                raise RenderError("the spec has no observation camera")
-            return self._render(self._views[0])
-        return {v.key: self._render(v) for v in self._views}
-
-    def render_view(self, values: Sequence[Any]) -> np.ndarray:
-        self._check_open()
-        if self._view is None:
-            raise RenderError("the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')")
-        self.apply(values)
-        return self._render(self._view)
 
     def _render(self, view: View) -> np.ndarray:
         scene = self._scene
@@ -412,8 +419,17 @@ class BlenderRenderer(Renderer):
                 self._depth_forward = forward
         capture = self._capture.arm(view.width, view.height) if self._capture is not None and view.config.engine == "cycles" else None
         self._active_capture = capture
+        profile = self.profile
+        if profile is None:
+            self.raw_render()
+            return self._read_capture(view, capture) if capture is not None else self._read_file(view)
+        start = time.perf_counter()
         self.raw_render()
-        return self._read_capture(view, capture) if capture is not None else self._read_file(view)
+        rendered = time.perf_counter()
+        pixels = self._read_capture(view, capture) if capture is not None else self._read_file(view)
+        profile.add("render", rendered - start)
+        profile.add("readback", time.perf_counter() - rendered)
+        return pixels
 
     def last_linear_pass(self) -> np.ndarray | None:
         """The linear Combined pass (H, W, RGBA float32, top row first) the last Cycles image was read from; None where

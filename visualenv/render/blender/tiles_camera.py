@@ -193,3 +193,13 @@ def tiles_camera_check() -> dict[str, Any]:
         bpy.data.scenes.remove(scene)
         bpy.data.objects.remove(camera)
         bpy.data.cameras.remove(data)
+
+
+def rotation_of(matrix: Matrix) -> np.ndarray:
+    """The rotation of a 4x4 ``mathutils.Matrix``, in float64, its columns normalised (no scale)."""
+    return unit_columns(np.array(matrix.to_3x3(), dtype=np.float64))
+
+
+def unit_columns(rotations: np.ndarray) -> np.ndarray:
+    """3x3 matrices (``(..., 3, 3)``) with each column divided by its length: their rotation, without scale."""
+    return rotations / np.linalg.norm(rotations, axis=-2, keepdims=True)
