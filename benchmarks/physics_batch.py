@@ -123,13 +123,9 @@ def measure(spec: Path, n: int, steps: int, rendered: bool, copies: bool = False
     physics, poses = Timer(), Timer()
     instrument(physics, poses)
     before = rss_mb()
-    env = BatchedVectorEnv(spec, n, render=rendered)
+    copied = {"backend": "visualenv.tools.bench_batched:copied_renderer"} if rendered and copies else {}
+    env = BatchedVectorEnv(spec, n, render=rendered, **copied)  # copies: every object copied, no instances
     engine = "mujoco.batch" if getattr(env._physics, "engine", None) is not None else "lanes"
-    if rendered and copies:
-        from visualenv.render.blender.batched import BatchedBlenderRenderer
-
-        plan = env.program.render_plan().with_options(env._renderer_options)
-        env._renderer = BatchedBlenderRenderer(plan, env._renderer_options, num_envs=n, instanced=False)
     env.reset(seed=0)
     rng = np.random.default_rng(0)
     space = env.action_space
