@@ -9,7 +9,7 @@ distraction. A single env is the case N = 1: ``Frames((values,))``.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Sequence, Union
+from typing import Sequence
 
 import numpy as np
 
@@ -20,7 +20,7 @@ BindingValues = tuple[float, ...]
 
 #: one env's MuJoCo poses: xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir (the lights' None where the model has none)
 #: (``PhysicsPlan.poses``; live views of the env's MjData, so building Frames copies nothing)
-Poses = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, Union[np.ndarray, None], Union[np.ndarray, None]]
+Poses = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
 
 
 @dataclass(frozen=True)
