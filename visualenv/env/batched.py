@@ -443,7 +443,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         return dict(getattr(self.renderer, "segmentation_ids", {}))
 
     def _frames(self, envs: np.ndarray | None = None) -> Frames:
-        """Every env's state to draw: the binding table, a physics spec's lanes' MuJoCo poses, each env's distraction."""
+        """Every env's state to draw: the binding table, a physics spec's MuJoCo poses, each env's distraction."""
         distractions = [d.current or Distraction() for d in self._distractions] if self._distractions else None
         poses = None
         if self.program.physics is not None:

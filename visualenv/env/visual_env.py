@@ -435,7 +435,7 @@ class VisualEnv(gym.Env):
         return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
 
     def _frames(self) -> Frames:
-        """What the renderer draws of the current state: the binding values, a physics spec's MuJoCo poses, the episode's distraction."""
+        """What the renderer draws of this state: its binding values, MuJoCo's poses, the episode's distraction."""
         poses = None if self._sim is None else (self.program.physics.poses(self._sim.data),)  # type: ignore[union-attr]
         drawn = self._distractions.current if self._distractions is not None else None
         return Frames((self._bind(),), poses, None if drawn is None else (drawn,))

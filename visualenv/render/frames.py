@@ -15,11 +15,11 @@ import numpy as np
 
 from visualenv.render.distractions import Distraction
 
-#: one env's binding values, a flat tuple in :attr:`RenderPlan.bindings <visualenv.render.base.RenderPlan.bindings>` order
+#: one env's binding values, a flat tuple in ``RenderPlan.bindings`` order
 BindingValues = tuple[float, ...]
 
-#: one env's MuJoCo poses: xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir (the lights' None where the model has none)
-#: (``PhysicsPlan.poses``; live views of the env's MjData, so building Frames copies nothing)
+#: one env's MuJoCo poses: xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir (the lights' None where the
+#: model has none), as ``PhysicsPlan.poses`` gives them: live views of the env's MjData, so Frames copy nothing
 Poses = tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray, np.ndarray | None, np.ndarray | None]
 
 

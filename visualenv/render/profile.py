@@ -8,7 +8,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
-#: the phases: the env's vectorised step, its binding values, their writes into the scene, Blender's render call, the readback
+#: the phases: the batch's vectorised step, its binding values, their writes into the scene, Blender's render call
+#: and the readback
 PHASES = ("dynamics", "bind", "write", "render", "readback")
 
 

@@ -319,7 +319,7 @@ class StepTimes(gym.Wrapper):
         self._steps, self._renders, self._outside = [], [], []
         profile = Profile()
         self._renders = profile.times["render"]
-        self.env.unwrapped.renderer.profile = profile  # type: ignore[attr-defined]  # a VisualEnv's renderer: its public hook
+        self.env.unwrapped.renderer.profile = profile  # type: ignore[attr-defined]  # a VisualEnv's renderer's hook
         self._timing = True
 
     def step(self, action: Any) -> Any:

@@ -72,7 +72,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
         still.append(time.perf_counter() - t)
     alone: list[float] = []
     frames = Frames(env.binding_table(), envs=[0])
-    for _ in range(6):  # env 0's observation alone, as the re-render of a reset env (the first call also makes its camera)
+    for _ in range(6):  # env 0's observation again, as a reset env's (the first call may make its camera)
         t = time.perf_counter()
         renderer.render(frames)
         alone.append(time.perf_counter() - t)
@@ -91,7 +91,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
 
 
 def copied_renderer(plan: Any, options: Any, *, num_envs: int) -> Any:
-    """The batch renderer that copies every object (no instances), as a backend entry point: the figures before instancing."""
+    """The batch renderer that copies every object (no instances), as a backend entry point: the figures before."""
     from visualenv.render.blender.batched import BatchedBlenderRenderer
 
     return BatchedBlenderRenderer(plan, options, num_envs=num_envs, instanced=False)

@@ -59,8 +59,8 @@ from visualenv.render.blender.instances import InstancedCopies, removable
 from visualenv.render.blender.copies import (Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights, make_copy,
                                              one_colour, warn_shared_lights)
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
-from visualenv.render.blender.tiles_camera import (TURNING_NAME, grid_shape, make_tiles_camera, rotation_of, tile, tiles_text,
-                                                   unit_columns)
+from visualenv.render.blender.tiles_camera import (TURNING_NAME, grid_shape, make_tiles_camera, rotation_of, tile,
+                                                   tiles_text, unit_columns)
 from visualenv.render.blender.scene import BuiltScene, with_ancestors
 from visualenv.bindables import BINDABLES
 from visualenv.render.plan import CameraObject
@@ -274,10 +274,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
     # -- rendering ----------------------------------------------------------------------------------
 
     def render(self, frames: Frames) -> np.ndarray | dict[str, np.ndarray]:
-        """Apply each env's poses, distraction and binding values to its copy and render every observation camera for all envs.
+        """Each env's poses, distraction and binding values applied to its copy, every observation camera rendered.
 
-        With ``frames.envs`` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``: the envs
-        an autoreset just reset. They are rendered alone where that costs less than all N tiles again (:func:`alone_limit`).
+        With ``frames.envs`` (ascending indices) only those envs' tiles are returned, ``(len(envs), H, W, C)``: the
+        envs an autoreset just reset, rendered alone where that costs less than all N tiles (:func:`alone_limit`).
         """
         envs, values = frames.envs, frames.values
         self._check_open()
