@@ -82,7 +82,9 @@ def instrument(physics: Timer, poses: Timer) -> None:
         batch = None
     if batch is not None:
         batch.BatchSimulation.advance = physics.wrap(batch.BatchSimulation.advance)  # type: ignore[method-assign]
-    batched.BatchedVectorEnv._pose_copies = poses.wrap(batched.BatchedVectorEnv._pose_copies)  # type: ignore[method-assign]
+    # the poses handed to the renderer: _frames gathers them with the binding table (_pose_copies before the Frames API)
+    posing = "_pose_copies" if hasattr(batched.BatchedVectorEnv, "_pose_copies") else "_frames"
+    setattr(batched.BatchedVectorEnv, posing, poses.wrap(getattr(batched.BatchedVectorEnv, posing)))
     try:
         from visualenv.render.blender import instances  # the instanced bodies' poses, where this version of the code has them
     except ImportError:

@@ -9,7 +9,7 @@ import subprocess
 import sys
 import textwrap
 from pathlib import Path
-from typing import Any, Callable, Iterator, Mapping, Sequence
+from typing import Any, Callable, Iterator, Mapping
 
 import numpy as np
 import pytest
@@ -19,6 +19,7 @@ from visualenv.env.batched import BatchedVectorEnv
 from visualenv.env.human import HumanDisplay, grid, open_human_display, register_human_display
 from visualenv.errors import VisualEnvError
 from visualenv.render.base import RenderPlan, Renderer, RendererOptions
+from visualenv.render.frames import Frames
 
 REPO = Path(__file__).resolve().parents[1]
 
@@ -58,28 +59,25 @@ class FakeRenderer(Renderer):
     def __init__(self, plan: RenderPlan, options: RendererOptions) -> None:
         self.plan = plan
 
-    def render_observation(self, values: Sequence[Any]) -> np.ndarray:
-        return np.full((*_size(self.plan), 1), values[0], np.uint8)
+    def render(self, frames: Frames) -> np.ndarray:
+        return np.full((frames.n, *_size(self.plan), 1), frames.values[0][0], np.uint8)
 
-    def render_view(self, values: Sequence[Any]) -> np.ndarray:
-        return np.full((4, 4, 3), 7, np.uint8)
+    def render_view(self, frames: Frames) -> np.ndarray:
+        return np.full((frames.n, 4, 4, 3), 7, np.uint8)
 
     def close(self) -> None:
         pass
 
 
-class FakeBatchRenderer:
+class FakeBatchRenderer(FakeRenderer):
     """A batch's frames: env k's tile holds k + 1."""
 
     def __init__(self, plan: RenderPlan, options: RendererOptions, num_envs: int) -> None:
-        self.plan, self.num_envs = plan, num_envs
+        self.plan, self.n = plan, num_envs
 
-    def render_batch(self, table: Any, envs: np.ndarray | None = None) -> np.ndarray:
-        chosen = np.arange(self.num_envs) if envs is None else np.asarray(envs)
+    def render(self, frames: Frames) -> np.ndarray:
+        chosen = range(self.n) if frames.envs is None else frames.envs
         return np.stack([np.full((*_size(self.plan), 1), k + 1, np.uint8) for k in chosen])
-
-    def close(self) -> None:
-        pass
 
 
 def fake_env() -> VisualEnv:
