@@ -200,7 +200,7 @@ class RenderPlan:
     base_dir: Path
     source: SourceMap
     cameras: tuple[tuple[tuple[str | int, ...], str], ...] = ()  # every camera the spec names, with its field's path
-    physics: PhysicsScene | None = None  # a physics spec's drawable model, posed by set_physics_poses
+    physics: PhysicsScene | None = None  # a physics spec's drawable model, posed from Frames.poses
     distractions: Distractions | None = None  # the distractions the env will ask for: a batch builds its scene for them
 
     def with_options(self, options: Overrides) -> RenderPlan:
