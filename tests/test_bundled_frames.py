@@ -1,6 +1,6 @@
 """Every bundled id renders the frames it rendered before the render path became one (issue 60).
 
-``tests/fixtures/frames/bundled.npz`` holds each id's reset and two seeded steps, recorded by
+``tests/fixtures/bundled_frames.npz`` holds each id's reset and two seeded steps, recorded by
 ``tests/fixtures/bundled_frames.py`` from the code before the change. On the machine that recorded them the frames
 are the same bytes; on another CPU Cycles' kernels may round a pixel a level apart (``CYCLES_CPU_NO_AVX2=1``: at most
 one level, in a handful of pixels), so a frame may differ by more than 2 levels in at most 0.1 % of its pixels: fewer
@@ -19,7 +19,7 @@ from tests.paths import TESTS  # noqa: E402
 
 pytestmark = pytest.mark.blender
 
-RECORD = TESTS / "fixtures" / "frames" / "bundled.npz"
+RECORD = TESTS / "fixtures" / "bundled_frames.npz"
 #: a frame may differ by more than LEVELS in at most this share of its pixels
 LEVELS, SHARE = 2, 0.001
 
