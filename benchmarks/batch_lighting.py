@@ -12,7 +12,7 @@ import sys
 
 import numpy as np
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
 
 spec, n = sys.argv[1], int(sys.argv[2])

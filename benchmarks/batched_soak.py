@@ -7,7 +7,7 @@ import sys
 
 import psutil
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 
 spec = sys.argv[1] if len(sys.argv) > 1 else "specs/visual_cartpole.yaml"
 n = int(sys.argv[2]) if len(sys.argv) > 2 else 16

@@ -22,7 +22,7 @@ KINDS = {
 
 
 def one(n: int, resolution: int, kind: str, steps: int = 20) -> None:
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
     from visualenv.spec import load_spec_text
 
     text = KINDS[kind](EXAMPLE.read_text().replace("[84, 84]", f"[{resolution}, {resolution}]"))

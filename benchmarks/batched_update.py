@@ -21,7 +21,7 @@ from pathlib import Path
 
 import yaml
 
-from visualenv.tools.bench_batched import measure_batch
+from visualenv.tools.bench_batch import measure_batch
 
 
 PATHS = ("copies", "instanced", "realized")
@@ -29,7 +29,7 @@ PATHS = ("copies", "instanced", "realized")
 
 def _run(spec: str, n: int, steps: int, path: str, queue: "multiprocessing.Queue[dict]") -> None:
     if path == "instanced":
-        from visualenv.render.blender import instance_nodes
+        from visualenv.render.blender.batch import instance_nodes
 
         instance_nodes.REALIZED_TRIANGLES = 0  # no static mesh is small enough to realize: every mesh stays an instance
     queue.put(measure_batch(spec, n, steps, instanced=path != "copies"))

@@ -15,9 +15,9 @@ from pathlib import Path
 import bpy
 import psutil
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
-from visualenv.render.blender.scene import ID_COLLECTIONS
+from visualenv.render.blender.scene.build import ID_COLLECTIONS
 
 SPECS = Path(__file__).parents[1] / "specs"
 mode = sys.argv[1] if len(sys.argv) > 1 else "batch"

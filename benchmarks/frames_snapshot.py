@@ -11,7 +11,7 @@ import sys
 import numpy as np
 
 import visualenv
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 
 IDS = ("VisualCartPole-v0", "Hover2D-v0", "Goalie-v0", "DMC-cartpole-swingup-v0")
 STEPS = 5

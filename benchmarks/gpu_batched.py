@@ -27,11 +27,11 @@ CHILD = """
 import json, sys
 from visualenv.compat.glibc import apply_policy
 apply_policy()  # what `visualenv bench --batched` does in its measuring process (freed memory kept for the next call)
-from visualenv.tools.bench_batched import measure_batch, measure_workers
+from visualenv.tools.bench_batch import measure_batch, measure_workers
 spec, n, k, steps, device = sys.argv[1], int(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), sys.argv[5] or None
 if k == 1:
     row = measure_batch(spec, n, steps, device=device)
-    from visualenv.render.blender.devices import detect_gpu
+    from visualenv.render.blender.runtime.devices import detect_gpu
     row["backend"] = detect_gpu() if device != "cpu" else "CPU"
 else:
     row = measure_workers(spec, n, k, steps, device=device)

@@ -67,7 +67,7 @@ class Timer:
 
 def instrument(physics: Timer, poses: Timer) -> None:
     """Wrap the stepping (per lane and batched, where the code has it) and the pose writing."""
-    from visualenv.env import batched
+    from visualenv.env import batch as batched
     from visualenv.physics import simulation
 
     stepper = simulation.Simulation.stepper
@@ -86,7 +86,7 @@ def instrument(physics: Timer, poses: Timer) -> None:
     posing = "_pose_copies" if hasattr(batched.BatchedVectorEnv, "_pose_copies") else "_frames"
     setattr(batched.BatchedVectorEnv, posing, poses.wrap(getattr(batched.BatchedVectorEnv, posing)))
     try:
-        from visualenv.render.blender import instances  # the instanced bodies' poses, where this version of the code has them
+        from visualenv.render.blender.batch import instances  # the instanced bodies' poses, where this version of the code has them
     except ImportError:
         return
     instances.InstancedCopies.write = poses.wrap(instances.InstancedCopies.write)  # type: ignore[method-assign]
@@ -113,19 +113,19 @@ def spec_at(resolution: int, spec: Path, folder: str, spec_camera: bool = False)
 def use_engine(engine: str) -> None:
     """Step batches by MuJoCo's batch API ("mujoco", where this code and mujoco have it) or each lane's MjData ("lanes")."""
     try:
-        from visualenv.physics import batch, mujoco_batch
+        from visualenv.physics import batch, batch_mujoco as mujoco_batch
     except ImportError:  # code before the batch API: always the lanes
         return
     batch.batch_module = mujoco_batch.batch_module if engine == "mujoco" else (lambda *args: None)  # type: ignore[assignment]
 
 
 def measure(spec: Path, n: int, steps: int, rendered: bool, copies: bool = False) -> None:
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     physics, poses = Timer(), Timer()
     instrument(physics, poses)
     before = rss_mb()
-    copied = {"backend": "visualenv.tools.bench_batched:copied_renderer"} if rendered and copies else {}
+    copied = {"backend": "visualenv.tools.bench_batch:copied_renderer"} if rendered and copies else {}
     env = BatchedVectorEnv(spec, n, render=rendered, **copied)  # copies: every object copied, no instances
     engine = "mujoco.batch" if getattr(env._physics, "engine", None) is not None else "lanes"
     env.reset(seed=0)

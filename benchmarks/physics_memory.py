@@ -9,7 +9,7 @@ Each env holds its own MjModel (its reset may write the model) and MjData; run f
 import resource
 import sys
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 
 spec, n = sys.argv[1], int(sys.argv[2])
 batch = BatchedVectorEnv(spec, n, render=False)

@@ -24,7 +24,7 @@ import visualenv
 import visualenv.compat.blender as compat
 if sys.argv[4] == "1":
     compat.sort_faces = lambda bm: None
-    import visualenv.render.blender.scene as scene, visualenv.render.blender.mjcf as mjcf
+    import visualenv.render.blender.scene.build as scene, visualenv.render.blender.scene.mjcf as mjcf
     scene.sort_faces = mjcf.sort_faces = compat.sort_faces
 env = visualenv.make(sys.argv[1], threads=int(sys.argv[3]))
 env.reset(seed=3)

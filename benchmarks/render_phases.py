@@ -52,7 +52,7 @@ def _timed_engine(engine: Any, phases: dict[str, list[float]]) -> None:
 
 def measure(spec: str, envs: int, steps: int, device: str | None) -> dict[str, dict[str, float]]:
     """Median ms per render call of each phase, for moved and still calls."""
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
     from visualenv.render.frames import Frames
     from visualenv.render.profile import Profile
     from visualenv.tools.bench import device_option, timed
@@ -118,7 +118,7 @@ def main() -> None:
     parser.add_argument("--static-instanced", action="store_true", help="keep static meshes as instances (not realized)")
     args = parser.parse_args()
     if args.static_instanced:
-        from visualenv.render.blender import instance_nodes
+        from visualenv.render.blender.batch import instance_nodes
 
         instance_nodes.REALIZED_TRIANGLES = 0
     data = yaml.safe_load(Path(args.spec).read_text())

@@ -29,7 +29,7 @@ def import_package(root: str) -> tuple[Any, Any]:
         del sys.modules[name]
     sys.path.insert(0, root)
     try:
-        batched = importlib.import_module("visualenv.env.batched")
+        batched = importlib.import_module("visualenv.env.batch")
         single = importlib.import_module("visualenv.env.visual_env")
     finally:
         sys.path.remove(root)

@@ -10,7 +10,7 @@ pixels a call and the milliseconds a call. The record: results/benchmarks/render
 import sys
 import time
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.render.frames import Frames
 
 

@@ -48,7 +48,7 @@ def main() -> None:
     parser.add_argument("--steps", type=int, default=200)
     parser.add_argument("--slow-steps", type=int, default=3)
     args = parser.parse_args()
-    from visualenv.render.blender.settings import detect_gpu
+    from visualenv.render.blender.runtime.settings import detect_gpu
 
     gpu = detect_gpu()
     rows = [("Cycles, CPU", {"engine": "cycles", "device": "cpu"}, args.steps)]

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import visualenv
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError
 from visualenv.spec import load_spec_text
@@ -181,7 +181,7 @@ def test_each_tile_is_the_envs_own_render(spec):
 
 
 def test_a_batch_past_the_image_limit_renders_in_several_calls(monkeypatch):
-    from visualenv.render.blender import batch_calls, batched
+    from visualenv.render.blender.batch import calls as batch_calls, renderer as batched
 
     monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 100 * 100)  # two tiles a call: five envs take three calls
     calls: list[int] = []
@@ -194,8 +194,8 @@ def test_a_batch_past_the_image_limit_renders_in_several_calls(monkeypatch):
 
 def test_a_batch_larger_than_one_image_renders_every_tile():
     """441 envs at 100x100 would be a 2,100 x 2,100 image, which Cycles' in-memory result returned black: two calls instead."""
-    from visualenv.render.blender.batch_calls import MAX_IMAGE_PIXELS, envs_per_call
-    from visualenv.render.blender.tiles_camera import grid_shape
+    from visualenv.render.blender.batch.calls import MAX_IMAGE_PIXELS, envs_per_call
+    from visualenv.render.blender.batch.tiles_camera import grid_shape
 
     per_call = envs_per_call(441, 100, 100)
     assert per_call < 441 and np.prod(grid_shape(per_call)) * 100 * 100 <= MAX_IMAGE_PIXELS
@@ -385,7 +385,7 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, alon
     """SAME_STEP: an ended env's final frame and its next episode's first frame are the frames a NEXT_STEP batch
     shows one step apart. The reset envs are rendered alone (one env-sized call each) where that costs less than
     every tile again (alone_limit, set here so that both ways are seen with 3 envs), else the grid is rendered again."""
-    from visualenv.render.blender import batched
+    from visualenv.render.blender.batch import renderer as batched
 
     monkeypatch.setattr(batched, "alone_limit", (lambda n, device, threads: n) if alone else (lambda n, device, threads: 0))
     same = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3, autoreset_mode="same_step")
@@ -427,7 +427,7 @@ def test_reset_envs_are_rendered_alone_only_while_that_is_cheaper():
     """One env alone is a call over the whole scene (its cost grows with N); the grid again costs N tiles, cheap on
     many threads and on a GPU. So the limit grows slower than N, is lower on a GPU and with more threads, and few
     envs never render alone past the camera switch's cost."""
-    from visualenv.render.blender.batch_calls import ALONE_OVERHEAD_TILES, alone_limit
+    from visualenv.render.blender.batch.calls import ALONE_OVERHEAD_TILES, alone_limit
 
     cpu2, cpu16, gpu = (alone_limit(1024, "CPU", 2), alone_limit(1024, "CPU", 16), alone_limit(1024, "GPU", 16))
     assert gpu < cpu16 < cpu2 < 1024 - ALONE_OVERHEAD_TILES
@@ -437,7 +437,7 @@ def test_reset_envs_are_rendered_alone_only_while_that_is_cheaper():
 
 def test_reset_envs_rendered_alone_follow_a_moving_camera(monkeypatch):
     """Goalie's camera moves with the state: an env rendered alone after SAME_STEP's reset is still its own view."""
-    from visualenv.render.blender import batched
+    from visualenv.render.blender.batch import renderer as batched
 
     monkeypatch.setattr(batched, "alone_limit", lambda n, device, threads: n)
     same = BatchedVectorEnv(SPECS / "goalie.yaml", 3, autoreset_mode="same_step")

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.render.base import RendererOptions
 from visualenv.spec import load_spec_text
 from visualenv.render.frames import Frames
@@ -50,7 +50,7 @@ max_steps: 50
 
 
 def _renderers(env: BatchedVectorEnv) -> tuple:
-    from visualenv.render.blender.batched import BatchedBlenderRenderer
+    from visualenv.render.blender.batch.renderer import BatchedBlenderRenderer
 
     options = RendererOptions.parse(None)
     plan = env.program.render_plan().with_options(options)

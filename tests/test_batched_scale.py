@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import visualenv
-from visualenv.env.batched import BatchedVectorEnv
-from visualenv.env.multi_batch import batch_sizes, merge_infos
+from visualenv.env.batch import BatchedVectorEnv
+from visualenv.env.batch_workers import batch_sizes, merge_infos
 from visualenv.env.visual_env import VisualEnv
 from visualenv.render.frames import Frames
 
@@ -107,7 +107,7 @@ def batch_rounds(rounds: int, queue: Any) -> None:
 
     # visualenv's Blender package first: it drops the script folders a process spawned by one that imported bpy
     # inherits on sys.path, whose `bpy` package would shadow the real module
-    from visualenv.render.blender.scene import ID_COLLECTIONS
+    from visualenv.render.blender.scene.build import ID_COLLECTIONS
     import bpy
 
     spec = SPECS / "goalie.yaml"   # at 100x100: the 16 tiles' image (400x400, 2.6 MB) is one mapping of its own
@@ -167,7 +167,7 @@ def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkey
     """Past one image, parts of whole rows of copies are rendered by the tiles camera moved down the grid: the
     tiles equal one image's (a batch that fits), also when SAME_STEP renders reset envs again, and the camera's
     shader parameters (each change makes Cycles compile it again) are set once, not per call."""
-    from visualenv.render.blender import batch_calls, batched
+    from visualenv.render.blender.batch import calls as batch_calls, renderer as batched
 
     spec = small(tmp_path, "visual_cartpole.yaml")
     actions = np.array([0, 1, 0, 1, 1])
@@ -355,7 +355,7 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
 def test_a_turning_camera_renders_reset_envs_alone_split_batches_and_views(monkeypatch):
     """With a turning camera: envs rendered alone (after an autoreset), a batch split over several calls, and the
     high-resolution view are each env's own render."""
-    from visualenv.render.blender import batch_calls, batched
+    from visualenv.render.blender.batch import calls as batch_calls, renderer as batched
     from visualenv.spec import load_spec_text
 
     monkeypatch.setattr(batched, "alone_limit", lambda n, device, threads: n)

@@ -150,7 +150,7 @@ def test_a_measuring_process_that_dies_is_reported_not_waited_for():
     import multiprocessing
     import os
 
-    from visualenv.tools.bench_batched import _result_of
+    from visualenv.tools.bench_batch import _result_of
 
     context = multiprocessing.get_context("spawn")
     queue = context.Queue()

@@ -96,7 +96,7 @@ def test_a_file_with_one_setting_changed_renders_as_the_spec_says(corpus, base_i
 def test_a_file_that_crashes_blender_is_a_located_error(corpus, monkeypatch):
     """No .blend that segfaults bpy 5.0.1 could be made with bpy itself: the reader here is a child
     that dies of a real SIGSEGV when asked to read, as Blender does on such a file."""
-    from visualenv.render.blender import blendfile
+    from visualenv.render.blender.scene import blendfile
 
     crashing = blendfile._Reader([sys.executable, "-c", "import os, signal, sys; sys.stdin.readline(); os.kill(os.getpid(), signal.SIGSEGV)"])
     monkeypatch.setattr(blendfile, "_reader", crashing)

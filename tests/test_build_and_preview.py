@@ -55,7 +55,7 @@ def test_preview_writes_frames_of_a_random_episode(tmp_path):
 
 
 def test_gpu_request_falls_back_to_cpu_with_a_message(tmp_path, monkeypatch):
-    from visualenv.render.blender import settings
+    from visualenv.render.blender.runtime import settings
 
     if settings.detect_gpu():
         pytest.skip("Blender finds a GPU here: nothing to fall back from")

@@ -125,7 +125,7 @@ def test_making_stepping_and_closing_envs_leaves_the_allocator_as_it_was():
     figures = run("""
 import numpy as np
 import visualenv
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 
 print("FIGURE plain", returned_mb())
 batch = BatchedVectorEnv("specs/visual_cartpole.yaml", 128)  # 128 images of 100 x 100 a call

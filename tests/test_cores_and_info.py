@@ -114,7 +114,7 @@ def test_processes_placed_by_others_claim_distinct_cores(tmp_path, monkeypatch):
     (("HIP", (), (), (("~/.nv/ComputeCache", False),)), None),
 ])
 def test_the_first_gpu_render_says_when_it_compiles_kernels(facts, expected):
-    devices = pytest.importorskip("visualenv.render.blender.devices", reason="the Blender backend needs bpy")
+    devices = pytest.importorskip("visualenv.render.blender.runtime.devices", reason="the Blender backend needs bpy")
     kernel_facts = devices.KernelFacts(*facts)
     why = devices.kernels_to_compile(kernel_facts)
     notice = devices.compile_notice(kernel_facts)

@@ -8,7 +8,7 @@ import pytest
 from click.testing import CliRunner
 
 zstandard = pytest.importorskip("zstandard", reason="a dependency of bpy")
-kernels = pytest.importorskip("visualenv.render.blender.cuda_kernels", reason="the Blender backend needs bpy")
+kernels = pytest.importorskip("visualenv.render.blender.runtime.cuda_kernels", reason="the Blender backend needs bpy")
 
 from visualenv.cli import main  # noqa: E402
 from visualenv.compat import blender as compat  # noqa: E402

@@ -15,7 +15,7 @@ import pytest
 import yaml
 
 import visualenv
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.errors import SpecError
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -26,7 +26,7 @@ mujoco = pytest.importorskip("mujoco")
 suite = pytest.importorskip("dm_control.suite")
 
 import visualenv  # noqa: E402
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.physics.simulation import integration_state  # noqa: E402
 
 ID = "DMC-cartpole-swingup-v0"

@@ -18,7 +18,7 @@ mujoco = pytest.importorskip("mujoco")
 pytest.importorskip("bpy")
 
 import visualenv  # noqa: E402
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 
 pytestmark = pytest.mark.blender

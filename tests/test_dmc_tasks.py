@@ -24,7 +24,7 @@ mujoco = pytest.importorskip("mujoco")
 suite = pytest.importorskip("dm_control.suite")
 
 import visualenv  # noqa: E402
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.physics.simulation import integration_state  # noqa: E402
 
 #: id -> (dm_control's domain and task, PlaNet's action repeat, dm_control's camera 0)

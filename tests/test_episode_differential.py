@@ -24,8 +24,8 @@ import numpy as np
 import pytest
 from gymnasium.vector import AutoresetMode
 
-from visualenv.compiler.vector_functions import OPERATORS, float_errors, vector_functions
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.compiler.batch_functions import OPERATORS, float_errors, vector_functions
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import StepError
 from visualenv.expr.codegen import power

@@ -18,7 +18,7 @@ from gymnasium.utils.env_checker import check_env
 import visualenv
 from visualenv.cli import main
 from visualenv.env import registration
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.errors import SpecError, StepError
 from visualenv.spec.loader import load_spec_text
 

@@ -37,7 +37,7 @@ def bump(side: int = 65) -> np.ndarray:
 
 
 def depth(tmp_path: Path, file: str, *, top: float = 4.0, extra: str = "", batch: int = 0) -> np.ndarray:
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
     from visualenv.env.visual_env import VisualEnv
 
     loaded = load_spec_text(SPEC.format(file=file, top=top, extra=extra), name="dem.yaml", base_dir=tmp_path)

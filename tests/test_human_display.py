@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from visualenv import VisualEnv, load_spec_text
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.env.human import HumanDisplay, grid, open_human_display, register_human_display
 from visualenv.errors import VisualEnvError
 from visualenv.render.base import RenderPlan, Renderer, RendererOptions

@@ -100,7 +100,7 @@ def test_the_checks_see_a_cycle_and_an_upward_import() -> None:
     """Neither check is vacuous: a planted cycle is found, and the graph holds the lazy imports."""
     assert find_cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}}) == [["a", "b", "c", "a"]]
     edges = graph()
-    assert "visualenv.train.rllib_setup" in edges["visualenv.train.models"]  # a function-level import
+    assert "visualenv.train.rllib_setup" in edges["visualenv.train.model_files"]  # a function-level import
     assert layer("visualenv.train.play") == 5 and layer("visualenv.env.make") == 4 and layer("visualenv") == 7
 
 

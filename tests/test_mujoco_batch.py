@@ -19,12 +19,12 @@ import pytest
 mujoco = pytest.importorskip("mujoco")
 pytest.importorskip("mujoco.batch", reason="MuJoCo's batch API came with MuJoCo 3.17")
 
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 from visualenv.physics import batch as physics_batch  # noqa: E402
 from visualenv.physics.batch import THREADS_VARIABLE  # noqa: E402
 from visualenv.physics.conventions import step_function  # noqa: E402
-from visualenv.physics.mujoco_batch import MujocoBatch, batch_module  # noqa: E402
+from visualenv.physics.batch_mujoco import MujocoBatch, batch_module  # noqa: E402
 from visualenv.physics.simulation import integration_state  # noqa: E402
 
 #: what a step leaves in MjData besides the state, compared lane against single env

@@ -68,7 +68,7 @@ def test_import_visualenv_never_imports_stable_baselines3_or_torch():
     import subprocess
     import sys
 
-    code = ("import sys, visualenv, visualenv.env.batched, visualenv.env.sb3_vec; "
+    code = ("import sys, visualenv, visualenv.env.batch, visualenv.env.sb3_vec; "
             "assert not {'stable_baselines3', 'torch'} & set(sys.modules), 'SB3 or torch imported'")
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert result.returncode == 0, result.stderr

@@ -15,7 +15,7 @@ import pytest
 
 pytest.importorskip("mujoco")
 
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 from visualenv.errors import StepError  # noqa: E402
 from visualenv.physics import simulation  # noqa: E402

@@ -19,7 +19,7 @@ from click.testing import CliRunner
 pytest.importorskip("mujoco")
 
 from visualenv.cli import main  # noqa: E402
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError, StepError  # noqa: E402
 

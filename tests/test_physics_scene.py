@@ -227,7 +227,7 @@ def test_a_light_on_a_body_moves_with_it(tmp_path: Path) -> None:
 
 def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
     """Copy i of a rendered batch takes lane i's MuJoCo poses: tile i equals env i rendered alone (a moving model camera: tests/test_batched_tracking.py)."""
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     path = tmp_path / "pole.yaml"
     path.write_text(POLE.replace("values: {qpos_hinge: angle}", "values: {qpos_hinge: 'uniform(-1, 1)'}"), encoding="utf-8")
@@ -283,9 +283,9 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
     """A rendered batch draws the model's bodies (nested, free, a bound colour) as Geometry Nodes instances posed from
     every env's xpos and xquat at once, under a directional light (a spot light per env keeps every object a copy:
     the next test). Tiles equal those of the copied objects (the path before) pixel for pixel, step after step."""
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
     from visualenv.render.base import RendererOptions
-    from visualenv.render.blender.batched import BatchedBlenderRenderer
+    from visualenv.render.blender.batch.renderer import BatchedBlenderRenderer
 
     (tmp_path / "arm.xml").write_text(ARM.replace(BULB, "").replace("<worldbody>", '<worldbody>\n    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>'),
                                       encoding="utf-8")
@@ -331,7 +331,7 @@ def test_a_spot_light_on_a_falling_body_lights_only_its_own_env(tmp_path: Path) 
     lights and shadows only its own copy (Cycles' light linking: tests/test_dmc_render.py shows what sharing the spots
     did). Tiles equal each env rendered alone, so no object of a copy is left out of its light, and the bulb's light
     moves as its lamp falls."""
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     (tmp_path / "arm.xml").write_text(ARM, encoding="utf-8")
     path = tmp_path / "lamp.yaml"
@@ -368,7 +368,7 @@ def test_a_spot_light_on_a_falling_body_lights_only_its_own_env(tmp_path: Path) 
 def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:
     """A batch observing through a fixed camera of the model renders from that camera's pose (its tiles camera is built
     before any step, so the model's camera stands at its pose from the start): tile i is env i alone."""
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     lamp = ARM[ARM.index('    <body name="lamp"'):ARM.index("  </worldbody>")]  # a spot light per copy: more lights to sample, other noise
     (tmp_path / "arm.xml").write_text(ARM.replace(lamp, '    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>\n'
@@ -588,7 +588,7 @@ def test_the_models_skybox_shows_behind_it_and_lights_nothing(tmp_path: Path) ->
     assert inner.sum() >= 30, inner.sum()
     diff = np.abs(with_sky[1:-1, 1:-1][inner] - without[1:-1, 1:-1][inner])
     assert diff.max() <= 1, diff.max()  # the block lit as without the skybox (the same pixels, measured)
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     skybox_frame(tmp_path, sky=True)  # the files again, with the skybox
     batch = BatchedVectorEnv(tmp_path / "s.yaml", 2)

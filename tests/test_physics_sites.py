@@ -15,7 +15,7 @@ import pytest
 pytest.importorskip("mujoco")
 
 from visualenv.compiler.program import compile_spec  # noqa: E402
-from visualenv.env.batched import BatchedVectorEnv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 from visualenv.spec.loader import load_spec  # noqa: E402
 

@@ -247,7 +247,7 @@ def test_core_imports_without_mujoco_and_a_physics_spec_says_how_to_install_it(t
 
 def test_a_state_only_batch_steps_each_envs_own_simulation() -> None:
     """Env i of a batch seeded s equals one env seeded s + i (each lane steps its own MjData); HalfCheetah's tracking camera cannot be batched."""
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     spec = Path(__file__).resolve().parents[1] / "specs" / "mujoco" / "half_cheetah.yaml"
     batch = BatchedVectorEnv(spec, 3, render=False)

@@ -22,7 +22,7 @@ from click.testing import CliRunner
 from gymnasium import spaces
 
 from visualenv.cli import main
-from visualenv.train.models import PickleRefused, load_model, pretrained_model, save_policy
+from visualenv.train.model_files import PickleRefused, load_model, pretrained_model, save_policy
 from visualenv.train.policy_format import read_meta, space_from_data, space_to_data, write_policy
 from visualenv.train.policy_kinds import PolicyFileError, sb3_policies
 

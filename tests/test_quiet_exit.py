@@ -3,7 +3,7 @@
 A batch left open used to print ``EGL Error (0x3009): EGL_BAD_MATCH`` three times
 when Python exited (Blender freed its scene after its GPU context was gone);
 open renderers now close at exit, before Blender tears down
-(:mod:`visualenv.render.blender.at_exit`). Run in a subprocess: the noise came
+(:mod:`visualenv.render.blender.runtime.at_exit`). Run in a subprocess: the noise came
 after the interpreter's own shutdown began.
 """
 

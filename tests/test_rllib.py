@@ -211,7 +211,7 @@ def test_a_batched_runner_steps_its_envs_in_one_blender_scene(tmp_path):
 
 
 def test_vector_frame_stack_restarts_the_stack_of_an_env_that_reset():
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
     from visualenv.env.wrappers import VectorFrameStack
 
     vec = VectorFrameStack(BatchedVectorEnv("Goalie-v0", 2), 4)
@@ -279,7 +279,7 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     assert refused.exit_code == 1 and "is an RLlib checkpoint folder: a pickle-based file" in refused.output, refused.output
     exported = CliRunner().invoke(main, ["export-policy", "--trust-pickle", str(run / "best_model"), str(tmp_path / "policy.safetensors")])
     assert exported.exit_code == 0 and "float16 weights" in exported.output, exported.output  # how results/ ships one
-    from visualenv.train.models import load_model
+    from visualenv.train.model_files import load_model
 
     full, small = load_model(run / "best_model", trust_pickle=True), load_model(tmp_path / "policy.safetensors")
     ours = load_model(run / "best_model.safetensors")  # train's float32 policy file: the policy the checkpoint holds, exactly

@@ -90,7 +90,7 @@ def test_a_colour_camera_beside_a_segmentation_camera_renders_as_it_does_alone()
 
 
 def test_a_batch_gives_each_env_its_own_exact_ids():
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     text = SCENE.format(file="", init="uniform(-2.5, -1.5)")
     batch = BatchedVectorEnv(load_spec_text(text, name="seg.yaml"), 3)

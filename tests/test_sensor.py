@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError
 from visualenv.spec import load_spec_text

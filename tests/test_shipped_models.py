@@ -19,7 +19,7 @@ from click.testing import CliRunner
 
 import visualenv
 from visualenv.cli import main
-from visualenv.train.models import pretrained_model
+from visualenv.train.model_files import pretrained_model
 
 pytestmark = pytest.mark.slow
 

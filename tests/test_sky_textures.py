@@ -99,7 +99,7 @@ def test_strength_and_rotation_bind_through_the_world_actor(tmp_path):
 
 
 def test_a_batch_shares_an_unbound_sky_and_refuses_a_bound_one(tmp_path):
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     halves(tmp_path / "sky.png", (230, 20, 20), (20, 20, 230))
     text = SPEC.format(image="sky.png", strength=1.0, rotation="0.0", actors="")

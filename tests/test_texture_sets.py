@@ -71,7 +71,7 @@ def test_a_texture_drawn_at_reset_and_a_bound_colour_share_the_material(tmp_path
 
 
 def test_a_batch_gives_each_env_its_own_texture(tmp_path):
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
 
     make_textures(tmp_path)
     text = SPEC.format(init="randint(0, 2)", color="")

@@ -14,7 +14,7 @@ import math
 import numpy as np
 import pytest
 
-from visualenv.compiler.vectorized import vector_globals
+from visualenv.compiler.batch_step import vector_globals
 from visualenv.errors import ExpressionError
 from visualenv.expr import NUM, check
 from visualenv.expr.codegen import FunctionBuilder, Site, function_globals, local, lower, name
@@ -85,7 +85,7 @@ def test_generated_batch_code_calls_the_columns_version() -> None:
     fb = FunctionBuilder("f", [local("x")])
     fb.assign("_r", lower(checked.tree))
     fb.returns(name("_r"))
-    from visualenv.compiler.vectorized import vectorize
+    from visualenv.compiler.batch_step import vectorize
 
     f = vectorize(fb)
     assert f is not None and "_f_tolerance" in vector_globals()

@@ -219,7 +219,7 @@ def test_a_policy_file_plays_like_its_model(run_dir, tmp_path):
     from safetensors import safe_open
     from stable_baselines3 import PPO
 
-    from visualenv.train.models import load_model
+    from visualenv.train.model_files import load_model
 
     policy_file = tmp_path / "policy.safetensors"
     exported = CliRunner().invoke(main, ["export-policy", "--trust-pickle", str(run_dir / "best_model.zip"), str(policy_file)])

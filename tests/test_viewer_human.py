@@ -18,7 +18,7 @@ from gymnasium.utils.env_checker import check_env
 from PIL import Image
 
 import visualenv
-from visualenv.env.batched import BatchedVectorEnv
+from visualenv.env.batch import BatchedVectorEnv
 from visualenv.viewer.human import shared_board
 
 REPO = Path(__file__).resolve().parents[1]

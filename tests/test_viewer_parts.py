@@ -402,7 +402,7 @@ def test_view_refuses_an_unknown_spec_a_missing_model_and_a_taken_port():
 
 
 def test_a_batch_split_among_workers_refuses_human_mode():
-    from visualenv.env.multi_batch import MultiBatchVectorEnv
+    from visualenv.env.batch_workers import MultiBatchVectorEnv
 
     with pytest.raises(ValueError, match="render_mode='human' shows one batch: leave workers out"):
         MultiBatchVectorEnv("VisualCartPole-v0", 4, 2, render_mode="human")

@@ -207,7 +207,7 @@ def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: boo
     MODEL: an SB3 .zip, a torch .pt or an RLlib checkpoint folder (with --trust-pickle: loading them runs whatever code
     they hold), or a policy file. `play`, `eval` and `--model` then load OUT without unpickling anything (docs/security.md).
     """
-    from visualenv.train.models import export_policy as write
+    from visualenv.train.model_files import export_policy as write
     from visualenv.train.policy_format import WEIGHTS
 
     if Path(out).suffix != WEIGHTS:

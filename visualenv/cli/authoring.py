@@ -77,7 +77,7 @@ def inspect(blend: str, as_json: bool) -> None:
 
     The file is read in a child process: a file that crashes Blender is reported, not fatal.
     """
-    from visualenv.render.blender import blendfile
+    from visualenv.render.blender.scene import blendfile
     from visualenv.tools.mjcf_starter import is_mjcf, mjcf_report
     from visualenv.tools.starter import format_report
 
@@ -98,7 +98,7 @@ def init(blend: str, out_path: str | None, force: bool) -> None:
 
     Given an MJCF model (.xml): MuJoCo physics, actions from its actuators, a camera that frames it, its names as comments.
     """
-    from visualenv.render.blender import blendfile
+    from visualenv.render.blender.scene import blendfile
     from visualenv.tools.mjcf_starter import is_mjcf, mjcf_starter_spec
     from visualenv.tools.starter import starter_spec
 
@@ -117,7 +117,7 @@ def init(blend: str, out_path: str | None, force: bool) -> None:
 
 
 def _blend_path(blend: str) -> Path:
-    from visualenv.render.blender.blendfile import is_blend_file
+    from visualenv.render.blender.scene.blendfile import is_blend_file
 
     path = Path(blend)
     if not is_blend_file(path):

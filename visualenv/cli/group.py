@@ -70,7 +70,7 @@ def main() -> None:
 def model_file(spec: str, value: str) -> str:
     """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/policy.safetensors)."""
     if value == PRETRAINED:
-        from visualenv.train.models import pretrained_model
+        from visualenv.train.model_files import pretrained_model
         from visualenv.env.registration import resolve
         from visualenv.spec.loader import load_spec
 

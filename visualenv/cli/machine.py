@@ -18,7 +18,7 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
     """`bench --batched`: each batch size in a fresh process (or in K workers each, `split`), then the per-process
     vector env with one worker per usable core."""
     from visualenv.tools.bench import bench_parallel
-    from visualenv.tools.bench_batched import bench_batched, lines
+    from visualenv.tools.bench_batch import bench_batched, lines
 
     for k in split or ():
         if not 1 <= k <= min(sizes):
@@ -108,8 +108,8 @@ def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> N
     import time
 
     from visualenv.compat.blender import cached_kernels
-    from visualenv.render.blender.cuda_kernels import compile_cuda_kernels, find_ptxas
-    from visualenv.render.blender.devices import nvidia_archs, shipped_cuda_archs
+    from visualenv.render.blender.runtime.cuda_kernels import compile_cuda_kernels, find_ptxas
+    from visualenv.render.blender.runtime.devices import nvidia_archs, shipped_cuda_archs
 
     archs = archs or nvidia_archs()
     if not archs:

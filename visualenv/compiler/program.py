@@ -27,7 +27,7 @@ from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, function_glob
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.compiler.actions import ActionsCompiler
 from visualenv.compiler.bindings import BindingsCompiler
-from visualenv.compiler.vectorized import vectorizable, vectorize
+from visualenv.compiler.batch_step import vectorizable, vectorize
 from visualenv.compiler import physics as phys
 from visualenv.compiler.physics_reset import build_reset
 from visualenv.compiler.python_hook import checked_dynamics

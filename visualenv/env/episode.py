@@ -7,7 +7,7 @@ says, truncation after ``max_steps``, success (an outcome or a milestone marked
 faults (NaN, an infinity, a state the float32 observation cannot hold) and how
 an episode a fault ended looks. :class:`~visualenv.env.visual_env.VisualEnv`
 asks the scalar methods (Python numbers: its step is a hot path);
-:class:`~visualenv.env.batched.BatchedVectorEnv` asks their array twins, which
+:class:`~visualenv.env.batch.BatchedVectorEnv` asks their array twins, which
 take one value per env, from the same tables. A fault is described (located,
 with the values it read) by one env, the batch's lane, so its message is one
 env's; a batch only names the env: :meth:`StepError.in_env

@@ -25,8 +25,8 @@ SPEC_SUFFIXES = (".yaml", ".yml", ".toml")
 #: ``gymnasium.make("visualenv/<Id>", **options)`` builds what ``visualenv.make(spec, **options)`` builds,
 #: wrappers included (as ALE's ids take their preprocessing options); named as text, so this module never imports it
 ENTRY_POINT = "visualenv.env.make:make"
-#: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``: N envs in one Blender (env/batched.py)
-VECTOR_ENTRY_POINT = "visualenv.env.batched:make_batched"
+#: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``: N envs in one Blender (env/batch.py)
+VECTOR_ENTRY_POINT = "visualenv.env.batch:make_batched"
 #: where the bundled specs live: package data in a wheel; in a checkout, a link to the repository's specs/ folder
 BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 #: the environment variable naming folders of the user's own specs (os.pathsep separated)

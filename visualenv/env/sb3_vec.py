@@ -65,11 +65,11 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     from stable_baselines3.common.monitor import ResultsWriter
     from stable_baselines3.common.vec_env import VecFrameStack, VecMonitor
 
-    from visualenv.env.batched import make_batched
-    from visualenv.env.sb3_batch import SB3Batch
+    from visualenv.env.batch import make_batched
+    from visualenv.env.batch_sb3 import SB3Batch
 
     if workers is not None:
-        from visualenv.env.multi_batch import MultiBatchVectorEnv
+        from visualenv.env.batch_workers import MultiBatchVectorEnv
 
         batch: Any = MultiBatchVectorEnv(target, n, workers, pin=pin, threads=threads, autoreset_mode="same_step", **kwargs)
     else:

@@ -137,23 +137,23 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
     (`pin`; `threads` sets the render threads instead). `wrapper_class` wraps each env in its
     worker (as in SB3's ``make_vec_env``); kwargs go to :func:`visualenv.make` (render, frame_stack, params, ...).
 
-    ``batched=True`` gives a :class:`~visualenv.env.batched.BatchedVectorEnv` instead: all `n` envs in
+    ``batched=True`` gives a :class:`~visualenv.env.batch.BatchedVectorEnv` instead: all `n` envs in
     this process and one Blender scene, one render call per step (kwargs: render, params,
     autoreset_mode, render_mode and the renderer options; stack frames with SB3's VecFrameStack).
     With ``workers=K`` as well, K processes each hold a batch of about n / K envs, each confined to its
-    share of the cores (:class:`~visualenv.env.multi_batch.MultiBatchVectorEnv`), still one vector env of `n` envs.
+    share of the cores (:class:`~visualenv.env.batch_workers.MultiBatchVectorEnv`), still one vector env of `n` envs.
     """
     if workers is not None and not batched:
         raise ValueError("workers= splits a batch among processes: it goes with batched=True (without it, each env has its own process)")
     if batched:
-        from visualenv.env.batched import make_batched
+        from visualenv.env.batch import make_batched
 
         per_env = sorted(k for k in ("frame_stack", "grayscale", "resize") if kwargs.get(k) not in (None, False))
         if per_env or wrapper_class is not None:
             raise ValueError(f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
                              "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)")
         if workers is not None:
-            from visualenv.env.multi_batch import MultiBatchVectorEnv
+            from visualenv.env.batch_workers import MultiBatchVectorEnv
 
             return MultiBatchVectorEnv(target, n, workers, pin=pin, threads=threads, **kwargs)
         if threads is not None:

@@ -1,12 +1,12 @@
 """N envs' simulations stepped together, their named values read as numpy columns across envs.
 
-A batch of a physics spec runs the program's vectorised step (:mod:`visualenv.compiler.vectorized`)
+A batch of a physics spec runs the program's vectorised step (:mod:`visualenv.compiler.batch_step`)
 on columns: its reads of the model's names and its MuJoCo step are this module's. Env i steps on
 its own MjModel (that of its lane, so env i of a batch is env i alone), ``frame_skip`` physics
 steps as the spec's convention makes them, in one call for the batch:
 
 * by MuJoCo's own batch API where the installed mujoco has it and it fits the spec
-  (:mod:`visualenv.physics.mujoco_batch`): its C threads step the envs, and what they computed
+  (:mod:`visualenv.physics.batch_mujoco`): its C threads step the envs, and what they computed
   comes back as ``(N, size)`` arrays;
 * else each lane's MjData, split over a thread pool where there are cores for it (MuJoCo releases
   the GIL while it steps), each env's arrays copied into ``(N, size)`` arrays after its step.
@@ -29,7 +29,7 @@ from typing import Any, Callable, Iterable, Mapping, Sequence
 import numpy as np
 
 from visualenv.physics.model_fields import MODEL_PREFIX, SCALARS, array_view
-from visualenv.physics.mujoco_batch import MujocoBatch, batch_module
+from visualenv.physics.batch_mujoco import MujocoBatch, batch_module
 from visualenv.physics.simulation import FATAL_WARNINGS, Simulation, touching
 
 #: environment variable: threads that step a batch's simulations (default: see :func:`default_workers`)

@@ -12,7 +12,7 @@ zooms (``lens``) or scales, a turning camera past its envs or with a depth
 observation are refused when the batch is built (``BatchedVectorEnv(...)``),
 not at its first render. Objects of a .blend file (their types, parents,
 constraints) are only known to Blender: the renderer checks those again when it
-builds the scene, with the same messages (:mod:`visualenv.render.blender.batched`).
+builds the scene, with the same messages (:mod:`visualenv.render.blender.batch.renderer`).
 """
 
 from __future__ import annotations

@@ -7,7 +7,7 @@ from a generator of its own (:func:`distraction_generator`), so the state, the r
 are those of the same env without distractions, and the same seed draws the same distractions.
 
 A :class:`Distraction` is renderer-neutral numbers; a renderer applies it (Blender:
-:mod:`visualenv.render.blender.distractions`). Colours are drawn per material in the renderer's order from
+:mod:`visualenv.render.blender.look.distraction_scene`). Colours are drawn per material in the renderer's order from
 ``colors_seed``, so that the numbers here do not depend on how many materials a scene has.
 """
 

@@ -56,7 +56,7 @@ def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0,
         view = env.render()
         assert view is not None
         Image.fromarray(side_by_side(obs, view)).save(tmp / "preview.png")
-        from visualenv.render.blender.export import save_blend
+        from visualenv.render.blender.scene.export import save_blend
 
         save_blend(env.renderer.scene, tmp / "scene.blend")  # type: ignore[attr-defined]
         text = Path(source).read_bytes()

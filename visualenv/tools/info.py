@@ -1,6 +1,6 @@
 """`visualenv info`: versions, cores, and what Blender can render on this machine.
 
-Blender is probed in a child process (:mod:`visualenv.render.blender.probe`) with a time
+Blender is probed in a child process (:mod:`visualenv.render.blender.runtime.probe`) with a time
 limit, so a GPU driver that crashes or hangs is reported, never fatal: ``info`` always exits 0.
 """
 
@@ -18,7 +18,7 @@ from visualenv.env.cores import usable_cores
 from visualenv.render.base import CYCLES_BACKENDS as BACKENDS
 from visualenv.versions import __version__, mujoco_version
 
-PROBE = [sys.executable, "-m", "visualenv.render.blender.probe"]
+PROBE = [sys.executable, "-m", "visualenv.render.blender.runtime.probe"]
 PROBE_TIMEOUT = 120.0
 WARM_TIMEOUT = 1800.0  # compiling Cycles' kernels from PTX takes minutes (sm_90)
 

@@ -1,6 +1,6 @@
 """`visualenv inspect` and `visualenv init`: what a .blend holds, in words, and a starter spec over it.
 
-Both work from :func:`visualenv.render.blender.blendfile.describe` (the file is read in a child process), so this
+Both work from :func:`visualenv.render.blender.scene.blendfile.describe` (the file is read in a child process), so this
 module needs no Blender itself.
 """
 

@@ -67,7 +67,7 @@ def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str],
     from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
     from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_seed
-    from visualenv.train.models import load_model, save_policy
+    from visualenv.train.model_files import load_model, save_policy
 
     spec_path = str(resolve(config.spec))
     mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there

@@ -28,7 +28,7 @@ import numpy as np
 
 from visualenv.compat import mkl
 from visualenv.env.wrappers import FrameStack, subspaces
-from visualenv.train.models import load_model, stacked_like
+from visualenv.train.model_files import load_model, stacked_like
 from visualenv.train.reproducible import machine_record, pinned_inference
 from visualenv.train.run_folder import RESULT_KEYS, RunFolder, legacy_eval_seed, read_run
 
@@ -241,7 +241,7 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
 
     Unset arguments take the run's values (config.json and results.json beside the model),
     else PPO, 100 episodes and :data:`FRESH_SEED`; the run's final evaluation is replayed when the
-    seed is the run's. `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.models.load_model`).
+    seed is the run's. `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`).
     `distractions`: the observations distracted at this difficulty (the results say so in ``distractions``).
     """
     from gymnasium import spaces

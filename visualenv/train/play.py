@@ -12,7 +12,7 @@ from visualenv.files import make_dir
 from visualenv.render.images import side_by_side
 from visualenv.errors import VisualEnvError
 from visualenv.env.wrappers import FrameStack
-from visualenv.train.models import load_model, stacked_like
+from visualenv.train.model_files import load_model, stacked_like
 from visualenv.compat import mkl
 from visualenv.train.reproducible import pinned_inference
 
@@ -60,7 +60,7 @@ def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episode
          view_size: int | None = None, trust_pickle: bool = False) -> list[Episode]:
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation.
 
-    `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.models.load_model`)."""
+    `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`)."""
     if record:
         check_recording(record)
     mkl.pin()  # before the model is built (its initialisation calls MKL): the actions eval's episodes had

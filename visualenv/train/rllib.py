@@ -217,7 +217,7 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
     from visualenv.train.plots import training_plots
     from visualenv.env.registration import resolve
-    from visualenv.train.models import load_model
+    from visualenv.train.model_files import load_model
     from visualenv.train.rllib_setup import check_address
     from visualenv.env.cores import usable_cores
     from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_record, selection_seed
@@ -273,7 +273,7 @@ def _train_loop(config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env
                 steps: int) -> dict[str, Any]:
     from tqdm import tqdm
 
-    from visualenv.train.models import save_rllib_module
+    from visualenv.train.model_files import save_rllib_module
     from visualenv.train.rllib_setup import RLlibPolicy
 
     evaluations = _Evaluations(folder.evaluations)

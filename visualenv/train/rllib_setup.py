@@ -77,7 +77,7 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
     ``batched`` with ``num_envs`` (RLlib adds it when it calls the vector entry point): the runner's
     envs as one BatchedVectorEnv, frames stacked by :class:`VectorFrameStack`.
     """
-    from visualenv.env.batched import BatchedVectorEnv
+    from visualenv.env.batch import BatchedVectorEnv
     from visualenv.env.cores import claim_core
     from visualenv.env.make import make
     from visualenv.env.wrappers import VectorFrameStack

@@ -31,7 +31,7 @@ from visualenv.env.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.train.evaluation import (FINAL_EPISODES, evaluation_line, final_evaluation, final_seed, make_eval_env, selection_record,
                                         selection_seed)
-from visualenv.train.models import algorithm_class, load_model, save_policy
+from visualenv.train.model_files import algorithm_class, load_model, save_policy
 from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule

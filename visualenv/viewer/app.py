@@ -8,7 +8,7 @@ from typing import Callable
 
 from visualenv.env.registration import read_header, resolve
 from visualenv.errors import VisualEnvError
-from visualenv.train.models import load_model, pretrained_model
+from visualenv.train.model_files import load_model, pretrained_model
 from visualenv.viewer.board import Board
 from visualenv.viewer.server import ViewerServer, is_local
 from visualenv.viewer.session import DEFAULT_VIEW, Agent, Session, ViewOptions

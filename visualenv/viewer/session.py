@@ -25,7 +25,7 @@ from visualenv.env.visual_env import VisualEnv
 from visualenv.env.wrappers import FrameStack
 from visualenv.errors import SpecError, VisualEnvError
 from visualenv.spec.loader import load_spec
-from visualenv.train.models import stacked_like
+from visualenv.train.model_files import stacked_like
 from visualenv.train.play import with_view
 from visualenv.viewer.board import VIEW, Board, ViewPacer, observation_pictures, plain
 from visualenv.viewer.controls import Controls, controls_for

@@ -19,17 +19,17 @@ from visualenv.render.pixels import first_channel, read_bmp, to_grayscale
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, Renderer, RendererOptions
 from visualenv.render.distractions import Distraction
 from visualenv.render.frames import Frames
-from visualenv.render.blender import settings as cfg
-from visualenv.render.blender import user_file
-from visualenv.render.blender.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
-from visualenv.render.blender.at_exit import track
+from visualenv.render.blender.runtime import settings as cfg
+from visualenv.render.blender.scene import user_file
+from visualenv.render.blender.look.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
+from visualenv.render.blender.runtime.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
-from visualenv.render.blender.distractions import DistractionRig
+from visualenv.render.blender.look.distraction_scene import DistractionRig
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
-from visualenv.render.blender.mjcf import build_physics_objects, show_model_sky
-from visualenv.render.blender.mujoco_look import ambient, backdrop, light_scene, raw_images
-from visualenv.render.blender.scene import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
-from visualenv.render.blender.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
+from visualenv.render.blender.scene.mjcf import build_physics_objects, show_model_sky
+from visualenv.render.blender.look.mujoco import ambient, backdrop, light_scene, raw_images
+from visualenv.render.blender.scene.build import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
+from visualenv.render.blender.look.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
 from visualenv.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
 from visualenv.render.plan import CameraObject
 

@@ -17,7 +17,7 @@ import numpy as np
 from mathutils import Matrix, Vector
 
 from visualenv.compat.blender import compile_camera_shader
-from visualenv.render.blender.log import blender_output
+from visualenv.render.blender.runtime.log import blender_output
 
 
 #: the tiles shader, written once for both cameras: @NAME@ and the parts a turning camera adds (@ROTATIONS@, its

@@ -1,4 +1,4 @@
-"""What a .blend holds, as a spec writer needs it; run in a child process (see :mod:`visualenv.render.blender.blendfile`).
+"""What a .blend holds, as a spec writer needs it; run in a child process (see :mod:`visualenv.render.blender.scene.blendfile`).
 
 Opening a user's file can crash Blender, so this module is the body of a reader process: it reads
 requests (one JSON line: ``{"path": ...}``) on stdin and answers each with one JSON line on the
@@ -15,8 +15,8 @@ from typing import Any
 
 import bpy
 
-from visualenv.render.blender.autorun import turn_autorun_off
-from visualenv.render.blender.user_file import animated_fcurves, constraint_sets
+from visualenv.render.blender.runtime.autorun import turn_autorun_off
+from visualenv.render.blender.scene.user_file import animated_fcurves, constraint_sets
 
 _R = 4  # decimals of the numbers reported
 #: seconds without a request after which the reader exits (a process that builds once keeps no idle Blender)

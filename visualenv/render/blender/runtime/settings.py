@@ -30,7 +30,7 @@ from typing import Any
 import bpy
 
 from visualenv.compat.blender import use_cached_kernels
-from visualenv.render.blender.devices import compile_notice, detect_gpu, kernel_facts
+from visualenv.render.blender.runtime.devices import compile_notice, detect_gpu, kernel_facts
 from visualenv.render.plan import RenderSettings
 
 log = logging.getLogger("visualenv.render")

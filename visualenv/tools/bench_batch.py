@@ -10,7 +10,7 @@ where an image is split, or where ``--autoreset same_step`` renders the envs it
 reset again), and resident memory per env. The
 per-process vector env (one Blender per worker, as many workers as usable
 cores) runs beside it for comparison. ``--workers K`` splits each size among K worker
-processes (:class:`~visualenv.env.multi_batch.MultiBatchVectorEnv`), timed as a whole.
+processes (:class:`~visualenv.env.batch_workers.MultiBatchVectorEnv`), timed as a whole.
 Figures only: nothing is asserted.
 """
 
@@ -38,7 +38,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     """
     import psutil
 
-    from visualenv.env.batched import BATCH_BACKEND, BatchedVectorEnv
+    from visualenv.env.batch import BATCH_BACKEND, BatchedVectorEnv
     from visualenv.render.blender import BlenderRenderer
     from visualenv.render.frames import Frames
     from visualenv.render.profile import Profile
@@ -92,7 +92,7 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
 
 def copied_renderer(plan: Any, options: Any, *, num_envs: int) -> Any:
     """The batch renderer that copies every object (no instances), as a backend entry point: the figures before."""
-    from visualenv.render.blender.batched import BatchedBlenderRenderer
+    from visualenv.render.blender.batch.renderer import BatchedBlenderRenderer
 
     return BatchedBlenderRenderer(plan, options, num_envs=num_envs, instanced=False)
 
@@ -113,7 +113,7 @@ def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, 
     """
     import psutil
 
-    from visualenv.env.multi_batch import MultiBatchVectorEnv
+    from visualenv.env.batch_workers import MultiBatchVectorEnv
     from visualenv.tools.bench import device_option
 
     start = time.perf_counter()

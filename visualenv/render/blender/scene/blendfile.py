@@ -1,6 +1,6 @@
 """Read a user's .blend in a child process first, so a file that crashes Blender cannot take this process down.
 
-One reader process (``python -m visualenv.render.blender.describe``) per process serves every
+One reader process (``python -m visualenv.render.blender.scene.describe``) per process serves every
 request and is started again after a crash. Its answer (:func:`describe`) lists what the file holds
 (scenes, cameras, lights, meshes, materials, animation, the settings a spec overrides) for
 ``visualenv inspect`` and ``init``, and what is missing (linked libraries, image files) for the
@@ -33,7 +33,7 @@ class _Reader:
     """The reader process: one JSON line in, one out; it exits by itself when idle (IDLE_EXIT)."""
 
     def __init__(self, command: list[str] | None = None) -> None:
-        self.command = command or [sys.executable, "-m", "visualenv.render.blender.describe"]
+        self.command = command or [sys.executable, "-m", "visualenv.render.blender.scene.describe"]
         self.proc: subprocess.Popen[str] | None = None
         self.owner = os.getpid()  # a forked process starts its own reader rather than share the pipes
 
@@ -103,7 +103,7 @@ _answers: dict[tuple[str, int, int], dict[str, Any]] = {}
 
 
 def describe(path: str | Path, *, timeout: float = READ_TIMEOUT) -> dict[str, Any]:
-    """What the .blend at `path` holds (see :mod:`visualenv.render.blender.describe`); BlendReadError if Blender cannot read it."""
+    """What the .blend at `path` holds (see :mod:`visualenv.render.blender.scene.describe`); BlendReadError if Blender cannot read it."""
     path = str(Path(path).resolve())
     stat = os.stat(path)
     key = (path, stat.st_size, stat.st_mtime_ns)

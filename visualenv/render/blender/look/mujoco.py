@@ -40,7 +40,7 @@ from typing import Any
 import bpy
 
 from visualenv.physics.scene import Headlight, LightInfo, PhysicsScene
-from visualenv.render.blender.materials import tinted_base
+from visualenv.render.blender.look.materials import tinted_base
 
 #: MuJoCo's global ambient when nothing lights the model (``initLights``: no light, headlight off)
 UNLIT_AMBIENT = 0.3

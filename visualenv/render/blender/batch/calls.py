@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import math
 
-from visualenv.render.blender.tiles_camera import grid_shape
+from visualenv.render.blender.batch.tiles_camera import grid_shape
 
 #: the largest image one render call makes; past it a batch is rendered in several calls: a larger image
 #: comes back black from the in-memory readback (Cycles' result then reaches Blender in tiles, after the

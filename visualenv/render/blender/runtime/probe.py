@@ -1,4 +1,4 @@
-"""``python -m visualenv.render.blender.probe``: what ``visualenv info`` reports about Blender, as one JSON object.
+"""``python -m visualenv.render.blender.runtime.probe``: what ``visualenv info`` reports about Blender, as one JSON object.
 
 Run in a child process, so that a GPU driver that crashes or hangs takes only the probe with it.
 Its own module because it gathers from both :mod:`.devices` (Cycles devices, EEVEE's context,
@@ -12,13 +12,13 @@ import json
 import sys
 from typing import Any
 
-from visualenv.render.blender.tiles_camera import tiles_camera_check
-from visualenv.render.blender.devices import NVIDIA, cycles_devices, gpu_context, kernel_caches, kernel_facts, kernels_to_compile, warm_gpu
+from visualenv.render.blender.batch.tiles_camera import tiles_camera_check
+from visualenv.render.blender.runtime.devices import NVIDIA, cycles_devices, gpu_context, kernel_caches, kernel_facts, kernels_to_compile, warm_gpu
 
 
 def probe(warm: bool = False) -> dict[str, Any]:
     """Everything `visualenv info` reports about Blender; each part that fails says why instead of failing the rest."""
-    from visualenv.render.blender.log import blender_output
+    from visualenv.render.blender.runtime.log import blender_output
 
     import bpy
 

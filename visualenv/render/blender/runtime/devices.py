@@ -1,6 +1,6 @@
 """What Blender can render on here: Cycles devices per backend, the GPU context of EEVEE/Workbench, kernel caches.
 
-:mod:`visualenv.render.blender.probe` runs these in a child process for ``visualenv info``
+:mod:`visualenv.render.blender.runtime.probe` runs these in a child process for ``visualenv info``
 (a driver that crashes takes only the probe with it).
 
 Also the one-line notice before a process's first Cycles GPU render when Blender must first
@@ -177,7 +177,7 @@ def gpu_context() -> dict[str, Any]:
 
 def warm_gpu() -> dict[str, Any]:
     """Render one small Cycles frame on the GPU, so the driver compiles and caches the kernels now."""
-    from visualenv.render.blender.log import blender_output
+    from visualenv.render.blender.runtime.log import blender_output
 
     backend = detect_gpu()
     if backend is None:

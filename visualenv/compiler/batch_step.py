@@ -11,14 +11,14 @@ and both versions compute the same thing:
 * an ``if`` statement (the chosen action's inputs, the outcome chain, a
   milestone) becomes masked assignments: ``x = where(mask, new, x)``;
 * the function table is swapped for one on columns (``sin`` -> ``np.sin``, ...), which gives
-  Python's values to the bit (:mod:`visualenv.compiler.vector_functions`).
+  Python's values to the bit (:mod:`visualenv.compiler.batch_functions`).
 
 Both branches of a conditional are evaluated for every env, so an expression
 the scalar code would never reach may divide by zero, and an expression it does
 reach may raise where numpy's gives a number (``clip(1 / x, -1, 1)`` at x = 0 is
 ZeroDivisionError in Python, 1.0 in numpy). So divisions and the functions note
 each value Python raises on, and a batch runs these functions under
-:func:`~visualenv.compiler.vector_functions.float_errors` (numpy's warnings off,
+:func:`~visualenv.compiler.batch_functions.float_errors` (numpy's warnings off,
 the notes collected): after a step in which one was noted, or whose result for an
 env is not finite, the scalar function steps those envs again (every env, when a
 value was noted: the element-wise code cannot say whose), which gives the same
@@ -39,7 +39,7 @@ from typing import Any, Callable
 import numpy as np
 
 from visualenv.expr.codegen import FUNC_PREFIX, POW, FunctionBuilder
-from visualenv.compiler.vector_functions import OPERATORS, vector_functions
+from visualenv.compiler.batch_functions import OPERATORS, vector_functions
 from visualenv.expr.functions import FUNCTIONS
 
 WHERE, ALL, ANY, NOT = "_vwhere", "_vall", "_vany", "_vnot"

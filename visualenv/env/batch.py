@@ -1,9 +1,9 @@
 """N envs in one process and one Blender scene: :class:`BatchedVectorEnv`.
 
 The dynamics of all envs step at once as numpy columns (the program's
-vectorised step, :mod:`visualenv.compiler.vectorized`), and one Cycles call per
+vectorised step, :mod:`visualenv.compiler.batch_step`), and one Cycles call per
 camera renders every env's observation as a tile of one image
-(:class:`~visualenv.render.blender.batched.BatchedBlenderRenderer`).
+(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`).
 
 Env i of a batch reset with seed s is env ``visualenv.make`` reset with seed
 s + i: each env keeps its own random generator (a state-only
@@ -39,7 +39,7 @@ from gymnasium.vector.utils import batch_space
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.compiler.render_plan import checked_options, distractions_plan, observation_space, to_plan, views_plan
-from visualenv.compiler.vector_functions import float_errors
+from visualenv.compiler.batch_functions import float_errors
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.human import HumanDisplay, grid, open_human_display
 from visualenv.env.registration import resolve
@@ -55,7 +55,7 @@ from visualenv.spec.loader import LoadedSpec, load_spec
 from visualenv.spec.options import distraction_settings
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
-BATCH_BACKEND = "visualenv.render.blender.batched:BatchedBlenderRenderer"
+BATCH_BACKEND = "visualenv.render.blender.batch.renderer:BatchedBlenderRenderer"
 
 
 class BatchedVectorEnv(gym.vector.VectorEnv):
@@ -88,7 +88,7 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     Distractions (the spec's ``distractions`` or the option's, docs/distractions.md) are drawn per env: env i draws
     its own from a generator its lane's seed starts, as env i alone draws them (at each of its resets, and every step
-    when dynamic), and its tile shows them (:mod:`visualenv.render.blender.batch_distractions`).
+    when dynamic), and its tile shows them (:mod:`visualenv.render.blender.batch.distraction_draws`).
 
     ``render_mode="human"`` shows a grid of the observations live after every reset and step on the registered display
     (:mod:`visualenv.env.human`: the viewer's local web page) and ``render()`` returns None.
@@ -541,6 +541,10 @@ def _with_rows(obs: Any, rows: np.ndarray, new: Any) -> Any:
     return out
 
 
+#: the keywords of make_batched (and make_vec(batched=True)) that are the batch's own; the rest are renderer options
+BATCH_OPTIONS = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
+
+
 def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:
     """A batch from keyword options as ``visualenv.make`` takes them: :class:`BatchedVectorEnv`'s (render, params,
     autoreset_mode, render_mode, max_episode_steps) and the renderer options (``device``, ``threads``, ``samples``, ``noise``, ``readback``).
@@ -548,6 +552,5 @@ def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: An
     Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``,
     which passes the id's ``max_episode_steps`` (the spec's max_steps, or the one given to make_vec).
     """
-    own = {k: kwargs.pop(k) for k in ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
-           if k in kwargs}
+    own = {k: kwargs.pop(k) for k in BATCH_OPTIONS if k in kwargs}
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

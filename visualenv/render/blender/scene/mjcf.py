@@ -25,8 +25,8 @@ from mathutils import Matrix, Quaternion, Vector
 from visualenv.compat.blender import sort_faces
 from visualenv.physics.scene import GeomShape, LightInfo, PhysicsScene
 from visualenv.physics.texcoords import cube_uv, planar_uv
-from visualenv.render.blender.materials import make_material, show_skybox, tint_image, world_writer
-from visualenv.render.blender.mujoco_look import ambient, light_data, light_material
+from visualenv.render.blender.look.materials import make_material, show_skybox, tint_image, world_writer
+from visualenv.render.blender.look.mujoco import ambient, light_data, light_material
 from visualenv.render.plan import Material
 
 #: round shapes' segments: enough for smooth silhouettes at observation sizes

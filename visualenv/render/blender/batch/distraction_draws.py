@@ -3,16 +3,16 @@
 Env k of a batch draws what env k alone draws (docs/distractions.md), by the batch's own means:
 
 * **camera**: env k's observation camera orbits as the env's own child camera does
-  (:func:`~visualenv.render.blender.distractions.orbit` about the point measured at env k's first render), and the batch
+  (:func:`~visualenv.render.blender.look.distraction_scene.orbit` about the point measured at env k's first render), and the batch
   follows it as it follows a camera that moves and turns (:mod:`batched`): env k's copy is moved so that its orbited
   camera stands where the tiles camera looks from, and env k's rays are turned by its orbited rotation. A change of any
   env's orbit makes Cycles compile the tiles shader again, as for a camera the state turns;
 * **colours**: every material adds a per-env attribute to its colour
-  (:func:`~visualenv.render.blender.distractions.shift_by_attribute`), which each env's instances and copied objects
-  hold (:class:`~visualenv.render.blender.env_attributes.EnvAttributes`). So no static mesh is realized into one mesh
+  (:func:`~visualenv.render.blender.look.distraction_scene.shift_by_attribute`), which each env's instances and copied objects
+  hold (:class:`~visualenv.render.blender.batch.env_attributes.EnvAttributes`). So no static mesh is realized into one mesh
   of every env (its envs would read one shift);
 * **sky and background**: envs share one world, which cannot tell them apart; each env has its own backdrop
-  (:func:`~visualenv.render.blender.distractions.make_backdrops`, as one env has), an instance about its ray origin
+  (:func:`~visualenv.render.blender.look.distraction_scene.make_backdrops`, as one env has), an instance about its ray origin
   whose attributes are its numbers. The copies stand twice the cameras' far clip apart, so that no env's backdrop
   reaches another's.
 
@@ -25,8 +25,8 @@ from typing import Any, Callable
 
 import numpy as np
 
-from visualenv.render.blender.distractions import distracted_materials, make_backdrops, orbit, shift_by_attribute, write_backdrops
-from visualenv.render.blender.env_attributes import EnvAttributes, shift_name
+from visualenv.render.blender.look.distraction_scene import distracted_materials, make_backdrops, orbit, shift_by_attribute, write_backdrops
+from visualenv.render.blender.batch.env_attributes import EnvAttributes, shift_name
 from visualenv.render.distractions import Distraction, color_shifts
 from visualenv.render.plan import Distractions
 
@@ -79,7 +79,7 @@ class BatchDistractions:
 
     def orbited(self, camera: int, poses: np.ndarray, measure: Callable[[int], float]) -> list[np.ndarray]:
         """Each env's camera pose (``(N, 4, 4)``, each in its own copy) orbited by its distraction about its centre, measured once
-        per env by `measure` (:func:`~visualenv.render.blender.distractions.focus_distance`) for this `camera` (a pointer)."""
+        per env by `measure` (:func:`~visualenv.render.blender.look.distraction_scene.focus_distance`) for this `camera` (a pointer)."""
         out = []
         for k, (pose, distraction) in enumerate(zip(poses, self.current)):
             key = (camera, k)

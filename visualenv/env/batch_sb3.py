@@ -1,4 +1,4 @@
-"""SB3's VecEnv API over a :class:`~visualenv.env.batched.BatchedVectorEnv`, or several (MultiBatchVectorEnv) (imports Stable-Baselines3: the train extra)."""
+"""SB3's VecEnv API over a :class:`~visualenv.env.batch.BatchedVectorEnv`, or several (MultiBatchVectorEnv) (imports Stable-Baselines3: the train extra)."""
 
 from __future__ import annotations
 

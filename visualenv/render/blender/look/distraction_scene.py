@@ -4,7 +4,7 @@ sky's shift and the background drawn on a backdrop.
 Each observation camera gets a child camera (the same lens, parented to it) whose local pose is the orbit about the
 point the camera looks at: the parent goes on following its bindings or its MuJoCo body, the child follows it, and
 the observation is rendered through the child. Colours shift where colour bindings write (each Principled
-material's base colour or its tint, :func:`~visualenv.render.blender.materials.color_sockets`), so a MuJoCo look and
+material's base colour or its tint, :func:`~visualenv.render.blender.look.materials.color_sockets`), so a MuJoCo look and
 a bound colour are shifted alike. A value is written only when it changes: Cycles updates a shader on every write.
 
 The sky's shift and the background are drawn on a *backdrop* (:func:`make_backdrops`): a sphere about the camera
@@ -26,9 +26,9 @@ import bpy
 import numpy as np
 from mathutils import Matrix, Vector
 
-from visualenv.render.blender.env_attributes import env_attribute
-from visualenv.render.blender.instance_nodes import geometry_node_group
-from visualenv.render.blender.materials import SHIFTED, color_sockets, ensure_node_tree
+from visualenv.render.blender.batch.env_attributes import env_attribute
+from visualenv.render.blender.batch.instance_nodes import geometry_node_group
+from visualenv.render.blender.look.materials import SHIFTED, color_sockets, ensure_node_tree
 from visualenv.render.distractions import Distraction, background, color_shifts
 
 #: the orbit's centre when a camera's view axis hits nothing: this far along it

@@ -67,7 +67,7 @@ import numpy as np
 
 from visualenv.compat.blender import basis_matrices, check_bpy, mul_m4_m4m4, quat_to_mat3
 from visualenv.render.base import BindingTarget
-from visualenv.render.blender.instance_nodes import (
+from visualenv.render.blender.batch.instance_nodes import (
     COLOR,
     CYCLES_SETTINGS,
     RAY_SETTINGS,
@@ -79,7 +79,7 @@ from visualenv.render.blender.instance_nodes import (
     realizable,
     static_groups,
 )
-from visualenv.render.blender.scene import with_ancestors
+from visualenv.render.blender.scene.build import with_ancestors
 
 #: the bindable properties the instanced path computes; any other binding keeps its object a copy
 COMPUTED = frozenset({"location", "rotation", "scale", "visible", "color"})

@@ -1,6 +1,6 @@
 """The Geometry Nodes groups a batch's instances are drawn with, and the meshes realized or joined once.
 
-:class:`~visualenv.render.blender.instances.InstancedCopies` decides what is instanced; this module builds the node
+:class:`~visualenv.render.blender.batch.instances.InstancedCopies` decides what is instanced; this module builds the node
 groups (an instancer: points -> Instance on Points -> Set Instance Transform; a static group: members joined and
 realized), tells whether a static mesh may be realized with the same pixels (:func:`realizable`: its materials must
 not read its placement, :func:`reads_placement`), and lets a material read each instance's bound colour.
@@ -13,7 +13,7 @@ from typing import Any, Callable, Sequence
 import bpy
 import numpy as np
 
-from visualenv.render.blender.materials import color_sockets
+from visualenv.render.blender.look.materials import color_sockets
 
 #: attribute names on the instancers' points (and so on their instances)
 TRANSFORM, VISIBLE, COLOR = "visualenv_transform", "visualenv_visible", "visualenv_color"

@@ -1,6 +1,6 @@
 """Several batches as one vector env: :class:`MultiBatchVectorEnv`.
 
-One :class:`~visualenv.env.batched.BatchedVectorEnv` renders with one Blender,
+One :class:`~visualenv.env.batch.BatchedVectorEnv` renders with one Blender,
 whose render call uses the threads of one process. To fill a machine with many
 cores (or a GPU, with several scenes in flight), `K` worker processes each hold
 a batch of about n / K envs, confined to their own share of the cores as
@@ -24,6 +24,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from visualenv.compat.glibc import apply_policy
+from visualenv.env.batch import BATCH_OPTIONS
 from visualenv.env.cores import Share, confine, render_threads, worker_cores
 from visualenv.errors import StepError, VisualEnvError, WorkerError
 
@@ -45,8 +46,8 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
     """`num_envs` envs as `workers` batches, one process (and one Blender scene) each, behind one Gymnasium vector env.
 
     Spaces, ``info`` and autoreset (``NEXT_STEP`` or ``SAME_STEP``) are those of one
-    :class:`~visualenv.env.batched.BatchedVectorEnv` of `num_envs` envs; keyword options
-    are :func:`~visualenv.env.batched.make_batched`'s. Each worker renders with the threads
+    :class:`~visualenv.env.batch.BatchedVectorEnv` of `num_envs` envs; keyword options
+    are :func:`~visualenv.env.batch.make_batched`'s. Each worker renders with the threads
     of its share of the cores (``threads`` overrides; ``pin=False`` leaves workers unconfined).
     """
 
@@ -105,8 +106,7 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
 
         program = compile_spec(load_spec(resolve(target)), kwargs.get("params"))
         if kwargs.get("render") is not False and program.spec.observation is not None:
-            own = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
-            options = checked_options({k: v for k, v in kwargs.items() if k not in own})
+            options = checked_options({k: v for k, v in kwargs.items() if k not in BATCH_OPTIONS})
             check_batchable(program.render_plan().with_options(options), size)
 
     # -- Gymnasium API ------------------------------------------------------------------------------
@@ -269,7 +269,7 @@ def _worker(pipe: Any, target: str, size: int, options: dict[str, Any], share: S
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group; the parent decides how to stop
     batch: Any = None
     try:
-        from visualenv.env.batched import make_batched
+        from visualenv.env.batch import make_batched
 
         batch = make_batched(target, size, **options)
         pipe.send((True, {"observation_space": batch.single_observation_space, "action_space": batch.single_action_space,

@@ -26,13 +26,13 @@ from mathutils import Matrix, Vector
 
 from visualenv.compat.blender import reusable_scene_name, sort_faces
 from visualenv.compat.glibc import release_free_memory
-from visualenv.render.blender.blendfile import BlendReadError
-from visualenv.render.blender import blendfile
-from visualenv.render.blender.autorun import turn_autorun_off
+from visualenv.render.blender.scene.blendfile import BlendReadError
+from visualenv.render.blender.scene import blendfile
+from visualenv.render.blender.runtime.autorun import turn_autorun_off
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
-from visualenv.render.blender.log import blender_output, marked
+from visualenv.render.blender.runtime.log import blender_output, marked
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
-from visualenv.render.blender.materials import fix_uv_coordinates, make_material, make_world
+from visualenv.render.blender.look.materials import fix_uv_coordinates, make_material, make_world
 from visualenv.render.plan import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Scene, SceneObject
 from visualenv.source_map import SourceMap
 

@@ -51,17 +51,17 @@ from visualenv.render.distractions import Distraction
 from visualenv.render.frames import Frames, Poses
 from visualenv.render.batch_limits import (MAX_LINKED_ENVS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
                                            sun_world_error, turning_error, world_error)
-from visualenv.render.blender.batch_calls import MAX_IMAGE_SIDE, alone_limit, envs_per_call
-from visualenv.render.blender.batch_distractions import BatchDistractions
-from visualenv.render.blender.distractions import focus_distance
-from visualenv.render.blender.env_attributes import CAMERA_TURN, EnvAttributes, read_per_env, turn_to_env_cameras
-from visualenv.render.blender.instances import InstancedCopies, removable
-from visualenv.render.blender.copies import (Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights, make_copy,
+from visualenv.render.blender.batch.calls import MAX_IMAGE_SIDE, alone_limit, envs_per_call
+from visualenv.render.blender.batch.distraction_draws import BatchDistractions
+from visualenv.render.blender.look.distraction_scene import focus_distance
+from visualenv.render.blender.batch.env_attributes import CAMERA_TURN, EnvAttributes, read_per_env, turn_to_env_cameras
+from visualenv.render.blender.batch.instances import InstancedCopies, removable
+from visualenv.render.blender.batch.copies import (Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights, make_copy,
                                              one_colour, warn_shared_lights)
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
-from visualenv.render.blender.tiles_camera import (TURNING_NAME, grid_shape, make_tiles_camera, rotation_of, tile,
+from visualenv.render.blender.batch.tiles_camera import (TURNING_NAME, grid_shape, make_tiles_camera, rotation_of, tile,
                                                    tiles_text, unit_columns)
-from visualenv.render.blender.scene import BuiltScene, with_ancestors
+from visualenv.render.blender.scene.build import BuiltScene, with_ancestors
 from visualenv.bindables import BINDABLES
 from visualenv.render.plan import CameraObject
 

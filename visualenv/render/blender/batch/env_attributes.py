@@ -2,7 +2,7 @@
 
 Envs share their materials (instances of one mesh, linked duplicates). A number that differs from env to env is read
 by an Attribute node of type Instancer, which an instance answers with its own attribute (written per env by
-:meth:`~visualenv.render.blender.instances.InstancedCopies.write_env_attributes`) and a copied object with its own
+:meth:`~visualenv.render.blender.batch.instances.InstancedCopies.write_env_attributes`) and a copied object with its own
 custom property (:class:`EnvAttributes`). Their names start with :data:`PREFIX`. A batch writes two kinds:
 
 * each env's shift of a material's colour, a distraction (:mod:`batch_distractions`);
@@ -85,7 +85,7 @@ class EnvAttributes:
 
     @classmethod
     def of_copies(cls, copies: Sequence[Any], originals: Sequence[Any], instances: Any) -> EnvAttributes:
-        """For a batch's copies (:class:`~visualenv.render.blender.copies.Copy`; copy 0's objects are `originals`, those
+        """For a batch's copies (:class:`~visualenv.render.blender.batch.copies.Copy`; copy 0's objects are `originals`, those
         that are not instances; another's, those in its anchor's collection) and its instances."""
         return cls([list(originals)] + [[o for o in copy.anchor.users_collection[0].objects if o != copy.anchor]
                                         if copy.anchor is not None else [] for copy in copies[1:]], instances)

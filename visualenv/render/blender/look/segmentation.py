@@ -24,9 +24,9 @@ import bpy
 
 from visualenv.errors import SpecError
 from visualenv.render.base import RenderPlan
-from visualenv.render.blender.materials import ensure_node_tree, set_background
-from visualenv.render.blender.scene import BuiltScene
-from visualenv.render.blender.settings import EngineConfig
+from visualenv.render.blender.look.materials import ensure_node_tree, set_background
+from visualenv.render.blender.scene.build import BuiltScene
+from visualenv.render.blender.runtime.settings import EngineConfig
 from visualenv.render.plan import MeshObject, PrimitiveObject
 
 #: one ray per pixel, through its centre (Cycles' least filter width): exact ids, the same at every render

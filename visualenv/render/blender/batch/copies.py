@@ -16,8 +16,8 @@ import bpy
 from mathutils import Matrix, Vector
 
 from visualenv.render.batch_limits import MAX_LINKED_ENVS
-from visualenv.render.blender.materials import SKYBOX
-from visualenv.render.blender.scene import BuiltScene, aim
+from visualenv.render.blender.look.materials import SKYBOX
+from visualenv.render.blender.scene.build import BuiltScene, aim
 
 
 class Copy:

@@ -1,6 +1,6 @@
 """The language's functions on numpy columns, giving what Python's give one env, to the bit, on any CPU.
 
-A batch must compute what each env alone computes (:mod:`visualenv.compiler.vectorized`).
+A batch must compute what each env alone computes (:mod:`visualenv.compiler.batch_step`).
 Three things stand in the way, and each is handled here:
 
 * numpy's loops for ``tan``, ``exp``, ``atan2``... are its own SIMD code where the CPU has
