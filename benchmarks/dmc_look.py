@@ -3,7 +3,7 @@
 dm_control renders with MuJoCo's OpenGL renderer (``MUJOCO_GL=egl`` unless set to
 osmesa or glfw, in a child process, so that its GL context never meets Blender); visualenv's
 frames are Blender's (Cycles, 1 sample, ``physics.look: mujoco``). Both start
-from the same seed (their states are equal: tests/test_dmc_parity.py) and step
+from the same seed (their states are equal: tests/specs/test_dmc_parity.py) and step
 the same actions with no action repeat. Prints, per state, the mean colour of
 each region of visualenv's segmentation (the sky, each body's geoms; the
 world body's: floor and decorations) in both frames, and writes one PNG: a row

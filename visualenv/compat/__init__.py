@@ -9,7 +9,7 @@ moves; here each is found, named and checked. The rule:
 * one module per dependency (:mod:`~visualenv.compat.glibc`, :mod:`~visualenv.compat.mkl`,
   :mod:`~visualenv.compat.gymnasium`, :mod:`~visualenv.compat.blender`, :mod:`~visualenv.compat.mujoco`,
   :mod:`~visualenv.compat.ray`, :mod:`~visualenv.compat.sb3`), and nothing outside this package reaches a
-  dependency's internals (``tests/test_compat.py`` searches the package for ``ctypes``, ``mallopt``,
+  dependency's internals (``tests/compat/test_private_access.py`` searches the package for ``ctypes``, ``mallopt``,
   ``malloc_trim``, frame inspection and MKL's service calls, for imports of another package's private modules
   and names, and for ``X._name`` where visualenv defines no ``_name``);
 * each module says which versions it was checked against and uses its workaround only on those (elsewhere

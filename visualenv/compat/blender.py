@@ -2,7 +2,7 @@
 
 Each part says what it relies on and why no documented mechanism does the job. All were checked against the
 bpy versions in :data:`CHECKED_BPY`; on another bpy each warns once (:func:`check_bpy`) and the CUDA kernel
-cache is left unused. ``tests/test_compat_blender.py`` checks every part against the installed bpy and fails,
+cache is left unused. ``tests/compat/test_blender.py`` checks every part against the installed bpy and fails,
 naming the part, when bpy moves.
 
 - bpy's bundled Python packages (``oslquery``, which compiling an OSL camera shader needs) on ``sys.path``, and
@@ -56,7 +56,7 @@ def check_bpy(part: str) -> bool:
     if part not in _warned:
         _warned.add(part)
         warnings.warn(f"visualenv's {part} relies on Blender internals checked against bpy {', '.join(CHECKED_BPY)}, "
-                      f"not {version}: run tests/test_compat_blender.py", RuntimeWarning, stacklevel=3)
+                      f"not {version}: run tests/compat/test_blender.py", RuntimeWarning, stacklevel=3)
     return False
 
 

@@ -3,7 +3,7 @@
 Checked against glibc 2.36 (Debian 12, x86-64). What is used is glibc's documented interface: ``mallopt``'s
 ``M_MMAP_MAX`` and ``M_TRIM_THRESHOLD``, ``malloc_trim`` (mallopt(3), malloc_trim(3)) and the matching
 ``glibc.malloc`` tunables (2.26 and later); it is used on glibc from :data:`OLDEST` on, and on no other C
-library (macOS, musl: nothing is done). ``tests/test_compat_glibc.py`` fails when the symbols are gone or the
+library (macOS, musl: nothing is done). ``tests/compat/test_glibc.py`` fails when the symbols are gone or the
 policy stops doing what it says.
 
 **The policy: freed memory kept.** A batch's render call allocates and frees Blender's render result and

@@ -13,7 +13,7 @@ and the spec it sets on the env (``env.unwrapped.spec``, the one an env can read
 documented place that holds it. So :func:`make_time_limit` reads it from ``gymnasium.make``'s own frame while
 ``make`` calls the entry point: its argument ``max_episode_steps``, else its ``env_spec``'s. It does so on the
 versions in :data:`CHECKED` alone, and only when ``gymnasium.make`` is the entry point's caller; elsewhere it
-gives None (the env then truncates at its spec's ``max_steps``). ``tests/test_compat_gymnasium.py`` fails when
+gives None (the env then truncates at its spec's ``max_steps``). ``tests/compat/test_gymnasium.py`` fails when
 Gymnasium moves: another version, or a ``make`` that sets the limit on the env's spec (the documented route
 this module should then take instead).
 

@@ -16,7 +16,7 @@ mode costs speed for nothing), and only MKL can say which mode it runs in, which
 states. torch exposes no MKL API: it links MKL statically into ``libtorch_cpu.so`` and exports these functions
 under MKL's internal names (``mkl_serv_cbwr_get``, ``mkl_serv_cbwr_set``), a detail of each torch build. So the
 call is made only on the torch versions in :data:`CHECKED_TORCH`; elsewhere such a process is recorded as not
-pinned. ``tests/test_compat_mkl.py`` fails when torch moves.
+pinned. ``tests/compat/test_mkl.py`` fails when torch moves.
 
 Checked against torch 2.13.0+cpu (x86-64 Linux wheel).
 """

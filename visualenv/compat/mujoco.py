@@ -12,7 +12,7 @@ Each gate tests for the field or call itself, so that every supported MuJoCo tak
 * :func:`batch_api`: ``mujoco.batch``, which steps many simulations in one call, came with MuJoCo 3.17.
 
 The fields' history was read in MuJoCo's headers and Python bindings at each release tag from 3.2.0 to 3.12.0, and
-every gate runs on the installed 3.17. ``tests/test_compat_mujoco.py`` fails when MuJoCo moves: another version (read
+every gate runs on the installed 3.17. ``tests/compat/test_mujoco.py`` fails when MuJoCo moves: another version (read
 its changelog for these fields, then add it to :data:`CHECKED`), or a field or call gone.
 """
 

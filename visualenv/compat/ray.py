@@ -10,7 +10,7 @@ itself.
 **RLlib's deprecation warnings.** RLlib warns about its own deprecated constructors while it builds its own modules;
 they go to the logger of the module that warns, :data:`DEPRECATION_LOGGER`, which visualenv quiets while it builds them.
 
-``tests/test_compat_ray.py`` fails when Ray moves: another version, the call or the logger's module gone.
+``tests/compat/test_ray.py`` fails when Ray moves: another version, the call or the logger's module gone.
 
 Checked against Ray 2.60.0 (the version the ``ray`` extra pins).
 """

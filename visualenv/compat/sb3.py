@@ -8,7 +8,7 @@ data. SB3 keeps that record in ``BaseModel._get_constructor_parameters()``, whic
 ``env_method`` and ``env_is_wrapped`` (None: every env; an int: that env; else the envs listed), read as SB3's own
 VecEnvs read it, through ``VecEnv._get_indices``.
 
-Neither has a documented alternative, so both are called on every version; ``tests/test_compat_sb3.py`` fails when
+Neither has a documented alternative, so both are called on every version; ``tests/compat/test_sb3.py`` fails when
 Stable-Baselines3 moves: another version (read these methods in it, then add it to :data:`CHECKED`), or a method gone.
 
 Checked against Stable-Baselines3 2.3.0 to 2.8.0 (their source) and 2.9.2 (installed).

@@ -1,7 +1,7 @@
 """A batch's simulations stepped by MuJoCo's own batch API (``mujoco.batch.Batch``, MuJoCo 3.17 and later).
 
 ``mujoco.batch`` steps many simulations on its own C thread pool, bit-identical to a loop of
-MjData (its documentation; ``tests/test_mujoco_batch.py`` holds each env of a batch to one env
+MjData (its documentation; ``tests/physics/test_mujoco_batch.py`` holds each env of a batch to one env
 alone, resets and blow-ups included), and gives what a step computed as ``(N, size)`` arrays: a
 batch step is one call, with no Python per env. It is *persistent* (one MjData per simulation,
 each a whole MjData as a lane's would be) and runs each simulation on its lane's own MjModel

@@ -187,7 +187,7 @@ def without_textures(path: Path, model: Any) -> Any:
 
     Textures only draw, and the renderer reads them from the model once. Kept, every env would hold its own copy of
     them: gigabytes in a batch of DMC envs (results/benchmarks/model-without-textures.md). MuJoCo's MjSpec deletes
-    them and compiles the rest: every other array is the same (``tests/test_physics_spec.py``). Where this MuJoCo's
+    them and compiles the rest: every other array is the same (``tests/physics/test_spec_section.py``). Where this MuJoCo's
     MjSpec cannot (no ``delete``: :func:`~visualenv.compat.mujoco.spec_deletes`), or MuJoCo refuses to compile the
     spec (a ValueError, as MuJoCo's Python calls raise its errors), the model as it is.
     """

@@ -50,7 +50,7 @@ class GeomShape:
     unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
     texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
     #: added to a finite plane's vertices before its 2-D texture's mapping: MuJoCo 3.17's renderer lays the texture from
-    #: the plane's (-x, +y) corner, not its centre (checked against mujoco.Renderer: tests/test_physics_texcoords.py)
+    #: the plane's (-x, +y) corner, not its centre (checked against mujoco.Renderer: tests/physics/test_texcoords.py)
     texorigin: tuple[float, float, float] = (0.0, 0.0, 0.0)
     #: its material's emission (times its colour), specular and shininess, as MuJoCo's renderer lights it (no material: 0, 0.5, 0.5)
     emission: float = 0.0

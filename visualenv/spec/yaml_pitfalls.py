@@ -4,7 +4,7 @@
 :mod:`visualenv.spec.source` asks :func:`explain_syntax_error` for the message of a syntax error (PyYAML's own
 words first, then what they mean for a spec) and reads the number and boolean rules here; the loader adds
 :data:`~visualenv.source_map.COMMA_HINT` to every problem inside a ``{...}`` or ``[...]`` that YAML split at a comma. docs/spec.md's
-"YAML pitfalls" table lists each trap; tests/test_yaml_pitfalls.py feeds every row.
+"YAML pitfalls" table lists each trap; tests/spec/test_yaml_pitfalls.py feeds every row.
 """
 
 from __future__ import annotations

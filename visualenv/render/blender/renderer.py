@@ -582,7 +582,7 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 
 
 #: setters of the bindable properties that need only the object; look_at and color need the renderer's state
-#: (BlenderRenderer._setter). Together they cover visualenv.bindables.BINDABLES (tests/test_bindables.py checks).
+#: (BlenderRenderer._setter). Together they cover visualenv.bindables.BINDABLES (tests/spec/test_bindables.py checks).
 SETTERS_WITH_STATE = ("look_at", "color", "texture")
 #: the setter maker of each bindable property that needs only the object
 SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {

@@ -1,0 +1,304 @@
+"""A physics reset's model fields, redraw loop and settling steps (the features DeepMind Control's resets need), and their errors.
+
+Every model here is written by the test (MJCF text), small enough to compile in milliseconds;
+nothing renders (tests/specs/test_dmc_render.py draws a geom a reset moves). The DMC tasks that use
+these features are compared with dm_control in tests/specs/test_dmc_tasks.py.
+"""
+
+from __future__ import annotations
+
+import re
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+mujoco = pytest.importorskip("mujoco")
+
+from visualenv.compiler.program import compile_spec  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
+from visualenv.env.visual_env import VisualEnv  # noqa: E402
+from visualenv.errors import SpecError, StepError  # noqa: E402
+from visualenv.spec.loader import load_spec  # noqa: E402
+
+#: a ball on a slide in front of a wall (touching it while |x| < 0.2), an arm on a limited hinge, a marker geom
+MODEL = """\
+<mujoco model="reset">
+  <option timestep="0.01"/>
+  <worldbody>
+    <geom name="floor" type="plane" size="5 5 0.1"/>
+    <geom name="wall" type="box" pos="0 0 0.5" size="0.1 1 0.5"/>
+    <geom name="marker" type="sphere" pos="1 1 0.05" size="0.05" contype="0" conaffinity="0"/>
+    <body name="ball" pos="0 0 0.5">
+      <joint name="slide" type="slide" axis="1 0 0" limited="true" range="-1 1"/>
+      <geom name="ball_geom" type="sphere" size="0.1"/>
+    </body>
+    <body name="arm" pos="2 0 1">
+      <joint name="hinge" type="hinge" axis="0 1 0" damping="0.1" limited="true" range="-90 90"/>
+      <geom name="arm_geom" type="capsule" fromto="0 0 0 0 0 -0.5" size="0.05" contype="0" conaffinity="0"/>
+    </body>
+  </worldbody>
+  <actuator>
+    <motor name="torque" joint="hinge" ctrllimited="true" ctrlrange="-1 1"/>
+  </actuator>
+</mujoco>
+"""
+
+BASE = """\
+id: Reset-v0
+physics:
+  model: reset.xml
+  convention: {convention}
+{extra}{top}
+"""
+
+
+def write(tmp_path: Path, extra: str, convention: str = "dm_control", top: str = "") -> Path:
+    """The spec: `extra` (dedented) inside the physics section, `top` after it."""
+    (tmp_path / "reset.xml").write_text(MODEL, encoding="utf-8")
+    path = tmp_path / "spec.yaml"
+    path.write_text(BASE.format(convention=convention, extra=textwrap.indent(textwrap.dedent(extra), "  "), top=top), encoding="utf-8")
+    return path
+
+
+def errors_of(path: Path) -> str:
+    with pytest.raises(SpecError) as caught:
+        compile_spec(load_spec(path))
+    return str(caught.value)
+
+
+def located(message: str, path: Path, text: str) -> tuple[int, int]:
+    """The line and column of the diagnostic whose message holds `text` (asserting there is one)."""
+    found = re.search(rf"{re.escape(str(path))}:(\d+):(\d+): [^\n]*{re.escape(text)}", message)
+    assert found, message
+    return int(found.group(1)), int(found.group(2))
+
+
+def line_of(path: Path, text: str) -> int:
+    return next(i for i, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1) if text in line)
+
+
+# -- names ----------------------------------------------------------------------------------------
+
+
+def test_names_read_the_models_fields_geoms_positions_and_contacts(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+      observe: [model_geom_size_ball_geom_0, model_jnt_range_hinge_lo, model_jnt_range_hinge_hi, model_dof_damping_hinge,
+                model_geom_pos_marker_x, geom_arm_geom_z, geom_ball_geom_x, ncon, model_site_size_nothing_0]
+    """)
+    assert "unknown name 'model_site_size_nothing_0'" in errors_of(path)
+    path.write_text(path.read_text(encoding="utf-8").replace(", model_site_size_nothing_0", ""), encoding="utf-8")
+    env = VisualEnv(path, render=False)
+    obs, _ = env.reset(seed=0)
+    model, data = env.model, env.data
+    assert obs.tolist() == [0.1, model.jnt_range[1][0], model.jnt_range[1][1], 0.1, 1.0, data.geom_xpos[4][2], data.geom_xpos[3][0], 1.0]
+    assert model.jnt_range[1][1] == pytest.approx(np.pi / 2)  # the model's range, in radians as MuJoCo compiled it
+    assert data.ncon == 1  # the ball at x = 0 touches the wall
+
+
+# -- writable model fields -------------------------------------------------------------------------
+
+
+def test_a_reset_writes_model_fields_into_the_envs_own_model(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          values:
+            model_geom_pos_marker_x: uniform(2, 3)
+            model_dof_damping_hinge: 0.5
+        observe: [model_geom_pos_marker_x, geom_marker_x, model_dof_damping_hinge]
+    """)
+    a, b = VisualEnv(path, render=False), VisualEnv(path, render=False)
+    obs, _ = a.reset(seed=1)
+    assert 2 <= obs[0] < 3 and obs[1] == obs[0] and obs[2] == 0.5  # written, and the forward moved the geom
+    assert a.model.geom_pos[2][0] == obs[0] and a.model.dof_damping[1] == 0.5
+    assert b.model.geom_pos[2][0] == 1.0 and b.model.dof_damping[1] == 0.1  # each env has its own MjModel
+    first = obs[0]
+    obs, _ = a.reset()
+    assert obs[0] != first and a.model.geom_pos[2][0] == obs[0]  # each reset draws again
+
+
+def test_a_reset_key_that_cannot_be_written_is_a_located_error(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          values:
+            model_geom_size_ball_geom_0: 0.2
+            model_geom_pos_markr_x: 1
+            body_ball_x: 1
+    """)
+    message = errors_of(path)
+    line = line_of(path, "model_geom_size_ball_geom_0")
+    assert located(message, path, "'model_geom_size_ball_geom_0' is read from the model, not written") == (line, 7)
+    assert located(message, path, "no writable model field 'model_geom_pos_markr_x' to set (did you mean 'model_geom_pos_marker_x'") == (line + 1, 7)
+    assert located(message, path, "'body_ball_x' is computed by MuJoCo from the state") == (line + 2, 7)
+
+
+# -- redraw -----------------------------------------------------------------------------------------
+
+
+def test_a_redraw_draws_again_until_its_condition_holds(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          redraw:
+            values: {qpos_slide: "uniform(model_jnt_range_slide_lo, model_jnt_range_slide_hi)"}
+            until: ncon == 0
+        observe: [qpos_slide, ncon]
+    """)
+    env = VisualEnv(path, render=False)
+    stream = np.random.RandomState(3)
+    draws = []
+    for seed in (3, None, None, None, None, None, None, None):
+        obs, _ = env.reset(seed=seed)
+        tries = [stream.uniform(-1, 1)]
+        while abs(tries[-1]) < 0.2:  # the ball touches the wall: dm_control's loop draws again
+            tries.append(stream.uniform(-1, 1))
+        draws.append(len(tries))
+        assert obs.tolist() == [tries[-1], 0.0] and env.data.ncon == 0
+    assert max(draws) > 1, draws  # the stream of seed 3 touches at least once in these resets
+
+
+def test_each_try_starts_from_the_values_the_reset_wrote(tmp_path: Path) -> None:
+    """A try reads the joint's value as ``values`` left it, never the previous try's: ten tries do not add up."""
+    path = write(tmp_path, """\
+        reset:
+          values: {qpos_slide: 0.5}
+          redraw:
+            values: {qpos_slide: "qpos_slide + uniform(0, 0.1)"}
+            until: qpos_slide > 0.59
+        observe: [qpos_slide]
+    """)
+    env = VisualEnv(path, render=False)
+    for seed in range(5):
+        obs, _ = env.reset(seed=seed)
+        assert 0.59 < obs[0] < 0.6
+
+
+def test_a_redraw_that_never_meets_its_condition_is_a_located_fault(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          redraw:
+            values: {qpos_slide: "uniform(-0.1, 0.1)"}
+            until: ncon == 0
+            attempts: 7
+    """)
+    env = VisualEnv(path, render=False)
+    with pytest.raises(StepError) as caught:
+        env.reset(seed=0)
+    message = str(caught.value)
+    assert f"spec.yaml:{line_of(path, 'until:')}: physics.reset.redraw.until = 'ncon == 0'" in message
+    assert "none of 7 tries met the condition" in message
+
+
+def test_a_bad_redraw_is_a_located_error(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          redraw:
+            values: {qpos_slide: "uniform(-1, 1)"}
+            until: ncon == 0
+            attempts: 0
+    """)
+    assert located(errors_of(path), path, "physics.reset.redraw.attempts") == (line_of(path, "attempts"), 17)
+    path = write(tmp_path, """\
+        reset:
+          redraw:
+            values: {qpos_slid: "uniform(-1, 1)"}
+            until: ncon == 0
+    """)
+    assert located(errors_of(path), path, "no joint value 'qpos_slid' to set (did you mean 'qpos_slide'") == (line_of(path, "qpos_slid"), 16)
+    path = write(tmp_path, """\
+        reset:
+          redraw:
+            values: {}
+            until: ncon + 1
+    """)
+    message = errors_of(path)
+    assert located(message, path, "physics.reset.redraw.values") == (line_of(path, "values"), 15)
+    path = write(tmp_path, """\
+        reset:
+          redraw:
+            values: {qpos_slide: "uniform(-1, 1)"}
+            until: ncon + 1
+    """)
+    assert located(errors_of(path), path, "physics.reset.redraw.until") == (line_of(path, "until"), 14)
+
+
+# -- settle -----------------------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize("convention", ["dm_control", "gymnasium"])
+def test_settling_steps_are_the_conventions_steps_then_the_time_set(tmp_path: Path, convention: str) -> None:
+    """The reset's MuJoCo calls, written out: reset (and dm_control's forward), the values, the steps in one call, the time, a forward."""
+    path = write(tmp_path, """\
+        reset:
+          values: {qpos_hinge: 0.5}
+          settle: {steps: 40, time: 0}
+    """, convention)
+    env = VisualEnv(path, render=False)
+    env.reset(seed=0)
+    from visualenv.physics.conventions import forward_function, reset_data, step_function
+
+    model = mujoco.MjModel.from_xml_path(str(tmp_path / "reset.xml"))
+    data = mujoco.MjData(model)
+    reset_data(convention, mujoco, model, data, None)
+    data.qpos[1] = 0.5
+    step_function(convention, mujoco)(model, data, 40)
+    data.time = 0.0
+    forward_function(convention, mujoco)(model, data)
+    state = mujoco.mjtState.mjSTATE_INTEGRATION
+    ours, theirs = (np.empty(mujoco.mj_stateSize(model, state)) for _ in range(2))
+    mujoco.mj_getState(env.model, env.data, ours, state)
+    mujoco.mj_getState(model, data, theirs, state)
+    np.testing.assert_array_equal(ours, theirs)
+    assert env.data.time == 0.0 and env.data.qpos[1] != 0.5  # the arm swung while it settled
+
+
+def test_settling_keeps_the_time_unless_told(tmp_path: Path) -> None:
+    env = VisualEnv(write(tmp_path, "  reset: {settle: {steps: 25}}\n"), render=False)
+    env.reset(seed=0)
+    assert env.data.time == pytest.approx(0.25)
+
+
+@pytest.mark.filterwarnings("ignore:MuJoCo:RuntimeWarning")  # MuJoCo's own words on the blow-up (where its warnings are Python's)
+def test_a_simulation_that_blows_up_while_settling_is_a_located_fault(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          values: {qvel_hinge: 1e300}
+          settle: {steps: 10}
+    """)
+    with pytest.raises(StepError) as caught:
+        VisualEnv(path, render=False).reset(seed=0)
+    assert f"spec.yaml:{line_of(path, 'settle:')}: physics.reset.settle" in str(caught.value)
+    assert "blew up" in str(caught.value)
+
+
+def test_a_bad_settle_is_a_located_error(tmp_path: Path) -> None:
+    path = write(tmp_path, "  reset: {settle: {steps: 0, time: inf}}\n")
+    message = errors_of(path)
+    assert "physics.reset.settle.steps" in message and "physics.reset.settle.time" in message
+    assert located(message, path, "physics.reset.settle.steps")[0] == 5
+    path = write(tmp_path, "  reset: {settle: {time: 0}}\n")
+    assert "physics.reset.settle.steps" in errors_of(path)
+
+
+# -- batches ----------------------------------------------------------------------------------------
+
+
+def test_a_batch_reads_contacts_and_model_fields_as_its_envs_do(tmp_path: Path) -> None:
+    path = write(tmp_path, """\
+        reset:
+          values: {qpos_slide: "uniform(-0.4, 0.4)", model_geom_pos_marker_x: "uniform(0, 1)"}
+        observe: [ncon, model_geom_pos_marker_x, geom_marker_x]
+    """, top="reward: ncon + model_geom_pos_marker_x")
+    batch = BatchedVectorEnv(path, 4, render=False)
+    alone = [VisualEnv(path, render=False) for _ in range(4)]
+    obs, _ = batch.reset(seed=5)
+    for i, env in enumerate(alone):
+        np.testing.assert_array_equal(obs[i], env.reset(seed=5 + i)[0])
+    for _ in range(30):
+        obs, rewards, *_ = batch.step(np.zeros((4, 1)))
+        for i, env in enumerate(alone):
+            mine, reward, *_ = env.step(np.zeros(1))
+            np.testing.assert_array_equal(obs[i], mine)
+            assert rewards[i] == reward
+    assert len({float(o[1]) for o in obs}) == 4  # each env's own marker
+    batch.close()

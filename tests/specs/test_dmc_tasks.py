@@ -1,0 +1,186 @@
+"""DeepMind Control, reproduced: reacher easy, cheetah run, finger spin, ball_in_cup catch and walker walk step as dm_control's.
+
+Against the installed dm_control (the ``dmc`` extra, which ``make setup`` installs), as
+tests/specs/test_dmc_parity.py does for cartpole: with the same seed (``reset(seed=s)`` and
+``task_kwargs={"random": s}``) and the same float64 actions, the state-only env with
+``action_repeat=1`` has dm_control's physics state after the first reset (MuJoCo's whole
+integration state, and the model fields the task's reset writes), and qpos, qvel, the observation
+and the reward agree to 1e-9 over the 1,000 steps of an episode, which both end there; the second
+episode's reset (the random stream continued) and steps too. The resets' rejection loops (finger,
+ball_in_cup) are checked on seeds where dm_control's needed several tries.
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import pickle
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("MUJOCO_GL", "disable")  # dm_control looks for an OpenGL display on import; these tests render nothing there
+mujoco = pytest.importorskip("mujoco")
+suite = pytest.importorskip("dm_control.suite")
+
+import visualenv  # noqa: E402
+from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
+from visualenv.physics.simulation import integration_state  # noqa: E402
+
+#: id -> (dm_control's domain and task, PlaNet's action repeat, dm_control's camera 0)
+TASKS = {
+    "DMC-reacher-easy-v0": ("reacher", "easy", 4, "fixed"),
+    "DMC-cheetah-run-v0": ("cheetah", "run", 4, "side"),
+    "DMC-finger-spin-v0": ("finger", "spin", 2, "cam0"),
+    "DMC-ball_in_cup-catch-v0": ("ball_in_cup", "catch", 4, "cam0"),
+    "DMC-walker-walk-v0": ("walker", "walk", 2, "side"),
+}
+#: the model fields each task's reset writes (dm_control's initialize_episode), compared after every reset
+WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping",)}
+
+
+def load(ident: str, seed: int):
+    domain, task, *_ = TASKS[ident]
+    return suite.load(domain, task, task_kwargs={"random": seed})
+
+
+def their_observation(time_step) -> np.ndarray:
+    """dm_control's observation dict flattened in its order (as its flat_observation does)."""
+    return np.concatenate([np.ravel(v) for v in time_step.observation.values()])
+
+
+def assert_same_reset(ours, theirs, where: str) -> None:
+    data, physics = ours.unwrapped.data, theirs.physics
+    np.testing.assert_array_equal(integration_state(data), integration_state(physics.data.ptr), err_msg=where)
+    for field in WRITTEN.get(TASKS[ours.spec.id.split("/")[-1]][0], ()):  # reacher's target, finger's hinge damping
+        np.testing.assert_allclose(getattr(ours.unwrapped.model, field), getattr(physics.model.ptr, field), rtol=0, atol=1e-15, err_msg=where)
+
+
+@pytest.mark.parametrize("seed", [0, 7])
+@pytest.mark.parametrize("ident", TASKS)
+def test_the_task_equals_dm_control_over_two_episodes(ident: str, seed: int) -> None:
+    ours = visualenv.make(ident, render=False, action_repeat=1)
+    theirs = load(ident, seed)
+    size = theirs.action_spec().shape
+    actions = np.random.default_rng(1000 + seed)
+    obs, _ = ours.reset(seed=seed)
+    time_step = theirs.reset()
+    rewarded = 0.0
+    for episode in range(2):
+        where = f"{ident} seed {seed} episode {episode}"
+        assert_same_reset(ours, theirs, where + " reset")
+        np.testing.assert_allclose(obs, their_observation(time_step), rtol=0, atol=1e-9, err_msg=where)
+        for step in range(1000):
+            action = actions.uniform(-1.0, 1.0, size=size)
+            obs, reward, terminated, truncated, _ = ours.step(action)
+            time_step = theirs.step(action)
+            here = f"{where} step {step}"
+            np.testing.assert_allclose(ours.unwrapped.data.qpos, theirs.physics.data.qpos, rtol=0, atol=1e-9, err_msg=here)
+            np.testing.assert_allclose(ours.unwrapped.data.qvel, theirs.physics.data.qvel, rtol=0, atol=1e-9, err_msg=here)
+            np.testing.assert_allclose(obs, their_observation(time_step), rtol=0, atol=1e-9, err_msg=here)
+            assert abs(reward - time_step.reward) <= 1e-9, (here, reward, time_step.reward)
+            assert not terminated
+            assert truncated == time_step.last() == (step == 999), here  # dm_control's time limit: 1,000 control steps
+            rewarded += reward
+        obs, _ = ours.reset()  # no seed: both streams go on
+        time_step = theirs.reset()
+    if TASKS[ident][0] in ("cheetah", "walker"):  # dense rewards: the comparison compared numbers that vary
+        assert rewarded > 0
+
+
+@pytest.mark.parametrize("ident", TASKS)
+def test_first_resets_equal_dm_controls_on_many_seeds(ident: str) -> None:
+    ours = visualenv.make(ident, render=False, action_repeat=1)
+    for seed in range(6):
+        obs, _ = ours.reset(seed=seed)
+        theirs = load(ident, seed)
+        time_step = theirs.reset()
+        assert_same_reset(ours, theirs, f"{ident} seed {seed}")
+        np.testing.assert_allclose(obs, their_observation(time_step), rtol=0, atol=1e-9)
+
+
+def tries_of(theirs) -> int:
+    """The tries dm_control's reset took: its rejection loop forwards once a try, and reset_context once more at the end."""
+    calls = []
+    after_reset = theirs.physics.after_reset
+
+    def counted() -> None:
+        calls.append(1)
+        after_reset()
+
+    theirs.physics.after_reset = counted
+    theirs.reset()
+    theirs.physics.after_reset = after_reset
+    return len(calls) - 1
+
+
+@pytest.mark.parametrize("ident", ["DMC-finger-spin-v0", "DMC-ball_in_cup-catch-v0"])
+def test_a_reset_redraws_until_nothing_touches_as_dm_controls_does(ident: str) -> None:
+    """The seeds whose first draw touched (dm_control drew again) reset to dm_control's state too, and nothing touches."""
+    ours = visualenv.make(ident, render=False, action_repeat=1)
+    redrawn = []
+    for seed in range(40):
+        theirs = load(ident, seed)
+        tries = tries_of(theirs)
+        if tries == 1:
+            continue
+        redrawn.append(tries)
+        ours.reset(seed=seed)
+        assert_same_reset(ours, theirs, f"{ident} seed {seed}, {tries} tries")
+        assert ours.unwrapped.data.ncon == 0
+        if len(redrawn) == 3:
+            break
+    assert len(redrawn) == 3, f"dm_control drew twice for {len(redrawn)} of 40 seeds: the loop was hardly tested"
+
+
+@pytest.mark.parametrize("ident", TASKS)
+def test_the_env_is_dm_controls_task_as_gymnasium_sees_it(ident: str) -> None:
+    _, _, repeat, camera = TASKS[ident]
+    env = visualenv.make(ident, render=False)
+    theirs = load(ident, 0)
+    spec = theirs.action_spec()
+    assert isinstance(env.unwrapped.data, mujoco.MjData) and isinstance(env.unwrapped.model, mujoco.MjModel)
+    assert env.action_space.shape == spec.shape and (env.action_space.low == spec.minimum).all() and (env.action_space.high == spec.maximum).all()
+    assert env.observation_space.shape == their_observation(theirs.reset()).shape and env.observation_space.dtype == np.float64
+    assert env.unwrapped.model.opt.timestep == theirs.physics.timestep()
+    assert env.unwrapped.program.physics.dt == pytest.approx(theirs.control_timestep(), rel=1e-12)  # frame_skip is n_sub_steps
+    assert env.unwrapped.action_repeat == repeat and env.unwrapped.max_episode_steps == math.ceil(1000 / repeat)  # PlaNet's
+    view = env.unwrapped.program.spec.observation
+    assert view.camera == mujoco.mj_id2name(theirs.physics.model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, 0) == camera  # camera 0
+    assert list(view.resolution) == [84, 84] and view.color == "rgb"
+    env.close()
+
+
+def test_a_pickled_reacher_carries_its_target() -> None:
+    """The target's position is a model field the reset wrote: a copy made mid-episode has it, and goes on as the env does."""
+    env = visualenv.make("DMC-reacher-easy-v0", render=False, action_repeat=1)
+    env.reset(seed=4)
+    target = env.unwrapped.model.geom_pos.copy()
+    copy = pickle.loads(pickle.dumps(env))
+    np.testing.assert_array_equal(copy.unwrapped.model.geom_pos, target)
+    assert not np.array_equal(visualenv.make("DMC-reacher-easy-v0", render=False).unwrapped.model.geom_pos, target)
+    for action in np.random.default_rng(0).uniform(-1, 1, size=(300, 2)):
+        a, b = env.step(action), copy.step(action)
+        assert a[1] == b[1]
+        np.testing.assert_array_equal(a[0], b[0])
+
+
+@pytest.mark.parametrize("ident", ["DMC-reacher-easy-v0", "DMC-ball_in_cup-catch-v0", "DMC-cheetah-run-v0"])
+def test_a_batch_steps_as_dm_control(ident: str) -> None:
+    """Each env of a state-only batch has its own target (reacher), reads the model's sizes (ball_in_cup) and settles (cheetah)."""
+    batch = BatchedVectorEnv(ident, 3, render=False, action_repeat=1)
+    obs, _ = batch.reset(seed=11)
+    theirs = [load(ident, 11 + i) for i in range(3)]
+    steps = [t.reset() for t in theirs]
+    for i, time_step in enumerate(steps):
+        np.testing.assert_allclose(obs[i], their_observation(time_step), rtol=0, atol=1e-9)
+    actions = np.random.default_rng(0)
+    for _ in range(300):
+        action = actions.uniform(-1, 1, size=(3, *theirs[0].action_spec().shape))
+        obs, rewards, *_ = batch.step(action)
+        for i, t in enumerate(theirs):
+            time_step = t.step(action[i])
+            assert abs(rewards[i] - time_step.reward) <= 1e-9
+            np.testing.assert_allclose(batch.lanes[i].data.qpos, t.physics.data.qpos, rtol=0, atol=1e-9)
+            np.testing.assert_allclose(obs[i], their_observation(time_step), rtol=0, atol=1e-9)
+    batch.close()
