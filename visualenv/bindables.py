@@ -36,19 +36,40 @@ class Bindable:
     moves: bool = False
 
 
-BINDABLES: dict[str, Bindable] = {b.name: b for b in (
-    Bindable("location", "vector", "world position (parented: relative to the parent)", moves=True),
-    Bindable("rotation", "vector", "Euler XYZ, radians", moves=True),
-    Bindable("scale", "scale", "3 factors, or one for all axes", moves=True),
-    Bindable("visible", "condition", "a condition: hidden from every camera while false (an empty: everything under it)"),
-    Bindable("color", "color", "material base colour (objects; on a textured material a tint that multiplies the texture) or light colour (lights)",
-             types=("MESH", "LIGHT", "EMPTY"), binds="a material or light colour"),
-    Bindable("strength", "number", "light strength (on the World actor: the sky's strength)", types=("LIGHT",), binds="a light's power"),
-    Bindable("look_at", "vector", "aim the object (a camera) at this point", moves=True),
-    Bindable("lens", "number", "camera focal length (mm)", types=("CAMERA",), binds="a camera's focal length"),
-    Bindable("texture", "number", "which file of the material's image texture set: int(floor(value)) modulo the set's size",
-             types=("MESH", "EMPTY"), binds="an image texture set"),
-)}
+BINDABLES: dict[str, Bindable] = {
+    b.name: b
+    for b in (
+        Bindable("location", "vector", "world position (parented: relative to the parent)", moves=True),
+        Bindable("rotation", "vector", "Euler XYZ, radians", moves=True),
+        Bindable("scale", "scale", "3 factors, or one for all axes", moves=True),
+        Bindable(
+            "visible", "condition", "a condition: hidden from every camera while false (an empty: everything under it)"
+        ),
+        Bindable(
+            "color",
+            "color",
+            "material base colour (objects; on a textured material a tint that multiplies the texture) or light colour (lights)",
+            types=("MESH", "LIGHT", "EMPTY"),
+            binds="a material or light colour",
+        ),
+        Bindable(
+            "strength",
+            "number",
+            "light strength (on the World actor: the sky's strength)",
+            types=("LIGHT",),
+            binds="a light's power",
+        ),
+        Bindable("look_at", "vector", "aim the object (a camera) at this point", moves=True),
+        Bindable("lens", "number", "camera focal length (mm)", types=("CAMERA",), binds="a camera's focal length"),
+        Bindable(
+            "texture",
+            "number",
+            "which file of the material's image texture set: int(floor(value)) modulo the set's size",
+            types=("MESH", "EMPTY"),
+            binds="an image texture set",
+        ),
+    )
+}
 
 
 #: the actor name that binds the scene's world (unless an object has that name): its sky's strength, rotation and tint
@@ -78,11 +99,18 @@ def camera_problem(name: str, object_types: Mapping[str, str]) -> str | None:
     cameras = [n for n, t in object_types.items() if t == "CAMERA"]
     object_type = object_types.get(name)
     if object_type is None and not cameras:
-        return (f"no camera '{name}' in the scene: the scene has no camera (objects: {', '.join(object_types) or 'none'}); "
-                f"add one under scene.objects, e.g. {name}: {{camera: perspective, location: [0, -8, 4], look_at: [0, 0, 0]}}")
+        return (
+            f"no camera '{name}' in the scene: the scene has no camera (objects: {', '.join(object_types) or 'none'}); "
+            f"add one under scene.objects, e.g. {name}: {{camera: perspective, location: [0, -8, 4], look_at: [0, 0, 0]}}"
+        )
     if object_type is None:
-        return (f"no camera '{name}' in the scene" + did_you_mean(name, cameras).replace("names:", "cameras:")
-                + f"; objects: {', '.join(object_types) or 'none'}")
+        return (
+            f"no camera '{name}' in the scene"
+            + did_you_mean(name, cameras).replace("names:", "cameras:")
+            + f"; objects: {', '.join(object_types) or 'none'}"
+        )
     if object_type != "CAMERA":
-        return f"'{name}' is {a_type(object_type)}, not a camera" + (f" (cameras: {', '.join(cameras)})" if cameras else " (the scene has no camera)")
+        return f"'{name}' is {a_type(object_type)}, not a camera" + (
+            f" (cameras: {', '.join(cameras)})" if cameras else " (the scene has no camera)"
+        )
     return None

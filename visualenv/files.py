@@ -30,11 +30,13 @@ def package_file(text: str) -> Path:
     load from and runs none of its code; namespace packages have several folders) and its subpackages
     are its folders on disk. The file itself may not exist: the caller says so, naming the path.
     """
-    rest = text[len(PACKAGE_PREFIX):] if text.startswith(PACKAGE_PREFIX) else text
+    rest = text[len(PACKAGE_PREFIX) :] if text.startswith(PACKAGE_PREFIX) else text
     package, _, inner = rest.partition("/")
     parts = package.split(".")
     if not inner or not all(part.isidentifier() for part in parts):
-        raise VisualEnvError(f"'{text}': expected package:<package>/<path inside it>, e.g. package:mypackage.models/arm.xml")
+        raise VisualEnvError(
+            f"'{text}': expected package:<package>/<path inside it>, e.g. package:mypackage.models/arm.xml"
+        )
     folders = [folder.joinpath(*parts[1:]) for folder in _package_folders(parts[0])]
     folders = [folder for folder in folders if folder.is_dir()]
     if not folders:

@@ -16,8 +16,8 @@ Places = tuple[tuple[int, int], ...]
 
 #: what an expression cut in two at a comma of a YAML flow mapping or list needs
 COMMA_HINT = {
-    "{": "an expression with a comma inside {...} was split by YAML; quote it, e.g. {init: \"uniform(-1, 1)\"}",
-    "[": "an expression with a comma inside [...] was split by YAML; quote it, e.g. [\"clip(x, -1, 1)\", 0, 0]",
+    "{": 'an expression with a comma inside {...} was split by YAML; quote it, e.g. {init: "uniform(-1, 1)"}',
+    "[": 'an expression with a comma inside [...] was split by YAML; quote it, e.g. ["clip(x, -1, 1)", 0, 0]',
 }
 
 
@@ -57,13 +57,17 @@ class SourceMap:
             path = path[:-1]
         return self.values.get(())
 
-    def diagnostic(self, path: SpecPath, message: str, *, key: bool = False, column_offset: int | None = None) -> Diagnostic:
+    def diagnostic(
+        self, path: SpecPath, message: str, *, key: bool = False, column_offset: int | None = None
+    ) -> Diagnostic:
         pos = self.locate(path, key=key)
         line = pos.line if pos else None
         column = pos.column if pos else None
         if pos and column_offset is not None and pos.text_offset is not None and tuple(path) in self.values:
             column = pos.column + pos.text_offset + column_offset
-        elif pos and column_offset is not None and pos.places and tuple(path) in self.values:  # a multi-line value: its own line
+        elif (
+            pos and column_offset is not None and pos.places and tuple(path) in self.values
+        ):  # a multi-line value: its own line
             line, column = pos.places[min(max(column_offset, 0), len(pos.places) - 1)]
         return Diagnostic(self.file, line, column, format_path(path), self._with_comma_hint(tuple(path), message))
 

@@ -22,7 +22,12 @@ def versions() -> dict[str, str]:
     """visualenv, Gymnasium, numpy, Python and (where installed) MuJoCo and (when bpy imports) Blender versions."""
     import gymnasium
 
-    out = {"visualenv": __version__, "gymnasium": gymnasium.__version__, "numpy": np.__version__, "python": platform.python_version()}
+    out = {
+        "visualenv": __version__,
+        "gymnasium": gymnasium.__version__,
+        "numpy": np.__version__,
+        "python": platform.python_version(),
+    }
     mujoco = mujoco_version()
     if mujoco is not None:
         out["mujoco"] = mujoco

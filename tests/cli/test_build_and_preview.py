@@ -36,8 +36,13 @@ def test_build_writes_env_json_blend_and_preview_then_loads(tmp_path):
 
 
 def test_a_broken_build_record_is_named(tmp_path):
-    for i, (text, message) in enumerate([("{bad", "not a build record of `visualenv build` (JSONDecodeError"), ('{"id": "X"}', "(KeyError: 'source')"),
-                          ('{"source": "/nowhere/gone.yaml"}', "source: the spec it was built from is gone: /nowhere/gone.yaml")]):
+    for i, (text, message) in enumerate(
+        [
+            ("{bad", "not a build record of `visualenv build` (JSONDecodeError"),
+            ('{"id": "X"}', "(KeyError: 'source')"),
+            ('{"source": "/nowhere/gone.yaml"}', "source: the spec it was built from is gone: /nowhere/gone.yaml"),
+        ]
+    ):
         folder = tmp_path / str(i)
         folder.mkdir()
         (folder / "env.json").write_text(text)
@@ -62,7 +67,10 @@ def test_gpu_request_falls_back_to_cpu_with_a_message(tmp_path, monkeypatch):
     if settings.detect_gpu():
         pytest.skip("Blender finds a GPU here: nothing to fall back from")
     monkeypatch.setattr(settings, "_warned", set())  # said once per process: say it again here
-    with pytest.warns(RuntimeWarning, match="render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU"):
+    with pytest.warns(
+        RuntimeWarning,
+        match="render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU",
+    ):
         result = CliRunner().invoke(main, ["build", "Goalie-v0", "--out", str(tmp_path), "--device", "gpu", "--quiet"])
     assert result.exit_code == 0, result.output
     assert (tmp_path / "Goalie-v0" / "preview.png").exists()
@@ -92,7 +100,11 @@ def test_domain_randomization_changes_the_scene_per_episode():
     # the cube's colour follows the drawn red/green values
     ca, cb = box_colour(a), box_colour(b)
     assert np.abs(ca - cb).max() > 10
-    redder = ca if info_a["state"]["red"] - info_a["state"]["green"] > info_b["state"]["red"] - info_b["state"]["green"] else cb
+    redder = (
+        ca
+        if info_a["state"]["red"] - info_a["state"]["green"] > info_b["state"]["red"] - info_b["state"]["green"]
+        else cb
+    )
     other = cb if redder is ca else ca
     assert (redder[0] - redder[1]) > (other[0] - other[1])
 
@@ -106,7 +118,9 @@ def test_play_view_override_changes_preset_and_size_keeping_aspect():
     loaded = visualenv.load_spec(resolve("Goalie-v0"))
     assert with_view(loaded) is loaded  # nothing asked: the same spec
     render = loaded.spec.render
-    wide = loaded.spec.model_copy(update={"render": render.model_copy(update={"view": render.view.model_copy(update={"resolution": [400, 300]})})})
+    wide = loaded.spec.model_copy(
+        update={"render": render.model_copy(update={"view": render.view.model_copy(update={"resolution": [400, 300]})})}
+    )
     changed = with_view(replace(loaded, spec=wide), preset="fast", size=200)
     assert changed.spec.render.view.preset == "fast" and changed.spec.render.view.resolution == [200, 150]
     assert wide.render.view.preset == "quality"  # the original is untouched

@@ -68,4 +68,6 @@ def test_init_writes_a_spec_that_builds_unchanged_and_with_its_examples(corpus, 
         assert not (left == right).all()
     finally:
         env.close()
-    assert runner.invoke(main, ["init", str(corpus / f"{name}.blend"), "-o", str(spec)]).output.startswith(f"error: {spec} exists")
+    assert runner.invoke(main, ["init", str(corpus / f"{name}.blend"), "-o", str(spec)]).output.startswith(
+        f"error: {spec} exists"
+    )

@@ -30,8 +30,17 @@ def test_inspect_lists_the_names() -> None:
     assert result.exit_code == 0, result.output
     text = result.output
     assert "6 actuators" in text and "actuator bthigh: ctrl_bthigh in [-1, 1]" in text
-    for name in ("qpos_rootx", "qvel_ffoot", "body_torso_z", "body_torso_qw", "geoms (for contacts): floor, torso", "sim_time",
-                 "drawn geoms: floor (plane), torso (capsule)", "cameras (observation.camera): track", "lights: light0"):
+    for name in (
+        "qpos_rootx",
+        "qvel_ffoot",
+        "body_torso_z",
+        "body_torso_qw",
+        "geoms (for contacts): floor, torso",
+        "sim_time",
+        "drawn geoms: floor (plane), torso (capsule)",
+        "cameras (observation.camera): track",
+        "lights: light0",
+    ):
         assert name in text, name
 
 
@@ -56,7 +65,9 @@ def test_init_writes_a_spec_that_steps(tmp_path: Path, model: str) -> None:
 def test_an_init_spec_renders_the_model(tmp_path: Path) -> None:
     out = tmp_path / "spec.yaml"
     CliRunner().invoke(main, ["init", str(ASSETS / "hopper.xml"), "-o", str(out)])
-    out.write_text(out.read_text(encoding="utf-8").replace("resolution: [84, 84]", "resolution: [24, 24]"), encoding="utf-8")
+    out.write_text(
+        out.read_text(encoding="utf-8").replace("resolution: [84, 84]", "resolution: [24, 24]"), encoding="utf-8"
+    )
     env = VisualEnv(out)
     try:
         obs, _ = env.reset(seed=0)
@@ -67,10 +78,13 @@ def test_an_init_spec_renders_the_model(tmp_path: Path) -> None:
         env.close()
 
 
-@pytest.mark.parametrize("text, expected", [
-    ("<mujoco><worldbody><geom type='sphere' size='1'/></worldbody>", "XML parse error"),
-    ("<mujoco><worldbody><joint name='j'/></worldbody></mujoco>", "MuJoCo cannot load"),
-])
+@pytest.mark.parametrize(
+    "text, expected",
+    [
+        ("<mujoco><worldbody><geom type='sphere' size='1'/></worldbody>", "XML parse error"),
+        ("<mujoco><worldbody><joint name='j'/></worldbody></mujoco>", "MuJoCo cannot load"),
+    ],
+)
 def test_a_bad_model_is_a_clear_error(tmp_path: Path, text: str, expected: str) -> None:
     bad = tmp_path / "bad.xml"
     bad.write_text(text, encoding="utf-8")
@@ -104,7 +118,13 @@ def test_init_observes_through_the_models_first_camera(tmp_path: Path) -> None:
     env = VisualEnv(out, render=False)  # compiles: the camera is the model's
     assert env.program.spec.observation.camera == "side"
     env.close()
-    (tmp_path / "bare.xml").write_text(CAMERAS.replace('<camera name="side" pos="0 -2 0.5" xyaxes="1 0 0 0 0 1"/>', "")
-                                       .replace('<camera name="top" pos="0 0 3"/>', ""), encoding="utf-8")
+    (tmp_path / "bare.xml").write_text(
+        CAMERAS.replace('<camera name="side" pos="0 -2 0.5" xyaxes="1 0 0 0 0 1"/>', "").replace(
+            '<camera name="top" pos="0 0 3"/>', ""
+        ),
+        encoding="utf-8",
+    )
     CliRunner().invoke(main, ["init", str(tmp_path / "bare.xml"), "-o", str(tmp_path / "bare.yaml")])
-    assert "observation: {camera: Camera," in (tmp_path / "bare.yaml").read_text(encoding="utf-8")  # no camera in the model: the starter's own
+    assert "observation: {camera: Camera," in (tmp_path / "bare.yaml").read_text(
+        encoding="utf-8"
+    )  # no camera in the model: the starter's own

@@ -22,14 +22,21 @@ def test_validate_ok_prints_one_line():
 
 
 def test_validate_reports_unknown_name_with_position_and_names(tmp_path):
-    text = (ROOT / "specs" / "visual_cartpole.yaml").read_text().replace("theta: theta + tau * theta_dot", "theta: thta + tau * theta_dot")
+    text = (
+        (ROOT / "specs" / "visual_cartpole.yaml")
+        .read_text()
+        .replace("theta: theta + tau * theta_dot", "theta: thta + tau * theta_dot")
+    )
     broken = tmp_path / "broken.yaml"
     broken.write_text(text)
     line = next(i for i, row in enumerate(text.splitlines(), 1) if "thta +" in row)
     column = text.splitlines()[line - 1].index("thta") + 1
     result = CliRunner().invoke(main, ["validate", str(broken)])
     assert result.exit_code == 2
-    assert f"{broken}:{line}:{column}: dynamics.update.theta: unknown name 'thta' (did you mean 'theta'? names: x, x_dot, theta, theta_dot," in result.output
+    assert (
+        f"{broken}:{line}:{column}: dynamics.update.theta: unknown name 'thta' (did you mean 'theta'? names: x, x_dot, theta, theta_dot,"
+        in result.output
+    )
     assert "Traceback" not in result.output
 
 

@@ -26,8 +26,14 @@ def run_python(code: str, env: dict[str, str] | None = None) -> dict:
     """Run `code` in a fresh Python (Blender state that is process-wide stays there); its last stdout line as JSON."""
     import os
 
-    done = subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=600, cwd=ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})})
+    done = subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT), **(env or {})},
+    )
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
 
@@ -48,7 +54,8 @@ def cycles_scene(name: str, size: int) -> tuple:
 def test_the_installed_bpy_is_one_every_part_was_checked_against():
     assert compat.bpy_version() == bpy.app.version_string.split()[0]
     assert compat.bpy_version() in compat.CHECKED_BPY, (
-        f"bpy {compat.bpy_version()}: check every part of visualenv/compat/blender.py against it (this file's tests), then add it to CHECKED_BPY")
+        f"bpy {compat.bpy_version()}: check every part of visualenv/compat/blender.py against it (this file's tests), then add it to CHECKED_BPY"
+    )
 
 
 def test_an_unchecked_bpy_is_told_once_per_part(monkeypatch):
@@ -68,8 +75,10 @@ def test_a_custom_camera_compiles_through_blenders_operator_with_bpys_own_packag
     scene, camera, data = cycles_scene("visualenv-compat-osl", 8)
     text = bpy.data.texts.new("visualenv-compat.osl")
     try:
-        text.write("shader probe(int cols = 3, float half_w = 0.5, output point position = 0, output vector direction = 0,"
-                   " output color throughput = 1) { direction = vector(0, 0, 1); }")
+        text.write(
+            "shader probe(int cols = 3, float half_w = 0.5, output point position = 0, output vector direction = 0,"
+            " output color throughput = 1) { direction = vector(0, 0, 1); }"
+        )
         data.type, data.custom_mode, data.custom_shader = "CUSTOM", "INTERNAL", text
         compat.compile_camera_shader(camera, scene)
         assert dict(data.cycles_custom) == {"cols": 3, "half_w": 0.5}
@@ -157,20 +166,36 @@ def test_numpy_composes_object_matrices_as_blender_to_the_bit():
         for mode in ("XYZ", "QUATERNION"):
             objects = random_objects(rng, 100, mode, scene)
             for obj in objects:
-                rotation = np.array([obj.rotation_quaternion]) if mode == "QUATERNION" else np.array([obj.rotation_euler], dtype=np.float32)
-                basis = compat.basis_matrices(np.array([obj.location], dtype=np.float32), rotation, np.array([obj.scale], dtype=np.float32))
-                assert np.array_equal(basis[0], np.array(obj.matrix_basis, dtype=np.float32)), (mode, obj.rotation_euler[:])
+                rotation = (
+                    np.array([obj.rotation_quaternion])
+                    if mode == "QUATERNION"
+                    else np.array([obj.rotation_euler], dtype=np.float32)
+                )
+                basis = compat.basis_matrices(
+                    np.array([obj.location], dtype=np.float32), rotation, np.array([obj.scale], dtype=np.float32)
+                )
+                assert np.array_equal(basis[0], np.array(obj.matrix_basis, dtype=np.float32)), (
+                    mode,
+                    obj.rotation_euler[:],
+                )
             parents, children = objects[::2], objects[1::2]
             for parent, child in zip(parents, children):
                 child.parent = parent
                 child.matrix_parent_inverse.identity()
             scene.view_layers[0].update()
             for parent, child in zip(parents, children):
-                world = compat.mul_m4_m4m4(np.array(parent.matrix_world, dtype=np.float32), np.array(child.matrix_basis, dtype=np.float32))
+                world = compat.mul_m4_m4m4(
+                    np.array(parent.matrix_world, dtype=np.float32), np.array(child.matrix_basis, dtype=np.float32)
+                )
                 assert np.array_equal(world, np.array(child.matrix_world, dtype=np.float32)), mode
             # numpy's plain product rounds otherwise somewhere among these: the order of sums is what matches
-            plain = [np.array(p.matrix_world, dtype=np.float32) @ np.array(c.matrix_basis, dtype=np.float32) for p, c in zip(parents, children)]
-            assert any(not np.array_equal(a, np.array(c.matrix_world, dtype=np.float32)) for a, c in zip(plain, children))
+            plain = [
+                np.array(p.matrix_world, dtype=np.float32) @ np.array(c.matrix_basis, dtype=np.float32)
+                for p, c in zip(parents, children)
+            ]
+            assert any(
+                not np.array_equal(a, np.array(c.matrix_world, dtype=np.float32)) for a, c in zip(plain, children)
+            )
             bpy.data.batch_remove(objects)
     finally:
         bpy.data.scenes.remove(scene)
@@ -216,7 +241,9 @@ FRAMES = """
 """
 
 
-@pytest.mark.skipif(glibc.version() is None or glibc.version() < (2, 33), reason="counts malloc's bytes with glibc's mallinfo2")
+@pytest.mark.skipif(
+    glibc.version() is None or glibc.version() < (2, 33), reason="counts malloc's bytes with glibc's mallinfo2"
+)
 @pytest.mark.parametrize("release", [False, True])
 def test_blender_keeps_a_removed_scenes_last_frame_unless_it_is_released(release):
     """Part: render results. A 1500x1500 frame (34 MiB in float RGBA) outlives its scene, unless a last tiny frame
@@ -318,7 +345,9 @@ def test_a_uv_spheres_faces_come_in_one_order_in_every_process():
     """
     runs = [run_python(code) for _ in range(3)]
     orders = {json.dumps(made) for run in runs for made in run["made"]}
-    assert len({json.dumps(sorted(map(tuple, json.loads(order)))) for order in orders}) == 1  # the same faces every time
+    assert (
+        len({json.dumps(sorted(map(tuple, json.loads(order)))) for order in orders}) == 1
+    )  # the same faces every time
     assert len(orders) > 1, "create_uvsphere's face order no longer varies: sort_faces may no longer be needed"
     assert len({json.dumps(run["sorted"]) for run in runs}) == 1
     faces = runs[0]["sorted"]

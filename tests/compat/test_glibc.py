@@ -35,8 +35,14 @@ RETURNED_ABOVE, KEPT_BELOW = 56, 8
 def run(code: str, env: dict[str, str] | None = None, timeout: int = 300) -> dict[str, float]:
     """Run `code` (after RETURNED) in a fresh interpreter; the `name value` pairs of its lines that start with FIGURE."""
     environment = {k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"}
-    out = subprocess.run([sys.executable, "-c", RETURNED + code], capture_output=True, text=True, timeout=timeout, cwd=ROOT,
-                         env={**environment, **(env or {})})
+    out = subprocess.run(
+        [sys.executable, "-c", RETURNED + code],
+        capture_output=True,
+        text=True,
+        timeout=timeout,
+        cwd=ROOT,
+        env={**environment, **(env or {})},
+    )
     assert out.returncode == 0, out.stderr[-3000:]
     figures = {}
     for line in out.stdout.splitlines():
@@ -48,7 +54,9 @@ def run(code: str, env: dict[str, str] | None = None, timeout: int = 300) -> dic
 
 def test_the_glibc_here_is_one_the_policy_was_written_for():
     """Fails when glibc moves: older than the tunables the docs name, or without mallopt and malloc_trim."""
-    assert glibc.version() >= glibc.OLDEST, f"glibc {glibc.version()}: compat/glibc.py was written for {glibc.OLDEST} and later"
+    assert glibc.version() >= glibc.OLDEST, (
+        f"glibc {glibc.version()}: compat/glibc.py was written for {glibc.OLDEST} and later"
+    )
     assert glibc.available(), "mallopt or malloc_trim is missing from this glibc"
 
 
@@ -67,12 +75,15 @@ print("FIGURE kept", returned_mb())
 def test_the_documented_tunables_are_the_same_policy_and_win_over_it():
     """GLIBC_TUNABLES (what docs/performance.md gives for your own process) keeps freed memory too; a process started
     with malloc tunables of its own keeps them: apply_policy then changes nothing."""
-    figures = run("""
+    figures = run(
+        """
 from visualenv.compat import glibc
 returned_mb()
 print("FIGURE kept", returned_mb())
 print("FIGURE applied", int(glibc.apply_policy()))
-""", env={"GLIBC_TUNABLES": glibc.POLICY_TUNABLES})
+""",
+        env={"GLIBC_TUNABLES": glibc.POLICY_TUNABLES},
+    )
     assert figures["kept"] < KEPT_BELOW and figures["applied"] == 0, figures
 
 
@@ -88,7 +99,9 @@ print("FIGURE after", returned_mb())
     assert figures["before"] > RETURNED_ABOVE and figures["after"] < KEPT_BELOW, figures
 
 
-WORKERS = RETURNED + """
+WORKERS = (
+    RETURNED
+    + """
 import gymnasium as gym
 import visualenv
 
@@ -105,15 +118,24 @@ if __name__ == "__main__":
     print("FIGURE parent", returned_mb())
     vec.close()
 """
+)
 
 
 def test_vector_env_workers_apply_the_policy_and_leave_the_parent_alone(tmp_path):
     script = tmp_path / "workers.py"  # a file: spawned workers import the wrapper class from it
     script.write_text(WORKERS)
-    out = subprocess.run([sys.executable, str(script)], capture_output=True, text=True, timeout=300, cwd=ROOT,
-                         env={k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"})
+    out = subprocess.run(
+        [sys.executable, str(script)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={k: v for k, v in os.environ.items() if k != "GLIBC_TUNABLES"},
+    )
     assert out.returncode == 0, out.stderr[-3000:]
-    figures = dict((line.split()[1], float(line.split()[2])) for line in out.stdout.splitlines() if line.startswith("FIGURE "))
+    figures = dict(
+        (line.split()[1], float(line.split()[2])) for line in out.stdout.splitlines() if line.startswith("FIGURE ")
+    )
     assert figures["workers"] < KEPT_BELOW and figures["parent"] > RETURNED_ABOVE, figures
 
 
@@ -122,7 +144,8 @@ def test_making_stepping_and_closing_envs_leaves_the_allocator_as_it_was():
     """A batch of 1.28 megapixels a render call (its buffers well past glibc's largest mmap threshold) and a single env
     with its view: while they step and once they are closed, a freed 64 MB array goes back to the system."""
     pytest.importorskip("bpy")
-    figures = run("""
+    figures = run(
+        """
 import numpy as np
 import visualenv
 from visualenv.env.batch import BatchedVectorEnv
@@ -141,5 +164,7 @@ env.step(0)
 env.render()
 env.close()
 print("FIGURE single", returned_mb())
-""", timeout=600)
+""",
+        timeout=600,
+    )
     assert min(figures.values()) > RETURNED_ABOVE, figures

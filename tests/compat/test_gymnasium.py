@@ -55,7 +55,9 @@ def test_the_limit_is_kept_outside_the_env_and_read_from_make(registered):
     has it. When this fails because the env's own spec holds the limit, read that instead."""
     for asked, limit in ((None, 7), (3, 3), (12, 12)):
         env = gym.make(ID, **({} if asked is None else {"max_episode_steps": asked}))
-        assert env.unwrapped.spec.max_episode_steps is None, "gymnasium.make now sets the limit on the env's spec: use it"
+        assert env.unwrapped.spec.max_episode_steps is None, (
+            "gymnasium.make now sets the limit on the env's spec: use it"
+        )
         assert env.spec.max_episode_steps == limit and env.unwrapped.limit == limit
     assert gym.make(ID, max_episode_steps=-1).unwrapped.limit is None  # no TimeLimit at all
     assert make_probe().limit is None  # another caller than gymnasium.make

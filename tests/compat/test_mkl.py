@@ -13,13 +13,17 @@ import pytest
 torch = pytest.importorskip("torch")
 from visualenv.compat import mkl  # noqa: E402
 
-pytestmark = pytest.mark.skipif(not torch.backends.mkl.is_available() or platform.machine() != "x86_64",
-                                reason="this torch has no MKL (only x86-64 builds carry it)")
+pytestmark = pytest.mark.skipif(
+    not torch.backends.mkl.is_available() or platform.machine() != "x86_64",
+    reason="this torch has no MKL (only x86-64 builds carry it)",
+)
 
 
 def in_a_fresh_process(code: str, **env: str) -> str:
     environment = {k: v for k, v in os.environ.items() if k != mkl.VARIABLE}
-    run = subprocess.run([sys.executable, "-c", code], env={**environment, **env}, capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-c", code], env={**environment, **env}, capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stderr[-3000:]
     return run.stdout.strip()
 
@@ -27,7 +31,9 @@ def in_a_fresh_process(code: str, **env: str) -> str:
 def test_torch_is_a_version_the_service_call_was_checked_against():
     """Fails when torch moves: check that its libtorch_cpu still exports MKL's service functions, then add its version."""
     assert mkl.torch_checked(), f"torch {torch.__version__} is not in compat/mkl.py's CHECKED_TORCH {mkl.CHECKED_TORCH}"
-    assert mkl.service() is not None, f"libtorch_cpu of torch {torch.__version__} does not export {mkl.GET_SYMBOL}/{mkl.SET_SYMBOL}"
+    assert mkl.service() is not None, (
+        f"libtorch_cpu of torch {torch.__version__} does not export {mkl.GET_SYMBOL}/{mkl.SET_SYMBOL}"
+    )
 
 
 PRODUCT = """
@@ -49,8 +55,12 @@ def test_the_variable_pins_mkl_when_set_before_its_first_product():
     compatible = str(mkl.COMPATIBLE_BRANCH)
     blank = {"before": "", "after_import": "", "after_product": ""}
     assert in_a_fresh_process(PRODUCT.format(**blank), MKL_CBWR="COMPATIBLE") == f"{compatible} COMPATIBLE"
-    assert in_a_fresh_process(PRODUCT.format(**dict(blank, after_import="os.environ['MKL_CBWR'] = 'COMPATIBLE'"))).startswith(compatible)
-    assert not in_a_fresh_process(PRODUCT.format(**dict(blank, after_product="os.environ['MKL_CBWR'] = 'COMPATIBLE'"))).startswith(compatible)
+    assert in_a_fresh_process(
+        PRODUCT.format(**dict(blank, after_import="os.environ['MKL_CBWR'] = 'COMPATIBLE'"))
+    ).startswith(compatible)
+    assert not in_a_fresh_process(
+        PRODUCT.format(**dict(blank, after_product="os.environ['MKL_CBWR'] = 'COMPATIBLE'"))
+    ).startswith(compatible)
     assert not in_a_fresh_process(PRODUCT.format(**blank)).startswith(compatible)
 
 
@@ -84,8 +94,13 @@ print(mkl.pin())
     assert late == "False"  # MKL took its mode at its first product: the record says unpinned
 
 
-@pytest.mark.parametrize("command, target", [(["eval", "LunarLanding-v0", "--model", "random", "--episodes", "1"], "evaluate_random"),
-                                             (["play", "LunarLanding-v0", "--episodes", "1"], "play")])
+@pytest.mark.parametrize(
+    "command, target",
+    [
+        (["eval", "LunarLanding-v0", "--model", "random", "--episodes", "1"], "evaluate_random"),
+        (["play", "LunarLanding-v0", "--episodes", "1"], "play"),
+    ],
+)
 def test_eval_and_play_run_with_the_variable_set_and_leave_it_as_it_was(command, target, monkeypatch):
     """The documented route for the processes visualenv starts: the command's work runs with MKL_CBWR=COMPATIBLE (what
     it loads and starts sees it), and the variable is put back once the command is done."""

@@ -10,7 +10,19 @@ from pathlib import Path
 
 PACKAGE = Path(__file__).parents[2] / "visualenv"
 #: names that reach past a dependency's documented API: C calls through ctypes, glibc's allocator, frame inspection
-INTERNAL_NAMES = {"ctypes", "CDLL", "cdll", "cffi", "mallopt", "malloc_trim", "_getframe", "currentframe", "getouterframes", "f_locals", "f_back"}
+INTERNAL_NAMES = {
+    "ctypes",
+    "CDLL",
+    "cdll",
+    "cffi",
+    "mallopt",
+    "malloc_trim",
+    "_getframe",
+    "currentframe",
+    "getouterframes",
+    "f_locals",
+    "f_back",
+}
 #: MKL's service functions (mkl_cbwr_set, mkl_serv_cbwr_get, ...), by name or looked up by a string
 MKL_SERVICE = re.compile(r"^mkl_\w+$")
 #: files that still hold such uses, with the change that removes them (made on another branch): each entry must still be
@@ -45,18 +57,25 @@ def test_dependency_internals_are_used_only_in_the_compat_package():
             outside[relative] = uses
     unexpected = {name: uses for name, uses in outside.items() if name not in PENDING}
     assert not unexpected, "move these into visualenv/compat/ (one module per dependency):\n" + "\n".join(
-        use for uses in unexpected.values() for use in uses)
+        use for uses in unexpected.values() for use in uses
+    )
     fixed = sorted(set(PENDING) - set(outside))
     assert not fixed, f"no longer uses a dependency's internals: remove it from PENDING: {fixed}"
 
 
 def test_the_search_finds_what_it_looks_for():
     """The search itself: each kind of use is found in code, and prose about them is not."""
-    text = ('"""ctypes and mallopt are named in prose."""\n'
-            "import ctypes  # a comment naming malloc_trim\n"
-            "frame = sys._getframe(1)\n"
-            "lib = getattr(torch_lib, 'mkl_serv_cbwr_set')\n")
-    assert internal_uses(text, "sample.py") == ["sample.py:2: ctypes", "sample.py:3: _getframe", "sample.py:4: mkl_serv_cbwr_set"]
+    text = (
+        '"""ctypes and mallopt are named in prose."""\n'
+        "import ctypes  # a comment naming malloc_trim\n"
+        "frame = sys._getframe(1)\n"
+        "lib = getattr(torch_lib, 'mkl_serv_cbwr_set')\n"
+    )
+    assert internal_uses(text, "sample.py") == [
+        "sample.py:2: ctypes",
+        "sample.py:3: _getframe",
+        "sample.py:4: mkl_serv_cbwr_set",
+    ]
 
 
 # -- private names of other packages -------------------------------------------------------------------------------
@@ -148,23 +167,30 @@ def test_no_private_name_of_another_package_is_used_outside_the_compat_package()
 def test_the_private_name_search_finds_what_it_looks_for():
     """The search itself, on a planted module: another package's private module and attributes are found (with their
     lines), visualenv's own private names and documented underscored names are not."""
-    planted = ("import torch\n"
-               "from ray._private import services\n"
-               "from visualenv.physics import _helper\n"
-               "import gymnasium.envs._impl as impl\n"
-               "from torch import _dynamo\n"
-               "class Probe:\n"
-               "    _field: int = 0\n"
-               "    def __init__(self) -> None:\n"
-               "        self._mine = torch._C\n"
-               "        self.__dict__.update(self._mine._asdict())\n"
-               "    def _helper(self, space, other) -> None:\n"
-               "        other._mine, other._field = self._helper, space._np_random\n"
-               "        space._np_random = getattr(space, '_np_random', None)\n")
+    planted = (
+        "import torch\n"
+        "from ray._private import services\n"
+        "from visualenv.physics import _helper\n"
+        "import gymnasium.envs._impl as impl\n"
+        "from torch import _dynamo\n"
+        "class Probe:\n"
+        "    _field: int = 0\n"
+        "    def __init__(self) -> None:\n"
+        "        self._mine = torch._C\n"
+        "        self.__dict__.update(self._mine._asdict())\n"
+        "    def _helper(self, space, other) -> None:\n"
+        "        other._mine, other._field = self._helper, space._np_random\n"
+        "        space._np_random = getattr(space, '_np_random', None)\n"
+    )
     tree = ast.parse(planted)
     own = own_private_names(tree)
     assert own == {"_field", "_mine", "_helper"}
     assert private_uses(tree, "planted.py", own) == [
-        "planted.py:2: from ray._private import services", "planted.py:4: import gymnasium.envs._impl",
-        "planted.py:5: from torch import _dynamo", "planted.py:9: torch._C", "planted.py:12: space._np_random",
-        "planted.py:13: space._np_random", "planted.py:13: getattr(space, '_np_random')"]
+        "planted.py:2: from ray._private import services",
+        "planted.py:4: import gymnasium.envs._impl",
+        "planted.py:5: from torch import _dynamo",
+        "planted.py:9: torch._C",
+        "planted.py:12: space._np_random",
+        "planted.py:13: space._np_random",
+        "planted.py:13: getattr(space, '_np_random')",
+    ]

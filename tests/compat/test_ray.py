@@ -32,9 +32,15 @@ def test_rllibs_deprecation_warnings_go_to_the_logger_quieted():
     assert isinstance(module.logger, logging.Logger) and module.logger.name == compat.DEPRECATION_LOGGER
 
 
-@pytest.mark.parametrize("found, environment, refused", [
-    (frozenset(), {}, True), (frozenset({"127.0.0.1:6379"}), {}, False), (None, {}, False),
-    (frozenset(), {"RAY_ADDRESS": "10.0.0.1:6379"}, False)])
+@pytest.mark.parametrize(
+    "found, environment, refused",
+    [
+        (frozenset(), {}, True),
+        (frozenset({"127.0.0.1:6379"}), {}, False),
+        (None, {}, False),
+        (frozenset(), {"RAY_ADDRESS": "10.0.0.1:6379"}, False),
+    ],
+)
 def test_address_auto_is_refused_where_ray_finds_no_cluster(found, environment, refused, monkeypatch):
     rllib_setup = pytest.importorskip("visualenv.train.rllib_setup")
     monkeypatch.setattr(rllib_setup, "local_cluster_addresses", lambda: found)

@@ -105,7 +105,11 @@ def test_max_steps_truncates():
 
 
 def test_truncate_outcome_with_reward():
-    env = env_from(WALKER.replace("halfway: {when: x >= 1, reward: 1, end: none}", "survived: {when: steps >= 3, reward: 10, end: truncate}"))
+    env = env_from(
+        WALKER.replace(
+            "halfway: {when: x >= 1, reward: 1, end: none}", "survived: {when: steps >= 3, reward: 10, end: truncate}"
+        )
+    )
     env.reset(seed=0)
     for _ in range(3):
         _, r, terminated, truncated, info = env.step(0)
@@ -197,7 +201,8 @@ def test_gymnasium_make_with_bundled_id():
 
 def test_yaml_and_toml_specs_compile_to_the_same_env(tmp_path):
     toml = tmp_path / "walker.toml"
-    toml.write_text(textwrap.dedent("""
+    toml.write_text(
+        textwrap.dedent("""
         id = "Walker-v0"
         reward = -0.1
         max_steps = 10
@@ -229,7 +234,8 @@ def test_yaml_and_toml_specs_compile_to_the_same_env(tmp_path):
         when = "x >= 1"
         reward = 1
         end = "none"
-    """))
+    """)
+    )
     yaml_env, toml_env = env_from(WALKER), VisualEnv(visualenv.load_spec(toml), render=False)
     for env in (yaml_env, toml_env):
         env.reset(seed=2)
@@ -275,12 +281,15 @@ def test_python_dynamics_escape_hatch():
     assert env.step(0)[4]["state"]["x"] == 3.0
 
 
-@pytest.mark.parametrize("function, message", [
-    ("returns_none", "the function returned NoneType, expected a dict of new state values (state: x)"),
-    ("returns_text", "the function returned x='abc', expected a number"),
-    ("returns_a_typo", "the function returned 'xx', which is not state (did you mean 'x'?"),
-    ("one_argument", "the function raised TypeError: one_argument() takes 1 positional argument but 4 were given"),
-])
+@pytest.mark.parametrize(
+    "function, message",
+    [
+        ("returns_none", "the function returned NoneType, expected a dict of new state values (state: x)"),
+        ("returns_text", "the function returned x='abc', expected a number"),
+        ("returns_a_typo", "the function returned 'xx', which is not state (did you mean 'x'?"),
+        ("one_argument", "the function raised TypeError: one_argument() takes 1 positional argument but 4 were given"),
+    ],
+)
 def test_python_dynamics_mistakes_are_located_faults(function, message):
     env = env_from(f"""
         id: Hook-v0

@@ -97,9 +97,13 @@ def test_find_names_the_first_site_of_a_spec_field():
 
 
 def test_a_compiled_program_has_a_line_map_per_generated_function():
-    program = compile_spec(load_spec_text(
-        "id: M-v0\nstate:\n  x: {init: 1}\nactions: {discrete: [{u: 1}]}\n"
-        "dynamics: {update: {x: x + u}}\nreward: x * 2\n", "m.yaml"))
+    program = compile_spec(
+        load_spec_text(
+            "id: M-v0\nstate:\n  x: {init: 1}\nactions: {discrete: [{u: 1}]}\n"
+            "dynamics: {update: {x: x + u}}\nreward: x * 2\n",
+            "m.yaml",
+        )
+    )
     assert set(program.line_maps) == {"init", "step", "bind"}
     assert program.line_maps["init"].find("state.x.init").text == "1"
     assert program.line_maps["step"].find("dynamics.update.x").text == "x + u"

@@ -29,7 +29,9 @@ def _env() -> gym.Env:
 # -- actions ------------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("action", [1.7, 1.0, "1", True, np.bool_(True), np.float32(1.0), np.array(1.0), np.array([1]), None, [1]])
+@pytest.mark.parametrize(
+    "action", [1.7, 1.0, "1", True, np.bool_(True), np.float32(1.0), np.array(1.0), np.array([1]), None, [1]]
+)
 def test_an_action_that_is_not_an_integer_is_refused_naming_the_action_space(action):
     env = _env()
     env.reset(seed=0)
@@ -116,8 +118,17 @@ def test_gymnasium_make_refuses_a_bad_option_like_visualenv_make():
 
 
 def test_gymnasium_make_with_image_options_builds_what_visualenv_make_builds():
-    options = dict(frame_stack=3, grayscale=True, resize=(32, 24), render_mode="rgb_array", threads=1, samples=1, device="cpu",
-                   engine="cycles", readback="auto")
+    options = dict(
+        frame_stack=3,
+        grayscale=True,
+        resize=(32, 24),
+        render_mode="rgb_array",
+        threads=1,
+        samples=1,
+        device="cpu",
+        engine="cycles",
+        readback="auto",
+    )
     env = gym.make(f"visualenv/{CARTPOLE}", **options)
     ours = visualenv.make(CARTPOLE, **options)
     try:
@@ -134,7 +145,9 @@ def test_gymnasium_make_with_image_options_builds_what_visualenv_make_builds():
 
 
 def test_gymnasium_make_vec_takes_the_options():
-    vec = gym.make_vec(f"visualenv/{CARTPOLE}", num_envs=2, vectorization_mode="sync", frame_stack=2, resize=(16, 16), threads=1)
+    vec = gym.make_vec(
+        f"visualenv/{CARTPOLE}", num_envs=2, vectorization_mode="sync", frame_stack=2, resize=(16, 16), threads=1
+    )
     try:
         obs, _ = vec.reset(seed=0)
         assert obs.shape == (2, 16, 16, 2)

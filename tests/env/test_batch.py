@@ -59,7 +59,9 @@ def step_both(batch: BatchedVectorEnv, singles: list[VisualEnv], steps: int) -> 
                 action = actions[i] if batch.program.discrete is None else int(actions[i])
                 _, reward, term, trunc, single_info = env.step(action)
                 assert (reward, term, trunc) == (rewards[i], terminated[i], truncated[i])
-                assert single_info["outcome"] == info["outcome"][i] and single_info["is_success"] == info["is_success"][i]
+                assert (
+                    single_info["outcome"] == info["outcome"][i] and single_info["is_success"] == info["is_success"][i]
+                )
                 assert single_info["milestones"] == info["milestones"][i] and single_info["steps"] == info["steps"][i]
             assert env.state == {k: v[i] for k, v in info["state"].items() if not k.startswith("_")}
             done[i] = terminated[i] or truncated[i]
@@ -94,7 +96,9 @@ def test_a_step_that_draws_random_numbers_steps_each_env_alone_with_the_same_res
 
 
 def test_a_fault_in_one_env_is_the_located_fault_of_that_env():
-    text = FEATURES.replace("x: x + v", "x: x + v / (x - x)").replace("max_steps: 40", "max_steps: 40\non_fault: terminate")
+    text = FEATURES.replace("x: x + v", "x: x + v / (x - x)").replace(
+        "max_steps: 40", "max_steps: 40\non_fault: terminate"
+    )
     batch = BatchedVectorEnv(load_spec_text(text, name="fault.yaml"), 2, render=False)
     batch.reset(seed=0)
     _, rewards, terminated, _, info = batch.step(np.zeros((2, 2), dtype=np.float32))
@@ -162,7 +166,10 @@ def render_both(spec, n: int, steps: int, seed: int = 3) -> list[float]:
             scores += [agreement(obs[i], own[i]) for i in range(n)]
             actions = np.array([batch.single_action_space.sample() for _ in range(n)])
             obs, _, terminated, truncated, _ = batch.step(actions)
-            own = [env.step(actions[i] if batch.program.discrete is None else int(actions[i]))[0] for i, env in enumerate(singles)]
+            own = [
+                env.step(actions[i] if batch.program.discrete is None else int(actions[i]))[0]
+                for i, env in enumerate(singles)
+            ]
             moved = moved or not np.array_equal(obs[0], first[0])
             if (terminated | truncated).any():
                 break
@@ -246,16 +253,22 @@ render: {{engine: cycles, preset: fast}}
 
 def test_engines_and_cameras_a_batch_cannot_render_are_refused(tmp_path):
     base = (SPECS / "visual_cartpole.yaml").read_text()
-    with pytest.raises(ValueError, match="render.engine 'workbench' cannot render a batch"):  # refused when the batch is built
+    with pytest.raises(
+        ValueError, match="render.engine 'workbench' cannot render a batch"
+    ):  # refused when the batch is built
         BatchedVectorEnv(load_spec_text(base.replace("engine: cycles", "engine: workbench"), name="w.yaml"), 2)
     zooming = base.replace("actors:\n", "actors:\n  Camera: {lens: 30 + 10 * theta}\n", 1)
-    with pytest.raises(SpecError, match=r"camera 'Camera' cannot be batched \(its lens binding on 'Camera'\): .* one lens"):
+    with pytest.raises(
+        SpecError, match=r"camera 'Camera' cannot be batched \(its lens binding on 'Camera'\): .* one lens"
+    ):
         BatchedVectorEnv(load_spec_text(zooming, name="zooming.yaml"), 2)
     scaled = base.replace("actors:\n", "actors:\n  Camera: {scale: [1, 1, 1 + theta]}\n", 1)
     with pytest.raises(SpecError, match=r"cannot be batched \(its scale binding on 'Camera'\)"):
         BatchedVectorEnv(load_spec_text(scaled, name="scaled.yaml"), 2)
     turning = base.replace("actors:\n", "actors:\n  Camera: {rotation: [1.5, 0, theta]}\n", 1)
-    BatchedVectorEnv(load_spec_text(turning, name="turning.yaml"), 2).close()   # a turning camera is followed (test_batched_scale)
+    BatchedVectorEnv(
+        load_spec_text(turning, name="turning.yaml"), 2
+    ).close()  # a turning camera is followed (test_batched_scale)
 
 
 def test_several_cameras_give_a_dict_of_tiles_per_camera(tmp_path):
@@ -310,9 +323,33 @@ def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
         pytest.fail("no episode ended")
     vec.close()
     out = tmp_path / "runs"
-    result = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--batched", "2", "--state-only", "--steps", "64", "--eval-every", "64",
-                                       "--eval-episodes", "1", "--final-episodes", "1", "--set", "n_steps=32", "--set", "batch_size=32",
-                                       "--device", "cpu", "--out", str(out), "--no-progress"])
+    result = CliRunner().invoke(
+        main,
+        [
+            "train",
+            "VisualCartPole-v0",
+            "--batched",
+            "2",
+            "--state-only",
+            "--steps",
+            "64",
+            "--eval-every",
+            "64",
+            "--eval-episodes",
+            "1",
+            "--final-episodes",
+            "1",
+            "--set",
+            "n_steps=32",
+            "--set",
+            "batch_size=32",
+            "--device",
+            "cpu",
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
     assert result.exit_code == 0, result.output
     (run,) = (out / "VisualCartPole-v0").iterdir()
     config = json.loads((run / "config.json").read_text())["config"]
@@ -321,39 +358,57 @@ def test_sb3_adapter_hands_sb3_the_ended_episode_and_trains(tmp_path):
     before = log.read_text().splitlines()
     assert len(before) > 2  # the header lines and at least one episode
     assert '"env_id": "visualenv/VisualCartPole-v0"' in before[0]
-    assert re.search(r"^eval at \d+ steps: mean return .* over 1 episodes, success [01]/1$", result.output, re.M), result.output
-    resumed = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--resume", str(run), "--steps", "128", "--no-progress"])
+    assert re.search(r"^eval at \d+ steps: mean return .* over 1 episodes, success [01]/1$", result.output, re.M), (
+        result.output
+    )
+    resumed = CliRunner().invoke(
+        main, ["train", "VisualCartPole-v0", "--resume", str(run), "--steps", "128", "--no-progress"]
+    )
     assert resumed.exit_code == 0, resumed.output
     after = log.read_text().splitlines()
-    assert after[:len(before)] == before and len(after) > len(before)  # the resumed run appends its episodes
+    assert after[: len(before)] == before and len(after) > len(before)  # the resumed run appends its episodes
 
 
 def test_a_child_object_moves_with_its_own_copys_parent():
     """The pole parented to the cart: each copy's pole hangs from that copy's cart (parents are remapped per copy)."""
     text = (SPECS / "visual_cartpole.yaml").read_text()
-    text = text.replace("  Pole: {location: [x, 0, 0.125], rotation: [0, theta, 0]}", "  Pole: {rotation: [0, theta, 0]}")
-    text = text.replace("depth: 1.0, origin: bottom,", "depth: 1.0, origin: bottom, parent: Cart, location: [0, 0, 0.125],")
+    text = text.replace(
+        "  Pole: {location: [x, 0, 0.125], rotation: [0, theta, 0]}", "  Pole: {rotation: [0, theta, 0]}"
+    )
+    text = text.replace(
+        "depth: 1.0, origin: bottom,", "depth: 1.0, origin: bottom, parent: Cart, location: [0, 0, 0.125],"
+    )
     assert "parent: Cart" in text and "Pole: {rotation" in text
     scores = render_both(load_spec_text(text, name="parented.yaml", base_dir=SPECS), 3, 8)
     assert min(scores) >= 0.98, scores
 
 
-@pytest.mark.parametrize("spec, depth_range", [("visual_cartpole.yaml", "[4, 9]"), ("goalie.yaml", "[1, 30]")], ids=["fixed_camera", "moving_camera"])
+@pytest.mark.parametrize(
+    "spec, depth_range",
+    [("visual_cartpole.yaml", "[4, 9]"), ("goalie.yaml", "[1, 30]")],
+    ids=["fixed_camera", "moving_camera"],
+)
 def test_depth_tiles_are_the_envs_own_depth(spec, depth_range):
     """Depth in a batch is measured along each tile's own ray: the third env sits a grid row away from the shared
     camera pose, where the scene camera's view Z would be off by the copies' spacing (all background)."""
     text = (SPECS / spec).read_text().replace("color: grayscale", f"color: depth\n  depth_range: {depth_range}")
     obs, owns = after_steps(load_spec_text(text, name=spec), seed=3, actions=[0, 1, 1])
     for i, own in enumerate(owns):
-        near = own[..., 0] < 255                      # what the env sees nearer than the far end of the range
+        near = own[..., 0] < 255  # what the env sees nearer than the far end of the range
         assert near.mean() > 0.01 and np.ptp(own) > 60, "a depth image, not the background alone"
         assert agreement(obs[i][near], own[near]) >= 0.98 and agreement(obs[i], own) >= 0.98, i
 
 
 def test_render_gives_each_envs_own_view():
     """render_mode='rgb_array': a tuple of N high-resolution views, each the view of the env alone (from gymnasium.make_vec too)."""
-    text = (SPECS / "goalie.yaml").read_text().replace("render: {engine: cycles, preset: fast}",
-                                                        "render: {engine: cycles, preset: fast, view: {resolution: [120, 90], preset: fast}}")
+    text = (
+        (SPECS / "goalie.yaml")
+        .read_text()
+        .replace(
+            "render: {engine: cycles, preset: fast}",
+            "render: {engine: cycles, preset: fast, view: {resolution: [120, 90], preset: fast}}",
+        )
+    )
     loaded = load_spec_text(text, name="goalie.yaml")
     batch = BatchedVectorEnv(loaded, 3, render_mode="rgb_array")
     single = VisualEnv(loaded, render_mode="rgb_array", renderer_options={"noise": "shared"})
@@ -362,14 +417,20 @@ def test_render_gives_each_envs_own_view():
         for _ in range(4):
             obs, *_ = batch.step(np.array([0, 1, 1]))
         views = batch.render()
-        assert isinstance(views, tuple) and len(views) == 3 and all(v.shape == (90, 120, 3) and v.dtype == np.uint8 for v in views)
+        assert (
+            isinstance(views, tuple)
+            and len(views) == 3
+            and all(v.shape == (90, 120, 3) and v.dtype == np.uint8 for v in views)
+        )
         for i in range(3):
             single.reset(seed=5 + i)
             for _ in range(4):
                 single.step(int([0, 1, 1][i]))
             assert agreement(views[i], single.render()) >= 0.98, i
-        assert agreement(views[0], views[1]) < 0.98          # the goalies stand in different places
-        after, *_ = batch.step(np.array([1, 1, 1]))           # observations after a view are still the env's own (the single env is env 2)
+        assert agreement(views[0], views[1]) < 0.98  # the goalies stand in different places
+        after, *_ = batch.step(
+            np.array([1, 1, 1])
+        )  # observations after a view are still the env's own (the single env is env 2)
         own, *_ = single.step(1)
         assert agreement(after[2], own) >= 0.98
     finally:
@@ -378,7 +439,9 @@ def test_render_gives_each_envs_own_view():
     with pytest.raises(ValueError, match="render_mode must be one of"):
         BatchedVectorEnv(loaded, 2, render_mode="ansi")  # "human" shows a grid: tests/viewer/test_human.py
     vec = gym.make_vec("visualenv/Goalie-v0", 2, vectorization_mode="vector_entry_point", render_mode="rgb_array")
-    assert vec.render_mode == "rgb_array" and "rgb_array" in vec.metadata["render_modes"]   # (its 400x400 'quality' views take seconds)
+    assert (
+        vec.render_mode == "rgb_array" and "rgb_array" in vec.metadata["render_modes"]
+    )  # (its 400x400 'quality' views take seconds)
     vec.close()
 
 
@@ -389,16 +452,20 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, alon
     every tile again (alone_limit, set here so that both ways are seen with 3 envs), else the grid is rendered again."""
     from visualenv.render.blender.batch import renderer as batched
 
-    monkeypatch.setattr(batched, "alone_limit", (lambda n, device, threads: n) if alone else (lambda n, device, threads: 0))
+    monkeypatch.setattr(
+        batched, "alone_limit", (lambda n, device, threads: n) if alone else (lambda n, device, threads: 0)
+    )
     same = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3, autoreset_mode="same_step")
     nxt = BatchedVectorEnv(SPECS / "visual_cartpole.yaml", 3)
     pixels: list[int] = []
     render = same.renderer._render
-    same.renderer._render = lambda view: (pixels.append(view.width * view.height), render(view))[1]  # counts, Blender renders
+    same.renderer._render = lambda view: (pixels.append(view.width * view.height), render(view))[
+        1
+    ]  # counts, Blender renders
     try:
         same.reset(seed=4)
         nxt.reset(seed=4)
-        actions = np.array([0, 0, 1])   # the two envs pushed left fall first
+        actions = np.array([0, 0, 1])  # the two envs pushed left fall first
         for _ in range(60):
             pixels.clear()
             obs, _, terminated, truncated, info = same.step(actions)
@@ -415,11 +482,13 @@ def test_same_step_autoreset_renders_only_the_reset_envs_again(monkeypatch, alon
             assert agreement(info["final_obs"][i], expected[i]) >= 0.98
         for i in np.flatnonzero(~done):
             assert agreement(obs[i], expected[i]) >= 0.98
-        again = [100 * 100] * len(ended) if alone else [4 * 100 * 100]   # each reset tile alone, or the grid again
-        assert pixels == [4 * 100 * 100] + again, pixels                           # after the 2 x 2 grid of the step
-        first, *_ = nxt.step(actions)   # NEXT_STEP resets the ended envs now, with the same draws
+        again = [100 * 100] * len(ended) if alone else [4 * 100 * 100]  # each reset tile alone, or the grid again
+        assert pixels == [4 * 100 * 100] + again, pixels  # after the 2 x 2 grid of the step
+        first, *_ = nxt.step(actions)  # NEXT_STEP resets the ended envs now, with the same draws
         for i in ended:
-            assert agreement(obs[i], first[i]) >= 0.98 and agreement(obs[i], info["final_obs"][i]) < 0.998  # the pole stands again
+            assert (
+                agreement(obs[i], first[i]) >= 0.98 and agreement(obs[i], info["final_obs"][i]) < 0.998
+            )  # the pole stands again
     finally:
         same.close()
         nxt.close()
@@ -433,7 +502,7 @@ def test_reset_envs_are_rendered_alone_only_while_that_is_cheaper():
 
     cpu2, cpu16, gpu = (alone_limit(1024, "CPU", 2), alone_limit(1024, "CPU", 16), alone_limit(1024, "GPU", 16))
     assert gpu < cpu16 < cpu2 < 1024 - ALONE_OVERHEAD_TILES
-    assert alone_limit(4096, "CPU", 2) / alone_limit(1024, "CPU", 2) == pytest.approx(2.0)   # 4x the envs, 2x the limit
+    assert alone_limit(4096, "CPU", 2) / alone_limit(1024, "CPU", 2) == pytest.approx(2.0)  # 4x the envs, 2x the limit
     assert alone_limit(16, "CPU", 2) <= 0 and alone_limit(20, "CPU", 1) == 20 - ALONE_OVERHEAD_TILES
 
 

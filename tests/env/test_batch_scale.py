@@ -47,7 +47,11 @@ def test_workers_split_a_batch_and_env_i_is_env_i_of_one_batch(tmp_path):
         for _ in range(40):
             obs, rewards, terminated, truncated, info = vec.step(actions)
             expected, rewards1, terminated1, truncated1, info1 = one.step(actions)
-            assert np.array_equal(rewards, rewards1) and np.array_equal(terminated, terminated1) and np.array_equal(truncated, truncated1)
+            assert (
+                np.array_equal(rewards, rewards1)
+                and np.array_equal(terminated, terminated1)
+                and np.array_equal(truncated, truncated1)
+            )
             assert all(np.array_equal(info["state"][n], info1["state"][n]) for n in one.program.state_names)
             assert np.array_equal(obs, expected)
             done = terminated | truncated
@@ -78,9 +82,18 @@ def test_workers_without_batched_and_uneven_splits():
 
 
 def test_infos_of_workers_merge_with_masks_for_keys_one_worker_lacks():
-    a = {"outcome": np.array(["x", None], dtype=object), "_outcome": np.ones(2, bool), "error": np.array([None, "boom"], dtype=object),
-         "_error": np.array([False, True]), "state": {"x": np.array([1.0, 2.0]), "_x": np.ones(2, bool)}}
-    b = {"outcome": np.array([None], dtype=object), "_outcome": np.ones(1, bool), "state": {"x": np.array([3.0]), "_x": np.ones(1, bool)}}
+    a = {
+        "outcome": np.array(["x", None], dtype=object),
+        "_outcome": np.ones(2, bool),
+        "error": np.array([None, "boom"], dtype=object),
+        "_error": np.array([False, True]),
+        "state": {"x": np.array([1.0, 2.0]), "_x": np.ones(2, bool)},
+    }
+    b = {
+        "outcome": np.array([None], dtype=object),
+        "_outcome": np.ones(1, bool),
+        "state": {"x": np.array([3.0]), "_x": np.ones(1, bool)},
+    }
     merged = merge_infos([a, b], [2, 1])
     assert list(merged["error"]) == [None, "boom", None] and list(merged["_error"]) == [False, True, False]
     assert list(merged["state"]["x"]) == [1.0, 2.0, 3.0] and merged["_outcome"].all()
@@ -112,7 +125,7 @@ def batch_rounds(rounds: int, queue: Any) -> None:
     from visualenv.render.blender.scene.build import ID_COLLECTIONS
     import bpy
 
-    spec = SPECS / "goalie.yaml"   # at 100x100: the 16 tiles' image (400x400, 2.6 MB) is one mapping of its own
+    spec = SPECS / "goalie.yaml"  # at 100x100: the 16 tiles' image (400x400, 2.6 MB) is one mapping of its own
     process = psutil.Process()
 
     def datablocks() -> int:
@@ -126,7 +139,7 @@ def batch_rounds(rounds: int, queue: Any) -> None:
         batch.close()
         gc.collect()
 
-    for seed in (0, 1):   # the first rounds load what every later one shares (Cycles' kernels, the OSL compiler)
+    for seed in (0, 1):  # the first rounds load what every later one shares (Cycles' kernels, the OSL compiler)
         round_trip(seed)
     ids = datablocks()
     before = process.memory_info().rss
@@ -152,7 +165,7 @@ def test_making_and_closing_batches_does_not_grow_memory():
     child = context.Process(target=batch_rounds, args=(20, queue))
     child.start()
     try:
-        while True:   # until the child reports, or has died (then at once, not at the suite's timeout)
+        while True:  # until the child reports, or has died (then at once, not at the suite's timeout)
             try:
                 growth, ids, counts = queue.get(timeout=5)
                 break
@@ -173,12 +186,14 @@ def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkey
 
     spec = small(tmp_path, "visual_cartpole.yaml")
     actions = np.array([0, 1, 0, 1, 1])
-    whole = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")   # one image
+    whole = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")  # one image
     try:
         frames = [whole.reset(seed=2)[0]] + [whole.step(actions)[0] for _ in range(30)]
     finally:
         whole.close()
-    monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles an image: 5 envs in three parts of one row of 2
+    monkeypatch.setattr(
+        batch_calls, "MAX_IMAGE_PIXELS", 2 * 32 * 32
+    )  # two tiles an image: 5 envs in three parts of one row of 2
     split = BatchedVectorEnv(spec, 5, autoreset_mode="same_step")
     calls: list[int] = []
     original = batched.BatchedBlenderRenderer.raw_render
@@ -196,7 +211,9 @@ def test_a_split_batch_moves_one_camera_instead_of_recompiling_its_shader(monkey
             for i in range(5):
                 assert agreement(obs[i], expected[i]) >= 0.99
             ended = ended or done
-        assert ended and split.renderer.shader_updates == updates, "a split step changed the tiles camera's shader parameters"
+        assert ended and split.renderer.shader_updates == updates, (
+            "a split step changed the tiles camera's shader parameters"
+        )
         assert obs.reshape(5, -1).max(axis=1).min() > 100
     finally:
         split.close()
@@ -215,9 +232,13 @@ def test_what_a_batch_cannot_render_is_refused_when_it_is_built(tmp_path):
     from visualenv.spec import load_spec_text
 
     example = (Path(__file__).parents[2] / "examples" / "domain_randomization.yaml").read_text()
-    BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2).close()   # a camera that moves and turns (look_at)
-    zoom = example.replace("look_at: [0, 0, 0]}\n\nobservation", "look_at: [0, 0, 0], lens: 20 + 5 * distance}\n\nobservation")
-    with pytest.raises(SpecError, match=r"dr.yaml:\d+.*camera 'Camera' cannot be batched \(its lens binding on 'Camera'\)"):
+    BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2).close()  # a camera that moves and turns (look_at)
+    zoom = example.replace(
+        "look_at: [0, 0, 0]}\n\nobservation", "look_at: [0, 0, 0], lens: 20 + 5 * distance}\n\nobservation"
+    )
+    with pytest.raises(
+        SpecError, match=r"dr.yaml:\d+.*camera 'Camera' cannot be batched \(its lens binding on 'Camera'\)"
+    ):
         BatchedVectorEnv(load_spec_text(zoom, name="dr.yaml"), 2)
     unlit = example.replace("  Sun: {strength: sun}\n", "")
     with pytest.raises(SpecError, match=r"turns with the state: .* at most 1024 envs, not 1025"):
@@ -225,8 +246,10 @@ def test_what_a_batch_cannot_render_is_refused_when_it_is_built(tmp_path):
     with pytest.raises(SpecError, match=r"turns with the state: .* depth observation"):
         BatchedVectorEnv(load_spec_text(example.replace("color: rgb", "color: depth"), name="dr.yaml"), 2)
     fixed = example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
-    BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 63).close()   # a bound sun: one per env, up to 63
-    with pytest.raises(SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: .* at most 63 such sets apart, not 64"):
+    BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 63).close()  # a bound sun: one per env, up to 63
+    with pytest.raises(
+        SpecError, match=r"dr.yaml:\d+.*sun 'Sun' is bound to the state: .* at most 63 such sets apart, not 64"
+    ):
         BatchedVectorEnv(load_spec_text(fixed, name="dr.yaml"), 64)
     sky = (Path(__file__).parents[2] / "specs" / "assets" / "goalie" / "sky.png").resolve()
     under_sky = fixed.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}}}")
@@ -236,7 +259,7 @@ def test_what_a_batch_cannot_render_is_refused_when_it_is_built(tmp_path):
     with pytest.raises(SpecError, match="the world .* is bound to the state"):
         BatchedVectorEnv(load_spec_text(world, name="dr.yaml"), 2)
     (tmp_path / "zoom.yaml").write_text(zoom)
-    with pytest.raises(SpecError, match="cannot be batched"):   # in worker processes too, before any starts
+    with pytest.raises(SpecError, match="cannot be batched"):  # in worker processes too, before any starts
         visualenv.make_vec(str(tmp_path / "zoom.yaml"), 4, batched=True, workers=2)
     batch = BatchedVectorEnv(load_spec_text(example, name="dr.yaml"), 2, render=False)
     assert batch.reset(seed=0)[0].shape[0] == 2
@@ -250,9 +273,14 @@ def test_a_bound_sun_lights_each_copy_with_its_own_strength_colour_and_direction
     from visualenv.spec import load_spec_text
 
     example = (Path(__file__).parents[2] / "examples" / "domain_randomization.yaml").read_text()
-    text = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
-            .replace("  Sun: {strength: sun}\n", "  Sun: {strength: sun, color: [1, green, red], rotation: [0.2 + 0.6 * red, 0.3 * green, x]}\n")
-            .replace("resolution: [84, 84]", "resolution: [32, 32]"))
+    text = (
+        example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "")
+        .replace(
+            "  Sun: {strength: sun}\n",
+            "  Sun: {strength: sun, color: [1, green, red], rotation: [0.2 + 0.6 * red, 0.3 * green, x]}\n",
+        )
+        .replace("resolution: [84, 84]", "resolution: [32, 32]")
+    )
     loaded = load_spec_text(text, name="sun.yaml")
     batch = BatchedVectorEnv(loaded, 3)
     singles = [VisualEnv(loaded, renderer_options={"noise": "shared"}) for _ in range(3)]
@@ -261,7 +289,9 @@ def test_a_bound_sun_lights_each_copy_with_its_own_strength_colour_and_direction
             obs, _ = batch.reset(seed=seed)
             own = [env.reset(seed=seed + i)[0] for i, env in enumerate(singles)]
             for _ in range(3):
-                assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [agreement(obs[i], own[i]) for i in range(3)]
+                assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [
+                    agreement(obs[i], own[i]) for i in range(3)
+                ]
                 assert min(agreement(obs[i], own[j]) for i in range(3) for j in range(3) if i != j) < 0.9
                 obs, *_ = batch.step(np.array([1, 0, 1]))
                 own = [env.step(a)[0] for env, a in zip(singles, (1, 0, 1))]
@@ -281,11 +311,15 @@ def test_a_lamp_per_env_lights_only_its_own_copy_under_any_world(light: str):
 
     sky = (Path(__file__).parents[2] / "specs" / "assets" / "goalie" / "sky.png").resolve()
     example = (Path(__file__).parents[2] / "examples" / "domain_randomization.yaml").read_text()
-    text = (example.replace("    Sun: {light: sun, strength: 3.0, rotation: [0.5, 0.2, 0.0]}\n",
-                            f"    Lamp: {{light: {light}, strength: 300, location: [1, -2, 4]}}\n")
-            .replace("  Sun: {strength: sun}\n", "  Lamp: {strength: 100 * sun}\n")
-            .replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5}}")
-            .replace("resolution: [84, 84]", "resolution: [32, 32]"))
+    text = (
+        example.replace(
+            "    Sun: {light: sun, strength: 3.0, rotation: [0.5, 0.2, 0.0]}\n",
+            f"    Lamp: {{light: {light}, strength: 300, location: [1, -2, 4]}}\n",
+        )
+        .replace("  Sun: {strength: sun}\n", "  Lamp: {strength: 100 * sun}\n")
+        .replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5}}")
+        .replace("resolution: [84, 84]", "resolution: [32, 32]")
+    )
     assert "Lamp: {strength" in text and "image:" in text
     loaded = load_spec_text(text, name="lamp.yaml")
     n = 6
@@ -295,7 +329,9 @@ def test_a_lamp_per_env_lights_only_its_own_copy_under_any_world(light: str):
         obs, _ = batch.reset(seed=1)
         own = [env.reset(seed=1 + i)[0] for i, env in enumerate(singles)]
         assert all(agreement(obs[i], own[i]) >= 0.95 for i in range(n)), [agreement(obs[i], own[i]) for i in range(n)]
-        assert min(agreement(obs[i], own[j]) for i in range(n) for j in range(n) if i != j) < 0.9  # each tile its own env
+        assert (
+            min(agreement(obs[i], own[j]) for i in range(n) for j in range(n) if i != j) < 0.9
+        )  # each tile its own env
     finally:
         batch.close()
         for env in singles:
@@ -303,7 +339,9 @@ def test_a_lamp_per_env_lights_only_its_own_copy_under_any_world(light: str):
     if light == "point":  # past 63 envs light linking cannot tell the copies apart: the batch says what that costs
         many = BatchedVectorEnv(loaded, 64)
         try:
-            with pytest.warns(RuntimeWarning, match=r"batch of 64 envs shares light 'Lamp' .* at most 63 envs per batch"):
+            with pytest.warns(
+                RuntimeWarning, match=r"batch of 64 envs shares light 'Lamp' .* at most 63 envs per batch"
+            ):
                 _, info = many.reset(seed=0)
             # still, each env's lamp has its own strength (copies shared one light datablock: the last env's strength)
             energies = [copy.objects["Lamp"].data.energy for copy in many.renderer._copies]
@@ -320,16 +358,26 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
     parent's bound rotation; and under an image sky."""
     from visualenv.spec import load_spec_text
 
-    example = (Path(__file__).parents[2] / "examples" / "domain_randomization.yaml").read_text().replace("[84, 84]", "[32, 32]")
-    every_step = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n",
-                                  "  Camera: {rotation: [1.0 + 0.4 * red, 0, 0.8 * green - 0.5 + x]}\n")
-                  .replace("location: [0, -6, 2], look_at: [0, 0, 0]}", "location: [0, -6, 2]}"))
+    example = (
+        (Path(__file__).parents[2] / "examples" / "domain_randomization.yaml")
+        .read_text()
+        .replace("[84, 84]", "[32, 32]")
+    )
+    every_step = example.replace(
+        "  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n",
+        "  Camera: {rotation: [1.0 + 0.4 * red, 0, 0.8 * green - 0.5 + x]}\n",
+    ).replace("location: [0, -6, 2], look_at: [0, 0, 0]}", "location: [0, -6, 2]}")
     sky = (Path(__file__).parents[2] / "specs" / "assets" / "goalie" / "sky.png").resolve()
-    image_sky = (example.replace("world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5, rotation: 0.7}}")
-                 .replace("  Sun: {strength: sun}\n", ""))   # each ray is turned, not the scene: any world
-    rig = (example.replace("  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n", "  Rig: {rotation: [0, 0, 0.6 * green - 0.3 + x]}\n")
-           .replace("    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], look_at: [0, 0, 0]}",
-                    "    Rig: {empty: true}\n    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], rotation: [1.2, 0, 0], parent: Rig}"))
+    image_sky = example.replace(
+        "world: {color: [0.3, 0.3, 0.35]}", f"world: {{image: {sky}, strength: 0.5, rotation: 0.7}}"
+    ).replace("  Sun: {strength: sun}\n", "")  # each ray is turned, not the scene: any world
+    rig = example.replace(
+        "  Camera: {location: [0, -distance, 2], look_at: [0, 0, 0]}\n",
+        "  Rig: {rotation: [0, 0, 0.6 * green - 0.3 + x]}\n",
+    ).replace(
+        "    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], look_at: [0, 0, 0]}",
+        "    Rig: {empty: true}\n    Camera: {camera: perspective, lens: 35, location: [0, -6, 2], rotation: [1.2, 0, 0], parent: Rig}",
+    )
     assert "parent: Rig" in rig and "Rig: {rotation" in rig
     for text, seeds, steps in ((example, (1, 5), 3), (every_step, (3,), 4), (image_sky, (1,), 2), (rig, (2,), 2)):
         loaded = load_spec_text(text, name="dr.yaml")
@@ -340,14 +388,20 @@ def test_the_randomization_example_runs_batched_and_each_tile_is_the_envs_own():
                 obs, info = batch.reset(seed=seed)
                 own = [env.reset(seed=seed + i)[0] for i, env in enumerate(singles)]
                 for _ in range(steps):
-                    assert all(env.state == {k: v[i] for k, v in info["state"].items() if not k.startswith("_")}
-                               for i, env in enumerate(singles))
-                    assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [agreement(obs[i], own[i]) for i in range(3)]
+                    assert all(
+                        env.state == {k: v[i] for k, v in info["state"].items() if not k.startswith("_")}
+                        for i, env in enumerate(singles)
+                    )
+                    assert all(agreement(obs[i], own[i]) >= 0.98 for i in range(3)), [
+                        agreement(obs[i], own[i]) for i in range(3)
+                    ]
                     assert max(agreement(obs[i], own[j]) for i in range(3) for j in range(3) if i != j) < 0.9
                     updates = batch.renderer.shader_updates
                     obs, _, _, _, info = batch.step(np.array([1, 0, 1]))
                     own = [env.step(a)[0] for env, a in zip(singles, (1, 0, 1))]
-                    assert (batch.renderer.shader_updates > updates) == (text in (every_step, rig))   # turned each step, or at resets
+                    assert (batch.renderer.shader_updates > updates) == (
+                        text in (every_step, rig)
+                    )  # turned each step, or at resets
         finally:
             batch.close()
             for env in singles:
@@ -361,9 +415,12 @@ def test_a_turning_camera_renders_reset_envs_alone_split_batches_and_views(monke
     from visualenv.spec import load_spec_text
 
     monkeypatch.setattr(batched, "alone_limit", lambda n, device, threads: n)
-    monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 32 * 32)   # two tiles a call: three envs take two calls
+    monkeypatch.setattr(batch_calls, "MAX_IMAGE_PIXELS", 2 * 32 * 32)  # two tiles a call: three envs take two calls
     example = (Path(__file__).parents[2] / "examples" / "domain_randomization.yaml").read_text()
-    text = example.replace("[84, 84]", "[32, 32]") + "render: {engine: cycles, view: {resolution: [40, 40], preset: fast}}\n"
+    text = (
+        example.replace("[84, 84]", "[32, 32]")
+        + "render: {engine: cycles, view: {resolution: [40, 40], preset: fast}}\n"
+    )
     loaded = load_spec_text(text, name="dr.yaml")
     batch = BatchedVectorEnv(loaded, 3, render_mode="rgb_array")
     singles = [VisualEnv(loaded, render_mode="rgb_array", renderer_options={"noise": "shared"}) for _ in range(3)]

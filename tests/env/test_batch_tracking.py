@@ -23,7 +23,9 @@ CHEETAH = "DMC-cheetah-run-v0"
 
 def gait(step: int, phase: float) -> np.ndarray:
     """A periodic action of the cheetah's six joints: with phase 1.57 it runs backwards about 2 m in 40 steps."""
-    return np.sin(0.5 * step + np.array([0.0, phase, 2 * phase, phase + np.pi, 2 * phase + np.pi, 0.0])).astype(np.float32)
+    return np.sin(0.5 * step + np.array([0.0, phase, 2 * phase, phase + np.pi, 2 * phase + np.pi, 0.0])).astype(
+        np.float32
+    )
 
 
 def body(frame: np.ndarray) -> np.ndarray:
@@ -42,19 +44,27 @@ def test_each_cheetah_tile_is_its_own_env_seen_from_its_own_tracking_camera() ->
         tiles, _ = batch.reset(seed=10)
         frames = [env.reset(seed=10 + k)[0] for k, env in enumerate(alone)]
         for t in range(steps):
-            actions = np.stack([gait(t, p) if p is not None else rng.uniform(-1, 1, 6).astype(np.float32) for p in phases])
+            actions = np.stack(
+                [gait(t, p) if p is not None else rng.uniform(-1, 1, 6).astype(np.float32) for p in phases]
+            )
             tiles, *_ = batch.step(actions)
             frames = [env.step(actions[k])[0] for k, env in enumerate(alone)]
         xs = [float(env.unwrapped.data.qpos[0]) for env in alone]
-        assert xs[0] < -1.5, f"the cheetah did not run: x = {xs}"  # a camera left where it started would see it out of the frame
+        assert xs[0] < -1.5, (
+            f"the cheetah did not run: x = {xs}"
+        )  # a camera left where it started would see it out of the frame
         for k in range(n):
             mine, theirs = body(tiles[k]), body(frames[k])
             assert theirs.sum() > 150, f"env {k}: the cheetah is not in its own frame ({theirs.sum()} pixels)"
             iou = (mine & theirs).sum() / (mine | theirs).sum()
             mean = np.abs(tiles[k].astype(int) - frames[k].astype(int)).mean()
-            assert iou > 0.95 and mean < 1.0, f"env {k} (x = {xs[k]:.2f} m): IoU {iou:.3f}, mean |difference| {mean:.2f}"
+            assert iou > 0.95 and mean < 1.0, (
+                f"env {k} (x = {xs[k]:.2f} m): IoU {iou:.3f}, mean |difference| {mean:.2f}"
+            )
             columns = np.nonzero(theirs)[1]
-            assert 20 < columns.mean() < 64, f"env {k}: the tracking camera lost the body (centre column {columns.mean():.1f})"
+            assert 20 < columns.mean() < 64, (
+                f"env {k}: the tracking camera lost the body (centre column {columns.mean():.1f})"
+            )
     finally:
         batch.close()
         for env in alone:
@@ -82,7 +92,9 @@ def test_a_walker_batch_shows_each_env_as_it_is_alone() -> None:
             env.close()
 
 
-@pytest.mark.parametrize("ident", sorted(i.removeprefix("visualenv/") for i in gym.registry if i.startswith("visualenv/")))
+@pytest.mark.parametrize(
+    "ident", sorted(i.removeprefix("visualenv/") for i in gym.registry if i.startswith("visualenv/"))
+)
 def test_every_bundled_id_runs_batched(ident: str) -> None:
     batch = visualenv.make_vec(ident, 2, batched=True)
     try:
@@ -91,7 +103,11 @@ def test_every_bundled_id_runs_batched(ident: str) -> None:
             obs, rewards, terminated, truncated, _ = batch.step(batch.action_space.sample())
         space = batch.single_observation_space
         frames = obs if isinstance(obs, dict) else {"": obs}
-        shapes = {key: sub.shape for key, sub in space.spaces.items()} if isinstance(space, gym.spaces.Dict) else {"": space.shape}
+        shapes = (
+            {key: sub.shape for key, sub in space.spaces.items()}
+            if isinstance(space, gym.spaces.Dict)
+            else {"": space.shape}
+        )
         for key, frame in frames.items():
             assert frame.shape == (2, *shapes[key]) and frame.dtype == np.uint8, (key, frame.shape)
             assert frame.std() > 0, f"{ident}: a blank observation ({key or 'the camera'})"

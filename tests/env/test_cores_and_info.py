@@ -18,24 +18,31 @@ from visualenv.env import cores
 from visualenv.env.vector import make_vec, warn_gpu_workers
 from visualenv.tools.info import format_report, gather
 
-TWO_CORES = pytest.mark.skipif(not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs Linux and 2 cores")
+TWO_CORES = pytest.mark.skipif(
+    not hasattr(os, "sched_getaffinity") or len(os.sched_getaffinity(0)) < 2, reason="needs Linux and 2 cores"
+)
 
 
-@pytest.mark.parametrize("usable, n, shares", [
-    (range(16), 16, [(i,) for i in range(16)]),
-    (range(16), 4, [(0, 1, 2, 3), (4, 5, 6, 7), (8, 9, 10, 11), (12, 13, 14, 15)]),
-    (range(16), 3, [(0, 1, 2, 3, 4), (5, 6, 7, 8, 9), (10, 11, 12, 13, 14, 15)]),
-    ([2, 5], 3, [(2,), (5,), (2,)]),  # more workers than cores: one core each, round robin
-    ([2, 5, 7], 1, [None]),  # one worker: nothing to keep apart
-    ([0], 2, [None, None]),  # one core: nothing to choose
-])
+@pytest.mark.parametrize(
+    "usable, n, shares",
+    [
+        (range(16), 16, [(i,) for i in range(16)]),
+        (range(16), 4, [(0, 1, 2, 3), (4, 5, 6, 7), (8, 9, 10, 11), (12, 13, 14, 15)]),
+        (range(16), 3, [(0, 1, 2, 3, 4), (5, 6, 7, 8, 9), (10, 11, 12, 13, 14, 15)]),
+        ([2, 5], 3, [(2,), (5,), (2,)]),  # more workers than cores: one core each, round robin
+        ([2, 5, 7], 1, [None]),  # one worker: nothing to keep apart
+        ([0], 2, [None, None]),  # one core: nothing to choose
+    ],
+)
 def test_workers_get_disjoint_shares_of_the_usable_cores(monkeypatch, usable, n, shares):
     monkeypatch.setattr(cores.os, "sched_getaffinity", lambda pid: set(usable), raising=False)
     assert cores.worker_cores(n) == shares
     assert cores.worker_cores(n, pin=False) == [None] * n
     got = [s for s in cores.worker_cores(n) if s]
     if n <= len(list(usable)):
-        assert sum(len(s) for s in got) in (0, len(list(usable))) and len({c for s in got for c in s}) == sum(len(s) for s in got)
+        assert sum(len(s) for s in got) in (0, len(list(usable))) and len({c for s in got for c in s}) == sum(
+            len(s) for s in got
+        )
     assert [cores.render_threads(s, n) for s in shares] == [len(s) if s else cores.default_threads(n) for s in shares]
 
 
@@ -74,7 +81,11 @@ def test_vector_env_workers_are_confined_by_default_and_run_few_busy_threads():
         after = [_thread_cpu_ticks(pid) for pid in pids]
         for b, a, share in zip(before, after, shares):
             busy = [tid for tid in a if a[tid] - b.get(tid, 0) > 2]  # threads that ran more than 20 ms over 300 steps
-            assert 1 <= len(busy) <= 1 + len(share), (busy, a, b)  # the main thread and Cycles' render threads, one per core of its share
+            assert 1 <= len(busy) <= 1 + len(share), (
+                busy,
+                a,
+                b,
+            )  # the main thread and Cycles' render threads, one per core of its share
     finally:
         vec.close()
     assert os.sched_getaffinity(0) == ours  # Gymnasium builds one env in the parent: it must not confine us
@@ -89,7 +100,9 @@ def _claim(queue, release) -> None:
 @TWO_CORES
 def test_processes_placed_by_others_claim_distinct_cores(tmp_path, monkeypatch):
     """RLlib's EnvRunners are placed by Ray: each claims a core no other visualenv process holds."""
-    monkeypatch.setenv("TMPDIR", str(tmp_path))  # the claims' lock files of these processes alone, not of others on the machine
+    monkeypatch.setenv(
+        "TMPDIR", str(tmp_path)
+    )  # the claims' lock files of these processes alone, not of others on the machine
     context = multiprocessing.get_context("spawn")
     queue, release = context.Queue(), context.Event()
     workers = [context.Process(target=_claim, args=(queue, release)) for _ in range(len(os.sched_getaffinity(0)) + 1)]
@@ -105,14 +118,31 @@ def test_processes_placed_by_others_claim_distinct_cores(tmp_path, monkeypatch):
     assert sum(core is None for core, _ in results) == 1  # the extra process claims nothing and stays unconfined
 
 
-@pytest.mark.parametrize("facts, expected", [
-    (("CUDA", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", False), ("/var/tmp/OptixCache_root", False))), "sm_90"),
-    (("OPTIX", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", False),)), "no CUDA binary for sm_90"),
-    (("OPTIX", ("sm_75", "sm_89", "sm_90"), ("sm_90",), (("~/.nv/ComputeCache", False),)), None),  # OptiX's own modules: seconds
-    (("CUDA", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", True),)), None),  # the driver's cache serves it
-    (("CUDA", ("sm_75", "sm_89"), ("sm_89",), (("~/.nv/ComputeCache", False),)), None),  # a shipped binary
-    (("HIP", (), (), (("~/.nv/ComputeCache", False),)), None),
-])
+@pytest.mark.parametrize(
+    "facts, expected",
+    [
+        (
+            (
+                "CUDA",
+                ("sm_75", "sm_89"),
+                ("sm_90",),
+                (("~/.nv/ComputeCache", False), ("/var/tmp/OptixCache_root", False)),
+            ),
+            "sm_90",
+        ),
+        (("OPTIX", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", False),)), "no CUDA binary for sm_90"),
+        (
+            ("OPTIX", ("sm_75", "sm_89", "sm_90"), ("sm_90",), (("~/.nv/ComputeCache", False),)),
+            None,
+        ),  # OptiX's own modules: seconds
+        (
+            ("CUDA", ("sm_75", "sm_89"), ("sm_90",), (("~/.nv/ComputeCache", True),)),
+            None,
+        ),  # the driver's cache serves it
+        (("CUDA", ("sm_75", "sm_89"), ("sm_89",), (("~/.nv/ComputeCache", False),)), None),  # a shipped binary
+        (("HIP", (), (), (("~/.nv/ComputeCache", False),)), None),
+    ],
+)
 def test_the_first_gpu_render_says_when_it_compiles_kernels(facts, expected):
     devices = pytest.importorskip("visualenv.render.blender.runtime.devices", reason="the Blender backend needs bpy")
     kernel_facts = devices.KernelFacts(*facts)
@@ -151,7 +181,10 @@ def test_info_reports_versions_cores_and_blenders_devices():
     context = report["blender"]["gpu_context"]
     assert "renderer" in context and isinstance(context["software"], bool)
     assert set(report["blender"]["kernel_caches"]) and report["cores"]["usable"] == len(os.sched_getaffinity(0))
-    assert report["blender"]["batches"] == {"available": True} and "batches (N envs per Cycles call, --batched): available" in result.output
+    assert (
+        report["blender"]["batches"] == {"available": True}
+        and "batches (N envs per Cycles call, --batched): available" in result.output
+    )
 
 
 def test_info_survives_a_probe_that_crashes_or_hangs():
@@ -165,15 +198,29 @@ def test_info_survives_a_probe_that_crashes_or_hangs():
 def test_info_names_mujocos_version():
     mujoco = pytest.importorskip("mujoco")
     report = gather(command=[sys.executable, "-c", "pass"])
-    assert report["mujoco"] == mujoco.__version__ and f"MuJoCo {mujoco.__version__}" in format_report(report).splitlines()
+    assert (
+        report["mujoco"] == mujoco.__version__ and f"MuJoCo {mujoco.__version__}" in format_report(report).splitlines()
+    )
     assert "MuJoCo: not installed" in format_report(dict(report, mujoco=None))
 
 
 def test_info_says_why_batches_are_unavailable():
-    report = {"visualenv": "0", "python": "3.11", "machine": "x86_64", "cores": {"usable": 2, "machine": 2},
-              "blender": {"bpy": "5.0.1", "cycles": {}, "gpu_context": {"error": "none"},
-                          "batches": {"error": "RuntimeError: Cycles could not compile the batch's custom camera shader"}}}
-    assert "batches (N envs per Cycles call, --batched): unavailable (RuntimeError: Cycles could not compile" in format_report(report)
+    report = {
+        "visualenv": "0",
+        "python": "3.11",
+        "machine": "x86_64",
+        "cores": {"usable": 2, "machine": 2},
+        "blender": {
+            "bpy": "5.0.1",
+            "cycles": {},
+            "gpu_context": {"error": "none"},
+            "batches": {"error": "RuntimeError: Cycles could not compile the batch's custom camera shader"},
+        },
+    }
+    assert (
+        "batches (N envs per Cycles call, --batched): unavailable (RuntimeError: Cycles could not compile"
+        in format_report(report)
+    )
 
 
 def test_info_says_whether_cuda_mps_runs(tmp_path, monkeypatch):

@@ -37,7 +37,9 @@ from visualenv.spec.loader import LoadedSpec, load_spec
 pytestmark = pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 
 SPECS = Path(__file__).parents[2] / "specs"
-BUNDLED = sorted(SPECS.glob("*.yaml")) + sorted((SPECS / "mujoco").glob("*.yaml")) + sorted((SPECS / "dmc").glob("*.yaml"))
+BUNDLED = (
+    sorted(SPECS.glob("*.yaml")) + sorted((SPECS / "mujoco").glob("*.yaml")) + sorted((SPECS / "dmc").glob("*.yaml"))
+)
 N = 4
 SEED = 20
 
@@ -167,8 +169,13 @@ def with_fault_policy(loaded: LoadedSpec, on_fault: str) -> LoadedSpec:
 
 def lane_info(info: dict[str, Any], i: int, names: list[str]) -> dict[str, Any]:
     """Env i's info out of a vector info, in a single env's layout."""
-    out = {"state": {n: info["state"][n][i] for n in names}, "steps": info["steps"][i], "outcome": info["outcome"][i],
-           "milestones": info["milestones"][i], "is_success": info["is_success"][i]}
+    out = {
+        "state": {n: info["state"][n][i] for n in names},
+        "steps": info["steps"][i],
+        "outcome": info["outcome"][i],
+        "milestones": info["milestones"][i],
+        "is_success": info["is_success"][i],
+    }
     if "error" in info and info["_error"][i]:
         out["error"] = info["error"][i]
     return out
@@ -185,8 +192,13 @@ def assert_same_info(batch_info: dict[str, Any], single_info: dict[str, Any], wh
         assert batch_info[key] == value, f"{where}: info[{key!r}] {batch_info[key]!r} != {value!r}"
 
 
-def differential(loaded: LoadedSpec, steps: int, nan_rate: float = 0.0, mode: AutoresetMode = AutoresetMode.NEXT_STEP,
-                 repeat: int = 1) -> dict[str, int]:
+def differential(
+    loaded: LoadedSpec,
+    steps: int,
+    nan_rate: float = 0.0,
+    mode: AutoresetMode = AutoresetMode.NEXT_STEP,
+    repeat: int = 1,
+) -> dict[str, int]:
     """Step a batch of N and N single envs with the same random actions; count what happened (episodes ended, faults).
     `repeat`: the action repeat of both (DeepMind Control's tasks default to theirs: compared with 1, and with it apart)."""
     batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode, action_repeat=repeat)
@@ -322,7 +334,9 @@ def test_a_fault_raised_in_a_batch_is_its_envs_fault_named_by_its_index(case: st
 
 @pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP], ids=lambda m: m.name)
 @pytest.mark.parametrize("case", HOSTILE)
-def test_a_fault_that_terminates_ends_the_same_episode_in_a_batch(case: str, mode: AutoresetMode, tmp_path: Path) -> None:
+def test_a_fault_that_terminates_ends_the_same_episode_in_a_batch(
+    case: str, mode: AutoresetMode, tmp_path: Path
+) -> None:
     counts = differential(hostile(case, "terminate", tmp_path), 300, nan_rate=0.03, mode=mode)
     assert counts["errors"] >= 2 and counts["raised"] == 0, counts
 
@@ -386,7 +400,10 @@ def test_a_batch_computes_each_function_as_python_does_and_notes_where_python_ra
     arity = {"clip": 3, "min": 2, "max": 2, "hypot": 2, "atan2": 2, "pow": 2, "/": 2, "//": 2, "%": 2}
     python = {name: f.impl for name, f in FUNCTIONS.items() if not f.random}
     python.update({"pow": power, "/": operator.truediv, "//": operator.floordiv, "%": operator.mod})
-    vector = {**table, **{symbol: OPERATORS[op] for symbol, op in (("/", ast.Div), ("//", ast.FloorDiv), ("%", ast.Mod))}}
+    vector = {
+        **table,
+        **{symbol: OPERATORS[op] for symbol, op in (("/", ast.Div), ("//", ast.FloorDiv), ("%", ast.Mod))},
+    }
     for name, scalar in python.items():
         n = arity.get(name, 1)
         args = [rng.uniform(*domains.get(name, (0.01, 10) if name == "pow" else (-5, 5)), 300) for _ in range(n)]
@@ -403,7 +420,9 @@ def test_a_batch_computes_each_function_as_python_does_and_notes_where_python_ra
             where = f"{name}{values}"
             assert met or expected is not None, f"{where} raises in Python: the batch must note it"
             if not met:
-                assert got == expected or (math.isnan(got) and math.isnan(expected)), f"{where}: {got} != Python's {expected}"  # type: ignore[arg-type]
+                assert got == expected or (math.isnan(got) and math.isnan(expected)), (
+                    f"{where}: {got} != Python's {expected}"
+                )  # type: ignore[arg-type]
     with float_errors() as met:
         table["log"](np.array([0.5, 2.0]))
         table["floor"](np.array([0.5, -2.5]))

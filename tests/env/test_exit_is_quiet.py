@@ -41,7 +41,13 @@ def test_a_script_that_leaves_envs_open_prints_nothing_on_stderr(tmp_path: Path)
     pytest.importorskip("bpy")
     script = tmp_path / "leave_open.py"
     script.write_text(SCRIPT, encoding="utf-8")
-    done = subprocess.run([sys.executable, str(script), str(ROOT / "specs" / "visual_cartpole.yaml")], capture_output=True,
-                          text=True, timeout=600, cwd=tmp_path, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    done = subprocess.run(
+        [sys.executable, str(script), str(ROOT / "specs" / "visual_cartpole.yaml")],
+        capture_output=True,
+        text=True,
+        timeout=600,
+        cwd=tmp_path,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert done.returncode == 0 and done.stdout.strip() == "left open", done.stdout + done.stderr
     assert done.stderr == ""

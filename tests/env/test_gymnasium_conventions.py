@@ -75,13 +75,20 @@ def _problems(text: str) -> list[str]:
 def test_register_a_folder_then_gymnasium_makes_its_ids(tmp_path, clean_registry):
     _write(tmp_path / "mine", "docking.yaml", "FirstHourDocking-v0")
     _write(tmp_path / "mine", "docking_long.yaml", "FirstHourDockingLong-v0", max_steps=9)
-    assert visualenv.register(tmp_path / "mine") == ["visualenv/FirstHourDocking-v0", "visualenv/FirstHourDockingLong-v0"]
+    assert visualenv.register(tmp_path / "mine") == [
+        "visualenv/FirstHourDocking-v0",
+        "visualenv/FirstHourDockingLong-v0",
+    ]
     assert gym.spec("visualenv/FirstHourDockingLong-v0").max_episode_steps == 9
     env = gym.make("visualenv/FirstHourDocking-v0")
     env.reset(seed=0)
     assert env.step(np.zeros(2, np.float32))[0].shape == (2,)
-    assert visualenv.make("FirstHourDocking-v0").spec.id == "visualenv/FirstHourDocking-v0"  # the id is known to make() too
-    assert visualenv.register(tmp_path / "mine" / "docking.yaml") == ["visualenv/FirstHourDocking-v0"]  # again: harmless
+    assert (
+        visualenv.make("FirstHourDocking-v0").spec.id == "visualenv/FirstHourDocking-v0"
+    )  # the id is known to make() too
+    assert visualenv.register(tmp_path / "mine" / "docking.yaml") == [
+        "visualenv/FirstHourDocking-v0"
+    ]  # again: harmless
 
 
 def test_a_duplicate_id_is_an_error_naming_both_files(tmp_path, clean_registry):
@@ -102,7 +109,9 @@ def test_a_duplicate_id_is_an_error_naming_both_files(tmp_path, clean_registry):
 
 def test_register_reports_every_bad_file_located(tmp_path, clean_registry):
     _write(tmp_path, "good.yaml", "FirstHourGood-v0")
-    (tmp_path / "bad.yaml").write_text("id: Bad-v0\nstate: {x: {init: 0}}\nactions: {discrete: [{u: 1}]}\nmax_stpes: 3\n")
+    (tmp_path / "bad.yaml").write_text(
+        "id: Bad-v0\nstate: {x: {init: 0}}\nactions: {discrete: [{u: 1}]}\nmax_stpes: 3\n"
+    )
     with pytest.raises(SpecError, match=r"bad.yaml:4:1: max_stpes: unknown key 'max_stpes' \(did you mean 'max_steps'"):
         visualenv.register(tmp_path)
     (tmp_path / "empty").mkdir()
@@ -132,14 +141,19 @@ def test_the_header_reader_finds_the_top_level_id_and_max_steps_in_yaml_and_toml
     assert registration.read_header(toml_spec) == ("Toml-v0", 30)
     (tmp_path / "c.yaml").write_bytes(b"id: Bytes-v0\n\xff\xfe\n")  # not UTF-8: still read, never a crash on import
     assert registration.read_header(tmp_path / "c.yaml") == ("Bytes-v0", None)
-    (tmp_path / "d.toml").write_text('id = "Broken-v0"\nmax_steps = 9\n[state.x]\ninit = = 0\n')  # what precedes an error is read
+    (tmp_path / "d.toml").write_text(
+        'id = "Broken-v0"\nmax_steps = 9\n[state.x]\ninit = = 0\n'
+    )  # what precedes an error is read
     assert registration.read_header(tmp_path / "d.toml") == ("Broken-v0", 9)
     (tmp_path / "e.yaml").write_text("id: [Listed-v0]\nmax_steps: true\n")  # neither an id nor a step count
     assert registration.read_header(tmp_path / "e.yaml") == (None, None)
 
 
 def test_an_unknown_id_says_how_to_register_one():
-    with pytest.raises(SpecError, match=r"not a spec file, build folder or known env id .*visualenv.register\(path\).*VISUALENV_SPECS_PATH"):
+    with pytest.raises(
+        SpecError,
+        match=r"not a spec file, build folder or known env id .*visualenv.register\(path\).*VISUALENV_SPECS_PATH",
+    ):
         visualenv.resolve("Docking2D-v0")
 
 
@@ -170,7 +184,10 @@ def test_a_scene_without_a_camera_says_so_and_how_to_add_one():
     with pytest.raises(SpecError) as info:
         visualenv.compile_spec(load_spec_text(NO_CAMERA % "strength", "spec.yaml"))
     message = str(info.value)
-    assert "spec.yaml:10:23: observation.camera: no camera 'ChaserCam' in the scene: the scene has no camera (objects: Ball, Sun)" in message
+    assert (
+        "spec.yaml:10:23: observation.camera: no camera 'ChaserCam' in the scene: the scene has no camera (objects: Ball, Sun)"
+        in message
+    )
     assert "add one under scene.objects, e.g. ChaserCam: {camera: perspective" in message
     assert "no names are defined" not in message
 
@@ -178,7 +195,9 @@ def test_a_scene_without_a_camera_says_so_and_how_to_add_one():
 @pytest.mark.parametrize("blender_name, ours", [("energy", "strength"), ("colour", "color"), ("position", "location")])
 def test_blenders_name_of_a_light_property_suggests_the_specs(blender_name, ours):
     problems = _problems(NO_CAMERA % blender_name)
-    assert len(problems) == 1 and f"unknown key '{blender_name}' (did you mean '{ours}'? expected one of:" in problems[0], problems
+    assert (
+        len(problems) == 1 and f"unknown key '{blender_name}' (did you mean '{ours}'? expected one of:" in problems[0]
+    ), problems
 
 
 # -- 4. Gymnasium's conventions -------------------------------------------------------------------------------
@@ -206,7 +225,9 @@ def test_visualenv_make_sets_the_gymnasium_spec_so_check_env_can_remake_it(tmp_p
     assert env.spec.kwargs == {"target": str(path.resolve()), "render": False}
     assert env.metadata["render_modes"] == []  # no camera: no render mode to test
     with warnings.catch_warnings():
-        warnings.simplefilter("error")  # "Not able to test alternative render modes ... not having a spec" would fail here
+        warnings.simplefilter(
+            "error"
+        )  # "Not able to test alternative render modes ... not having a spec" would fail here
         check_env(env)
     again = env.spec.make()
     assert np.array_equal(again.reset(seed=3)[0], env.reset(seed=3)[0])
@@ -227,7 +248,9 @@ def test_gymnasiums_time_limit_gives_the_max_steps_outcome(tmp_path, clean_regis
             if terminated or truncated:
                 break
         assert (steps, truncated, info["outcome"]) == (limit or 7, True, "max_steps")
-    vec = gym.make_vec("visualenv/FirstHourLimit-v0", 2, vectorization_mode="vector_entry_point", render=False, max_episode_steps=3)
+    vec = gym.make_vec(
+        "visualenv/FirstHourLimit-v0", 2, vectorization_mode="vector_entry_point", render=False, max_episode_steps=3
+    )
     vec.reset(seed=0)
     for _ in range(3):
         info = vec.step(np.zeros((2, 2), np.float32))[4]
@@ -270,13 +293,16 @@ def test_a_fault_with_a_finite_action_does_not_blame_it(tmp_path):
 # -- 7. smaller points ----------------------------------------------------------------------------------------
 
 
-@pytest.mark.parametrize("field, value, expected", [
-    ("scene.objects.Ball.location", "[0, 0]", "expected exactly 3 values, got 2"),
-    ("scene.objects.Ball.location", "[0, 0, 0, 1]", "expected exactly 3 values, got 4"),
-    ("scene.objects.Ball.material.color", "[1, 0]", "expected 3 or 4 values, got 2"),
-    ("observation.resolution", "[32]", "expected exactly 2 values, got 1"),
-    ("actors.Ball.location", "[x, 0]", "expected exactly 3 values, got 2"),
-])
+@pytest.mark.parametrize(
+    "field, value, expected",
+    [
+        ("scene.objects.Ball.location", "[0, 0]", "expected exactly 3 values, got 2"),
+        ("scene.objects.Ball.location", "[0, 0, 0, 1]", "expected exactly 3 values, got 4"),
+        ("scene.objects.Ball.material.color", "[1, 0]", "expected 3 or 4 values, got 2"),
+        ("observation.resolution", "[32]", "expected exactly 2 values, got 1"),
+        ("actors.Ball.location", "[x, 0]", "expected exactly 3 values, got 2"),
+    ],
+)
 def test_a_vector_of_the_wrong_length_gets_one_phrasing(field, value, expected):
     objects = {"Ball": "{primitive: sphere}", "Cam": "{camera: perspective}"}
     actors = ""
@@ -289,8 +315,13 @@ def test_a_vector_of_the_wrong_length_gets_one_phrasing(field, value, expected):
         actors = "actors:\n  Ball: {location: %s}\n" % value
     else:
         observation = "observation: {camera: Cam, resolution: %s}\n" % value
-    text = ("id: V-v0\nscene:\n  objects:\n" + "".join(f"    {k}: {v}\n" for k, v in objects.items())
-            + "state:\n  x: {init: 0}\nactions:\n  discrete: [{u: 1}]\n" + actors + observation)
+    text = (
+        "id: V-v0\nscene:\n  objects:\n"
+        + "".join(f"    {k}: {v}\n" for k, v in objects.items())
+        + "state:\n  x: {init: 0}\nactions:\n  discrete: [{u: 1}]\n"
+        + actors
+        + observation
+    )
     problems = _problems(text)
     assert len(problems) == 1 and f"{field}: {expected}" in problems[0], problems
 
@@ -306,7 +337,8 @@ def test_docs_say_an_outcome_ends_by_terminating_unless_told():
 @pytest.mark.blender
 def test_build_says_an_rgb_observation_is_sketched_in_grayscale(tmp_path):
     spec = tmp_path / "rgb.yaml"
-    spec.write_text(textwrap.dedent("""\
+    spec.write_text(
+        textwrap.dedent("""\
         id: FirstHourRgb-v0
         scene:
           objects:
@@ -319,7 +351,8 @@ def test_build_says_an_rgb_observation_is_sketched_in_grayscale(tmp_path):
           discrete: [{u: 1}]
         observation: {camera: Cam, resolution: [16, 12], color: rgb}
         render: {view: {resolution: [32, 24]}}
-        """))
+        """)
+    )
     result = CliRunner().invoke(main, ["build", str(spec), "--out", str(tmp_path / "build")])
     assert result.exit_code == 0, result.output
     assert "observation (reset, seed 0; RGB shown as grayscale text; the colours are in preview.png):" in result.output

@@ -119,18 +119,18 @@ def displays() -> Iterator[list[RecordingDisplay]]:
 
 def test_an_env_in_human_mode_shows_each_reset_and_step_on_the_registered_display(displays):
     env = fake_env()
-    assert displays == []                                        # opened by the first step shown, not by the env
+    assert displays == []  # opened by the first step shown, not by the env
     obs, _ = env.reset(seed=0)
     env.step(1)
     obs, *_ = env.step(1)
     assert env.render() is None
     [display] = displays
     assert {title for title, *_ in display.shown} == {"Mover-v0"}
-    assert [values["reward"] for _, _, values, _ in display.shown] == [None, 1, 1]   # the reset, then the steps
+    assert [values["reward"] for _, _, values, _ in display.shown] == [None, 1, 1]  # the reset, then the steps
     title, observation, values, view = display.shown[-1]
     np.testing.assert_array_equal(observation, obs)
     assert observation[0, 0, 0] == 2 and values["state"]["x"] == 2.0
-    assert view is not None and view().shape == (4, 4, 3)     # the view, rendered only when the display calls it
+    assert view is not None and view().shape == (4, 4, 3)  # the view, rendered only when the display calls it
     env.close()
     assert display.closed
 
@@ -168,9 +168,11 @@ def test_import_visualenv_registers_the_viewers_page_without_loading_it():
     registered = register_human_display(None)
     register_human_display(registered)
     assert registered is viewer.open_display
-    code = ("import sys, visualenv; from visualenv.env.human import register_human_display as hook; "
-            "from visualenv import viewer; registered = hook(None); hook(registered); "
-            "assert registered is viewer.open_display, registered; "
-            "assert not {'werkzeug', 'visualenv.viewer.human', 'visualenv.viewer.board'} & set(sys.modules)")
+    code = (
+        "import sys, visualenv; from visualenv.env.human import register_human_display as hook; "
+        "from visualenv import viewer; registered = hook(None); hook(registered); "
+        "assert registered is viewer.open_display, registered; "
+        "assert not {'werkzeug', 'visualenv.viewer.human', 'visualenv.viewer.board'} & set(sys.modules)"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=REPO, timeout=120)
     assert result.returncode == 0, result.stderr

@@ -109,7 +109,10 @@ def test_an_episode_that_cannot_be_carried_over_says_so():
     data = env.__getstate__()
     data["episode"]["physics"] = data["episode"]["physics"][:-1]  # as from a MuJoCo whose state is another size
     copy = VisualEnv.__new__(VisualEnv)
-    with pytest.warns(RuntimeWarning, match=r"the episode it was pickled in could not be carried over \(ValueError: MuJoCo's state has"):
+    with pytest.warns(
+        RuntimeWarning,
+        match=r"the episode it was pickled in could not be carried over \(ValueError: MuJoCo's state has",
+    ):
         copy.__setstate__(data)
     with pytest.raises(ResetNeeded, match="could not be carried over"):
         copy.step(copy.action_space.sample())
@@ -120,7 +123,8 @@ def test_an_episode_that_cannot_be_carried_over_says_so():
 @pytest.mark.blender
 def test_a_rendered_env_goes_on_with_its_frames_and_sensor_noise():
     """The copy's renderer is rebuilt, the scene posed from the carried state, the sensor noise drawn from the carried generator."""
-    spec = load_spec_text("""\
+    spec = load_spec_text(
+        """\
 id: PickledView-v0
 scene:
   objects:
@@ -141,7 +145,9 @@ observation:
   color: grayscale
   sensor: {read_noise: 0.05}
 max_steps: 10
-""", "view.yaml")
+""",
+        "view.yaml",
+    )
     env = VisualEnv(spec)
     try:
         env.reset(seed=2)

@@ -69,13 +69,41 @@ FAULTS = [
     pytest.param({"update": "sqrt(1 - v)"}, "dynamics.update.x", "math domain error", ["v=2.0"], id="sqrt-of-negative"),
     pytest.param({"update": "log(1 - v)"}, "dynamics.update.x", "math domain error", ["v=1.0"], id="log-of-zero"),
     pytest.param({"update": "acos(v)"}, "dynamics.update.x", "math domain error", ["v=2.0"], id="acos-out-of-domain"),
-    pytest.param({"update": "(v - 2) ** 0.5"}, "dynamics.update.x", "a negative number to a fractional power", ["v=0.0"], id="negative-fractional-power"),
+    pytest.param(
+        {"update": "(v - 2) ** 0.5"},
+        "dynamics.update.x",
+        "a negative number to a fractional power",
+        ["v=0.0"],
+        id="negative-fractional-power",
+    ),
     pytest.param({"update": "exp(x * 1000)"}, "dynamics.update.x", "numeric overflow", ["x=1.0"], id="exp-overflow"),
-    pytest.param({"update": "x * 1e300 * 1e300"}, "dynamics.update.x", "state 'x' became inf", ["x=1.0"], id="state-becomes-inf"),
-    pytest.param({"update": "x * 1e200"}, "dynamics.update.x", "too large for the float32 observation", ["x=1.0"], id="state-overflows-float32"),
-    pytest.param({"update": "x * 1e300 * 1e300", "init": "-1"}, "dynamics.update.x", "state 'x' became -inf", ["x=-1.0"], id="state-becomes-minus-inf"),
-    pytest.param({"update": "x * inf - x * inf"}, "dynamics.update.x", "state 'x' became nan", ["x=1.0"], id="state-becomes-nan"),
-    pytest.param({"hidden": "hidden + 1e300 * v * 1e10"}, "dynamics.update.hidden", "state 'hidden' became inf", ["v=1.0"], id="unobserved-state-becomes-inf"),
+    pytest.param(
+        {"update": "x * 1e300 * 1e300"}, "dynamics.update.x", "state 'x' became inf", ["x=1.0"], id="state-becomes-inf"
+    ),
+    pytest.param(
+        {"update": "x * 1e200"},
+        "dynamics.update.x",
+        "too large for the float32 observation",
+        ["x=1.0"],
+        id="state-overflows-float32",
+    ),
+    pytest.param(
+        {"update": "x * 1e300 * 1e300", "init": "-1"},
+        "dynamics.update.x",
+        "state 'x' became -inf",
+        ["x=-1.0"],
+        id="state-becomes-minus-inf",
+    ),
+    pytest.param(
+        {"update": "x * inf - x * inf"}, "dynamics.update.x", "state 'x' became nan", ["x=1.0"], id="state-becomes-nan"
+    ),
+    pytest.param(
+        {"hidden": "hidden + 1e300 * v * 1e10"},
+        "dynamics.update.hidden",
+        "state 'hidden' became inf",
+        ["v=1.0"],
+        id="unobserved-state-becomes-inf",
+    ),
     pytest.param({"reward": "1e300 * (v + 1) * 1e10"}, "reward", "the reward became inf", [], id="reward-becomes-inf"),
     pytest.param({"reward": "x * inf - x * inf"}, "reward", "the reward became nan", [], id="reward-becomes-nan"),
 ]
@@ -85,7 +113,14 @@ FAULTS = [
 def test_fault_raises_step_error_naming_expression_line_and_values(fields, where, message, shown):
     err = step_until_fault(make(**fields))
     text = str(err)
-    expression = fields.get({"dynamics.let.a": "let", "dynamics.update.x": "update", "dynamics.update.hidden": "hidden", "reward": "reward"}[where])
+    expression = fields.get(
+        {
+            "dynamics.let.a": "let",
+            "dynamics.update.x": "update",
+            "dynamics.update.hidden": "hidden",
+            "reward": "reward",
+        }[where]
+    )
     assert f"faults.yaml:{LINES[where]}: {where} = {expression!r}: " in text, text
     assert message in text, text
     assert "values: " in text
@@ -218,7 +253,9 @@ def test_a_binding_fault_after_a_vector_binding_names_its_own_binding():
     env = VisualEnv(load_spec_text(AFTER_A_VECTOR, "after.yaml"), render=False)
     env.reset(seed=0)
     env.step(0)
-    with pytest.raises(StepError, match=r"after\.yaml:12: actors\.Lamp\.strength = 'x \* inf': a binding became inf .*x=1\.0"):
+    with pytest.raises(
+        StepError, match=r"after\.yaml:12: actors\.Lamp\.strength = 'x \* inf': a binding became inf .*x=1\.0"
+    ):
         env.binding_values()
 
 

@@ -26,7 +26,9 @@ from visualenv.expr.functions import bind_random
 NAMES = {"x": NUM, "y": NUM, "z": NUM, "flag": BOOL, "pos": vec(3)}
 NUM_NAMES = ["x", "y", "z"]
 RUNTIME_FAULTS = (ZeroDivisionError, OverflowError, ValueError)
-FAST = settings(max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much])
+FAST = settings(
+    max_examples=150, deadline=None, suppress_health_check=[HealthCheck.too_slow, HealthCheck.filter_too_much]
+)
 
 # -- the grammar ---------------------------------------------------------------------------------------
 
@@ -43,7 +45,9 @@ def _call(children: st.SearchStrategy[str]) -> st.SearchStrategy[str]:
     def one(fname: str) -> st.SearchStrategy[str]:
         f = FUNCTIONS[fname]
         hi = f.max_args if f.max_args is not None else f.min_args + 3
-        return st.lists(children, min_size=max(0, f.min_args - 1), max_size=hi + 1).map(lambda args: f"{fname}({', '.join(args)})")
+        return st.lists(children, min_size=max(0, f.min_args - 1), max_size=hi + 1).map(
+            lambda args: f"{fname}({', '.join(args)})"
+        )
 
     return st.sampled_from(sorted(FUNCTIONS)).flatmap(one)
 
@@ -52,7 +56,9 @@ def _any_tree(children: st.SearchStrategy[str]) -> st.SearchStrategy[str]:
     return st.one_of(
         st.tuples(children, st.sampled_from(BINOPS), children).map(lambda t: f"({t[0]} {t[1]} {t[2]})"),
         st.tuples(children, st.sampled_from(CMPOPS), children).map(lambda t: f"({t[0]} {t[1]} {t[2]})"),
-        st.tuples(children, st.sampled_from(CMPOPS), children, st.sampled_from(CMPOPS), children).map(lambda t: f"({' '.join(t)})"),
+        st.tuples(children, st.sampled_from(CMPOPS), children, st.sampled_from(CMPOPS), children).map(
+            lambda t: f"({' '.join(t)})"
+        ),
         st.tuples(children, st.sampled_from(["and", "or"]), children).map(lambda t: f"({t[0]} {t[1]} {t[2]})"),
         children.map(lambda c: f"(not {c})"),
         children.map(lambda c: f"(-{c})"),
@@ -63,7 +69,9 @@ def _any_tree(children: st.SearchStrategy[str]) -> st.SearchStrategy[str]:
 
 
 #: untyped trees: mostly type errors, which is the point
-any_expr = st.recursive(st.one_of(numbers, st.sampled_from([*NAMES, "True", "False", "nope", "sin"])), _any_tree, max_leaves=30)
+any_expr = st.recursive(
+    st.one_of(numbers, st.sampled_from([*NAMES, "True", "False", "nope", "sin"])), _any_tree, max_leaves=30
+)
 
 
 # typed trees: numbers, conditions and 3-vectors that usually check, so they can run
@@ -97,7 +105,9 @@ cond_expr = st.deferred(
 vec_expr = st.one_of(
     st.lists(num_expr, min_size=3, max_size=3).map(lambda items: "[" + ", ".join(items) + "]"),
     st.just("pos"),
-    st.tuples(st.lists(num_expr, min_size=3, max_size=3), cond_expr).map(lambda t: f"([{', '.join(t[0])}] if {t[1]} else pos)"),
+    st.tuples(st.lists(num_expr, min_size=3, max_size=3), cond_expr).map(
+        lambda t: f"([{', '.join(t[0])}] if {t[1]} else pos)"
+    ),
 )
 typed_expr = st.one_of(num_expr, num_expr, cond_expr, vec_expr)
 
@@ -143,7 +153,9 @@ def _run(checked, x: float, y: float, z: float, flag: bool, pos: tuple[float, fl
         assert type(result) is tuple and len(result) == checked.type.size, (checked.text, result)
         assert all(type(v) is float for v in result), (checked.text, result)
     if checked.constant is not None:  # folding agrees with running
-        same = result == checked.constant or (isinstance(result, float) and math.isnan(result) and math.isnan(checked.constant))
+        same = result == checked.constant or (
+            isinstance(result, float) and math.isnan(result) and math.isnan(checked.constant)
+        )
         assert same or checked.random, (checked.text, result, checked.constant)
 
 
@@ -201,7 +213,9 @@ def test_untyped_trees_that_check_run_safely(text: str, x: float, y: float, z: f
 @example("normal(x, y)", 0.0, -1.0, 0.0, True, (0.0, 0.0, 0.0))
 @example("floor(x)", math.nan, 0.0, 0.0, True, (0.0, 0.0, 0.0))
 @example("choice(pos)", 0.0, 0.0, 0.0, True, (1.0, 2.0, 3.0))
-def test_typed_trees_check_and_run_to_their_type_or_a_documented_fault(text: str, x: float, y: float, z: float, flag: bool, pos: tuple):
+def test_typed_trees_check_and_run_to_their_type_or_a_documented_fault(
+    text: str, x: float, y: float, z: float, flag: bool, pos: tuple
+):
     checked = _check_or_expression_error(text)
     assume(checked is not None)
     _run(checked, x, y, z, flag, pos)
@@ -227,8 +241,13 @@ def test_typed_grammar_mostly_checks():
 
 
 @FAST
-@given(st.lists(st.tuples(st.sampled_from(["+", "-", "*"]), st.sampled_from(["x", "y", "1", "2.5"])), min_size=1, max_size=140),
-       values, values)
+@given(
+    st.lists(
+        st.tuples(st.sampled_from(["+", "-", "*"]), st.sampled_from(["x", "y", "1", "2.5"])), min_size=1, max_size=140
+    ),
+    values,
+    values,
+)
 def test_flat_chains_are_not_nesting_and_run_like_python(chain: list, x: float, y: float):
     """`a + b - c * ...` of up to 140 operations checks (a flat sum is not "deeply nested") and computes what Python computes."""
     text = "x" + "".join(f" {op} {term}" for op, term in chain)

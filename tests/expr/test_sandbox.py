@@ -140,7 +140,9 @@ def _assert_no_trace(marker: Path) -> None:
     assert SENTINEL not in globals(), "an attempt set a global"
 
 
-@pytest.mark.timeout(20)  # a bound, not a figure: an attempt that makes the checker hang (a huge power, deep nesting) fails here
+@pytest.mark.timeout(
+    20
+)  # a bound, not a figure: an attempt that makes the checker hang (a huge power, deep nesting) fails here
 @pytest.mark.parametrize("attempt, fragment", ATTEMPTS, ids=[a[:40] for a, _ in ATTEMPTS])
 def test_check_rejects_attempt(attempt: str, fragment: str, marker: Path):
     with pytest.raises(ExpressionError) as err:
@@ -168,7 +170,14 @@ def test_compile_spec_rejects_attempt_in_every_place(attempt: str, fragment: str
     with pytest.raises(SpecError) as err:
         compile_spec(loaded)
     lines = str(err.value).splitlines()
-    places = ("state.v.init", "dynamics.let.a", "dynamics.update.x", "actors.Box.location[0]", "reward", "outcomes.done.when")
+    places = (
+        "state.v.init",
+        "dynamics.let.a",
+        "dynamics.update.x",
+        "actors.Box.location[0]",
+        "reward",
+        "outcomes.done.when",
+    )
     for place in places:
         line = next((row for row in lines if f" {place}: " in row), None)
         assert line is not None, f"no problem reported at {place}:\n{err.value}"
@@ -249,4 +258,6 @@ def test_constant_folding_runs_without_builtins():
     import ast
 
     with pytest.raises(NameError):
-        evaluate_constant(ast.Call(ast.Name("open", ast.Load()), [], []))  # not reachable from a spec: the checker refuses it
+        evaluate_constant(
+            ast.Call(ast.Name("open", ast.Load()), [], [])
+        )  # not reachable from a spec: the checker refuses it

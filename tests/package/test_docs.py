@@ -94,7 +94,9 @@ def test_the_sections_the_code_points_to_exist():
         for page, starred, quoted in re.findall(r"docs/([\w-]+\.md),\s+(?:\*([^*\n]+)\*|'([^'\n]+)')", text):
             cited += 1
             name = starred or quoted
-            if not (ROOT / "docs" / page).exists() or not any(h.startswith(name) for h in headings(ROOT / "docs" / page)):
+            if not (ROOT / "docs" / page).exists() or not any(
+                h.startswith(name) for h in headings(ROOT / "docs" / page)
+            ):
                 broken.append(f"{file.relative_to(ROOT)}: docs/{page}, {name!r}")
     assert cited >= 5 and not broken, broken
 

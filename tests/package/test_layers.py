@@ -12,8 +12,15 @@ PACKAGE = Path(__file__).resolve().parents[2] / "visualenv"
 
 #: each module's layer, by its longest matching prefix; a module may import its own layer or lower ones
 LAYERS = {
-    "visualenv.errors": 0, "visualenv.files": 0, "visualenv.bindables": 0, "visualenv.source_map": 0, "visualenv.versions": 0, "visualenv.compat": 0,
-    "visualenv.spec": 1, "visualenv.expr": 1, "visualenv.physics": 1,
+    "visualenv.errors": 0,
+    "visualenv.files": 0,
+    "visualenv.bindables": 0,
+    "visualenv.source_map": 0,
+    "visualenv.versions": 0,
+    "visualenv.compat": 0,
+    "visualenv.spec": 1,
+    "visualenv.expr": 1,
+    "visualenv.physics": 1,
     "visualenv.render": 2,
     "visualenv.compiler": 3,
     "visualenv.env": 4,
@@ -21,7 +28,8 @@ LAYERS = {
     "visualenv.tools": 6,
     # the viewer steps envs and loads agents; render_mode="human" reaches it through a hook (visualenv.env.human)
     "visualenv.viewer": 6,
-    "visualenv.cli": 7, "visualenv": 7,
+    "visualenv.cli": 7,
+    "visualenv": 7,
 }
 
 
@@ -40,7 +48,12 @@ def imports(path: Path, known: set[str]) -> set[str]:
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.Import):
             found.update(a.name for a in node.names if a.name.split(".")[0] == "visualenv")
-        elif isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "visualenv" and node.level == 0:
+        elif (
+            isinstance(node, ast.ImportFrom)
+            and node.module
+            and node.module.split(".")[0] == "visualenv"
+            and node.level == 0
+        ):
             for alias in node.names:
                 sub = f"{node.module}.{alias.name}"
                 found.add(sub if sub in known else node.module)
@@ -58,13 +71,21 @@ def graph() -> dict[str, set[str]]:
 
 
 def test_every_module_has_a_layer() -> None:
-    unplaced = [name for name in modules() if not any(name == p or name.startswith(p + ".") for p in LAYERS if p != "visualenv")
-                and name != "visualenv"]
+    unplaced = [
+        name
+        for name in modules()
+        if not any(name == p or name.startswith(p + ".") for p in LAYERS if p != "visualenv") and name != "visualenv"
+    ]
     assert unplaced == [], f"modules outside the layers: put them in a layer's package: {unplaced}"
 
 
 def test_imports_point_down() -> None:
-    upward = sorted(f"{a} ({layer(a)}) imports {b} ({layer(b)})" for a, targets in graph().items() for b in targets if layer(b) > layer(a))
+    upward = sorted(
+        f"{a} ({layer(a)}) imports {b} ({layer(b)})"
+        for a, targets in graph().items()
+        for b in targets
+        if layer(b) > layer(a)
+    )
     assert upward == [], "\n".join(upward)
 
 
@@ -79,7 +100,7 @@ def find_cycles(edges: dict[str, set[str]]) -> list[list[str]]:
         stack.append(node)
         for nxt in sorted(edges.get(node, ())):
             if state.get(nxt) == 1:
-                cycles.append(stack[stack.index(nxt):] + [nxt])
+                cycles.append(stack[stack.index(nxt) :] + [nxt])
             elif nxt not in state:
                 visit(nxt)
         stack.pop()
@@ -125,7 +146,11 @@ MAX_MODULE_LINES = 600
 
 
 def test_no_module_is_over_the_size_limit() -> None:
-    big = {name: n for name, path in modules().items() if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES}
+    big = {
+        name: n
+        for name, path in modules().items()
+        if (n := len(path.read_text(encoding="utf-8").splitlines())) > MAX_MODULE_LINES
+    }
     assert big == {}, f"split these by job (at most {MAX_MODULE_LINES} lines a module): {big}"
 
 
@@ -134,7 +159,9 @@ def private_imports(path: Path) -> list[str]:
     found = []
     for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
         if isinstance(node, ast.ImportFrom) and node.module and node.module.split(".")[0] == "visualenv":
-            found += [f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_") and not a.name.startswith("__")]
+            found += [
+                f"{node.module}.{a.name}" for a in node.names if a.name.startswith("_") and not a.name.startswith("__")
+            ]
     return found
 
 
@@ -150,8 +177,13 @@ def test_no_module_imports_another_modules_private_names(tmp_path: Path) -> None
 def test_render_imports_nothing_from_the_spec() -> None:
     """render/ reads its own plan (visualenv.render.plan), built by the compiler: never the spec's models."""
     edges = graph()
-    found = sorted(f"{a} imports {b}" for a, targets in edges.items() if a.split(".")[:2] == ["visualenv", "render"]
-                   for b in targets if b.split(".")[:2] == ["visualenv", "spec"])
+    found = sorted(
+        f"{a} imports {b}"
+        for a, targets in edges.items()
+        if a.split(".")[:2] == ["visualenv", "render"]
+        for b in targets
+        if b.split(".")[:2] == ["visualenv", "spec"]
+    )
     assert found == [], "\n".join(found)
 
 
@@ -165,9 +197,16 @@ def test_the_render_plan_has_no_field_of_type_any() -> None:
     def holds_any(hint: object) -> bool:
         return hint is typing.Any or any(holds_any(arg) for arg in typing.get_args(hint))
 
-    classes = [c for c in vars(plan).values()
-               if isinstance(c, type) and dataclasses.is_dataclass(c) and c.__module__ == plan.__name__]
+    classes = [
+        c
+        for c in vars(plan).values()
+        if isinstance(c, type) and dataclasses.is_dataclass(c) and c.__module__ == plan.__name__
+    ]
     assert plan.RenderPlan in classes and len(classes) > 10
-    untyped = [f"{c.__name__}.{f.name}" for c in classes for f in dataclasses.fields(c)
-               if holds_any(typing.get_type_hints(c)[f.name])]
+    untyped = [
+        f"{c.__name__}.{f.name}"
+        for c in classes
+        for f in dataclasses.fields(c)
+        if holds_any(typing.get_type_hints(c)[f.name])
+    ]
     assert untyped == []

@@ -13,14 +13,35 @@ ROOT = Path(__file__).resolve().parents[2]
 
 
 def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
-    subprocess.run([sys.executable, "-m", "pip", "wheel", "-q", "--no-deps", "--no-build-isolation", "-w", str(tmp_path / "dist"), str(ROOT)],
-                   check=True, capture_output=True)
+    subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "pip",
+            "wheel",
+            "-q",
+            "--no-deps",
+            "--no-build-isolation",
+            "-w",
+            str(tmp_path / "dist"),
+            str(ROOT),
+        ],
+        check=True,
+        capture_output=True,
+    )
     wheel = next((tmp_path / "dist").glob("visualenv-*.whl"))
     # the specs and the physics specs of specs/mujoco/ and specs/dmc/, by their paths under specs/
-    bundled = sorted(p.relative_to(ROOT / "specs").as_posix() for p in [*(ROOT / "specs").glob("*"), *(ROOT / "specs").glob("mujoco/*"),
-                                                                        *(ROOT / "specs").glob("dmc/*")] if p.suffix in (".yaml", ".toml"))
+    bundled = sorted(
+        p.relative_to(ROOT / "specs").as_posix()
+        for p in [*(ROOT / "specs").glob("*"), *(ROOT / "specs").glob("mujoco/*"), *(ROOT / "specs").glob("dmc/*")]
+        if p.suffix in (".yaml", ".toml")
+    )
     with zipfile.ZipFile(wheel) as archive:
-        shipped = sorted(n[len("visualenv/specs/"):] for n in archive.namelist() if n.startswith("visualenv/specs/") and n.endswith((".yaml", ".toml")))
+        shipped = sorted(
+            n[len("visualenv/specs/") :]
+            for n in archive.namelist()
+            if n.startswith("visualenv/specs/") and n.endswith((".yaml", ".toml"))
+        )
         pinned = sorted(n for n in archive.namelist() if n.startswith("visualenv/specs/mujoco/assets/"))
         dmc = sorted(n for n in archive.namelist() if n.startswith("visualenv/specs/dmc/assets/"))
         archive.extractall(tmp_path / "site")
@@ -30,12 +51,21 @@ def test_an_installed_wheel_finds_the_bundled_specs(tmp_path):
     assert pinned == sorted(f"visualenv/specs/mujoco/assets/{p.name}" for p in assets.iterdir() if p.is_file())
     # dm_control's MJCF files the DMC tasks read (the common assets they include too), with its licence
     dmc_assets = ROOT / "specs" / "dmc" / "assets"
-    assert dmc == sorted(f"visualenv/specs/dmc/assets/{p.relative_to(dmc_assets).as_posix()}" for p in dmc_assets.rglob("*")
-                         if p.is_file() and "__pycache__" not in p.parts)
+    assert dmc == sorted(
+        f"visualenv/specs/dmc/assets/{p.relative_to(dmc_assets).as_posix()}"
+        for p in dmc_assets.rglob("*")
+        if p.is_file() and "__pycache__" not in p.parts
+    )
     # import the unpacked wheel, not the checkout, and look a spec up by id
     probe = "from visualenv.env.registration import resolve; print(resolve('Goalie-v0'))"
-    out = subprocess.run([sys.executable, "-c", probe], cwd=tmp_path, env={"PYTHONPATH": str(tmp_path / "site")},
-                         check=True, capture_output=True, text=True).stdout.strip()
+    out = subprocess.run(
+        [sys.executable, "-c", probe],
+        cwd=tmp_path,
+        env={"PYTHONPATH": str(tmp_path / "site")},
+        check=True,
+        capture_output=True,
+        text=True,
+    ).stdout.strip()
     assert out == str((tmp_path / "site" / "visualenv" / "specs" / "goalie.yaml").resolve())
 
 
@@ -70,7 +100,9 @@ def test_import_visualenv_never_imports_stable_baselines3_or_torch():
     import subprocess
     import sys
 
-    code = ("import sys, visualenv, visualenv.env.batch, visualenv.env.sb3_vec; "
-            "assert not {'stable_baselines3', 'torch'} & set(sys.modules), 'SB3 or torch imported'")
+    code = (
+        "import sys, visualenv, visualenv.env.batch, visualenv.env.sb3_vec; "
+        "assert not {'stable_baselines3', 'torch'} & set(sys.modules), 'SB3 or torch imported'"
+    )
     result = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, cwd=ROOT, timeout=120)
     assert result.returncode == 0, result.stderr

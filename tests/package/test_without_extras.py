@@ -20,9 +20,17 @@ def test_import_visualenv_never_imports_ray():
 
 def test_the_suite_collects_without_bpy(tmp_path):
     """With `import bpy` failing (as on a machine without it), every test module collects: none errors."""
-    (tmp_path / "sitecustomize.py").write_text("import sys\nsys.modules['bpy'] = None  # `import bpy` raises ImportError\n")
-    result = subprocess.run([sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", str(REPO / "tests")],
-                            capture_output=True, text=True, cwd=REPO, timeout=300, env={**os.environ, "PYTHONPATH": str(tmp_path)})
+    (tmp_path / "sitecustomize.py").write_text(
+        "import sys\nsys.modules['bpy'] = None  # `import bpy` raises ImportError\n"
+    )
+    result = subprocess.run(
+        [sys.executable, "-m", "pytest", "--collect-only", "-q", "-p", "no:cacheprovider", str(REPO / "tests")],
+        capture_output=True,
+        text=True,
+        cwd=REPO,
+        timeout=300,
+        env={**os.environ, "PYTHONPATH": str(tmp_path)},
+    )
     assert result.returncode == 0, result.stdout[-3000:] + result.stderr[-3000:]
     assert "could not import 'bpy'" in result.stdout  # the Blender-only modules skipped, so bpy really was missing
     assert " error" not in result.stdout.splitlines()[-1], result.stdout[-2000:]

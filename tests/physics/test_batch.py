@@ -49,7 +49,8 @@ MODEL = """\
 def arm_spec(tmp_path: Path, on_fault: str) -> Path:
     (tmp_path / "arm.xml").write_text(MODEL, encoding="utf-8")
     path = tmp_path / "arm.yaml"
-    path.write_text(textwrap.dedent(f"""\
+    path.write_text(
+        textwrap.dedent(f"""\
         id: Arm-v0
         physics:
           model: arm.xml
@@ -65,7 +66,9 @@ def arm_spec(tmp_path: Path, on_fault: str) -> Path:
         outcomes:
           far: {{when: abs(qpos_slide) > 2, end: terminate}}
         max_steps: 30
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     return path
 
 
@@ -84,7 +87,9 @@ def assert_same(batch: BatchedVectorEnv, singles: list[VisualEnv], actions: np.n
                 error = single_info.get("error")
             assert np.array_equal(obs[i], single_obs), (i, obs[i], single_obs)
             assert (rewards[i], terminated[i], truncated[i]) == (reward, term, trunc), i
-            assert np.array_equal(batch.lanes[i].data.qpos, env.data.qpos) and np.array_equal(batch.lanes[i].data.qvel, env.data.qvel)
+            assert np.array_equal(batch.lanes[i].data.qpos, env.data.qpos) and np.array_equal(
+                batch.lanes[i].data.qvel, env.data.qvel
+            )
             assert (info["error"][i] if "error" in info and info["_error"][i] else None) == error
             pending[i] = term or trunc
             ends += term or trunc
@@ -94,7 +99,9 @@ def assert_same(batch: BatchedVectorEnv, singles: list[VisualEnv], actions: np.n
 
 
 @pytest.mark.parametrize("threads", ["1", "2"])
-def test_a_batch_steps_every_simulation_at_once_and_each_env_equals_one_env(monkeypatch: pytest.MonkeyPatch, threads: str) -> None:
+def test_a_batch_steps_every_simulation_at_once_and_each_env_equals_one_env(
+    monkeypatch: pytest.MonkeyPatch, threads: str
+) -> None:
     """InvertedPendulum, 6 envs, episodes ending and resetting: the batch's MuJoCo step and column reads, never the envs' own."""
     monkeypatch.setenv(THREADS_VARIABLE, threads)
     spec = SPECS / "inverted_pendulum.yaml"
@@ -121,7 +128,8 @@ def test_a_batch_steps_every_simulation_at_once_and_each_env_equals_one_env(monk
 @pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 @pytest.mark.parametrize("threads", ["1", "2"])
 def test_an_env_of_a_batch_that_blows_up_ends_with_its_own_fault_and_the_others_go_on(
-        tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: str) -> None:
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: str
+) -> None:
     """on_fault: terminate: env 3's simulation blows up (in a worker thread), its episode ends with the message one env gives."""
     monkeypatch.setenv(THREADS_VARIABLE, threads)
     path = arm_spec(tmp_path, "terminate")

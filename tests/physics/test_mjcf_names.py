@@ -44,27 +44,56 @@ def body(joints: str, inner: str = "", name: str = "b") -> str:
 
 
 CASES = {
-    "joints": (body('<joint name="left-leg"/><joint name="left_leg" axis="1 0 0"/>'), "",
-               "joint 'left-leg' and joint 'left_leg' are both 'qpos_left_leg'"),
-    "free joint and hinge": (body('<freejoint name="a"/>') + body('<joint name="a_x"/>', name="c"), "",
-                             "joint 'a' and joint 'a_x' are both 'qpos_a_x'"),
-    "bodies": (body('<joint name="j1"/>', name="arm.1") + body('<joint name="j2"/>', name="arm_1"), "",
-               "body 'arm.1' and body 'arm_1' are both 'body_arm_1_x'"),
-    "sites": (body('<joint name="j"/>', inner='<site name="tip-1"/><site name="tip_1"/>'), "",
-              "site 'tip-1' and site 'tip_1' are both 'site_tip_1_x'"),
-    "sensors": (body('<joint name="j"/>', inner='<site name="s"/>'),
-                '<sensor><framepos name="p" objtype="site" objname="s"/><jointpos name="p_0" joint="j"/></sensor>',
-                "sensor 'p' and sensor 'p_0' are both 'sensor_p_0'"),
-    "actuators": (body('<joint name="j"/>'), '<actuator><motor name="m-1" joint="j"/><motor name="m_1" joint="j"/></actuator>',
-                  "actuator 'm-1' and actuator 'm_1' are both 'ctrl_m_1'"),
-    "geoms": (body('<joint name="j"/>', inner='<geom name="foot-l" size="0.1"/><geom name="foot_l" size="0.1"/>'), "",
-              "geom 'foot-l' and geom 'foot_l' are both 'foot_l'"),
-    "unnamed geom": ('    <geom name="geom2" size="0.1"/><geom size="0.1"/>', "",
-                     "geom 'geom2' and the unnamed geom 2 are both 'geom2'"),
-    "geom and camera": (body('<joint name="j"/>', inner='<camera name="b_geom"/>'), "",
-                        "geom 'b_geom' and camera 'b_geom' are both 'b_geom'"),
-    "keyframes": (body('<joint name="j"/>'), '<keyframe><key name="up-1"/><key name="up_1"/></keyframe>',
-                  "keyframe 'up-1' and keyframe 'up_1' are both 'up_1'"),
+    "joints": (
+        body('<joint name="left-leg"/><joint name="left_leg" axis="1 0 0"/>'),
+        "",
+        "joint 'left-leg' and joint 'left_leg' are both 'qpos_left_leg'",
+    ),
+    "free joint and hinge": (
+        body('<freejoint name="a"/>') + body('<joint name="a_x"/>', name="c"),
+        "",
+        "joint 'a' and joint 'a_x' are both 'qpos_a_x'",
+    ),
+    "bodies": (
+        body('<joint name="j1"/>', name="arm.1") + body('<joint name="j2"/>', name="arm_1"),
+        "",
+        "body 'arm.1' and body 'arm_1' are both 'body_arm_1_x'",
+    ),
+    "sites": (
+        body('<joint name="j"/>', inner='<site name="tip-1"/><site name="tip_1"/>'),
+        "",
+        "site 'tip-1' and site 'tip_1' are both 'site_tip_1_x'",
+    ),
+    "sensors": (
+        body('<joint name="j"/>', inner='<site name="s"/>'),
+        '<sensor><framepos name="p" objtype="site" objname="s"/><jointpos name="p_0" joint="j"/></sensor>',
+        "sensor 'p' and sensor 'p_0' are both 'sensor_p_0'",
+    ),
+    "actuators": (
+        body('<joint name="j"/>'),
+        '<actuator><motor name="m-1" joint="j"/><motor name="m_1" joint="j"/></actuator>',
+        "actuator 'm-1' and actuator 'm_1' are both 'ctrl_m_1'",
+    ),
+    "geoms": (
+        body('<joint name="j"/>', inner='<geom name="foot-l" size="0.1"/><geom name="foot_l" size="0.1"/>'),
+        "",
+        "geom 'foot-l' and geom 'foot_l' are both 'foot_l'",
+    ),
+    "unnamed geom": (
+        '    <geom name="geom2" size="0.1"/><geom size="0.1"/>',
+        "",
+        "geom 'geom2' and the unnamed geom 2 are both 'geom2'",
+    ),
+    "geom and camera": (
+        body('<joint name="j"/>', inner='<camera name="b_geom"/>'),
+        "",
+        "geom 'b_geom' and camera 'b_geom' are both 'b_geom'",
+    ),
+    "keyframes": (
+        body('<joint name="j"/>'),
+        '<keyframe><key name="up-1"/><key name="up_1"/></keyframe>',
+        "keyframe 'up-1' and keyframe 'up_1' are both 'up_1'",
+    ),
 }
 
 
@@ -89,15 +118,21 @@ def test_validate_and_inspect_report_the_clash(tmp_path: Path) -> None:
     body_xml, extra, expected = CASES["joints"]
     path = write(tmp_path, MODEL.format(body=body_xml, extra=extra))
     validated = CliRunner().invoke(main, ["validate", str(path)])
-    assert validated.exit_code != 0 and expected in validated.output and "ok" not in validated.output.split(), validated.output
+    assert validated.exit_code != 0 and expected in validated.output and "ok" not in validated.output.split(), (
+        validated.output
+    )
     inspected = CliRunner().invoke(main, ["inspect", str(tmp_path / "model.xml")])
-    assert inspected.exit_code == 1 and expected in inspected.output and "Traceback" not in inspected.output, inspected.output
+    assert inspected.exit_code == 1 and expected in inspected.output and "Traceback" not in inspected.output, (
+        inspected.output
+    )
 
 
 def test_distinct_names_stay_distinct(tmp_path: Path) -> None:
     """The control: the same kinds of elements, named apart, compile and keep every name."""
-    model = MODEL.format(body=body('<freejoint name="a"/>', inner='<site name="tip"/>') + body('<joint name="a_y2"/>', name="c"),
-                         extra='<actuator><motor name="m" joint="a_y2"/></actuator>')
+    model = MODEL.format(
+        body=body('<freejoint name="a"/>', inner='<site name="tip"/>') + body('<joint name="a_y2"/>', name="c"),
+        extra='<actuator><motor name="m" joint="a_y2"/></actuator>',
+    )
     program = compile_spec(load_spec(write(tmp_path, model)))
     assert program.physics is not None
     values = program.physics.model.names.values
@@ -106,7 +141,11 @@ def test_distinct_names_stay_distinct(tmp_path: Path) -> None:
 
 def test_a_contact_named_like_a_model_name_or_a_state_variable(tmp_path: Path) -> None:
     model = MODEL.format(body=body('<joint name="j"/>'), extra="")
-    path = write(tmp_path, model, "  contacts: {qpos_j: [b_geom, floor], touching: [b_geom, floor]}\nstate: {touching: {init: 0}}")
+    path = write(
+        tmp_path,
+        model,
+        "  contacts: {qpos_j: [b_geom, floor], touching: [b_geom, floor]}\nstate: {touching: {init: 0}}",
+    )
     with pytest.raises(SpecError) as caught:
         compile_spec(load_spec(path))
     message = str(caught.value)

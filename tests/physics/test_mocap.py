@@ -71,7 +71,9 @@ def test_inspect_lists_the_mocap_names(tmp_path: Path) -> None:
     result = CliRunner().invoke(main, ["inspect", str(tmp_path / "pusher.xml")])
     assert result.exit_code == 0, result.output
     line = next(t for t in result.output.splitlines() if t.startswith("mocap bodies"))
-    assert line.endswith(": mocap_goal_x, mocap_goal_y, mocap_goal_z, mocap_goal_qw, mocap_goal_qx, mocap_goal_qy, mocap_goal_qz"), line
+    assert line.endswith(
+        ": mocap_goal_x, mocap_goal_y, mocap_goal_z, mocap_goal_qw, mocap_goal_qx, mocap_goal_qy, mocap_goal_qz"
+    ), line
     assert "drawn sites" not in result.output  # the model has none
 
 
@@ -87,7 +89,9 @@ def test_a_mocap_goal_set_at_reset_and_moved_by_the_update_moves_in_the_physics(
     assert np.array_equal(data.xpos[2], goal)  # mj_forward after the reset: the body stands where the mocap pose is
     for step in range(1, 4):
         _, reward, *_ = env.step(0)
-        assert np.allclose(data.mocap_pos[0], goal + [0, 0.2 * step, 0]) and np.array_equal(data.xpos[2], data.mocap_pos[0])
+        assert np.allclose(data.mocap_pos[0], goal + [0, 0.2 * step, 0]) and np.array_equal(
+            data.xpos[2], data.mocap_pos[0]
+        )
         assert reward == pytest.approx(-np.hypot(*(data.xpos[1][:2] - data.mocap_pos[0][:2])))
     batch = BatchedVectorEnv(path, 3, render=False)
     singles = [VisualEnv(path, render=False) for _ in range(3)]
@@ -111,11 +115,17 @@ def test_a_mocap_goal_set_at_reset_and_moved_by_the_update_moves_in_the_physics(
 
 
 def test_a_mocap_pose_that_is_not_finite_is_a_located_fault_alone_and_in_a_batch(tmp_path: Path) -> None:
-    path = write(tmp_path, SPEC.replace("mocap_goal_y + speed", "mocap_goal_y * big * big").replace(
-        "actions:", "state: {big: {init: 1e300, observe: false}}\nactions:"))
+    path = write(
+        tmp_path,
+        SPEC.replace("mocap_goal_y + speed", "mocap_goal_y * big * big").replace(
+            "actions:", "state: {big: {init: 1e300, observe: false}}\nactions:"
+        ),
+    )
     env = VisualEnv(path, render=False)
     env.reset(seed=0)
-    with pytest.raises(StepError, match=r"pusher.yaml:\d+: physics = .*mocap pose set in dynamics.update is not finite: mocap_goal_y="):
+    with pytest.raises(
+        StepError, match=r"pusher.yaml:\d+: physics = .*mocap pose set in dynamics.update is not finite: mocap_goal_y="
+    ):
         env.step(0)
     env.close()
     batch = BatchedVectorEnv(path, 2, render=False)
@@ -127,18 +137,34 @@ def test_a_mocap_pose_that_is_not_finite_is_a_located_fault_alone_and_in_a_batch
         batch.close()
 
 
-@pytest.mark.parametrize("actor, line, expected", [
-    ("goal_geom: {location: [0, 0, 1]}", "17:15", "'goal_geom' stands for the MuJoCo body 'goal': binding its location would move the "
-     "picture and not the physics. It is a mocap body: set mocap_goal_x, _y, _z"),
-    ("'body:goal': {rotation: [0, 0, 1]}", "17:17", "'body:goal' stands for the MuJoCo body 'goal'"),
-    ("ball_geom: {location: [0, 0, 1]}", "17:15", "Its joints move it: set qpos_ball_x, qpos_ball_y, qpos_ball_z"),
-    ("floor: {scale: 2}", "17:11", "the MuJoCo model's world body (static geoms): binding its scale would move the picture and not "
-     "the physics. To move a body that has no joint, put the geoms in a body of their own that is a mocap body"),
-    ("top: {location: [0, 0, 2]}", "17:9", "'top' is a camera of the MuJoCo model, which MuJoCo poses every step"),
-    ("'body:ball': {color: [1, 0, 0]}", "17:17", "'body:ball' is the frame of the MuJoCo body 'ball': bind its geoms by their names "
-     "instead (ball_geom)"),
-])
-def test_binding_the_pose_of_a_bodys_object_is_refused_saying_how_to_move_the_body(tmp_path: Path, actor: str, line: str, expected: str) -> None:
+@pytest.mark.parametrize(
+    "actor, line, expected",
+    [
+        (
+            "goal_geom: {location: [0, 0, 1]}",
+            "17:15",
+            "'goal_geom' stands for the MuJoCo body 'goal': binding its location would move the "
+            "picture and not the physics. It is a mocap body: set mocap_goal_x, _y, _z",
+        ),
+        ("'body:goal': {rotation: [0, 0, 1]}", "17:17", "'body:goal' stands for the MuJoCo body 'goal'"),
+        ("ball_geom: {location: [0, 0, 1]}", "17:15", "Its joints move it: set qpos_ball_x, qpos_ball_y, qpos_ball_z"),
+        (
+            "floor: {scale: 2}",
+            "17:11",
+            "the MuJoCo model's world body (static geoms): binding its scale would move the picture and not "
+            "the physics. To move a body that has no joint, put the geoms in a body of their own that is a mocap body",
+        ),
+        ("top: {location: [0, 0, 2]}", "17:9", "'top' is a camera of the MuJoCo model, which MuJoCo poses every step"),
+        (
+            "'body:ball': {color: [1, 0, 0]}",
+            "17:17",
+            "'body:ball' is the frame of the MuJoCo body 'ball': bind its geoms by their names instead (ball_geom)",
+        ),
+    ],
+)
+def test_binding_the_pose_of_a_bodys_object_is_refused_saying_how_to_move_the_body(
+    tmp_path: Path, actor: str, line: str, expected: str
+) -> None:
     path = write(tmp_path, SPEC + f"actors:\n  {actor}\n")
     with pytest.raises(SpecError) as caught:
         VisualEnv(path, render=False)
@@ -146,17 +172,32 @@ def test_binding_the_pose_of_a_bodys_object_is_refused_saying_how_to_move_the_bo
 
 
 def test_an_object_the_spec_draws_for_a_body_takes_no_pose_binding_but_a_colour(tmp_path: Path) -> None:
-    spec = SPEC.replace("scene: {world: {color: [0, 0, 0]}}", "scene:\n  objects:\n    goal: {primitive: cube, size: 0.2, material: {color: [1, 0, 0]}}")
+    spec = SPEC.replace(
+        "scene: {world: {color: [0, 0, 0]}}",
+        "scene:\n  objects:\n    goal: {primitive: cube, size: 0.2, material: {color: [1, 0, 0]}}",
+    )
     with pytest.raises(SpecError, match=r"actors.goal.location: 'goal' stands for the MuJoCo body 'goal'"):
         VisualEnv(write(tmp_path, spec + "actors: {goal: {location: [0, 0, 1]}}\n"), render=False)
-    VisualEnv(write(tmp_path, spec + "actors: {goal: {color: [0, 1, 0]}, ball_geom: {color: [1, 1, 0]}}\n"), render=False).close()
+    VisualEnv(
+        write(tmp_path, spec + "actors: {goal: {color: [0, 1, 0]}, ball_geom: {color: [1, 1, 0]}}\n"), render=False
+    ).close()
 
 
 def test_a_misspelt_mocap_name_is_a_located_error(tmp_path: Path) -> None:
-    for old, new, where in (("mocap_goal_y: mocap_goal_y + speed", "mocap_gaol_y: 1", r"dynamics.update.mocap_gaol_y: 'mocap_gaol_y' "
-                             r"is not a state variable or a mocap pose \(did you mean 'mocap_goal_y'"),
-                            ("mocap_goal_x, mocap_goal_y:", "mocap_goal_x, mocap_gaol_y:", r"physics.reset.values.mocap_goal_x, mocap_gaol_y: "
-                             r"no joint value or mocap pose 'mocap_gaol_y' to set \(did you mean 'mocap_goal_y'")):
+    for old, new, where in (
+        (
+            "mocap_goal_y: mocap_goal_y + speed",
+            "mocap_gaol_y: 1",
+            r"dynamics.update.mocap_gaol_y: 'mocap_gaol_y' "
+            r"is not a state variable or a mocap pose \(did you mean 'mocap_goal_y'",
+        ),
+        (
+            "mocap_goal_x, mocap_goal_y:",
+            "mocap_goal_x, mocap_gaol_y:",
+            r"physics.reset.values.mocap_goal_x, mocap_gaol_y: "
+            r"no joint value or mocap pose 'mocap_gaol_y' to set \(did you mean 'mocap_goal_y'",
+        ),
+    ):
         with pytest.raises(SpecError, match=where):
             VisualEnv(write(tmp_path, SPEC.replace(old, new)), render=False)
 
@@ -180,7 +221,12 @@ def test_the_goal_is_drawn_where_its_mocap_pose_puts_it_alone_and_in_a_batch(tmp
         rows, cols = np.nonzero(red(obs))
         assert rows.size >= 3
         # 3 m above the goal with MuJoCo's 45 degree fovy: 32 px span 2 * 3 * tan(22.5 deg) = 2.49 m
-        assert abs(cols.mean() - (15.5 + x * 32 / 2.485)) < 1.5 and abs(rows.mean() - (15.5 - y * 32 / 2.485)) < 1.5, (x, y, rows.mean(), cols.mean())
+        assert abs(cols.mean() - (15.5 + x * 32 / 2.485)) < 1.5 and abs(rows.mean() - (15.5 - y * 32 / 2.485)) < 1.5, (
+            x,
+            y,
+            rows.mean(),
+            cols.mean(),
+        )
         assert (np.abs(tiles[0].astype(int) - obs.astype(int)) <= 8).mean() >= 0.99
         moved, *_ = env.step(0)
         moved_tiles, *_ = batch.step(np.zeros(2, dtype=np.int64))

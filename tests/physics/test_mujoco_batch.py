@@ -38,11 +38,21 @@ def assert_same_data(ours: object, theirs: object, where: str) -> None:
     np.testing.assert_array_equal(ours.warning.number, theirs.warning.number, err_msg=where)  # type: ignore[attr-defined]
 
 
-IDS = ["DMC-cartpole-swingup-v0", "DMC-cheetah-run-v0", "DMC-finger-spin-v0", "DMC-reacher-easy-v0", "VisualHalfCheetah-v0"]
+IDS = [
+    "DMC-cartpole-swingup-v0",
+    "DMC-cheetah-run-v0",
+    "DMC-finger-spin-v0",
+    "DMC-reacher-easy-v0",
+    "VisualHalfCheetah-v0",
+]
 
 
-@pytest.mark.parametrize("ident, by_mujoco", [(i, True) for i in IDS] + [("DMC-cheetah-run-v0", False), ("VisualHalfCheetah-v0", False)])
-def test_each_env_stepped_by_mujoco_batch_is_one_env_alone(ident: str, by_mujoco: bool, monkeypatch: pytest.MonkeyPatch) -> None:
+@pytest.mark.parametrize(
+    "ident, by_mujoco", [(i, True) for i in IDS] + [("DMC-cheetah-run-v0", False), ("VisualHalfCheetah-v0", False)]
+)
+def test_each_env_stepped_by_mujoco_batch_is_one_env_alone(
+    ident: str, by_mujoco: bool, monkeypatch: pytest.MonkeyPatch
+) -> None:
     """dm_control's split step and settling steps (cheetah), resets that write the env's own model (finger's damping, reacher's
     target) and Gymnasium's convention: five envs for 120 steps, four of them reset at different steps while the others go on.
     Likewise where the batch steps the lanes' MjData itself (a mujoco without mujoco.batch)."""
@@ -50,14 +60,24 @@ def test_each_env_stepped_by_mujoco_batch_is_one_env_alone(ident: str, by_mujoco
         monkeypatch.setattr(physics_batch, "batch_module", lambda *args: None)
     n, steps = 5, 120
     batch = BatchedVectorEnv(ident, n, render=False, action_repeat=1)
-    singles = [VisualEnv(batch.program, render=False, action_repeat=1) for _ in range(n)]  # one env each, as make() gives it
+    singles = [
+        VisualEnv(batch.program, render=False, action_repeat=1) for _ in range(n)
+    ]  # one env each, as make() gives it
     plan = batch.program.physics
-    assert plan is not None and isinstance(batch._physics.engine, MujocoBatch) == by_mujoco  # MuJoCo's batch steps them, or the lanes
+    assert (
+        plan is not None and isinstance(batch._physics.engine, MujocoBatch) == by_mujoco
+    )  # MuJoCo's batch steps them, or the lanes
     try:
         obs, _ = batch.reset(seed=20)
         for i, env in enumerate(singles):
             np.testing.assert_array_equal(obs[i], env.reset(seed=20 + i)[0])
-        resets = {(30, 1), (31, 3), (70, 0), (71, 1), (100, 4)}  # (step, env): the env ends its episode there, the others go on
+        resets = {
+            (30, 1),
+            (31, 3),
+            (70, 0),
+            (71, 1),
+            (100, 4),
+        }  # (step, env): the env ends its episode there, the others go on
         pending = np.zeros(n, dtype=bool)
         actions = np.random.default_rng(1).uniform(-1, 1, (steps, *batch.action_space.shape))
         for t, action in enumerate(actions):
@@ -69,7 +89,9 @@ def test_each_env_stepped_by_mujoco_batch_is_one_env_alone(ident: str, by_mujoco
                     single_obs, reward, *_ = env.step(action[i])
                 assert rewards[i] == reward, (t, i)
                 np.testing.assert_array_equal(obs[i], single_obs, err_msg=f"step {t}, env {i}")
-                source = batch._physics.pose_sources()[i]  # what the renderer poses env i from: the batch's rows, or its lane
+                source = batch._physics.pose_sources()[
+                    i
+                ]  # what the renderer poses env i from: the batch's rows, or its lane
                 for ours, theirs in zip(plan.poses(source), plan.poses(env.data)):
                     np.testing.assert_array_equal(ours, theirs, err_msg=f"step {t}, env {i}: poses")
             for lane, env in zip(batch.lanes, singles):  # handed out, a lane's MjData is the whole of it
@@ -108,14 +130,17 @@ ARM = """\
 
 @pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 @pytest.mark.parametrize("threads", ["1", "2"])
-def test_an_env_that_blows_up_in_mujoco_batch_ends_with_its_own_fault(tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: str) -> None:
+def test_an_env_that_blows_up_in_mujoco_batch_ends_with_its_own_fault(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch, threads: str
+) -> None:
     """on_fault: terminate: env 2 blows up inside MuJoCo's batch (with two threads, MuJoCo's warning may reach Python from
     the batch's own thread); it ends with the fault one env gives, resets, and it and the others go on as alone (the
     batch's warning counters of env 2 start again at its reset, as its MjData's do)."""
     monkeypatch.setenv(THREADS_VARIABLE, threads)
     (tmp_path / "arm.xml").write_text(ARM, encoding="utf-8")
     path = tmp_path / "arm.yaml"
-    path.write_text(textwrap.dedent("""\
+    path.write_text(
+        textwrap.dedent("""\
         id: Arm-v0
         physics:
           model: arm.xml
@@ -127,7 +152,9 @@ def test_an_env_that_blows_up_in_mujoco_batch_ends_with_its_own_fault(tmp_path: 
         reward: qpos_slide
         on_fault: terminate
         max_steps: 30
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     batch = BatchedVectorEnv(path, 3, render=False)
     singles = [VisualEnv(path, render=False) for _ in range(3)]
     assert isinstance(batch._physics.engine, MujocoBatch) and batch._physics.engine.batch.nthread == int(threads)

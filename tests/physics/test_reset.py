@@ -58,7 +58,10 @@ def write(tmp_path: Path, extra: str, convention: str = "dm_control", top: str =
     """The spec: `extra` (dedented) inside the physics section, `top` after it."""
     (tmp_path / "reset.xml").write_text(MODEL, encoding="utf-8")
     path = tmp_path / "spec.yaml"
-    path.write_text(BASE.format(convention=convention, extra=textwrap.indent(textwrap.dedent(extra), "  "), top=top), encoding="utf-8")
+    path.write_text(
+        BASE.format(convention=convention, extra=textwrap.indent(textwrap.dedent(extra), "  "), top=top),
+        encoding="utf-8",
+    )
     return path
 
 
@@ -83,16 +86,28 @@ def line_of(path: Path, text: str) -> int:
 
 
 def test_names_read_the_models_fields_geoms_positions_and_contacts(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
       observe: [model_geom_size_ball_geom_0, model_jnt_range_hinge_lo, model_jnt_range_hinge_hi, model_dof_damping_hinge,
                 model_geom_pos_marker_x, geom_arm_geom_z, geom_ball_geom_x, ncon, model_site_size_nothing_0]
-    """)
+    """,
+    )
     assert "unknown name 'model_site_size_nothing_0'" in errors_of(path)
     path.write_text(path.read_text(encoding="utf-8").replace(", model_site_size_nothing_0", ""), encoding="utf-8")
     env = VisualEnv(path, render=False)
     obs, _ = env.reset(seed=0)
     model, data = env.model, env.data
-    assert obs.tolist() == [0.1, model.jnt_range[1][0], model.jnt_range[1][1], 0.1, 1.0, data.geom_xpos[4][2], data.geom_xpos[3][0], 1.0]
+    assert obs.tolist() == [
+        0.1,
+        model.jnt_range[1][0],
+        model.jnt_range[1][1],
+        0.1,
+        1.0,
+        data.geom_xpos[4][2],
+        data.geom_xpos[3][0],
+        1.0,
+    ]
     assert model.jnt_range[1][1] == pytest.approx(np.pi / 2)  # the model's range, in radians as MuJoCo compiled it
     assert data.ncon == 1  # the ball at x = 0 touches the wall
 
@@ -101,13 +116,16 @@ def test_names_read_the_models_fields_geoms_positions_and_contacts(tmp_path: Pat
 
 
 def test_a_reset_writes_model_fields_into_the_envs_own_model(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           values:
             model_geom_pos_marker_x: uniform(2, 3)
             model_dof_damping_hinge: 0.5
         observe: [model_geom_pos_marker_x, geom_marker_x, model_dof_damping_hinge]
-    """)
+    """,
+    )
     a, b = VisualEnv(path, render=False), VisualEnv(path, render=False)
     obs, _ = a.reset(seed=1)
     assert 2 <= obs[0] < 3 and obs[1] == obs[0] and obs[2] == 0.5  # written, and the forward moved the geom
@@ -119,17 +137,22 @@ def test_a_reset_writes_model_fields_into_the_envs_own_model(tmp_path: Path) -> 
 
 
 def test_a_reset_key_that_cannot_be_written_is_a_located_error(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           values:
             model_geom_size_ball_geom_0: 0.2
             model_geom_pos_markr_x: 1
             body_ball_x: 1
-    """)
+    """,
+    )
     message = errors_of(path)
     line = line_of(path, "model_geom_size_ball_geom_0")
     assert located(message, path, "'model_geom_size_ball_geom_0' is read from the model, not written") == (line, 7)
-    assert located(message, path, "no writable model field 'model_geom_pos_markr_x' to set (did you mean 'model_geom_pos_marker_x'") == (line + 1, 7)
+    assert located(
+        message, path, "no writable model field 'model_geom_pos_markr_x' to set (did you mean 'model_geom_pos_marker_x'"
+    ) == (line + 1, 7)
     assert located(message, path, "'body_ball_x' is computed by MuJoCo from the state") == (line + 2, 7)
 
 
@@ -137,13 +160,16 @@ def test_a_reset_key_that_cannot_be_written_is_a_located_error(tmp_path: Path) -
 
 
 def test_a_redraw_draws_again_until_its_condition_holds(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           redraw:
             values: {qpos_slide: "uniform(model_jnt_range_slide_lo, model_jnt_range_slide_hi)"}
             until: ncon == 0
         observe: [qpos_slide, ncon]
-    """)
+    """,
+    )
     env = VisualEnv(path, render=False)
     stream = np.random.RandomState(3)
     draws = []
@@ -159,14 +185,17 @@ def test_a_redraw_draws_again_until_its_condition_holds(tmp_path: Path) -> None:
 
 def test_each_try_starts_from_the_values_the_reset_wrote(tmp_path: Path) -> None:
     """A try reads the joint's value as ``values`` left it, never the previous try's: ten tries do not add up."""
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           values: {qpos_slide: 0.5}
           redraw:
             values: {qpos_slide: "qpos_slide + uniform(0, 0.1)"}
             until: qpos_slide > 0.59
         observe: [qpos_slide]
-    """)
+    """,
+    )
     env = VisualEnv(path, render=False)
     for seed in range(5):
         obs, _ = env.reset(seed=seed)
@@ -174,13 +203,16 @@ def test_each_try_starts_from_the_values_the_reset_wrote(tmp_path: Path) -> None
 
 
 def test_a_redraw_that_never_meets_its_condition_is_a_located_fault(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           redraw:
             values: {qpos_slide: "uniform(-0.1, 0.1)"}
             until: ncon == 0
             attempts: 7
-    """)
+    """,
+    )
     env = VisualEnv(path, render=False)
     with pytest.raises(StepError) as caught:
         env.reset(seed=0)
@@ -190,35 +222,50 @@ def test_a_redraw_that_never_meets_its_condition_is_a_located_fault(tmp_path: Pa
 
 
 def test_a_bad_redraw_is_a_located_error(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           redraw:
             values: {qpos_slide: "uniform(-1, 1)"}
             until: ncon == 0
             attempts: 0
-    """)
+    """,
+    )
     assert located(errors_of(path), path, "physics.reset.redraw.attempts") == (line_of(path, "attempts"), 17)
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           redraw:
             values: {qpos_slid: "uniform(-1, 1)"}
             until: ncon == 0
-    """)
-    assert located(errors_of(path), path, "no joint value 'qpos_slid' to set (did you mean 'qpos_slide'") == (line_of(path, "qpos_slid"), 16)
-    path = write(tmp_path, """\
+    """,
+    )
+    assert located(errors_of(path), path, "no joint value 'qpos_slid' to set (did you mean 'qpos_slide'") == (
+        line_of(path, "qpos_slid"),
+        16,
+    )
+    path = write(
+        tmp_path,
+        """\
         reset:
           redraw:
             values: {}
             until: ncon + 1
-    """)
+    """,
+    )
     message = errors_of(path)
     assert located(message, path, "physics.reset.redraw.values") == (line_of(path, "values"), 15)
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           redraw:
             values: {qpos_slide: "uniform(-1, 1)"}
             until: ncon + 1
-    """)
+    """,
+    )
     assert located(errors_of(path), path, "physics.reset.redraw.until") == (line_of(path, "until"), 14)
 
 
@@ -228,11 +275,15 @@ def test_a_bad_redraw_is_a_located_error(tmp_path: Path) -> None:
 @pytest.mark.parametrize("convention", ["dm_control", "gymnasium"])
 def test_settling_steps_are_the_conventions_steps_then_the_time_set(tmp_path: Path, convention: str) -> None:
     """The reset's MuJoCo calls, written out: reset (and dm_control's forward), the values, the steps in one call, the time, a forward."""
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           values: {qpos_hinge: 0.5}
           settle: {steps: 40, time: 0}
-    """, convention)
+    """,
+        convention,
+    )
     env = VisualEnv(path, render=False)
     env.reset(seed=0)
     from visualenv.physics.conventions import forward_function, reset_data, step_function
@@ -258,13 +309,18 @@ def test_settling_keeps_the_time_unless_told(tmp_path: Path) -> None:
     assert env.data.time == pytest.approx(0.25)
 
 
-@pytest.mark.filterwarnings("ignore:MuJoCo:RuntimeWarning")  # MuJoCo's own words on the blow-up (where its warnings are Python's)
+@pytest.mark.filterwarnings(
+    "ignore:MuJoCo:RuntimeWarning"
+)  # MuJoCo's own words on the blow-up (where its warnings are Python's)
 def test_a_simulation_that_blows_up_while_settling_is_a_located_fault(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           values: {qvel_hinge: 1e300}
           settle: {steps: 10}
-    """)
+    """,
+    )
     with pytest.raises(StepError) as caught:
         VisualEnv(path, render=False).reset(seed=0)
     assert f"spec.yaml:{line_of(path, 'settle:')}: physics.reset.settle" in str(caught.value)
@@ -284,11 +340,15 @@ def test_a_bad_settle_is_a_located_error(tmp_path: Path) -> None:
 
 
 def test_a_batch_reads_contacts_and_model_fields_as_its_envs_do(tmp_path: Path) -> None:
-    path = write(tmp_path, """\
+    path = write(
+        tmp_path,
+        """\
         reset:
           values: {qpos_slide: "uniform(-0.4, 0.4)", model_geom_pos_marker_x: "uniform(0, 1)"}
         observe: [ncon, model_geom_pos_marker_x, geom_marker_x]
-    """, top="reward: ncon + model_geom_pos_marker_x")
+    """,
+        top="reward: ncon + model_geom_pos_marker_x",
+    )
     batch = BatchedVectorEnv(path, 4, render=False)
     alone = [VisualEnv(path, render=False) for _ in range(4)]
     obs, _ = batch.reset(seed=5)

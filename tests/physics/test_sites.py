@@ -63,12 +63,39 @@ def write(tmp_path: Path, spec: str = SPEC) -> Path:
 def test_the_scene_holds_the_visible_sites_with_their_shapes(tmp_path: Path) -> None:
     scene = compile_spec(load_spec(write(tmp_path))).physics.scene
     sites = {s.name: s for s in scene.sites}
-    assert set(sites) == {"site:marker", "site:target", "site:post", "site:bar", "site:egg", "site:default"}  # not hidden, not clear
-    assert (sites["site:target"].kind, sites["site:target"].size[0], sites["site:target"].rgba) == ("sphere", 0.15, (1.0, 0.0, 0.0, 1.0))
-    assert [sites[n].kind for n in ("site:marker", "site:post", "site:bar", "site:egg")] == ["box", "cylinder", "capsule", "ellipsoid"]
+    assert set(sites) == {
+        "site:marker",
+        "site:target",
+        "site:post",
+        "site:bar",
+        "site:egg",
+        "site:default",
+    }  # not hidden, not clear
+    assert (sites["site:target"].kind, sites["site:target"].size[0], sites["site:target"].rgba) == (
+        "sphere",
+        0.15,
+        (1.0, 0.0, 0.0, 1.0),
+    )
+    assert [sites[n].kind for n in ("site:marker", "site:post", "site:bar", "site:egg")] == [
+        "box",
+        "cylinder",
+        "capsule",
+        "ellipsoid",
+    ]
     assert sites["site:marker"].body == 1 and sites["site:marker"].pos == (0.0, 0.0, 0.12)  # in its body's frame
-    assert sites["site:default"].size[0] == 0.005 and sites["site:default"].rgba == (0.5, 0.5, 0.5, 1.0)  # MuJoCo's defaults
-    off = compile_spec(load_spec(write(tmp_path, SPEC.replace("physics: {model: sites.xml,", "physics: {model: sites.xml, draw_sites: false,"))))
+    assert sites["site:default"].size[0] == 0.005 and sites["site:default"].rgba == (
+        0.5,
+        0.5,
+        0.5,
+        1.0,
+    )  # MuJoCo's defaults
+    off = compile_spec(
+        load_spec(
+            write(
+                tmp_path, SPEC.replace("physics: {model: sites.xml,", "physics: {model: sites.xml, draw_sites: false,")
+            )
+        )
+    )
     assert off.physics.scene.sites == ()
 
 
@@ -81,7 +108,9 @@ def test_inspect_lists_the_sites_it_draws(tmp_path: Path) -> None:
     result = CliRunner().invoke(main, ["inspect", str(tmp_path / "sites.xml")])
     assert result.exit_code == 0, result.output
     line = next(t for t in result.output.splitlines() if t.startswith("drawn sites"))
-    assert "target (sphere)" in line and "post (cylinder)" in line and "hidden" not in line and "clear" not in line, line
+    assert "target (sphere)" in line and "post (cylinder)" in line and "hidden" not in line and "clear" not in line, (
+        line
+    )
 
 
 def red(image: np.ndarray) -> np.ndarray:
@@ -104,8 +133,13 @@ def test_a_red_site_in_view_shows_red_pixels_alone_and_in_a_batch_and_draw_sites
     try:
         obs, _ = env.reset(seed=0)
         rows, cols = np.nonzero(red(obs))
-        assert rows.size >= 6 and cols.min() > 16  # only the target's red, right of the centre: the other two red sites hidden
-        assert abs(cols.mean() - (15.5 + 0.5 * 32 / 2.485)) < 1.5 and abs(rows.mean() - 15.5) < 1.5, (rows.mean(), cols.mean())
+        assert (
+            rows.size >= 6 and cols.min() > 16
+        )  # only the target's red, right of the centre: the other two red sites hidden
+        assert abs(cols.mean() - (15.5 + 0.5 * 32 / 2.485)) < 1.5 and abs(rows.mean() - 15.5) < 1.5, (
+            rows.mean(),
+            cols.mean(),
+        )
         marker = np.nonzero(green(obs))
         assert marker[0].size >= 2 and marker[1].mean() < 12  # on the ball, left of the centre
         tiles, _ = batch.reset(seed=0)
@@ -117,11 +151,15 @@ def test_a_red_site_in_view_shows_red_pixels_alone_and_in_a_batch_and_draw_sites
     moved = VisualEnv(path, params={"bx": 0.0})  # the ball half a metre to the right: its marker with it
     try:
         obs, _ = moved.reset(seed=0)
-        metres = 2 * (3 - 0.42) * np.tan(np.radians(22.5))  # what 32 px span at the marker's height (MuJoCo's 45 degree fovy)
+        metres = (
+            2 * (3 - 0.42) * np.tan(np.radians(22.5))
+        )  # what 32 px span at the marker's height (MuJoCo's 45 degree fovy)
         assert abs(np.nonzero(green(obs))[1].mean() - marker[1].mean() - 0.5 * 32 / metres) < 1.5
     finally:
         moved.close()
-    hidden = VisualEnv(write(tmp_path, SPEC.replace("physics: {model: sites.xml,", "physics: {model: sites.xml, draw_sites: false,")))
+    hidden = VisualEnv(
+        write(tmp_path, SPEC.replace("physics: {model: sites.xml,", "physics: {model: sites.xml, draw_sites: false,"))
+    )
     try:
         obs, _ = hidden.reset(seed=0)
         assert not red(obs).any() and not green(obs).any()

@@ -82,7 +82,9 @@ def errors_of(path: Path) -> str:
 
 
 def test_default_actions_are_the_actuators_and_names_read_the_model(tmp_path: Path) -> None:
-    path = write(tmp_path, spec_with("""\
+    path = write(
+        tmp_path,
+        spec_with("""\
     state:
       total: {init: 0}
     dynamics:
@@ -91,7 +93,8 @@ def test_default_actions_are_the_actuators_and_names_read_the_model(tmp_path: Pa
     reward: qpos_hinge - angle_before
     outcomes:
       landed: {when: body_ball_z < 0.2 and sim_time > 0.1, end: terminate}
-    """))
+    """),
+    )
     env = VisualEnv(path, render=False)
     assert env.action_space.shape == (1,) and env.action_space.low[0] == -2 and env.action_space.high[0] == 2
     program = env.program
@@ -111,14 +114,17 @@ def test_default_actions_are_the_actuators_and_names_read_the_model(tmp_path: Pa
 
 
 def test_reset_values_draws_and_keyframe(tmp_path: Path) -> None:
-    path = write(tmp_path, spec_with("""\
+    path = write(
+        tmp_path,
+        spec_with("""\
       reset:
         keyframe: high
         values:
           qpos_free_x: qpos_free_x + uniform(-1, 1)
           qpos_hinge, qvel_hinge: "[qpos_hinge * 2, 0.25]"
       observe: [qpos_free_x, qpos_free_z, qpos_hinge, qvel_hinge, sensor_angle, site_tip_x, sensor_tip_pos_0]
-    """))
+    """),
+    )
     env = VisualEnv(path, render=False)
     obs, _ = env.reset(seed=3)
     expected_x = np.random.default_rng(3).uniform(-1, 1)
@@ -128,7 +134,9 @@ def test_reset_values_draws_and_keyframe(tmp_path: Path) -> None:
 
 
 def test_contacts_and_discrete_controls(tmp_path: Path) -> None:
-    path = write(tmp_path, spec_with("""\
+    path = write(
+        tmp_path,
+        spec_with("""\
       contacts: {on_floor: [floor, ball_geom]}
     actions:
       discrete:
@@ -137,7 +145,8 @@ def test_contacts_and_discrete_controls(tmp_path: Path) -> None:
     reward: "1.0 if on_floor else 0.0"
     outcomes:
       touched: {when: on_floor, end: terminate}
-    """))
+    """),
+    )
     env = VisualEnv(path, render=False)
     env.reset(seed=0)
     _, reward, terminated, _, _ = env.step(1)
@@ -151,14 +160,17 @@ def test_contacts_and_discrete_controls(tmp_path: Path) -> None:
 
 def test_a_contact_read_in_let_is_the_one_before_the_step(tmp_path: Path) -> None:
     """docs/physics.md: let reads the contact the previous step found, reward the one this step found: each landing pays once."""
-    path = write(tmp_path, spec_with("""\
+    path = write(
+        tmp_path,
+        spec_with("""\
       contacts: {on_floor: [floor, ball_geom]}
     dynamics:
       let: {was: "1 if on_floor else 0"}
     actions: {discrete: [{}]}
     reward: "1 if on_floor and was == 0 else 0"
     max_steps: 150
-    """))
+    """),
+    )
     env = VisualEnv(path, render=False)
     env.reset(seed=0)
     touching, rewards = [False], []
@@ -166,7 +178,9 @@ def test_a_contact_read_in_let_is_the_one_before_the_step(tmp_path: Path) -> Non
         rewards.append(env.step(0)[1])
         touching.append(env.data.ncon > 0)  # the ball and the floor: the model's only contact pair
     landings = [float(now and not before) for before, now in zip(touching, touching[1:])]
-    assert rewards == landings and 1 <= sum(rewards) < sum(touching)  # each landing pays once, not every step on the floor
+    assert rewards == landings and 1 <= sum(rewards) < sum(
+        touching
+    )  # each landing pays once, not every step on the floor
 
 
 # -- errors ----------------------------------------------------------------------------------------------
@@ -178,12 +192,17 @@ def test_unknown_names_list_the_models_names(tmp_path: Path) -> None:
 
 
 def test_unknown_geom_keyframe_and_reset_target(tmp_path: Path) -> None:
-    message = errors_of(write(tmp_path, spec_with("""\
+    message = errors_of(
+        write(
+            tmp_path,
+            spec_with("""\
       contacts: {hit: [floor, bal]}
       reset:
         keyframe: low
         values: {qpos_hing: 0}
-    """)))
+    """),
+        )
+    )
     assert "no geom 'bal' in the model (geoms: floor, ball_geom, arm_geom)" in message
     assert "no keyframe 'low' in the model" in message and "high" in message
     assert "no joint value 'qpos_hing' to set (did you mean 'qpos_hinge'?" in message
@@ -193,12 +212,24 @@ def test_dt_is_the_models(tmp_path: Path) -> None:
     assert "leave 'dt' out" in errors_of(write(tmp_path, spec_with("dt: 0.1\n")))
 
 
-@pytest.mark.parametrize("model, expected", [
-    ("<mujoco><worldbody><body>\n</mujoco>", "XML parse error"),
-    ('<mujoco>\n  <include file="missing.xml"/>\n</mujoco>', "Error opening file 'missing.xml' Element 'include', line 2"),
-    ('<mujoco>\n<worldbody>\n  <geom type="box" size="1 1 1" colour="red"/>\n</worldbody>\n</mujoco>', "unrecognized attribute: 'colour' Element 'geom', line 3"),
-    ('<mujoco>\n<worldbody>\n  <gizmo name="x"/>\n</worldbody>\n</mujoco>', "unrecognized element Element 'gizmo', line 3"),
-])
+@pytest.mark.parametrize(
+    "model, expected",
+    [
+        ("<mujoco><worldbody><body>\n</mujoco>", "XML parse error"),
+        (
+            '<mujoco>\n  <include file="missing.xml"/>\n</mujoco>',
+            "Error opening file 'missing.xml' Element 'include', line 2",
+        ),
+        (
+            '<mujoco>\n<worldbody>\n  <geom type="box" size="1 1 1" colour="red"/>\n</worldbody>\n</mujoco>',
+            "unrecognized attribute: 'colour' Element 'geom', line 3",
+        ),
+        (
+            '<mujoco>\n<worldbody>\n  <gizmo name="x"/>\n</worldbody>\n</mujoco>',
+            "unrecognized element Element 'gizmo', line 3",
+        ),
+    ],
+)
 def test_bad_mjcf_is_a_located_error(tmp_path: Path, model: str, expected: str) -> None:
     message = errors_of(write(tmp_path, spec_with(""), model=model))
     assert "spec.yaml:3" in message and "physics.model" in message and expected in message and "toy.xml" in message
@@ -213,10 +244,14 @@ def test_missing_model_file(tmp_path: Path) -> None:
 @pytest.mark.filterwarnings("ignore:MuJoCo. Nan, Inf or huge value:RuntimeWarning")
 def test_a_simulation_that_blows_up_is_a_located_fault(tmp_path: Path) -> None:
     model = MODEL.replace('gear="1" ctrllimited="true" ctrlrange="-2 2"', 'gear="1e30" ctrllimited="false"')
-    path = write(tmp_path, spec_with("""\
+    path = write(
+        tmp_path,
+        spec_with("""\
     actions:
       continuous: {ctrl_torque: {low: -1.0e+30, high: 1.0e+30}}
-    """), model=model)
+    """),
+        model=model,
+    )
     env = VisualEnv(path, render=False)
     env.reset(seed=0)
     with pytest.raises(StepError) as caught:
@@ -265,7 +300,10 @@ def test_a_state_only_batch_steps_each_envs_own_simulation() -> None:
 
 def test_an_input_for_an_actuator_that_does_not_exist(tmp_path: Path) -> None:
     message = errors_of(write(tmp_path, spec_with("actions: {continuous: {ctrl_torqe: {low: -1, high: 1}}}\n")))
-    assert "no actuator 'torqe' in the model for 'ctrl_torqe' (did you mean 'ctrl_torque'?" in message and "spec.yaml:" in message
+    assert (
+        "no actuator 'torqe' in the model for 'ctrl_torqe' (did you mean 'ctrl_torque'?" in message
+        and "spec.yaml:" in message
+    )
 
 
 #: MjModel arrays a model without textures may differ in: the textures' own, the materials' links to them, the names,
@@ -273,10 +311,19 @@ def test_an_input_for_an_actuator_that_does_not_exist(tmp_path: Path) -> None:
 TEXTURE_ARRAYS = ("tex_", "mat_texid", "name_", "names", "paths", "_sizes")
 
 
-@pytest.mark.filterwarnings("ignore:MuJoCo. compiler attribute:RuntimeWarning")  # Gymnasium's half_cheetah: settotalmass
-@pytest.mark.parametrize("model_file", [*sorted(str(p.relative_to(Path(__file__).parents[2]))
-                                                for p in (Path(__file__).parents[2] / "specs").glob("*/assets/*.xml")),
-                                        "package:gymnasium.envs.mujoco/assets/half_cheetah.xml"])
+@pytest.mark.filterwarnings(
+    "ignore:MuJoCo. compiler attribute:RuntimeWarning"
+)  # Gymnasium's half_cheetah: settotalmass
+@pytest.mark.parametrize(
+    "model_file",
+    [
+        *sorted(
+            str(p.relative_to(Path(__file__).parents[2]))
+            for p in (Path(__file__).parents[2] / "specs").glob("*/assets/*.xml")
+        ),
+        "package:gymnasium.envs.mujoco/assets/half_cheetah.xml",
+    ],
+)
 def test_each_env_copies_the_model_without_its_textures_and_steps_the_same(model_file: str) -> None:
     """An env's MjModel holds no texture (dm_control's skybox is 11.8 MB an env otherwise): every other array equals
     the model's, and 30 steps under the same controls give the same state to the bit; compiled again quietly (the

@@ -24,15 +24,20 @@ def unit_cube_face(axis: int, sign: float) -> np.ndarray:
     return corners
 
 
-@pytest.mark.parametrize(("face", "axis", "sign", "point", "st"), [
-    (0, 0, 1.0, (1.0, -0.5, 0.5), (0.25, 0.75)),    # +X: s = -z, t = -y
-    (1, 0, -1.0, (-1.0, -0.5, 0.5), (0.75, 0.75)),  # -X: s = +z, t = -y
-    (2, 1, 1.0, (-0.5, 1.0, 0.5), (0.25, 0.75)),    # +Y: s = +x, t = +z
-    (3, 1, -1.0, (-0.5, -1.0, 0.5), (0.25, 0.25)),  # -Y: s = +x, t = -z
-    (4, 2, 1.0, (-0.5, 0.5, 1.0), (0.25, 0.25)),    # +Z: s = +x, t = -y
-    (5, 2, -1.0, (-0.5, 0.5, -1.0), (0.75, 0.25)),  # -Z: s = -x, t = -y
-])
-def test_a_cube_texture_picks_the_face_and_its_coordinates_as_opengl_does(face: int, axis: int, sign: float, point: tuple, st: tuple) -> None:
+@pytest.mark.parametrize(
+    ("face", "axis", "sign", "point", "st"),
+    [
+        (0, 0, 1.0, (1.0, -0.5, 0.5), (0.25, 0.75)),  # +X: s = -z, t = -y
+        (1, 0, -1.0, (-1.0, -0.5, 0.5), (0.75, 0.75)),  # -X: s = +z, t = -y
+        (2, 1, 1.0, (-0.5, 1.0, 0.5), (0.25, 0.75)),  # +Y: s = +x, t = +z
+        (3, 1, -1.0, (-0.5, -1.0, 0.5), (0.25, 0.25)),  # -Y: s = +x, t = -z
+        (4, 2, 1.0, (-0.5, 0.5, 1.0), (0.25, 0.25)),  # +Z: s = +x, t = -y
+        (5, 2, -1.0, (-0.5, 0.5, -1.0), (0.75, 0.25)),  # -Z: s = -x, t = -y
+    ],
+)
+def test_a_cube_texture_picks_the_face_and_its_coordinates_as_opengl_does(
+    face: int, axis: int, sign: float, point: tuple, st: tuple
+) -> None:
     """Each face of a box reads its own face of the cube map, stacked from the top of the image (face 0) down."""
     points = np.vstack([unit_cube_face(axis, sign), [point]])
     # one quad (the face) and one triangle made of the point twice and the face's centre, which sits on the same face
@@ -43,7 +48,9 @@ def test_a_cube_texture_picks_the_face_and_its_coordinates_as_opengl_does(face: 
     s, t = st
     np.testing.assert_allclose(uv[4], [s, 1.0 - (face + t) / 6], atol=1e-9)
     np.testing.assert_allclose(uv[6], [0.5, 1.0 - (face + 0.5) / 6], atol=1e-9)
-    assert np.all((uv[:4, 1] >= 1.0 - (face + 1) / 6) & (uv[:4, 1] <= 1.0 - face / 6))  # the whole face stays in its band
+    assert np.all(
+        (uv[:4, 1] >= 1.0 - (face + 1) / 6) & (uv[:4, 1] <= 1.0 - face / 6)
+    )  # the whole face stays in its band
 
 
 def test_one_cube_face_for_all_six_and_the_edges_stay_inside_the_face() -> None:
@@ -74,8 +81,10 @@ def test_a_gradient_skybox_is_rgb1_above_and_rgb2_below() -> None:
     mujoco = pytest.importorskip("mujoco")
     from visualenv.physics.scene import _pixels
 
-    model = mujoco.MjModel.from_xml_string('<mujoco><asset><texture type="skybox" builtin="gradient" rgb1="1 1 1" '
-                                           'rgb2="0 0 0" width="16" height="16"/></asset><worldbody/></mujoco>')
+    model = mujoco.MjModel.from_xml_string(
+        '<mujoco><asset><texture type="skybox" builtin="gradient" rgb1="1 1 1" '
+        'rgb2="0 0 0" width="16" height="16"/></asset><worldbody/></mujoco>'
+    )
     level = cube_to_equirect(_pixels(model, 0))[..., 0].mean(axis=1)  # by row, bottom first
     assert level[-1] > 0.9 and level[0] < 0.1
     assert np.all(np.diff(level) > -0.03)  # brighter upwards all the way (nearest texels: steps, no dips)

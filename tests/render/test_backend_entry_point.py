@@ -98,9 +98,13 @@ def test_a_backend_that_is_not_module_colon_attribute_is_refused():
 
 
 def test_renderer_options_are_checked_when_made():
-    with pytest.raises(TypeError, match="unknown renderer option.s. colour: use engine, samples, device, threads, noise, readback"):
+    with pytest.raises(
+        TypeError, match="unknown renderer option.s. colour: use engine, samples, device, threads, noise, readback"
+    ):
         fake_env(renderer_options={"colour": 1})
     with pytest.raises(ValueError, match="unknown readback 'gpu'"):
         RendererOptions(readback="gpu")  # type: ignore[arg-type]
-    with pytest.raises(SpecError, match=r"visualenv.make\(\): samples: expected a value greater than or equal to 1, got 0"):
+    with pytest.raises(
+        SpecError, match=r"visualenv.make\(\): samples: expected a value greater than or equal to 1, got 0"
+    ):
         fake_env(renderer_options={"samples": 0})

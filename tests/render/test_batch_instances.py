@@ -56,8 +56,10 @@ def _renderers(env: BatchedVectorEnv) -> tuple:
 
     options = RendererOptions.parse(None)
     plan = env.program.render_plan().with_options(options)
-    return (BatchedBlenderRenderer(plan, options, num_envs=env.num_envs, instanced=True),
-            BatchedBlenderRenderer(plan, options, num_envs=env.num_envs, instanced=False))
+    return (
+        BatchedBlenderRenderer(plan, options, num_envs=env.num_envs, instanced=True),
+        BatchedBlenderRenderer(plan, options, num_envs=env.num_envs, instanced=False),
+    )
 
 
 def test_instanced_tiles_equal_copied_tiles():
@@ -69,17 +71,33 @@ def test_instanced_tiles_equal_copied_tiles():
     env.reset(seed=5)
     instanced, copied = _renderers(env)
     try:
-        names = {instanced.object(n).as_pointer(): n for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Sun", "Camera")}
-        assert {names[p] for p in instanced._removed if p in names} == {"Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Camera"}
+        names = {
+            instanced.object(n).as_pointer(): n
+            for n in ("Floor", "Rig", "Body", "Arm", "Ball", "Group", "Cone", "Sun", "Camera")
+        }
+        assert {names[p] for p in instanced._removed if p in names} == {
+            "Floor",
+            "Rig",
+            "Body",
+            "Arm",
+            "Ball",
+            "Group",
+            "Cone",
+            "Camera",
+        }
         assert not instanced._per_copy  # no binding is written copy by copy
-        assert _instanced(instanced, realized_only=True) == {"Floor"}  # the one mesh nothing moves, hides or colours: one realized mesh
+        assert _instanced(instanced, realized_only=True) == {
+            "Floor"
+        }  # the one mesh nothing moves, hides or colours: one realized mesh
         tiles, seen = [], set()
         x, a = (env.program.state_names.index(name) for name in ("x", "a"))
         for step in range(4):
             table = env.binding_table()
             ours, theirs = instanced.render(Frames(table)), copied.render(Frames(table))
             difference = np.abs(ours.astype(int) - theirs.astype(int))
-            assert difference.max() <= 1 and (difference > 0).sum() <= 2, f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
+            assert difference.max() <= 1 and (difference > 0).sum() <= 2, (
+                f"step {step}: {(ours != theirs).any(axis=-1).sum()} pixels differ"
+            )
             tiles.append(ours)
             seen |= {("ball", bool(v > 0)) for v in env._state[x]} | {("rig", bool(v < 1.2)) for v in env._state[a]}
             env.step(np.array([step % 2] * 4))
@@ -94,7 +112,11 @@ def test_instanced_tiles_equal_copied_tiles():
 
 def _instanced(renderer, realized_only: bool = False) -> set[str]:
     """The names of the meshes the batch draws through instancers (only those realized into one mesh, if asked)."""
-    return {inst.mesh.name.removesuffix("-instances") for inst in renderer._instances._instancers if inst.realized or not realized_only}
+    return {
+        inst.mesh.name.removesuffix("-instances")
+        for inst in renderer._instances._instancers
+        if inst.realized or not realized_only
+    }
 
 
 def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
@@ -103,10 +125,12 @@ def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
     that a merged mesh draws alike are one mesh in the anchor's space, one instance per env (a static group). Either
     way every tile equals the copied objects' tile."""
     scene = SCENE.replace(
-        "    Sun:", "    Tiles: {primitive: cube, size: 0.6, location: [-2.4, 1, 0.3], material: {color: [0.9, 0.9, 0.9], "
+        "    Sun:",
+        "    Tiles: {primitive: cube, size: 0.6, location: [-2.4, 1, 0.3], material: {color: [0.9, 0.9, 0.9], "
         "texture: {type: checker, scale: 3}}}\n"
         "    Post: {primitive: cylinder, radius: 0.15, depth: 1.5, location: [2.4, 1.2, 0.75], rotation: [0, 0.3, 0], "
-        "scale: [1, 1.5, 1], material: {color: [0.1, 0.4, 0.9]}}\n    Sun:")
+        "scale: [1, 1.5, 1], material: {color: [0.1, 0.4, 0.9]}}\n    Sun:",
+    )
     follow = scene.replace("  Group: {color:", "  Camera: {location: [0.5 * x, -6, 3]}\n  Group: {color:")
     for text, realized, groups in ((scene, {"Floor", "Post"}, []), (follow, set(), [["Floor", "Post"]])):
         env = BatchedVectorEnv(load_spec_text(text, name="instances.yaml"), 3, render=False)
@@ -127,12 +151,15 @@ def test_static_meshes_are_realized_only_where_pixels_stay_the_same():
             env.close()
 
 
-@pytest.mark.parametrize("spec, realized, groups, instancers", [
-    ("visual_cartpole.yaml", {"Track"}, [], 3),  # the moving cart and pole stay instances
-    # Goalie's camera follows the goalie: computed, not copied; its eight plain static meshes are one static group (the
-    # field's texture reads its object coordinates: its own instancer)
-    ("goalie.yaml", set(), [["Column" + str(i) for i in range(1, 8)] + ["GoalLine"]], 3),
-])
+@pytest.mark.parametrize(
+    "spec, realized, groups, instancers",
+    [
+        ("visual_cartpole.yaml", {"Track"}, [], 3),  # the moving cart and pole stay instances
+        # Goalie's camera follows the goalie: computed, not copied; its eight plain static meshes are one static group (the
+        # field's texture reads its object coordinates: its own instancer)
+        ("goalie.yaml", set(), [["Column" + str(i) for i in range(1, 8)] + ["GoalLine"]], 3),
+    ],
+)
 def test_a_batch_of_instances_adds_no_objects_per_env(spec, realized, groups, instancers):
     """Every object becomes an instance, and a moving camera is posed from numpy: the scene holds as many objects for
     6 envs as for 2, and no binding is written per env."""
@@ -162,10 +189,13 @@ def test_a_computed_camera_that_turns_or_hangs_on_a_moving_parent_renders_each_e
     from tests.test_batched import after_steps, agreement
 
     goalie = (Path(__file__).parents[2] / "specs" / "goalie.yaml").read_text()
-    turning = goalie.replace("  Camera: {location: [gx, -1, 1.6]}", "  Camera: {location: [gx, -1, 1.6], rotation: [1.05, 0, 0.04 * gx]}")
-    hung = (goalie.replace("  Camera: {location: [gx, -1, 1.6]}", "  Rig: {location: [gx, 0, 0]}")
-            .replace("    Camera: {camera: perspective, lens: 24, location: [0, -1, 1.6],",
-                     "    Rig: {empty: true}\n    Camera: {camera: perspective, lens: 24, location: [0, -1, 1.6], parent: Rig,"))
+    turning = goalie.replace(
+        "  Camera: {location: [gx, -1, 1.6]}", "  Camera: {location: [gx, -1, 1.6], rotation: [1.05, 0, 0.04 * gx]}"
+    )
+    hung = goalie.replace("  Camera: {location: [gx, -1, 1.6]}", "  Rig: {location: [gx, 0, 0]}").replace(
+        "    Camera: {camera: perspective, lens: 24, location: [0, -1, 1.6],",
+        "    Rig: {empty: true}\n    Camera: {camera: perspective, lens: 24, location: [0, -1, 1.6], parent: Rig,",
+    )
     assert turning != goalie and "parent: Rig" in hung
     for text in (turning, hung):
         loaded = load_spec_text(text, name="goalie.yaml")

@@ -100,10 +100,15 @@ def test_a_file_that_crashes_blender_is_a_located_error(corpus, monkeypatch):
     that dies of a real SIGSEGV when asked to read, as Blender does on such a file."""
     from visualenv.render.blender.scene import blendfile
 
-    crashing = blendfile._Reader([sys.executable, "-c", "import os, signal, sys; sys.stdin.readline(); os.kill(os.getpid(), signal.SIGSEGV)"])
+    crashing = blendfile._Reader(
+        [sys.executable, "-c", "import os, signal, sys; sys.stdin.readline(); os.kill(os.getpid(), signal.SIGSEGV)"]
+    )
     monkeypatch.setattr(blendfile, "_reader", crashing)
     monkeypatch.setattr(blendfile, "_answers", {})
-    with pytest.raises(SpecError, match=r"Blender crashed \(signal SIGSEGV\) while reading .*base\.blend: open it in Blender and save it again") as info:
+    with pytest.raises(
+        SpecError,
+        match=r"Blender crashed \(signal SIGSEGV\) while reading .*base\.blend: open it in Blender and save it again",
+    ) as info:
         corpus_env(corpus, "base", VARIANTS["base"]).renderer
     assert info.value.diagnostics[0].path == "scene.file" and info.value.diagnostics[0].line == 2
     assert crashing.proc is None  # the dead reader is forgotten; the next request starts a new one

@@ -45,7 +45,12 @@ def scripted(tmp_path_factory) -> tuple[Path, Path]:
     """The folder holding scripted.blend and spec.yaml, and the marker prefix its scripts write to."""
     folder = tmp_path_factory.mktemp("scripted")
     marker = folder / "ran"
-    subprocess.run([sys.executable, str(FIXTURE), str(folder / "scripted.blend"), str(marker)], check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [sys.executable, str(FIXTURE), str(folder / "scripted.blend"), str(marker)],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     (folder / "spec.yaml").write_text(SPEC, encoding="utf-8")
     return folder, marker
 
@@ -55,15 +60,26 @@ def markers(marker: Path) -> list[str]:
 
 
 def run_python(code: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-c", textwrap.dedent(code)], capture_output=True, text=True, timeout=300, cwd=ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    return subprocess.run(
+        [sys.executable, "-c", textwrap.dedent(code)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
 
 
 def test_the_files_scripts_run_when_blender_is_allowed_to_run_them(scripted, tmp_path) -> None:
     """The control: with auto-run on, opening the file runs its text block and evaluating the scene its driver."""
     folder, _ = scripted
     marker = tmp_path / "ran"
-    subprocess.run([sys.executable, str(FIXTURE), str(tmp_path / "control.blend"), str(marker)], check=True, capture_output=True, timeout=300)
+    subprocess.run(
+        [sys.executable, str(FIXTURE), str(tmp_path / "control.blend"), str(marker)],
+        check=True,
+        capture_output=True,
+        timeout=300,
+    )
     assert markers(marker) == []  # saving it ran nothing
     out = run_python(f"""
         import bpy
@@ -110,4 +126,3 @@ def test_an_env_over_the_file_steps_without_running_its_scripts_even_where_autor
     assert "after import: False" in out.stdout and "after steps: False" in out.stdout, out.stdout
     assert int(out.stdout.split()[-1]) > 60  # the ball was rendered
     assert markers(marker) == []
-

@@ -30,8 +30,17 @@ OBJECTS = """\
 """
 
 
-def make_env(tmp_path: Path, *, objects: str = OBJECTS, actors: str = "Box: {location: [x, 0, 0]}", observation: str = "{camera: Cam, resolution: [48, 32], color: rgb}",
-             scene_extra: str = "", state: str = "x: {init: 0.0}", render: str = "{engine: cycles, preset: fast}", **renderer_options: Any) -> VisualEnv:
+def make_env(
+    tmp_path: Path,
+    *,
+    objects: str = OBJECTS,
+    actors: str = "Box: {location: [x, 0, 0]}",
+    observation: str = "{camera: Cam, resolution: [48, 32], color: rgb}",
+    scene_extra: str = "",
+    state: str = "x: {init: 0.0}",
+    render: str = "{engine: cycles, preset: fast}",
+    **renderer_options: Any,
+) -> VisualEnv:
     text = f"""\
 id: RenderTest-v0
 scene:
@@ -97,11 +106,17 @@ def test_bound_colour_changes_the_rendered_colour(tmp_path):
         e.close()
 
 
-@pytest.mark.parametrize("binding", ["Box: {color: [0.9, 0.9, 0.9, x]}", "Box: {location: [0, 0, 0]}"], ids=["bound", "static"])
+@pytest.mark.parametrize(
+    "binding", ["Box: {color: [0.9, 0.9, 0.9, x]}", "Box: {location: [0, 0, 0]}"], ids=["bound", "static"]
+)
 def test_colour_alpha_makes_an_object_see_through(tmp_path, binding):
     # a white box (alpha x) in front of a red wall: opaque it hides the wall, with alpha 0 the wall shows through
-    objects = OBJECTS.replace("[0.9, 0.9, 0.9]}", "[0.9, 0.9, 0.9, 0.0]}" if "location" in binding else "[0.9, 0.9, 0.9]}")
-    objects += "    Wall: {primitive: cube, size: [6, 0.1, 6], location: [0, 2, 0], material: {color: [0.8, 0.02, 0.02]}}\n"
+    objects = OBJECTS.replace(
+        "[0.9, 0.9, 0.9]}", "[0.9, 0.9, 0.9, 0.0]}" if "location" in binding else "[0.9, 0.9, 0.9]}"
+    )
+    objects += (
+        "    Wall: {primitive: cube, size: [6, 0.1, 6], location: [0, 2, 0], material: {color: [0.8, 0.02, 0.02]}}\n"
+    )
     e = make_env(tmp_path, objects=objects, actors=binding)
     try:
         centre = observe(e, x=0.0).astype(int)[16, 24]
@@ -121,7 +136,10 @@ def test_opaque_scenes_skip_transparent_passes(env):
 
 
 def test_bound_colour_on_an_empty_colours_the_meshes_under_it(tmp_path):
-    objects = OBJECTS.replace("    Box:  {primitive: cube, size: 1.0,", "    Rig:  {empty: true}\n    Box:  {primitive: cube, size: 1.0, parent: Rig,")
+    objects = OBJECTS.replace(
+        "    Box:  {primitive: cube, size: 1.0,",
+        "    Rig:  {empty: true}\n    Box:  {primitive: cube, size: 1.0, parent: Rig,",
+    )
     e = make_env(tmp_path, objects=objects, actors="Rig: {color: [1 - x, 0.05, x]}")
     try:
         red, blue = observe(e, x=0.0).astype(int)[16, 24], observe(e, x=1.0).astype(int)[16, 24]
@@ -129,13 +147,18 @@ def test_bound_colour_on_an_empty_colours_the_meshes_under_it(tmp_path):
     finally:
         e.close()
     lonely = make_env(tmp_path, objects=OBJECTS + "    Rig:  {empty: true}\n", actors="Rig: {color: [1, 0, 0]}")
-    with pytest.raises(SpecError, match="actors.Rig.color: a bound colour sets the materials of 'Rig' and the meshes under it, but it has none"):
+    with pytest.raises(
+        SpecError,
+        match="actors.Rig.color: a bound colour sets the materials of 'Rig' and the meshes under it, but it has none",
+    ):
         lonely.renderer
     lonely.close()
 
 
 def test_colour_binding_does_not_leak_to_other_objects(tmp_path):
-    objects = OBJECTS + "    Other: {primitive: cube, size: 1.0, location: [2, 0, 0], material: {color: [0.9, 0.9, 0.9]}}\n"
+    objects = (
+        OBJECTS + "    Other: {primitive: cube, size: 1.0, location: [2, 0, 0], material: {color: [0.9, 0.9, 0.9]}}\n"
+    )
     e = make_env(tmp_path, objects=objects, actors="Box: {color: [0.0, 0.0, x]}")
     try:
         img = observe(e, x=1.0).astype(int)
@@ -162,7 +185,9 @@ def test_grayscale_rgb_depth_shapes_and_depth_order(tmp_path):
     try:
         obs = observe(e, x=0.0)
         assert set(obs) == {"color", "gray", "depth"}
-        assert obs["color"].shape == (30, 40, 3) and obs["gray"].shape == (30, 40, 1) and obs["depth"].shape == (30, 40, 1)
+        assert (
+            obs["color"].shape == (30, 40, 3) and obs["gray"].shape == (30, 40, 1) and obs["depth"].shape == (30, 40, 1)
+        )
         assert all(a.dtype == np.uint8 for a in obs.values())
         assert e.observation_space.contains(obs)
         depth = obs["depth"][:, :, 0].astype(int)
@@ -192,7 +217,10 @@ THREE_VIEWS = """
 
 def test_memory_readback_matches_the_file_written_by_blender(tmp_path):
     """Pixels copied from Cycles' result equal Blender's own 8-bit file, up to one level of rounding."""
-    objects = OBJECTS + "    Ball: {primitive: sphere, radius: 0.6, location: [0, 0, 1.8], material: {color: [0.8, 0.3, 0.05]}}\n"
+    objects = (
+        OBJECTS
+        + "    Ball: {primitive: sphere, radius: 0.6, location: [0, 0, 1.8], material: {color: [0.8, 0.3, 0.05]}}\n"
+    )
     frames = {}
     for readback in ("memory", "file"):
         e = make_env(tmp_path, objects=objects, observation=THREE_VIEWS, readback=readback)
@@ -204,7 +232,9 @@ def test_memory_readback_matches_the_file_written_by_blender(tmp_path):
         for key in ("color", "gray", "depth"):
             difference = np.abs(memory[key].astype(int) - file[key].astype(int))
             assert difference.max() <= 1, key
-            assert (difference > 0).mean() < 0.02, key  # rounding at a handful of pixels, not a shifted or flipped image
+            assert (difference > 0).mean() < 0.02, (
+                key
+            )  # rounding at a handful of pixels, not a shifted or flipped image
         assert memory["color"][5:12].max() > 60  # the ball, near the top: an upside-down copy would differ
 
 
@@ -232,7 +262,12 @@ def test_two_cameras_give_a_dict_of_different_images(tmp_path):
   cameras:
     front: {camera: Cam, resolution: [32, 32], color: rgb}
     top:   {camera: Top, resolution: [24, 16], color: grayscale}"""
-    e = make_env(tmp_path, objects=objects, observation=observation, render="{preset: fast, view: {resolution: [64, 48], preset: quality}}")
+    e = make_env(
+        tmp_path,
+        objects=objects,
+        observation=observation,
+        render="{preset: fast, view: {resolution: [64, 48], preset: quality}}",
+    )
     try:
         obs = observe(e, x=0.0)
         assert isinstance(obs, dict) and set(obs) == {"front", "top"}
@@ -293,7 +328,9 @@ def blend_file(tmp_path_factory) -> Path:
 
 def test_bound_colour_needs_a_principled_material(tmp_path_factory):
     path = tmp_path_factory.mktemp("blend") / "emission.blend"
-    subprocess.run([sys.executable, "-c", BLEND_SCRIPT, str(path), "emission"], check=True, capture_output=True, timeout=120)
+    subprocess.run(
+        [sys.executable, "-c", BLEND_SCRIPT, str(path), "emission"], check=True, capture_output=True, timeout=120
+    )
     with pytest.raises(SpecError, match="material 'Glow' of 'Ball' has none") as info:
         blend_env(path, actors="Ball: {color: [x, 0, 0]}").renderer
     assert info.value.diagnostics[0].path == "actors.Ball.color" and info.value.diagnostics[0].line == 6
@@ -311,7 +348,9 @@ def two_scene_blend(tmp_path_factory) -> Path:
     return path
 
 
-def blend_env(blend: Path, actors: str = "Ball: {location: [x, 0, 0]}", camera: str = "Cam", file_scene: str = "") -> VisualEnv:
+def blend_env(
+    blend: Path, actors: str = "Ball: {location: [x, 0, 0]}", camera: str = "Cam", file_scene: str = ""
+) -> VisualEnv:
     text = f"""\
 id: BlendTest-v0
 scene: {{file: {blend.name}, {file_scene}world: {{color: [0, 0, 0], strength: 0}}}}
@@ -353,7 +392,10 @@ def test_wrong_names_list_what_the_scene_has(blend_file):
 
 
 def test_file_scene_picks_a_scene_of_the_blend(two_scene_blend):
-    with pytest.raises(SpecError, match=r"blend\.yaml:2:.*scene\.file: .*has 2 scenes \((Scene, Top|Top, Scene)\): choose one with scene\.file_scene"):
+    with pytest.raises(
+        SpecError,
+        match=r"blend\.yaml:2:.*scene\.file: .*has 2 scenes \((Scene, Top|Top, Scene)\): choose one with scene\.file_scene",
+    ):
         blend_env(two_scene_blend).renderer
     top = blend_env(two_scene_blend, camera="TopCam", file_scene="file_scene: Top, ")
     try:
@@ -363,7 +405,9 @@ def test_file_scene_picks_a_scene_of_the_blend(two_scene_blend):
         top.close()
     with pytest.raises(SpecError, match="no camera 'TopCam'"):
         blend_env(two_scene_blend, camera="TopCam", file_scene="file_scene: Scene, ").renderer
-    with pytest.raises(SpecError, match=r"blend\.yaml:2:.*scene\.file_scene: .*has no scene 'Tpo' \(did you mean 'Top'\? scenes: "):
+    with pytest.raises(
+        SpecError, match=r"blend\.yaml:2:.*scene\.file_scene: .*has no scene 'Tpo' \(did you mean 'Top'\? scenes: "
+    ):
         blend_env(two_scene_blend, camera="TopCam", file_scene="file_scene: Tpo, ").renderer
 
 
@@ -378,7 +422,9 @@ def test_missing_or_bad_blend_file(tmp_path):
 
 
 def test_missing_texture_image_is_located(tmp_path):
-    objects = OBJECTS.replace("material: {color: [0.9, 0.9, 0.9]}", "material: {texture: {type: image, image: nope.png}}")
+    objects = OBJECTS.replace(
+        "material: {color: [0.9, 0.9, 0.9]}", "material: {texture: {type: image, image: nope.png}}"
+    )
     with pytest.raises(SpecError, match="image file not found") as info:
         make_env(tmp_path, objects=objects).renderer
     assert info.value.diagnostics[0].path == "scene.objects.Box.material.texture.image"
@@ -411,7 +457,10 @@ def test_visibility_binding_hides_the_object(tmp_path):
 
 def test_procedural_textures_and_imported_mesh(tmp_path):
     (tmp_path / "quad.obj").write_text("v -1 0 -1\nv 1 0 -1\nv 1 0 1\nv -1 0 1\nf 1 2 3 4\n")
-    objects = OBJECTS.replace("material: {color: [0.9, 0.9, 0.9]}", "material: {texture: {type: checker, scale: 4, colors: [[1, 0, 0], [0, 0, 1]]}}")
+    objects = OBJECTS.replace(
+        "material: {color: [0.9, 0.9, 0.9]}",
+        "material: {texture: {type: checker, scale: 4, colors: [[1, 0, 0], [0, 0, 1]]}}",
+    )
     objects += "    Quad: {mesh: quad.obj, location: [2, 0, 0], material: {color: [0, 0, 0], emission: [0, 1, 0], emission_strength: 1.0}}\n"
     objects += "    Ring: {primitive: torus, radius: 0.4, thickness: 0.1, location: [-2, 0, 0], material: {emission: [1, 1, 0]}}\n"
     e = make_env(tmp_path, objects=objects)
@@ -425,9 +474,13 @@ def test_procedural_textures_and_imported_mesh(tmp_path):
         e.close()
 
 
-@pytest.mark.parametrize("texture", ["{type: checker, scale: 4, colors: [[1, 1, 1], [0.5, 0.5, 0.5]]}", "{type: noise, scale: 2}"])
+@pytest.mark.parametrize(
+    "texture", ["{type: checker, scale: 4, colors: [[1, 1, 1], [0.5, 0.5, 0.5]]}", "{type: noise, scale: 2}"]
+)
 def test_bound_colour_tints_a_textured_material(tmp_path, texture):
-    objects = OBJECTS.replace("material: {color: [0.9, 0.9, 0.9]}", f"material: {{color: [0.9, 0.9, 0.9], texture: {texture}}}")
+    objects = OBJECTS.replace(
+        "material: {color: [0.9, 0.9, 0.9]}", f"material: {{color: [0.9, 0.9, 0.9], texture: {texture}}}"
+    )
     e = make_env(tmp_path, objects=objects, actors="Box: {color: [1 - x, 0.05, x]}")
     static = make_env(tmp_path, objects=objects, actors="Box: {location: [0, 0, 0]}")
     try:
@@ -448,8 +501,16 @@ def test_bound_colour_tints_a_textured_material(tmp_path, texture):
 
 def test_create_close_cycles_keep_blender_data_flat(tmp_path):
     def counts():
-        return (len(bpy.data.objects), len(bpy.data.meshes), len(bpy.data.materials), len(bpy.data.scenes),
-                len(bpy.data.cameras), len(bpy.data.lights), len(bpy.data.worlds), len(bpy.data.collections))
+        return (
+            len(bpy.data.objects),
+            len(bpy.data.meshes),
+            len(bpy.data.materials),
+            len(bpy.data.scenes),
+            len(bpy.data.cameras),
+            len(bpy.data.lights),
+            len(bpy.data.worlds),
+            len(bpy.data.collections),
+        )
 
     e = make_env(tmp_path, actors="Box: {color: [x, 0, 0]}")
     observe(e, x=0.5)
@@ -477,10 +538,14 @@ def test_renderers_in_one_process_do_not_interfere(tmp_path):
         b.close()
 
 
-@pytest.mark.parametrize("actors", [
-    "Box: {location: [x, 0, 0]}\nRig: {location: [x, 0, 0]}\nCam: {look_at: [x, 0, 0]}",  # the target follows the rig
-    "Rig: {location: [x, 0, 0]}",  # only the rig moves: the camera turns to keep its fixed target
-], ids=["bound-target", "moving-parent"])
+@pytest.mark.parametrize(
+    "actors",
+    [
+        "Box: {location: [x, 0, 0]}\nRig: {location: [x, 0, 0]}\nCam: {look_at: [x, 0, 0]}",  # the target follows the rig
+        "Rig: {location: [x, 0, 0]}",  # only the rig moves: the camera turns to keep its fixed target
+    ],
+    ids=["bound-target", "moving-parent"],
+)
 def test_look_at_aims_a_parented_camera_at_a_world_point(tmp_path, actors):
     # the camera rides on a rig and must keep the box (at its look_at point, in the world) in the middle of the frame
     objects = """\

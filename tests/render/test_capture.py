@@ -92,14 +92,14 @@ def test_a_large_image_converted_in_bands_on_threads_gives_the_same_bytes():
     """Past 256² pixels per thread the rows are converted in bands on several threads: the result must not change,
     in particular at the bands' edges (rows flip bottom-first to top-first)."""
     rng = np.random.default_rng(2)
-    values = rng.uniform(-0.2, 1.4, size=(601, 523 * 4)).astype(np.float32).ravel()   # uneven bands
+    values = rng.uniform(-0.2, 1.4, size=(601, 523 * 4)).astype(np.float32).ravel()  # uneven bands
     images = []
     for threads in (1, 3):
         c = Capture(threads=threads).arm(523, 601)
         c._buffer[:] = values
         c._filled = True
         images.append((c.grayscale(), c.rgb(), c.raw()))
-        assert (c._pool is None) == (threads == 1)      # the bands did run on threads
+        assert (c._pool is None) == (threads == 1)  # the bands did run on threads
         c.close()
     one, three = images
     assert all(np.array_equal(a, b) for a, b in zip(one, three))
@@ -120,7 +120,9 @@ def test_not_a_number_and_infinities_are_black_or_white_on_any_cpu():
     """A NaN in the pass is black, as a negative value is, without a warning: cast as it came, its level would be the
     CPU's (0 with SSE's conversion, 65535 with AVX-512's unsigned one). Infinities clamp."""
     c = Capture().arm(4, 1)
-    c._buffer[:] = np.array([np.nan, np.nan, np.nan, 1, -np.inf, 0.5, np.inf, 1, 1, 1, 1, 1, np.nan, 0, 1, 1], dtype=np.float32)
+    c._buffer[:] = np.array(
+        [np.nan, np.nan, np.nan, 1, -np.inf, 0.5, np.inf, 1, 1, 1, 1, 1, np.nan, 0, 1, 1], dtype=np.float32
+    )
     c._filled = True
     with np.errstate(all="raise"):  # no 'invalid value encountered in cast'
         rgb, gray, raw = c.rgb(), c.grayscale(), c.raw()

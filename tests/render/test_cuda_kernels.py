@@ -29,7 +29,9 @@ def fake_lib(folder: Path, *computes: int) -> Path:
     """A kernel folder as bpy's, with a tiny kernel as each compute_XY PTX."""
     folder.mkdir(parents=True, exist_ok=True)
     for n in computes:
-        (folder / f"kernel_compute_{n}.ptx.zst").write_bytes(zstandard.ZstdCompressor().compress(PTX.replace("sm_75", f"sm_{n}").encode()))
+        (folder / f"kernel_compute_{n}.ptx.zst").write_bytes(
+            zstandard.ZstdCompressor().compress(PTX.replace("sm_75", f"sm_{n}").encode())
+        )
     return folder
 
 
@@ -95,7 +97,9 @@ def test_the_cuda_toolkits_ptxas_compiles_a_binary_into_the_cache(tmp_path, cach
     except ConfigError:
         pytest.skip("no CUDA toolkit (ptxas) on this machine")
     lib = fake_lib(tmp_path / "lib", 75)
-    path = kernels.compile_cuda_kernels("sm_80", lib=lib, ptxas=ptxas)   # an architecture every toolkit from CUDA 11 to 13 builds
+    path = kernels.compile_cuda_kernels(
+        "sm_80", lib=lib, ptxas=ptxas
+    )  # an architecture every toolkit from CUDA 11 to 13 builds
     assert path.is_relative_to(cache) and path.name == "kernel_sm_80.cubin.zst"
     assert zstandard.ZstdDecompressor().decompressobj().decompress(path.read_bytes())[:4] == b"\x7fELF"
 
@@ -110,7 +114,9 @@ def test_cycles_uses_only_binaries_of_the_ptx_it_ships_now_for_archs_it_has_no_b
     for arch in ("sm_90", "sm_86"):
         compat.cached_kernel(arch, ptx, "5.0.1").parent.mkdir(parents=True, exist_ok=True)
         compat.cached_kernel(arch, ptx, "5.0.1").write_bytes(b"compiled")
-    stale = cache / "bpy-5.0.1" / "kernel_compute_75-0000000000000000" / "kernel_sm_89.cubin.zst"   # from a PTX bpy no longer has
+    stale = (
+        cache / "bpy-5.0.1" / "kernel_compute_75-0000000000000000" / "kernel_sm_89.cubin.zst"
+    )  # from a PTX bpy no longer has
     stale.parent.mkdir()
     stale.write_bytes(b"compiled")
     older = cache / "bpy-4.5.0" / compat.cached_kernel("sm_80", ptx, "5.0.1").parent.name / "kernel_sm_80.cubin.zst"
@@ -121,9 +127,14 @@ def test_cycles_uses_only_binaries_of_the_ptx_it_ships_now_for_archs_it_has_no_b
     before = listing(addon)
     folder = compat.cycles_folder_with(found, addon)
     assert folder.is_relative_to(cache) and compat.cycles_folder_with(found, addon) == folder
-    assert {p.name: p.resolve() for p in folder.iterdir()} == {"lib": folder / "lib", "shader": (addon / "shader").resolve()}
+    assert {p.name: p.resolve() for p in folder.iterdir()} == {
+        "lib": folder / "lib",
+        "shader": (addon / "shader").resolve(),
+    }
     assert {p.name: p.resolve() for p in (folder / "lib").iterdir()} == {
-        **{p.name: p.resolve() for p in lib.iterdir()}, "kernel_sm_90.cubin.zst": found["sm_90"]}
+        **{p.name: p.resolve() for p in lib.iterdir()},
+        "kernel_sm_90.cubin.zst": found["sm_90"],
+    }
     assert listing(addon) == before
 
 
@@ -134,7 +145,9 @@ def test_a_missing_or_failing_ptxas_and_a_bad_architecture_are_told(tmp_path):
     failing = tmp_path / "ptxas"
     failing.write_text("#!/bin/sh\necho 'ptxas fatal: no good' >&2\nexit 1\n")
     failing.chmod(0o755)
-    with pytest.raises(ConfigError, match="could not compile kernel_compute_75.ptx.zst for sm_90: ptxas fatal: no good"):
+    with pytest.raises(
+        ConfigError, match="could not compile kernel_compute_75.ptx.zst for sm_90: ptxas fatal: no good"
+    ):
         kernels.compile_cuda_kernels("sm_90", lib=lib, ptxas=str(failing))
     assert not list(lib.glob("*cubin*"))
     with pytest.raises(ConfigError, match="expected a CUDA architecture such as sm_90, got '90'"):
@@ -145,7 +158,7 @@ def test_the_command_explains_instead_of_failing(tmp_path, cache):
     result = CliRunner().invoke(main, ["compile-kernels", "--arch", "sm_90", "--ptxas", str(tmp_path / "nope")])
     assert result.exit_code == 1 and "error: compiling Cycles' kernels needs the CUDA toolkit's ptxas" in result.output
     assert "Traceback" not in result.output
-    stand_in = tmp_path / "ptxas"   # never run: bpy ships sm_75's binary
+    stand_in = tmp_path / "ptxas"  # never run: bpy ships sm_75's binary
     stand_in.write_text("#!/bin/sh\nexit 1\n")
     stand_in.chmod(0o755)
     result = CliRunner().invoke(main, ["compile-kernels", "--arch", "sm_75", "--ptxas", str(stand_in)])
@@ -159,7 +172,9 @@ def test_the_command_writes_to_the_cache_and_leaves_bpy_as_installed(tmp_path, c
     result = CliRunner().invoke(main, ["compile-kernels", "--arch", "sm_90", "--ptxas", tool])
     assert result.exit_code == 0, result.output
     assert listing(bpy_lib) == before
-    assert compat.cached_kernels() == {"sm_90": compat.cached_kernel("sm_90", bpy_lib / "kernel_compute_75.ptx.zst", compat.bpy_version())}
+    assert compat.cached_kernels() == {
+        "sm_90": compat.cached_kernel("sm_90", bpy_lib / "kernel_compute_75.ptx.zst", compat.bpy_version())
+    }
     assert str(compat.cached_kernels()["sm_90"]) in result.output
     again = CliRunner().invoke(main, ["compile-kernels", "--arch", "sm_90", "--ptxas", tool])
     assert again.exit_code == 0 and "sm_90: already compiled" in again.output, again.output

@@ -78,9 +78,12 @@ BUSY = "while True: pass"
 
 
 def _render(spec: str, threads: int, out: Path) -> subprocess.Popen[bytes]:
-    return subprocess.Popen([sys.executable, "-c", RENDER, spec, str(threads), str(out)], cwd=REPO,
-                            env={**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))},
-                            stderr=subprocess.PIPE)
+    return subprocess.Popen(
+        [sys.executable, "-c", RENDER, spec, str(threads), str(out)],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": os.pathsep.join(filter(None, [str(REPO), os.environ.get("PYTHONPATH")]))},
+        stderr=subprocess.PIPE,
+    )
 
 
 def _finished(process: subprocess.Popen[bytes], out: Path) -> dict[str, np.ndarray]:
@@ -100,7 +103,10 @@ def test_the_same_states_render_the_same_bits_in_every_process_loaded_or_idle(sp
     alone = _finished(_render(spec, 0, tmp_path / "alone.npz"), tmp_path / "alone.npz")
     busy = subprocess.Popen([sys.executable, "-c", BUSY])
     try:
-        runs = [(tmp_path / f"loaded{threads}.npz", _render(spec, threads, tmp_path / f"loaded{threads}.npz")) for threads in (1, 0)]
+        runs = [
+            (tmp_path / f"loaded{threads}.npz", _render(spec, threads, tmp_path / f"loaded{threads}.npz"))
+            for threads in (1, 0)
+        ]
         loaded = [_finished(process, out) for out, process in runs]
     finally:
         busy.kill()

@@ -74,8 +74,15 @@ def test_distractions_leave_the_state_rewards_and_random_streams_unchanged() -> 
 def test_a_higher_difficulty_changes_the_pixels_more() -> None:
     seeds = range(4)
     clean = first_frames("DMC-cartpole-swingup-v0", seeds)
-    distances = [np.mean([mean_difference(c, f) for c, f in zip(clean, first_frames("DMC-cartpole-swingup-v0", seeds, distractions=level))])
-                 for level in LEVELS]
+    distances = [
+        np.mean(
+            [
+                mean_difference(c, f)
+                for c, f in zip(clean, first_frames("DMC-cartpole-swingup-v0", seeds, distractions=level))
+            ]
+        )
+        for level in LEVELS
+    ]
     assert np.all(np.diff(distances) > 1.0) and distances[0] > 2.0, distances
     assert first_frames("DMC-cartpole-swingup-v0", [0], distractions=0)[0].tobytes() == clean[0].tobytes()
 
@@ -150,7 +157,9 @@ def test_any_spec_takes_them_and_the_spec_section_is_checked(tmp_path: Path) -> 
     with pytest.raises(SpecError) as caught:
         visualenv.make(spec)
     line = len(text.splitlines()) + 1
-    assert f"bad.yaml:{line}:" in str(caught.value) and "distractions.difficulty" in str(caught.value), str(caught.value)
+    assert f"bad.yaml:{line}:" in str(caught.value) and "distractions.difficulty" in str(caught.value), str(
+        caught.value
+    )
 
 
 def agreement(a: np.ndarray, b: np.ndarray) -> float:
@@ -176,7 +185,9 @@ def test_each_tile_of_a_batch_is_its_env_distracted_alone(tmp_path: Path) -> Non
                 assert min(scores) >= 0.98, (key, scores)
             tiles, rewards, terminated, truncated, info = batch.step(actions)
             _, plain_rewards, plain_terminated, plain_truncated, plain_info = plain.step(actions)
-            assert np.array_equal(rewards, plain_rewards) and np.array_equal(terminated | truncated, plain_terminated | plain_truncated)
+            assert np.array_equal(rewards, plain_rewards) and np.array_equal(
+                terminated | truncated, plain_terminated | plain_truncated
+            )
             assert all(np.array_equal(info["state"][name], plain_info["state"][name]) for name in plain_info["state"])
             frames = [env.step(actions[k])[0] for k, env in enumerate(alone)]
         assert mean_difference(tiles["eye"][0], tiles["eye"][1]) > 5  # each env its own camera, colours and background
@@ -219,11 +230,23 @@ def test_what_a_batch_cannot_distract_is_refused_when_it_is_built(tmp_path: Path
     BatchedVectorEnv(spec, 2, distractions={"difficulty": 0.2, "camera": False}).close()
 
 
-@pytest.mark.parametrize("given, message", [
-    ({"difficulty": 0.1, "cam": True}, "visualenv.make(): distractions.cam: unknown key 'cam' (did you mean 'camera'?"),
-    ({"difficulty": 3}, "visualenv.make(): distractions.difficulty: expected a value less than or equal to 1, got 3"),
-    ("extreme", "visualenv.make(): distractions: expected a difficulty from 0 to 1, a level by name (easy, medium, hard) or a mapping"),
-])
+@pytest.mark.parametrize(
+    "given, message",
+    [
+        (
+            {"difficulty": 0.1, "cam": True},
+            "visualenv.make(): distractions.cam: unknown key 'cam' (did you mean 'camera'?",
+        ),
+        (
+            {"difficulty": 3},
+            "visualenv.make(): distractions.difficulty: expected a value less than or equal to 1, got 3",
+        ),
+        (
+            "extreme",
+            "visualenv.make(): distractions: expected a difficulty from 0 to 1, a level by name (easy, medium, hard) or a mapping",
+        ),
+    ],
+)
 def test_a_bad_option_says_what_was_expected(given, message) -> None:
     with pytest.raises(SpecError) as caught:
         visualenv.make("DMC-cartpole-swingup-v0", distractions=given)
@@ -249,15 +272,22 @@ def test_eval_plays_an_agent_on_distracted_episodes(tmp_path: Path) -> None:
     from visualenv.cli import main
 
     out = tmp_path / "eval.json"
-    result = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--episodes", "2", "--distractions", "0.2", "-o", str(out)])
+    result = CliRunner().invoke(
+        main, ["eval", "Goalie-v0", "--model", "pretrained", "--episodes", "2", "--distractions", "0.2", "-o", str(out)]
+    )
     assert result.exit_code == 0, result.output
-    assert "distracted at difficulty 0.2 (not compared with results.json)" in result.output and "reproduces" not in result.output
+    assert (
+        "distracted at difficulty 0.2 (not compared with results.json)" in result.output
+        and "reproduces" not in result.output
+    )
     figures = json.loads(out.read_text())
     assert figures["distractions"] == 0.2 and figures["matches_results_json"] is None and figures["episodes"] == 2
     refused = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "random", "--distractions", "0.2"])
     assert refused.exit_code == 2 and "--distractions" in refused.output
     unknown = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--distractions", "harder"])
-    assert unknown.exit_code == 2 and "expected a difficulty from 0 to 1, or easy, medium, hard" in unknown.output, unknown.output
+    assert unknown.exit_code == 2 and "expected a difficulty from 0 to 1, or easy, medium, hard" in unknown.output, (
+        unknown.output
+    )
 
 
 TWO_NAMES = """id: TwoNames-v0
@@ -292,9 +322,12 @@ def test_two_envs_in_one_process_draw_the_same_distractions(tmp_path: Path) -> N
 def test_a_bound_colour_still_changes_under_shifted_colours(tmp_path: Path) -> None:
     """A colour binding and the distraction write one socket: the bound colour goes on changing every step, shifted."""
     spec = tmp_path / "bound.yaml"
-    spec.write_text(TWO_NAMES.replace("state: {x: {init: 0.0}}", "state: {x: {init: 0.0}, red: {init: 0.1}}")
-                    .replace("dynamics: {update: {x: x + dx}}", "dynamics: {update: {x: x + dx, red: red + 0.3}}")
-                    .replace("distractions:", "actors: {Pole: {color: [red, 0.2, 0.2]}}\ndistractions:"), encoding="utf-8")
+    spec.write_text(
+        TWO_NAMES.replace("state: {x: {init: 0.0}}", "state: {x: {init: 0.0}, red: {init: 0.1}}")
+        .replace("dynamics: {update: {x: x + dx}}", "dynamics: {update: {x: x + dx, red: red + 0.3}}")
+        .replace("distractions:", "actors: {Pole: {color: [red, 0.2, 0.2]}}\ndistractions:"),
+        encoding="utf-8",
+    )
     env = visualenv.make(spec)
     try:
         frames = [env.reset(seed=2)[0], *(env.step(0)[0] for _ in range(2))]

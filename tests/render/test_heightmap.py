@@ -75,7 +75,9 @@ def test_8_and_16_bit_pngs_and_craters_on_top(tmp_path):
     want = expected_depth(top=2.0)
     for file in ("bump16.png", "bump8.png"):
         assert np.abs(depth(tmp_path, file, top=2.0) - want).max() <= 0.25, file
-    cratered = depth(tmp_path, "bump16.png", top=2.0, extra=", craters: {count: 1, radius: [3, 3], depth: 0.2, rim: 0.0, seed: 0}")
+    cratered = depth(
+        tmp_path, "bump16.png", top=2.0, extra=", craters: {count: 1, radius: [3, 3], depth: 0.2, rim: 0.0, seed: 0}"
+    )
     assert (cratered - want).max() >= 1.0  # a 1.2 m deep bowl pressed into the hill's ground
 
 
@@ -92,19 +94,28 @@ def test_heights_are_sampled_bilinearly_and_scaled_to_z():
 
 def test_the_bundled_example_is_made_by_its_script(tmp_path):
     out = tmp_path / "highlands.png"
-    subprocess.run([sys.executable, str(EXAMPLE / "make_highlands.py"), str(out)], check=True, capture_output=True, timeout=60)
+    subprocess.run(
+        [sys.executable, str(EXAMPLE / "make_highlands.py"), str(out)], check=True, capture_output=True, timeout=60
+    )
     assert out.read_bytes() == (EXAMPLE / "highlands.png").read_bytes()
     heights = read_heightmap(EXAMPLE / "highlands.png")
     assert heights.shape == (257, 257) and heights.min() == 0 and heights.max() == 1
     assert (EXAMPLE / "highlands.png").stat().st_size < 1_000_000
 
 
-@pytest.mark.parametrize("make, size, message", [
-    (lambda p: Image.new("RGB", (8, 8)).save(p / "map.png"), "[20, 20, 4]", "is a RGB image: a heightmap is one channel"),
-    (lambda p: None, "[20, 20, 4]", "heightmap file not found"),
-    (lambda p: np.save(p / "map.npy", np.array([[1.0, np.nan], [0.0, 1.0]])), "[20, 20, 4]", "NaN or infinite"),
-    (lambda p: (p / "map.png").write_text("not an image"), "[20, 20, 4]", "cannot read"),
-])
+@pytest.mark.parametrize(
+    "make, size, message",
+    [
+        (
+            lambda p: Image.new("RGB", (8, 8)).save(p / "map.png"),
+            "[20, 20, 4]",
+            "is a RGB image: a heightmap is one channel",
+        ),
+        (lambda p: None, "[20, 20, 4]", "heightmap file not found"),
+        (lambda p: np.save(p / "map.npy", np.array([[1.0, np.nan], [0.0, 1.0]])), "[20, 20, 4]", "NaN or infinite"),
+        (lambda p: (p / "map.png").write_text("not an image"), "[20, 20, 4]", "cannot read"),
+    ],
+)
 def test_a_bad_heightmap_is_a_located_error_at_build(tmp_path, make, size, message):
     from visualenv.env.visual_env import VisualEnv
 

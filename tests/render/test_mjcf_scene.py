@@ -72,7 +72,10 @@ def test_the_pole_stands_then_leans_where_the_hinge_turns_it(tmp_path: Path) -> 
     rows_l, cols_l = np.nonzero(leaning)
     # upright: a column about the image's centre, reaching higher than the leaning pole does
     assert abs(cols_u.mean() - 23.5) < 3, cols_u.mean()
-    assert cols_l.mean() > cols_u.mean() + 4, (cols_u.mean(), cols_l.mean())  # a positive hinge angle turns +z to +x: right
+    assert cols_l.mean() > cols_u.mean() + 4, (
+        cols_u.mean(),
+        cols_l.mean(),
+    )  # a positive hinge angle turns +z to +x: right
     assert rows_u.min() < rows_l.min() - 2, (rows_u.min(), rows_l.min())
 
 
@@ -95,14 +98,17 @@ HIDDEN = """\
 def test_hidden_groups_stay_hidden_and_the_models_camera_sees(tmp_path: Path) -> None:
     (tmp_path / "m.xml").write_text(HIDDEN, encoding="utf-8")
     spec = tmp_path / "s.yaml"
-    spec.write_text(textwrap.dedent("""\
+    spec.write_text(
+        textwrap.dedent("""\
         id: Hidden-v0
         physics: {model: m.xml, frame_skip: 5}
         scene: {world: {color: [0, 0, 0]}}
         observation: {camera: front, resolution: [32, 32], color: rgb}
         actions: {discrete: [{}]}
         reward: 0
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     env = VisualEnv(spec)
     try:
         obs, _ = env.reset(seed=0)
@@ -122,15 +128,23 @@ def test_hidden_groups_stay_hidden_and_the_models_camera_sees(tmp_path: Path) ->
 
 
 def test_a_height_field_is_a_located_error(tmp_path: Path) -> None:
-    (tmp_path / "h.xml").write_text(textwrap.dedent("""\
+    (tmp_path / "h.xml").write_text(
+        textwrap.dedent("""\
         <mujoco>
           <asset><hfield name="ground" nrow="4" ncol="4" size="1 1 0.1 0.1"/></asset>
           <worldbody><geom name="terrain" type="hfield" hfield="ground"/><camera name="c" pos="0 -2 1"/></worldbody>
         </mujoco>
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     spec = tmp_path / "s.yaml"
-    spec.write_text("id: H-v0\nphysics: {model: h.xml}\nobservation: {camera: c}\nactions: {discrete: [{}]}\n", encoding="utf-8")
-    with pytest.raises(SpecError, match=r"s.yaml:2.*physics.model: geom 'terrain' is a height field \(hfield\), which visualenv cannot draw yet"):
+    spec.write_text(
+        "id: H-v0\nphysics: {model: h.xml}\nobservation: {camera: c}\nactions: {discrete: [{}]}\n", encoding="utf-8"
+    )
+    with pytest.raises(
+        SpecError,
+        match=r"s.yaml:2.*physics.model: geom 'terrain' is a height field \(hfield\), which visualenv cannot draw yet",
+    ):
         VisualEnv(spec)
 
 
@@ -147,19 +161,28 @@ def test_half_cheetahs_track_camera_follows_it() -> None:
     env = visualenv.make("visualenv/VisualHalfCheetah-v0", samples=1)
     try:
         first, _ = env.reset(seed=0)
-        env.unwrapped.data.qpos[0] += 5.0  # five metres on: a camera fixed in the world would see no cheetah (tested: 0 pixels)
+        env.unwrapped.data.qpos[0] += (
+            5.0  # five metres on: a camera fixed in the world would see no cheetah (tested: 0 pixels)
+        )
         obs, *_ = env.step(np.zeros(6))
         assert env.unwrapped.data.qpos[0] > 4.5
-        before, after = brown(first), brown(obs)  # the cheetah's material (rgba .7 .5 .3) against the grey sky and light floor
+        before, after = (
+            brown(first),
+            brown(obs),
+        )  # the cheetah's material (rgba .7 .5 .3) against the grey sky and light floor
         assert before > 50 and abs(after - before) < 0.3 * before, (before, after)
         col_before, col_after = (np.nonzero(brown_mask(image))[1].mean() for image in (first, obs))
-        assert abs(col_after - col_before) < 5, (col_before, col_after)  # where it was in the frame (the checker floor slid by)
+        assert abs(col_after - col_before) < 5, (
+            col_before,
+            col_after,
+        )  # where it was in the frame (the checker floor slid by)
     finally:
         env.close()
 
 
 def test_a_planes_builtin_checker_texture_is_drawn(tmp_path: Path) -> None:
-    (tmp_path / "c.xml").write_text(textwrap.dedent("""\
+    (tmp_path / "c.xml").write_text(
+        textwrap.dedent("""\
         <mujoco>
           <asset>
             <texture name="grid" type="2d" builtin="checker" rgb1="1 1 1" rgb2="0 0 0" width="64" height="64"/>
@@ -171,13 +194,22 @@ def test_a_planes_builtin_checker_texture_is_drawn(tmp_path: Path) -> None:
             <camera name="top" pos="0 0 1.5"/>
           </worldbody>
         </mujoco>
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     spec = tmp_path / "s.yaml"
-    spec.write_text("id: C-v0\nphysics: {model: c.xml}\nobservation: {camera: top, resolution: [32, 32], color: grayscale}\n"
-                    "actions: {discrete: [{}]}\n", encoding="utf-8")
+    spec.write_text(
+        "id: C-v0\nphysics: {model: c.xml}\nobservation: {camera: top, resolution: [32, 32], color: grayscale}\n"
+        "actions: {discrete: [{}]}\n",
+        encoding="utf-8",
+    )
     gray = first_frame(spec)[..., 0]
     bright, dark = (gray > 150).mean(), (gray < 90).mean()
-    assert bright > 0.2 and dark > 0.2, (bright, dark, gray[16])  # squares of both colours, not the plain grey of a material without texture
+    assert bright > 0.2 and dark > 0.2, (
+        bright,
+        dark,
+        gray[16],
+    )  # squares of both colours, not the plain grey of a material without texture
     # 4 repeats of a 2x2 checker across the plane: the colour flips along a row several times
     flips = int(np.count_nonzero(np.diff(gray[16] > 120)))
     assert flips >= 4, gray[16]
@@ -186,7 +218,9 @@ def test_a_planes_builtin_checker_texture_is_drawn(tmp_path: Path) -> None:
 def test_a_spec_binds_a_geoms_colour(tmp_path: Path) -> None:
     """actors reach the model's geoms by name: a colour drawn at reset recolours the pole (domain randomisation)."""
     path = tmp_path / "pole.yaml"
-    path.write_text(POLE + "state:\n  red: {init: 'uniform(0.8, 1.0)'}\nactors:\n  cpole: {color: [red, 0, 0]}\n", encoding="utf-8")
+    path.write_text(
+        POLE + "state:\n  red: {init: 'uniform(0.8, 1.0)'}\nactors:\n  cpole: {color: [red, 0, 0]}\n", encoding="utf-8"
+    )
     env = visualenv.make(path)
     try:
         obs, _ = env.reset(seed=0)
@@ -198,7 +232,8 @@ def test_a_spec_binds_a_geoms_colour(tmp_path: Path) -> None:
 
 def test_a_light_on_a_body_moves_with_it(tmp_path: Path) -> None:
     """A light inside a falling body takes MuJoCo's light_xpos each step (a light on a body, or tracking one, moves)."""
-    (tmp_path / "l.xml").write_text(textwrap.dedent("""\
+    (tmp_path / "l.xml").write_text(
+        textwrap.dedent("""\
         <mujoco>
           <worldbody>
             <geom name="floor" type="plane" size="2 2 0.1" rgba="0.8 0.8 0.8 1"/>
@@ -210,10 +245,15 @@ def test_a_light_on_a_body_moves_with_it(tmp_path: Path) -> None:
             <camera name="side" pos="0 -4 1" xyaxes="1 0 0 0 0.2 1"/>
           </worldbody>
         </mujoco>
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     spec = tmp_path / "s.yaml"
-    spec.write_text("id: L-v0\nphysics: {model: l.xml, frame_skip: 10}\nobservation: {camera: side, resolution: [16, 16]}\n"
-                    "actions: {discrete: [{}]}\n", encoding="utf-8")
+    spec.write_text(
+        "id: L-v0\nphysics: {model: l.xml, frame_skip: 10}\nobservation: {camera: side, resolution: [16, 16]}\n"
+        "actions: {discrete: [{}]}\n",
+        encoding="utf-8",
+    )
     env = VisualEnv(spec)
     try:
         env.reset(seed=0)
@@ -232,12 +272,16 @@ def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
     from visualenv.env.batch import BatchedVectorEnv
 
     path = tmp_path / "pole.yaml"
-    path.write_text(POLE.replace("values: {qpos_hinge: angle}", "values: {qpos_hinge: 'uniform(-1, 1)'}"), encoding="utf-8")
+    path.write_text(
+        POLE.replace("values: {qpos_hinge: angle}", "values: {qpos_hinge: 'uniform(-1, 1)'}"), encoding="utf-8"
+    )
     batch = BatchedVectorEnv(path, 3)
     singles = [VisualEnv(path) for _ in range(3)]
     try:
         obs, _ = batch.reset(seed=2)
-        renderer = batch.renderer  # the model's bodies are instances, posed from every env's poses at once: nothing per copy
+        renderer = (
+            batch.renderer
+        )  # the model's bodies are instances, posed from every env's poses at once: nothing per copy
         assert renderer._instances.posed and renderer._copy_poses == []
         for i, env in enumerate(singles):
             alone, _ = env.reset(seed=2 + i)
@@ -250,7 +294,7 @@ def test_a_batch_renders_each_envs_own_pose(tmp_path: Path) -> None:
         poses = batch._pose_arrays
         poses[:] = [tuple(np.array(a, copy=True) for a in poses[j]) for j in (2, 0, 1)]
         renderer.render(Frames(batch.binding_table(), poses))
-        assert not np.array_equal(poses[0][1], poses[1][1])   # env 2's pole leans otherwise than env 0's
+        assert not np.array_equal(poses[0][1], poses[1][1])  # env 2's pole leans otherwise than env 0's
         assert all(np.array_equal(renderer._body_poses[part][i], poses[i][part]) for i in range(3) for part in (0, 1))
     finally:
         batch.close()
@@ -289,10 +333,15 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
     from visualenv.render.base import RendererOptions
     from visualenv.render.blender.batch.renderer import BatchedBlenderRenderer
 
-    (tmp_path / "arm.xml").write_text(ARM.replace(BULB, "").replace("<worldbody>", '<worldbody>\n    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>'),
-                                      encoding="utf-8")
+    (tmp_path / "arm.xml").write_text(
+        ARM.replace(BULB, "").replace(
+            "<worldbody>", '<worldbody>\n    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>'
+        ),
+        encoding="utf-8",
+    )
     path = tmp_path / "arm.yaml"
-    path.write_text(textwrap.dedent("""\
+    path.write_text(
+        textwrap.dedent("""\
         id: Arm-v0
         physics: {model: arm.xml, frame_skip: 50, reset: {values: {qpos_hinge: 'uniform(-1, 1)', qpos_wrist: 'uniform(-1, 1)'}}}
         scene:
@@ -304,15 +353,22 @@ def test_a_batch_draws_the_models_bodies_as_instances_with_the_pixels_of_copies(
         observation: {camera: Camera, resolution: [24, 24], color: rgb}
         actions: {discrete: [{}]}
         reward: 0.0
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     batch = BatchedVectorEnv(path, 3)
     options = RendererOptions.parse(None)
-    copies = BatchedBlenderRenderer(batch.program.render_plan().with_options(options), options, num_envs=3, instanced=False)
+    copies = BatchedBlenderRenderer(
+        batch.program.render_plan().with_options(options), options, num_envs=3, instanced=False
+    )
     try:
         obs, _ = batch.reset(seed=4)
         renderer = batch.renderer
-        instanced = {name for name in ("body:arm", "body:tip", "body:lamp", "rod", "ball", "glass")
-                     if renderer.object(name).as_pointer() in renderer._removed}
+        instanced = {
+            name
+            for name in ("body:arm", "body:tip", "body:lamp", "rod", "ball", "glass")
+            if renderer.object(name).as_pointer() in renderer._removed
+        }
         assert instanced == {"body:arm", "body:tip", "body:lamp", "rod", "ball", "glass"}, instanced
         assert not any(w.bodies for _, w in renderer._copy_poses or [])  # no body of any copy is posed from Python
         frames = []
@@ -337,9 +393,12 @@ def test_a_spot_light_on_a_falling_body_lights_only_its_own_env(tmp_path: Path) 
 
     (tmp_path / "arm.xml").write_text(ARM, encoding="utf-8")
     path = tmp_path / "lamp.yaml"
-    path.write_text("id: Lamp-v0\nphysics: {model: arm.xml, frame_skip: 50, reset: {values: {qpos_hinge: 'uniform(-1, 1)'}}}\n"
-                    "scene: {objects: {Camera: {camera: perspective, location: [0.3, -2.2, 1.2], look_at: [0.3, 0, 0.9], lens: 30}}}\n"
-                    "observation: {camera: Camera, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\nreward: 0.0\n", encoding="utf-8")
+    path.write_text(
+        "id: Lamp-v0\nphysics: {model: arm.xml, frame_skip: 50, reset: {values: {qpos_hinge: 'uniform(-1, 1)'}}}\n"
+        "scene: {objects: {Camera: {camera: perspective, location: [0.3, -2.2, 1.2], look_at: [0.3, 0, 0.9], lens: 30}}}\n"
+        "observation: {camera: Camera, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\nreward: 0.0\n",
+        encoding="utf-8",
+    )
     n = 6
     batch = BatchedVectorEnv(path, n)
     singles = [VisualEnv(path) for _ in range(n)]
@@ -372,19 +431,32 @@ def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:
     before any step, so the model's camera stands at its pose from the start): tile i is env i alone."""
     from visualenv.env.batch import BatchedVectorEnv
 
-    lamp = ARM[ARM.index('    <body name="lamp"'):ARM.index("  </worldbody>")]  # a spot light per copy: more lights to sample, other noise
-    (tmp_path / "arm.xml").write_text(ARM.replace(lamp, '    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>\n'
-                                                  '    <camera name="side" pos="0.3 -2.2 1.1" xyaxes="1 0 0 0 0.1 1"/>\n'), encoding="utf-8")
+    lamp = ARM[
+        ARM.index('    <body name="lamp"') : ARM.index("  </worldbody>")
+    ]  # a spot light per copy: more lights to sample, other noise
+    (tmp_path / "arm.xml").write_text(
+        ARM.replace(
+            lamp,
+            '    <light directional="true" pos="0 0 3" dir="0 0.3 -1"/>\n'
+            '    <camera name="side" pos="0.3 -2.2 1.1" xyaxes="1 0 0 0 0.1 1"/>\n',
+        ),
+        encoding="utf-8",
+    )
     path = tmp_path / "side.yaml"
-    path.write_text("id: Side-v0\nphysics: {model: arm.xml, reset: {values: {qpos_hinge: 'uniform(-1, 1)'}}}\n"
-                    "observation: {camera: side, resolution: [16, 16], color: rgb}\nactions: {discrete: [{}]}\nreward: 0.0\n", encoding="utf-8")
+    path.write_text(
+        "id: Side-v0\nphysics: {model: arm.xml, reset: {values: {qpos_hinge: 'uniform(-1, 1)'}}}\n"
+        "observation: {camera: side, resolution: [16, 16], color: rgb}\nactions: {discrete: [{}]}\nreward: 0.0\n",
+        encoding="utf-8",
+    )
     batch = BatchedVectorEnv(path, 2)
     singles = [VisualEnv(path) for _ in range(2)]
     try:
         obs, _ = batch.reset(seed=6)
         for i, env in enumerate(singles):
             alone, _ = env.reset(seed=6 + i)
-            close = (np.abs(obs[i].astype(int) - alone.astype(int)) <= 8).mean()  # as the batch test above (the world at the origin: 0.67)
+            close = (
+                np.abs(obs[i].astype(int) - alone.astype(int)) <= 8
+            ).mean()  # as the batch test above (the world at the origin: 0.67)
             assert close >= 0.98, (i, close)
         assert not np.array_equal(obs[0], obs[1])  # the arms swing differently: each tile shows its own env
     finally:
@@ -395,7 +467,8 @@ def test_a_batch_sees_through_the_models_fixed_camera(tmp_path: Path) -> None:
 
 def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
     """An MJCF mesh (inline vertices, no file) is drawn from MuJoCo's compiled vertices and faces: a yellow tetrahedron left of a box."""
-    (tmp_path / "m.xml").write_text(textwrap.dedent("""\
+    (tmp_path / "m.xml").write_text(
+        textwrap.dedent("""\
         <mujoco>
           <asset><mesh name="tet" vertex="0 0 0  0.6 0 0  0 0.6 0  0 0 0.6"/></asset>
           <worldbody>
@@ -405,10 +478,15 @@ def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
           </worldbody>
           <option gravity="0 0 0"/>
         </mujoco>
-        """), encoding="utf-8")
+        """),
+        encoding="utf-8",
+    )
     spec = tmp_path / "s.yaml"
-    spec.write_text("id: M-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0, 0, 0]}}\n"
-                    "observation: {camera: front, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    spec.write_text(
+        "id: M-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0, 0, 0]}}\n"
+        "observation: {camera: front, resolution: [24, 24], color: rgb}\nactions: {discrete: [{}]}\n",
+        encoding="utf-8",
+    )
     r, g, b = (first_frame(spec)[..., i] for i in range(3))
     yellow = (r > b + 40) & (g > b + 40)
     cols = np.nonzero(yellow)[1]
@@ -417,7 +495,10 @@ def test_a_mesh_geom_is_drawn_as_mujoco_compiled_it(tmp_path: Path) -> None:
 
 def test_an_object_named_as_a_body_stands_for_it(tmp_path: Path) -> None:
     """A spec object called 'pole' (a red cylinder) replaces the pole body's geoms and takes its pose: it leans with the hinge."""
-    own = POLE.replace("    Camera:", "    pole: {primitive: cylinder, radius: 0.06, depth: 0.6, origin: bottom, material: {color: [1, 0, 0]}}\n    Camera:")
+    own = POLE.replace(
+        "    Camera:",
+        "    pole: {primitive: cylinder, radius: 0.06, depth: 0.6, origin: bottom, material: {color: [1, 0, 0]}}\n    Camera:",
+    )
     path = tmp_path / "own.yaml"
     path.write_text(own, encoding="utf-8")
     centres = []
@@ -429,14 +510,21 @@ def test_an_object_named_as_a_body_stands_for_it(tmp_path: Path) -> None:
             env.close()
         r, g, b = (obs[..., i].astype(int) for i in range(3))
         red = (r > g + 40) & (r > b + 40)
-        assert cyan(obs).sum() == 0 and red.sum() >= 6, (cyan(obs).sum(), red.sum())  # the capsule is not drawn; the cylinder is
+        assert cyan(obs).sum() == 0 and red.sum() >= 6, (
+            cyan(obs).sum(),
+            red.sum(),
+        )  # the capsule is not drawn; the cylinder is
         centres.append(np.nonzero(red)[1].mean())
     assert centres[1] > centres[0] + 4, centres
 
 
 #: POLE with the cart slid to `start` at reset, seen by a camera that looks along +y without aiming at the pole
-FOLLOWING = (POLE.replace("Pole-v0", "Follow-v0").replace("{angle: 0.0}", "{start: 0.0}").replace("qpos_hinge: angle", "qpos_slider: start")
-             .replace("look_at: [0, 0, 0.3]", "rotation: [1.5708, 0, 0]"))
+FOLLOWING = (
+    POLE.replace("Pole-v0", "Follow-v0")
+    .replace("{angle: 0.0}", "{start: 0.0}")
+    .replace("qpos_hinge: angle", "qpos_slider: start")
+    .replace("look_at: [0, 0, 0.3]", "rotation: [1.5708, 0, 0]")
+)
 assert FOLLOWING.count("start") == 2 and "rotation" in FOLLOWING
 
 
@@ -458,7 +546,9 @@ def test_an_actor_binding_reads_the_models_names_so_a_camera_follows_the_cart(tm
     """`actors: {Camera: {location: [qpos_slider, ...]}}`: the pole stays in the middle of the frame wherever the cart is."""
     following = FOLLOWING + "actors: {Camera: {location: [qpos_slider, -3, 0.3]}}\n"
     assert abs(pole_column(tmp_path, following, 0.6) - pole_column(tmp_path, following, 0.0)) < 1.0
-    assert pole_column(tmp_path, FOLLOWING, 0.6) - pole_column(tmp_path, FOLLOWING, 0.0) > 4.0   # a fixed camera sees it move right
+    assert (
+        pole_column(tmp_path, FOLLOWING, 0.6) - pole_column(tmp_path, FOLLOWING, 0.0) > 4.0
+    )  # a fixed camera sees it move right
 
 
 TEXTURED = """\
@@ -522,18 +612,34 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
     from PIL import Image
 
     quads = np.zeros((4, 4, 3), np.uint8)
-    quads[:2, :2], quads[:2, 2:], quads[2:, :2], quads[2:, 2:] = (255, 0, 255), (0, 255, 255), (255, 255, 0), (255, 255, 255)
+    quads[:2, :2], quads[:2, 2:], quads[2:, :2], quads[2:, 2:] = (
+        (255, 0, 255),
+        (0, 255, 255),
+        (255, 255, 0),
+        (255, 255, 255),
+    )
     Image.fromarray(quads).save(tmp_path / "quads.png")
     (tmp_path / "m.xml").write_text(TEXTURED, encoding="utf-8")
     (tmp_path / "pyramid.obj").write_text(PYRAMID, encoding="utf-8")
     spec = tmp_path / "s.yaml"
-    spec.write_text("id: T-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0.5, 0.5, 0.5]}}\n"
-                    "observation: {camera: front, resolution: [64, 64], color: rgb}\nactions: {discrete: [{}]}\n", encoding="utf-8")
+    spec.write_text(
+        "id: T-v0\nphysics: {model: m.xml}\nscene: {world: {color: [0.5, 0.5, 0.5]}}\n"
+        "observation: {camera: front, resolution: [64, 64], color: rgb}\nactions: {discrete: [{}]}\n",
+        encoding="utf-8",
+    )
     r, g, b = (first_frame(spec)[..., i] for i in range(3))
-    colours = {"red": (r > g + 60) & (r > b + 60), "blue": (b > r + 60) & (b > g + 60), "yellow": (r > b + 60) & (g > b + 60),
-               "green": (g > r + 60) & (g > b + 60), "magenta": (r > g + 60) & (b > g + 60), "cyan": (g > r + 60) & (b > r + 60),
-               "white": (r > 200) & (g > 200) & (b > 200)}
-    scale = 32 / np.tan(np.radians(22.5)) / 3.2  # pixels per metre at the geoms' depth (MuJoCo's default fovy, 45 degrees)
+    colours = {
+        "red": (r > g + 60) & (r > b + 60),
+        "blue": (b > r + 60) & (b > g + 60),
+        "yellow": (r > b + 60) & (g > b + 60),
+        "green": (g > r + 60) & (g > b + 60),
+        "magenta": (r > g + 60) & (b > g + 60),
+        "cyan": (g > r + 60) & (b > r + 60),
+        "white": (r > 200) & (g > 200) & (b > 200),
+    }
+    scale = (
+        32 / np.tan(np.radians(22.5)) / 3.2
+    )  # pixels per metre at the geoms' depth (MuJoCo's default fovy, 45 degrees)
 
     def centre(x: float, z: float) -> tuple[float, float]:
         return 32 + x * scale, 32 - z * scale
@@ -541,16 +647,28 @@ def test_textures_are_drawn_on_every_geom_type_as_mujoco_maps_them(tmp_path: Pat
     def quadrant(x: float, z: float, dx: float, dz: float) -> str:
         col, row = centre(x, z)
         col, row = int(col + dx * 2.5), int(row - dz * 2.5)
-        block = {name: int(mask[row - 1:row + 1, col - 1:col + 1].sum()) for name, mask in colours.items()}
+        block = {name: int(mask[row - 1 : row + 1, col - 1 : col + 1].sum()) for name, mask in colours.items()}
         return max(block, key=lambda k: block[k])
 
-    for name, x, z in (("box", -0.9, 0.45), ("mesh", -0.3, -0.45)):  # (left/right, down/up) quadrants of the face toward the camera
+    for name, x, z in (
+        ("box", -0.9, 0.45),
+        ("mesh", -0.3, -0.45),
+    ):  # (left/right, down/up) quadrants of the face toward the camera
         seen = [quadrant(x, z, dx, dz) for dz in (1, -1) for dx in (-1, 1)]
         assert seen == ["red", "blue", "blue", "red"], (name, seen)
     for x in (0.3, 0.9):  # the turned box's 2-D projection, the mesh's own UVs: the image upright
-        assert [quadrant(x, -0.45, dx, dz) for dz in (1, -1) for dx in (-1, 1)] == ["magenta", "cyan", "yellow", "white"], x
-    for name, x, z, pair in (("ellipsoid", -0.3, 0.45, ("red", "blue")), ("capsule", 0.3, 0.45, ("red", "blue")),
-                             ("cylinder", 0.9, 0.45, ("red", "blue")), ("sphere", -0.9, -0.45, ("yellow", "green"))):
+        assert [quadrant(x, -0.45, dx, dz) for dz in (1, -1) for dx in (-1, 1)] == [
+            "magenta",
+            "cyan",
+            "yellow",
+            "white",
+        ], x
+    for name, x, z, pair in (
+        ("ellipsoid", -0.3, 0.45, ("red", "blue")),
+        ("capsule", 0.3, 0.45, ("red", "blue")),
+        ("cylinder", 0.9, 0.45, ("red", "blue")),
+        ("sphere", -0.9, -0.45, ("yellow", "green")),
+    ):
         col, row = (int(v) for v in centre(x, z))
         window = (slice(row - 4, row + 5), slice(col - 4, col + 5))
         counts = [int(colours[c][window].sum()) for c in pair]
@@ -570,11 +688,20 @@ SKYBOX = """\
 
 
 def skybox_frame(tmp_path: Path, *, sky: bool, world: str = "") -> np.ndarray:
-    (tmp_path / "m.xml").write_text(SKYBOX.format(sky='<texture type="skybox" builtin="gradient" rgb1="1 1 1" rgb2="0 0 0" '
-                                                      'width="32" height="32"/>' if sky else ""), encoding="utf-8")
+    (tmp_path / "m.xml").write_text(
+        SKYBOX.format(
+            sky='<texture type="skybox" builtin="gradient" rgb1="1 1 1" rgb2="0 0 0" width="32" height="32"/>'
+            if sky
+            else ""
+        ),
+        encoding="utf-8",
+    )
     spec = tmp_path / "s.yaml"
-    spec.write_text(f"id: Sky-v0\nphysics: {{model: m.xml}}\n{world}observation: {{camera: level, resolution: [24, 24], color: rgb}}\n"
-                    "actions: {discrete: [{}]}\n", encoding="utf-8")
+    spec.write_text(
+        f"id: Sky-v0\nphysics: {{model: m.xml}}\n{world}observation: {{camera: level, resolution: [24, 24], color: rgb}}\n"
+        "actions: {discrete: [{}]}\n",
+        encoding="utf-8",
+    )
     return first_frame(spec)
 
 

@@ -46,7 +46,9 @@ reward: 0.0
 """
 
 
-def frame(tmp_path: Path, model: str, *, camera: str = "eye", size: int = 32, look: str = "") -> tuple[np.ndarray, np.ndarray, dict]:
+def frame(
+    tmp_path: Path, model: str, *, camera: str = "eye", size: int = 32, look: str = ""
+) -> tuple[np.ndarray, np.ndarray, dict]:
     """The first frame (ints) and segmentation mask of `model` seen through `camera`, and the mask's ids."""
     (tmp_path / "model.xml").write_text(model, encoding="utf-8")
     spec = tmp_path / "look.yaml"
@@ -115,6 +117,7 @@ def test_a_lit_face_is_even_at_one_sample_with_the_models_light_and_shadows(tmp_
 def test_a_spot_light_keeps_mujocos_cone_and_does_not_fade_with_distance(tmp_path: Path) -> None:
     """A spot light straight above a plane (headlight off): the spot under it is rgba * diffuse at 1 m and at 3 m
     (MuJoCo's default attenuation is none), and dark beyond its cutoff."""
+
     def seen(height: float) -> np.ndarray:
         model = f"""<mujoco><visual><headlight active="0"/></visual><worldbody>
           <light name="spot" pos="0 0 {height}" dir="0 0 -1" diffuse=".7 .7 .7" cutoff="20" exponent="2" castshadow="false"/>
@@ -133,10 +136,13 @@ def test_a_spot_light_keeps_mujocos_cone_and_does_not_fade_with_distance(tmp_pat
 def test_a_light_that_casts_shadows_darkens_what_it_cannot_reach(tmp_path: Path) -> None:
     """A directional light 45 degrees down toward +x, seen from above: the block's shadow falls on the floor beside it,
     where the floor gets only the ambient and headlight terms; with castshadow false the floor there is lit."""
+
     def top_view(cast: str) -> tuple[np.ndarray, np.ndarray, dict]:
         light = f'<light name="sun" directional="true" dir="1 0 -1" diffuse=".6 .6 .6" castshadow="{cast}"/>'
         model = BOX.format(a=0.1, d=0.4, s=0, on=1, lights=light).replace(
-            '<camera name="eye" pos="0 -3 0" xyaxes="1 0 0 0 0 1"/>', '<camera name="eye" pos="0 0 6" xyaxes="1 0 0 0 1 0" fovy="60"/>')
+            '<camera name="eye" pos="0 -3 0" xyaxes="1 0 0 0 0 1"/>',
+            '<camera name="eye" pos="0 0 6" xyaxes="1 0 0 0 1 0" fovy="60"/>',
+        )
         return frame(tmp_path, model, size=48)
 
     shaded, mask, ids = top_view("true")
@@ -159,14 +165,17 @@ def test_gymnasiums_bodies_show_their_colour_not_black(tmp_path: Path, model: st
     most below 10 of 255 (Blender's light left 44 % and 36 % of them black: a sun from above, nothing on the sides
     the camera sees), as MuJoCo's headlight lights them."""
     spec = tmp_path / "body.yaml"
-    spec.write_text(f"""id: Body-v0
+    spec.write_text(
+        f"""id: Body-v0
 physics: {{model: "package:gymnasium.envs.mujoco/assets/{model}.xml"}}
 observation:
   cameras:
     eye: {{camera: track, resolution: [84, 84], color: rgb}}
     mask: {{camera: track, resolution: [84, 84], color: segmentation}}
 reward: 0.0
-""", encoding="utf-8")
+""",
+        encoding="utf-8",
+    )
     env = visualenv.make(spec)
     try:
         obs, _ = env.reset(seed=0)
@@ -187,8 +196,11 @@ def test_memory_and_file_readback_write_the_same_raw_bytes(tmp_path: Path) -> No
     frames = {}
     for color in ("rgb", "grayscale"):
         spec = tmp_path / f"{color}.yaml"
-        spec.write_text(f"id: Raw-v0\nphysics: {{model: model.xml}}\nobservation: {{camera: eye, resolution: [24, 24], color: {color}}}\n"
-                        "render: {noise: shared}\nreward: 0.0\n", encoding="utf-8")
+        spec.write_text(
+            f"id: Raw-v0\nphysics: {{model: model.xml}}\nobservation: {{camera: eye, resolution: [24, 24], color: {color}}}\n"
+            "render: {noise: shared}\nreward: 0.0\n",
+            encoding="utf-8",
+        )
         for readback in ("memory", "file"):
             env = visualenv.make(spec, readback=readback)
             try:
@@ -216,10 +228,14 @@ def test_a_spec_object_standing_for_a_body_is_lit_as_a_geom(tmp_path: Path) -> N
     light alone left it black: the model has no light)."""
     (tmp_path / "model.xml").write_text(BOX.format(a=0.2, d=0.5, s=0, on=1, lights=""), encoding="utf-8")
     spec = tmp_path / "own.yaml"
-    spec.write_text(SPEC.format(camera="eye", size=32, look="") + """scene:
+    spec.write_text(
+        SPEC.format(camera="eye", size=32, look="")
+        + """scene:
   objects:
     block: {primitive: cube, size: [1, 1, 1], material: {color: [0.2, 0.6, 0.4]}}
-""", encoding="utf-8")
+""",
+        encoding="utf-8",
+    )
     env = visualenv.make(spec)
     try:
         obs, _ = env.reset(seed=0)
@@ -242,7 +258,9 @@ def test_a_planes_checks_lie_where_mujoco_draws_them(tmp_path: Path) -> None:
         <body name="probe" pos="9 9 9"><joint name="slide" type="slide" axis="1 0 0"/><geom type="sphere" size=".1"/></body>
       </worldbody><actuator><motor joint="slide"/></actuator></mujoco>"""
     image = frame(tmp_path, model, camera="down", size=100)[0][..., 0]
-    metres = (np.arange(100) + 0.5 - 50) * (2 * 2 * np.tan(np.radians(30)) / 100)  # the floor under each column's centre
+    metres = (np.arange(100) + 0.5 - 50) * (
+        2 * 2 * np.tan(np.radians(30)) / 100
+    )  # the floor under each column's centre
     along_x = image[50] > 128  # the row at y = 0 (rows run down the image: -y)
     edges_x = metres[:-1][np.diff(along_x)] + (metres[1] - metres[0]) / 2
     inside = edges_x[np.abs(edges_x) < 0.65]
@@ -256,9 +274,15 @@ def test_a_planes_checks_lie_where_mujoco_draws_them(tmp_path: Path) -> None:
 def test_the_lit_colour_is_clamped_before_the_texture_multiplies_it(tmp_path: Path) -> None:
     """OpenGL clamps a vertex's lit colour to 1 before the texture multiplies it: a white box with a grey texture
     (.5 on the face toward the camera) under ambient .4 and diffuse .8 shows .5, not .6 (dm_control's floors)."""
-    model = BOX.format(a=0.4, d=0.8, s=0, on=1, lights="").replace(
-        '<worldbody>', '<asset><texture name="t" type="cube" builtin="flat" rgb1=".5 .5 .5" rgb2=".5 .5 .5" width="8" height="8"/>'
-        '<material name="m" texture="t"/></asset><worldbody>').replace('rgba=".8 .6 .4 1"/>', 'rgba="1 1 1 1" material="m"/>')
+    model = (
+        BOX.format(a=0.4, d=0.8, s=0, on=1, lights="")
+        .replace(
+            "<worldbody>",
+            '<asset><texture name="t" type="cube" builtin="flat" rgb1=".5 .5 .5" rgb2=".5 .5 .5" width="8" height="8"/>'
+            '<material name="m" texture="t"/></asset><worldbody>',
+        )
+        .replace('rgba=".8 .6 .4 1"/>', 'rgba="1 1 1 1" material="m"/>')
+    )
     image, mask, ids = frame(tmp_path, model)
     face = inside(mask == ids["block"])
     assert face.sum() >= 100 and np.abs(image[face] - level(0.5)).max() <= 1, np.unique(image[face])

@@ -78,7 +78,9 @@ def test_each_pixel_holds_the_id_of_what_it_sees_exactly():
         want = expected(x, ids)
         assert np.array_equal(seg[:, :, 0], want), np.argwhere(seg[:, :, 0] != want)
     rgb = seen[0]["rgb"].astype(int)
-    assert rgb[22, 22, 0] > rgb[22, 22, 1] + 50 and len(np.unique(rgb.reshape(-1, 3), axis=0)) > 4  # the colour camera still sees red box B
+    assert (
+        rgb[22, 22, 0] > rgb[22, 22, 1] + 50 and len(np.unique(rgb.reshape(-1, 3), axis=0)) > 4
+    )  # the colour camera still sees red box B
 
 
 def test_a_colour_camera_beside_a_segmentation_camera_renders_as_it_does_alone():
@@ -112,8 +114,11 @@ def test_objects_of_a_blend_file_take_part_by_name(tmp_path):
 
     scene = bpy.data.scenes.new("crate-scene")
     mesh = bpy.data.meshes.new("crate-mesh")
-    mesh.from_pydata([(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0, 1)], [],
-                     [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)])
+    mesh.from_pydata(
+        [(x, y, z) for x in (-0.5, 0.5) for y in (-0.5, 0.5) for z in (0, 1)],
+        [],
+        [(0, 1, 3, 2), (4, 6, 7, 5), (0, 4, 5, 1), (2, 3, 7, 6), (0, 2, 6, 4), (1, 5, 7, 3)],
+    )
     crate = bpy.data.objects.new("Crate", mesh)
     crate.location = (-2.5, 2.5, 0)
     scene.collection.objects.link(crate)
@@ -153,11 +158,17 @@ color = "segmentation"
     assert np.array_equal(seen[0][:, :, 0], want)
 
 
-@pytest.mark.parametrize("fragment, message", [
-    ("observation: {camera: Cam, color: segmentation, sensor: {read_noise: 0.1}}", "a sensor model acts on light"),
-    ("scene: {objects: {L: {light: sun, label: lamp}}}\nobservation: {camera: Cam, color: segmentation}", "label"),
-    ("scene: {objects: {C: {primitive: cube, label: 'two words'}}}\nobservation: {camera: Cam, color: segmentation}", "expected a name made of letters"),
-])
+@pytest.mark.parametrize(
+    "fragment, message",
+    [
+        ("observation: {camera: Cam, color: segmentation, sensor: {read_noise: 0.1}}", "a sensor model acts on light"),
+        ("scene: {objects: {L: {light: sun, label: lamp}}}\nobservation: {camera: Cam, color: segmentation}", "label"),
+        (
+            "scene: {objects: {C: {primitive: cube, label: 'two words'}}}\nobservation: {camera: Cam, color: segmentation}",
+            "expected a name made of letters",
+        ),
+    ],
+)
 def test_bad_segmentation_specs_are_located_errors(fragment, message):
     text = "id: Bad-v0\nstate: {x: {init: 0}}\nactions: {discrete: [{}]}\n" + fragment + "\n"
     with pytest.raises(SpecError, match=message) as err:
@@ -171,12 +182,26 @@ def test_mujoco_geoms_take_their_bodys_name():
     from pathlib import Path
 
     folder = Path(__file__).parents[2] / "specs" / "mujoco"
-    text = (folder / "inverted_pendulum.yaml").read_text().replace(
-        "observation: {camera: Camera, resolution: [64, 64], color: grayscale}",
-        "observation: {cameras: {eye: {camera: Camera, resolution: [48, 48], color: rgb}, mask: {camera: Camera, resolution: [48, 48], color: segmentation}}}")
+    text = (
+        (folder / "inverted_pendulum.yaml")
+        .read_text()
+        .replace(
+            "observation: {camera: Camera, resolution: [64, 64], color: grayscale}",
+            "observation: {cameras: {eye: {camera: Camera, resolution: [48, 48], color: rgb}, mask: {camera: Camera, resolution: [48, 48], color: segmentation}}}",
+        )
+    )
     assert "mask:" in text
     seen, _, ids = run(text, [], base_dir=folder)
-    assert set(ids) == {"world", "cart", "pole", "Post0", "PostL1", "PostR1", "PostL2", "PostR2"}   # bodies, then the spec's posts
+    assert set(ids) == {
+        "world",
+        "cart",
+        "pole",
+        "Post0",
+        "PostL1",
+        "PostR1",
+        "PostL2",
+        "PostR2",
+    }  # bodies, then the spec's posts
     mask = seen[0]["mask"][:, :, 0]
     cart, pole = np.argwhere(mask == ids["cart"]), np.argwhere(mask == ids["pole"])
     assert len(cart) >= 8 and len(pole) >= 8

@@ -122,11 +122,14 @@ resolution = [16, 16]
     assert obs["clean"].std() == 0 and obs["noisy"].std() > 5
 
 
-@pytest.mark.parametrize("observation, message", [
-    ("  sensor: {read_noise: 0.1}\n  color: depth\n", "a sensor model acts on light"),
-    ("  sensor: {read_noise: -0.1}\n", "greater than or equal to 0"),
-    ("  sensor: {readnoise: 0.1}\n", "readnoise"),
-])
+@pytest.mark.parametrize(
+    "observation, message",
+    [
+        ("  sensor: {read_noise: 0.1}\n  color: depth\n", "a sensor model acts on light"),
+        ("  sensor: {read_noise: -0.1}\n", "greater than or equal to 0"),
+        ("  sensor: {readnoise: 0.1}\n", "readnoise"),
+    ],
+)
 def test_bad_sensors_are_located_spec_errors(observation, message):
     text = "id: Bad-v0\nstate: {x: {init: 0}}\nactions: {discrete: [{}]}\nobservation:\n  camera: Cam\n" + observation
     with pytest.raises(SpecError, match=message) as err:

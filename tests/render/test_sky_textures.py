@@ -55,7 +55,9 @@ observation:
 """
 
 
-def frames(tmp_path: Path, *, image: str, strength: float = 1.0, rotation: str = "0.0", actors: str = "", steps: int = 0) -> list[dict]:
+def frames(
+    tmp_path: Path, *, image: str, strength: float = 1.0, rotation: str = "0.0", actors: str = "", steps: int = 0
+) -> list[dict]:
     from visualenv.env.visual_env import VisualEnv
 
     text = SPEC.format(image=image, strength=strength, rotation=rotation, actors=actors)
@@ -88,12 +90,17 @@ def test_an_hdr_sky_lights_the_scene_in_proportion_to_its_strength(tmp_path):
     dim_floor, bright_floor = dim["floor"].mean(), bright["floor"].mean()
     assert 10 < dim_floor < bright_floor - 40, (dim_floor, bright_floor)
     # the sky seen directly: radiance 0.05 and 0.2, as Blender's sRGB writes them
-    assert abs(dim["sky"].mean() - 63) <= 3 and abs(bright["sky"].mean() - 124) <= 3, (dim["sky"].mean(), bright["sky"].mean())
+    assert abs(dim["sky"].mean() - 63) <= 3 and abs(bright["sky"].mean() - 124) <= 3, (
+        dim["sky"].mean(),
+        bright["sky"].mean(),
+    )
 
 
 def test_strength_and_rotation_bind_through_the_world_actor(tmp_path):
     halves(tmp_path / "sky.png", (230, 20, 20), (20, 20, 230))
-    seen = frames(tmp_path, image="sky.png", strength=0.25, actors="actors: {World: {rotation: yaw, strength: power}}", steps=2)
+    seen = frames(
+        tmp_path, image="sky.png", strength=0.25, actors="actors: {World: {rotation: yaw, strength: power}}", steps=2
+    )
     red = [mean_rgb(obs)[0] > mean_rgb(obs)[2] for obs in seen]
     assert red[0] != red[1] and red[0] == red[2]  # turned half a turn each step
     brightness = [obs["floor"].mean() for obs in seen]
@@ -132,9 +139,15 @@ def test_bad_skies_are_located_errors(tmp_path):
     with pytest.raises(SpecError, match="sky image not found") as err:
         build(SPEC.format(image="gone.hdr", strength=1.0, rotation="0.0", actors=""))
     assert "sky.yaml:3" in str(err.value)
-    with pytest.raises(SpecError, match="the World actor binds the world's 'strength', 'rotation', 'color', not 'location'"):
-        load_and_compile(SPEC.format(image="x.png", strength=1.0, rotation="0.0", actors="actors: {World: {location: [0, 0, yaw]}}"))
-    plain = SPEC.format(image="x.png", strength=1.0, rotation="0.0", actors="actors: {World: {rotation: yaw}}").replace("image: x.png, ", "")
+    with pytest.raises(
+        SpecError, match="the World actor binds the world's 'strength', 'rotation', 'color', not 'location'"
+    ):
+        load_and_compile(
+            SPEC.format(image="x.png", strength=1.0, rotation="0.0", actors="actors: {World: {location: [0, 0, yaw]}}")
+        )
+    plain = SPEC.format(image="x.png", strength=1.0, rotation="0.0", actors="actors: {World: {rotation: yaw}}").replace(
+        "image: x.png, ", ""
+    )
     with pytest.raises(SpecError, match="'rotation' turns an image sky: give the world an 'image'"):
         build(plain.replace(", rotation: 0.0", ""))
 

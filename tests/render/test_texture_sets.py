@@ -109,8 +109,10 @@ def test_a_texture_binding_needs_a_texture_set_and_toml_takes_one(tmp_path):
         assert "scene.objects.Card.material.texture.image[1]" in str(err.value)
     finally:
         env.close()
-    toml = ('id = "T-v0"\n[state.k]\ninit = 0\n[actions]\ndiscrete = [{}]\n[actors.Card]\ntexture = "k"\n'
-            '[scene.objects.Card]\nprimitive = "plane"\nmaterial = {texture = {type = "image", image = ["a.png", "b.png"]}}\n')
+    toml = (
+        'id = "T-v0"\n[state.k]\ninit = 0\n[actions]\ndiscrete = [{}]\n[actors.Card]\ntexture = "k"\n'
+        '[scene.objects.Card]\nprimitive = "plane"\nmaterial = {texture = {type = "image", image = ["a.png", "b.png"]}}\n'
+    )
     assert load_spec_text(toml, name="t.toml").spec.scene.objects["Card"].material.texture.image == ["a.png", "b.png"]
 
 
@@ -119,7 +121,12 @@ def test_goalie_randomizeds_images_are_made_by_its_script(tmp_path):
     import sys
 
     assets = Path(__file__).parents[2] / "specs" / "assets"
-    subprocess.run([sys.executable, str(assets / "make_goalie_assets.py"), str(tmp_path)], check=True, capture_output=True, timeout=120)
+    subprocess.run(
+        [sys.executable, str(assets / "make_goalie_assets.py"), str(tmp_path)],
+        check=True,
+        capture_output=True,
+        timeout=120,
+    )
     made = sorted(p.name for p in tmp_path.glob("*.png"))
     assert made == sorted(p.name for p in (assets / "goalie").glob("*.png")) and len(made) == 4
     for name in made:

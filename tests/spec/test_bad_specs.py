@@ -190,7 +190,11 @@ def test_all_problems_of_several_files_are_listed(tmp_path: Path):
 
 
 def _tree_digest(folder: Path) -> dict[str, str]:
-    return {str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted(folder.rglob("*")) if p.is_file()}
+    return {
+        str(p.relative_to(folder)): hashlib.sha256(p.read_bytes()).hexdigest()
+        for p in sorted(folder.rglob("*"))
+        if p.is_file()
+    }
 
 
 @needs_blender
@@ -221,7 +225,9 @@ def test_blender_prints_nothing_when_a_mesh_imports(tmp_path: Path, capfd: pytes
     """The OBJ importer's timing lines are dropped when the build succeeds; only the CLI's own output is shown."""
     (tmp_path / "tri.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     spec = tmp_path / "env.yaml"
-    spec.write_text(VALID_SCENE_SPEC.format(id="MeshQuiet-v0").replace("Box: {primitive: cube}", "Box: {mesh: tri.obj}"))
+    spec.write_text(
+        VALID_SCENE_SPEC.format(id="MeshQuiet-v0").replace("Box: {primitive: cube}", "Box: {mesh: tri.obj}")
+    )
     capfd.readouterr()
     result = CliRunner().invoke(main, ["build", str(spec), "-o", str(tmp_path / "build"), "--quiet"])
     assert result.exit_code == 0, result.output

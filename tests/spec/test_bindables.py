@@ -25,8 +25,13 @@ def test_docs_name_every_bindable_property():
 
 
 def test_type_and_camera_problems_name_what_was_expected():
-    assert type_problem("strength", "Box", "MESH") == "'strength' binds a light's power, but 'Box' is a mesh, not a light"
-    assert type_problem("lens", "Lamp", "LIGHT") == "'lens' binds a camera's focal length, but 'Lamp' is a light, not a camera"
+    assert (
+        type_problem("strength", "Box", "MESH") == "'strength' binds a light's power, but 'Box' is a mesh, not a light"
+    )
+    assert (
+        type_problem("lens", "Lamp", "LIGHT")
+        == "'lens' binds a camera's focal length, but 'Lamp' is a light, not a camera"
+    )
     assert "'Cam' is a camera, not a mesh, a light or an empty" in type_problem("color", "Cam", "CAMERA")
     assert type_problem("color", "Rig", "EMPTY") is None and type_problem("location", "Cam", "CAMERA") is None
     assert camera_problem("Cam", {"Cam": "CAMERA"}) is None

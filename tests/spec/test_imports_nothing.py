@@ -63,7 +63,9 @@ def hostile_package(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> tuple[st
     root = tmp_path / "site" / name
     (root / "models").mkdir(parents=True)
     for init in (root / "__init__.py", root / "models" / "__init__.py"):
-        init.write_text(f"import pathlib\npathlib.Path({str(marker)!r}).open('a').write({str(init)!r} + '\\n')\n", encoding="utf-8")
+        init.write_text(
+            f"import pathlib\npathlib.Path({str(marker)!r}).open('a').write({str(init)!r} + '\\n')\n", encoding="utf-8"
+        )
     (root / "models" / "pole.xml").write_text(MODEL, encoding="utf-8")
     monkeypatch.syspath_prepend(str(tmp_path / "site"))
     importlib.invalidate_caches()
@@ -78,13 +80,17 @@ def write_spec(folder: Path, model: str) -> Path:
     return path
 
 
-def test_a_package_path_is_validated_made_and_stepped_without_importing_the_package(tmp_path: Path, hostile_package) -> None:
+def test_a_package_path_is_validated_made_and_stepped_without_importing_the_package(
+    tmp_path: Path, hostile_package
+) -> None:
     name, marker = hostile_package
     spec = write_spec(tmp_path, f"package:{name}.models/pole.xml")
     result = CliRunner().invoke(main, ["validate", str(spec)])
     assert result.exit_code == 0 and "ok" in result.output, result.output
     program = compile_spec(load_spec(spec))
-    assert program.physics is not None and program.physics.model.path == tmp_path / "site" / name / "models" / "pole.xml"
+    assert (
+        program.physics is not None and program.physics.model.path == tmp_path / "site" / name / "models" / "pole.xml"
+    )
     env = VisualEnv(spec, render=False)
     env.reset(seed=0)
     for _ in range(5):
@@ -97,7 +103,9 @@ def test_a_package_path_is_validated_made_and_stepped_without_importing_the_pack
     assert marker.read_text().count("__init__.py") == 2
 
 
-def test_a_namespace_package_is_searched_in_every_folder_it_spans(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+def test_a_namespace_package_is_searched_in_every_folder_it_spans(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
     name = f"nspkg_{tmp_path.name.replace('-', '_')}"
     for portion in ("one", "two"):
         (tmp_path / portion / name / "models").mkdir(parents=True)
@@ -108,15 +116,20 @@ def test_a_namespace_package_is_searched_in_every_folder_it_spans(tmp_path: Path
     assert name not in sys.modules
 
 
-@pytest.mark.parametrize("model, expected", [
-    ("package:no_such_package_xyz/pole.xml", "no installed package 'no_such_package_xyz'"),
-    ("package:{name}.nothing/pole.xml", "no installed package '{name}.nothing'"),
-    ("package:{name}.models/missing.xml", "no MJCF file"),
-    ("package:{name}.models", "expected package:<package>/<path inside it>"),
-    ("package:../{name}/pole.xml", "expected package:<package>/<path inside it>"),
-    ("package:textwrap/pole.xml", "no installed package 'textwrap'"),  # a module, not a package
-])
-def test_an_unknown_package_or_file_is_a_located_error(tmp_path: Path, hostile_package, model: str, expected: str) -> None:
+@pytest.mark.parametrize(
+    "model, expected",
+    [
+        ("package:no_such_package_xyz/pole.xml", "no installed package 'no_such_package_xyz'"),
+        ("package:{name}.nothing/pole.xml", "no installed package '{name}.nothing'"),
+        ("package:{name}.models/missing.xml", "no MJCF file"),
+        ("package:{name}.models", "expected package:<package>/<path inside it>"),
+        ("package:../{name}/pole.xml", "expected package:<package>/<path inside it>"),
+        ("package:textwrap/pole.xml", "no installed package 'textwrap'"),  # a module, not a package
+    ],
+)
+def test_an_unknown_package_or_file_is_a_located_error(
+    tmp_path: Path, hostile_package, model: str, expected: str
+) -> None:
     name, marker = hostile_package
     spec = write_spec(tmp_path, model.format(name=name))
     with pytest.raises(SpecError) as caught:
@@ -137,13 +150,17 @@ def test_build_renders_a_package_model_without_importing_the_package(tmp_path: P
     assert not marker.exists() and name not in sys.modules
 
 
-
-@pytest.mark.parametrize("element, expected", [
-    ('<include file="__init__.py"/>', "Include error: 'XML parse error"),
-    ('<asset><mesh name="m" file="__init__.py"/></asset>', "no decoder found for mesh file"),
-    ('<asset><texture name="t" type="2d" file="__init__.py"/></asset>', "Element name 't'"),
-])
-def test_mjcf_include_and_file_attributes_are_files_mujoco_reads(tmp_path: Path, hostile_package, element: str, expected: str) -> None:
+@pytest.mark.parametrize(
+    "element, expected",
+    [
+        ('<include file="__init__.py"/>', "Include error: 'XML parse error"),
+        ('<asset><mesh name="m" file="__init__.py"/></asset>', "no decoder found for mesh file"),
+        ('<asset><texture name="t" type="2d" file="__init__.py"/></asset>', "Element name 't'"),
+    ],
+)
+def test_mjcf_include_and_file_attributes_are_files_mujoco_reads(
+    tmp_path: Path, hostile_package, element: str, expected: str
+) -> None:
     name, marker = hostile_package
     folder = tmp_path / "site" / name / "models"
     (folder / "pole.xml").write_text(MODEL.replace('<option timestep="0.01"/>', element), encoding="utf-8")

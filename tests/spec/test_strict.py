@@ -74,8 +74,10 @@ def test_a_toml_file_with_a_byte_order_mark_loads(tmp_path):
 def test_a_large_document_without_aliases_is_not_blamed_on_aliases(monkeypatch):
     monkeypatch.setattr(source, "MAX_VALUES", 500)
     params = "".join(f"  p{i}: {i}\n" for i in range(600))
-    problems = _problems("id: T-v0\nparams:\n" + params + BASE[len("id: T-v0\n"):])
+    problems = _problems("id: T-v0\nparams:\n" + params + BASE[len("id: T-v0\n") :])
     assert len(problems) == 1 and "too large: more than 500 values" in problems[0]
     assert "alias" not in problems[0]
-    bomb = "a: &a [1, 1, 1, 1, 1, 1, 1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\nc: [*b, *b, *b, *b, *b, *b, *b, *b]\n"
+    bomb = (
+        "a: &a [1, 1, 1, 1, 1, 1, 1, 1]\nb: &b [*a, *a, *a, *a, *a, *a, *a, *a]\nc: [*b, *b, *b, *b, *b, *b, *b, *b]\n"
+    )
     assert "YAML aliases expand" in _problems(bomb)[0]

@@ -21,7 +21,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-os.environ.setdefault("MUJOCO_GL", "disable")  # dm_control looks for an OpenGL display on import; these tests render nothing there
+os.environ.setdefault(
+    "MUJOCO_GL", "disable"
+)  # dm_control looks for an OpenGL display on import; these tests render nothing there
 mujoco = pytest.importorskip("mujoco")
 suite = pytest.importorskip("dm_control.suite")
 
@@ -39,7 +41,10 @@ def test_the_pinned_files_are_dm_controls_own() -> None:
     text = (ASSETS / "SOURCES.md").read_text(encoding="utf-8")
     version = re.search(r"^dm_control (\S+) ", text, re.M)
     assert version is not None and "Apache License" in (ASSETS / "LICENSE.dm_control").read_text(encoding="utf-8")
-    rows = {name: (sha, how) for name, sha, how in re.findall(r"^\| `([\w./]+)` \| `([0-9a-f]{64})` \| ([^|]+) \|", text, re.M)}
+    rows = {
+        name: (sha, how)
+        for name, sha, how in re.findall(r"^\| `([\w./]+)` \| `([0-9a-f]{64})` \| ([^|]+) \|", text, re.M)
+    }
     assert sorted(rows) == sorted(p.relative_to(ASSETS).as_posix() for p in ASSETS.rglob("*.xml"))
     verbatim = [name for name, (_, how) in rows.items() if how.strip() == "verbatim"]
     for name in verbatim:
@@ -65,7 +70,9 @@ def test_the_pinned_files_are_dm_controls_own() -> None:
     heavier = cheetah.replace(f'mass="{mass}"', f'mass="{np.nextafter(float(mass), np.inf)!r}"', 1)
     assets = importlib.import_module("dm_control.suite.cheetah").get_model_and_assets()[1]
     expected = vendor.binary(vendor.expected_model("cheetah.xml", "dm_control.suite.cheetah"))
-    assert vendor.binary(vendor.compile_quietly(heavier, assets)) != expected  # the control: the comparison sees one bit
+    assert (
+        vendor.binary(vendor.compile_quietly(heavier, assets)) != expected
+    )  # the control: the comparison sees one bit
 
 
 def their_observation(time_step) -> np.ndarray:
@@ -76,7 +83,9 @@ def assert_same_state(ours, theirs, where: str) -> None:
     data, physics = ours.unwrapped.data, theirs.physics
     np.testing.assert_array_equal(data.qpos, physics.data.qpos, err_msg=where)
     np.testing.assert_array_equal(data.qvel, physics.data.qvel, err_msg=where)
-    np.testing.assert_array_equal(integration_state(data), integration_state(physics.data.ptr), err_msg=where)  # warm start and time too
+    np.testing.assert_array_equal(
+        integration_state(data), integration_state(physics.data.ptr), err_msg=where
+    )  # warm start and time too
 
 
 @pytest.mark.parametrize("seed", [0, 7, 123])
@@ -95,8 +104,12 @@ def test_cartpole_swingup_equals_dm_control_over_two_episodes(seed: int) -> None
             obs, reward, terminated, truncated, _ = ours.step(action)
             time_step = theirs.step(action)
             here = f"{where} step {step}"
-            np.testing.assert_allclose(ours.unwrapped.data.qpos, theirs.physics.data.qpos, rtol=0, atol=1e-9, err_msg=here)
-            np.testing.assert_allclose(ours.unwrapped.data.qvel, theirs.physics.data.qvel, rtol=0, atol=1e-9, err_msg=here)
+            np.testing.assert_allclose(
+                ours.unwrapped.data.qpos, theirs.physics.data.qpos, rtol=0, atol=1e-9, err_msg=here
+            )
+            np.testing.assert_allclose(
+                ours.unwrapped.data.qvel, theirs.physics.data.qvel, rtol=0, atol=1e-9, err_msg=here
+            )
             np.testing.assert_allclose(obs, their_observation(time_step), rtol=0, atol=1e-9, err_msg=here)
             assert abs(reward - time_step.reward) <= 1e-9, (here, reward, time_step.reward)
             assert not terminated
@@ -119,7 +132,11 @@ def test_the_env_is_dm_controls_task_as_gymnasium_sees_it() -> None:
     theirs = suite.load("cartpole", "swingup")
     spec = theirs.action_spec()
     assert isinstance(env.unwrapped.data, mujoco.MjData) and isinstance(env.unwrapped.model, mujoco.MjModel)
-    assert env.action_space.shape == spec.shape and (env.action_space.low == spec.minimum).all() and (env.action_space.high == spec.maximum).all()
+    assert (
+        env.action_space.shape == spec.shape
+        and (env.action_space.low == spec.minimum).all()
+        and (env.action_space.high == spec.maximum).all()
+    )
     assert env.observation_space.shape == (5,) and env.observation_space.dtype == np.float64
     assert env.unwrapped.model.opt.timestep == theirs.physics.timestep() == 0.01
     assert env.unwrapped.action_repeat == 8 and env.unwrapped.max_episode_steps == 125  # PlaNet's repeat for cartpole

@@ -30,7 +30,7 @@ PER_METRE = (SIZE / 2) / (4 * math.tan(math.radians(45 / 2)))
 
 def cart_column(frame: np.ndarray) -> float:
     """The column of the cart's middle: the warm (red over blue) pixels of the rows the cart's box covers."""
-    rows = frame[SIZE // 2 - 3: SIZE // 2 + 3].astype(int)
+    rows = frame[SIZE // 2 - 3 : SIZE // 2 + 3].astype(int)
     warm = (rows[..., 0] > rows[..., 2] + 40) & (rows[..., 0] > 120)
     assert warm.sum() >= 20, f"the cart is not in view: {warm.sum()} warm pixels"
     return float(np.nonzero(warm)[1].mean())
@@ -58,7 +58,9 @@ def test_the_cart_is_seen_where_mujocos_camera_puts_it_in_front_of_the_sky() -> 
 
 def look_script():
     """benchmarks/dmc_look.py, which renders both (dm_control's frames in a child process, so GL never meets Blender)."""
-    spec = importlib.util.spec_from_file_location("dmc_look", Path(__file__).resolve().parents[2] / "benchmarks" / "dmc_look.py")
+    spec = importlib.util.spec_from_file_location(
+        "dmc_look", Path(__file__).resolve().parents[2] / "benchmarks" / "dmc_look.py"
+    )
     assert spec is not None and spec.loader is not None
     module = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(module)

@@ -39,9 +39,11 @@ def reacher_with_a_mask(tmp_path: Path) -> Path:
     """DMC-reacher-easy-v0 with a segmentation camera beside its own (the same camera): where the target is drawn, exactly."""
     text = (DMC / "reacher_easy.yaml").read_text(encoding="utf-8")
     text = text.replace("model: assets/reacher.xml", f"model: {DMC / 'assets' / 'reacher.xml'}")
-    text = text.replace("observation: {camera: fixed, resolution: [84, 84], color: rgb}",
-                        "observation:\n  cameras:\n    eye: {camera: fixed, resolution: [84, 84], color: rgb}\n"
-                        "    mask: {camera: fixed, resolution: [84, 84], color: segmentation}")
+    text = text.replace(
+        "observation: {camera: fixed, resolution: [84, 84], color: rgb}",
+        "observation:\n  cameras:\n    eye: {camera: fixed, resolution: [84, 84], color: rgb}\n"
+        "    mask: {camera: fixed, resolution: [84, 84], color: segmentation}",
+    )
     path = tmp_path / "reacher_mask.yaml"
     path.write_text(text.replace("id: DMC-reacher-easy-v0", "id: ReacherMask-v0"), encoding="utf-8")
     return path
@@ -58,10 +60,19 @@ def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None
             rows, columns = np.nonzero(mask)
             column, row = target_pixel(env.model)
             assert 60 <= mask.sum() <= 160, mask.sum()  # a disc of radius 0.05 m: about 6.8 pixels
-            assert abs(columns.mean() - column) < 1.0 and abs(rows.mean() - row) < 1.0, (seed, columns.mean(), rows.mean(), column, row)
+            assert abs(columns.mean() - column) < 1.0 and abs(rows.mean() - row) < 1.0, (
+                seed,
+                columns.mean(),
+                rows.mean(),
+                column,
+                row,
+            )
             eye = obs["eye"].astype(int)
             redness = eye[..., 0] - eye[..., 2]  # the target's red in the rgb frame, where the floor around it is blue
-            assert redness[mask].mean() > 10 and redness[mask].mean() > redness[~mask].mean() + 20, (redness[mask].mean(), redness[~mask].mean())
+            assert redness[mask].mean() > 10 and redness[mask].mean() > redness[~mask].mean() + 20, (
+                redness[mask].mean(),
+                redness[~mask].mean(),
+            )
             seen.append((column, row))
         assert len({(round(c), round(r)) for c, r in seen}) == 3  # three episodes, three places
     finally:
@@ -84,7 +95,14 @@ def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path) -> None:
                 mask = obs["mask"][i][..., 0] == target
                 rows, columns = np.nonzero(mask)
                 column, row = target_pixel(batch.lanes[i].model)
-                assert abs(columns.mean() - column) < 1.0 and abs(rows.mean() - row) < 1.0, (step, i, columns.mean(), rows.mean(), column, row)
+                assert abs(columns.mean() - column) < 1.0 and abs(rows.mean() - row) < 1.0, (
+                    step,
+                    i,
+                    columns.mean(),
+                    rows.mean(),
+                    column,
+                    row,
+                )
                 assert (obs["mask"][i] == alone["mask"]).mean() >= 0.99, (step, i)
                 places.add((round(column), round(row)))
             actions = np.random.default_rng(step).uniform(-1, 1, size=(3, 2))
@@ -144,7 +162,11 @@ def test_a_spot_lit_batch_past_four_envs_is_lit_as_each_env_alone() -> None:
             finally:
                 env.close()
             difference = np.abs(tiles[k].astype(int) - alone)
-            assert difference.mean() < 0.2 and (difference <= 8).mean() > 0.999, (k, difference.mean(), (difference > 8).sum())
+            assert difference.mean() < 0.2 and (difference <= 8).mean() > 0.999, (
+                k,
+                difference.mean(),
+                (difference > 8).sum(),
+            )
         assert not np.array_equal(tiles[0], tiles[1])  # each tile its own env's cart and pole
     finally:
         batch.close()

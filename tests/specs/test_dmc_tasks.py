@@ -19,7 +19,9 @@ import pickle
 import numpy as np
 import pytest
 
-os.environ.setdefault("MUJOCO_GL", "disable")  # dm_control looks for an OpenGL display on import; these tests render nothing there
+os.environ.setdefault(
+    "MUJOCO_GL", "disable"
+)  # dm_control looks for an OpenGL display on import; these tests render nothing there
 mujoco = pytest.importorskip("mujoco")
 suite = pytest.importorskip("dm_control.suite")
 
@@ -53,7 +55,9 @@ def assert_same_reset(ours, theirs, where: str) -> None:
     data, physics = ours.unwrapped.data, theirs.physics
     np.testing.assert_array_equal(integration_state(data), integration_state(physics.data.ptr), err_msg=where)
     for field in WRITTEN.get(TASKS[ours.spec.id.split("/")[-1]][0], ()):  # reacher's target, finger's hinge damping
-        np.testing.assert_allclose(getattr(ours.unwrapped.model, field), getattr(physics.model.ptr, field), rtol=0, atol=1e-15, err_msg=where)
+        np.testing.assert_allclose(
+            getattr(ours.unwrapped.model, field), getattr(physics.model.ptr, field), rtol=0, atol=1e-15, err_msg=where
+        )
 
 
 @pytest.mark.parametrize("seed", [0, 7])
@@ -75,8 +79,12 @@ def test_the_task_equals_dm_control_over_two_episodes(ident: str, seed: int) -> 
             obs, reward, terminated, truncated, _ = ours.step(action)
             time_step = theirs.step(action)
             here = f"{where} step {step}"
-            np.testing.assert_allclose(ours.unwrapped.data.qpos, theirs.physics.data.qpos, rtol=0, atol=1e-9, err_msg=here)
-            np.testing.assert_allclose(ours.unwrapped.data.qvel, theirs.physics.data.qvel, rtol=0, atol=1e-9, err_msg=here)
+            np.testing.assert_allclose(
+                ours.unwrapped.data.qpos, theirs.physics.data.qpos, rtol=0, atol=1e-9, err_msg=here
+            )
+            np.testing.assert_allclose(
+                ours.unwrapped.data.qvel, theirs.physics.data.qvel, rtol=0, atol=1e-9, err_msg=here
+            )
             np.testing.assert_allclose(obs, their_observation(time_step), rtol=0, atol=1e-9, err_msg=here)
             assert abs(reward - time_step.reward) <= 1e-9, (here, reward, time_step.reward)
             assert not terminated
@@ -140,13 +148,26 @@ def test_the_env_is_dm_controls_task_as_gymnasium_sees_it(ident: str) -> None:
     theirs = load(ident, 0)
     spec = theirs.action_spec()
     assert isinstance(env.unwrapped.data, mujoco.MjData) and isinstance(env.unwrapped.model, mujoco.MjModel)
-    assert env.action_space.shape == spec.shape and (env.action_space.low == spec.minimum).all() and (env.action_space.high == spec.maximum).all()
-    assert env.observation_space.shape == their_observation(theirs.reset()).shape and env.observation_space.dtype == np.float64
+    assert (
+        env.action_space.shape == spec.shape
+        and (env.action_space.low == spec.minimum).all()
+        and (env.action_space.high == spec.maximum).all()
+    )
+    assert (
+        env.observation_space.shape == their_observation(theirs.reset()).shape
+        and env.observation_space.dtype == np.float64
+    )
     assert env.unwrapped.model.opt.timestep == theirs.physics.timestep()
-    assert env.unwrapped.program.physics.dt == pytest.approx(theirs.control_timestep(), rel=1e-12)  # frame_skip is n_sub_steps
-    assert env.unwrapped.action_repeat == repeat and env.unwrapped.max_episode_steps == math.ceil(1000 / repeat)  # PlaNet's
+    assert env.unwrapped.program.physics.dt == pytest.approx(
+        theirs.control_timestep(), rel=1e-12
+    )  # frame_skip is n_sub_steps
+    assert env.unwrapped.action_repeat == repeat and env.unwrapped.max_episode_steps == math.ceil(
+        1000 / repeat
+    )  # PlaNet's
     view = env.unwrapped.program.spec.observation
-    assert view.camera == mujoco.mj_id2name(theirs.physics.model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, 0) == camera  # camera 0
+    assert (
+        view.camera == mujoco.mj_id2name(theirs.physics.model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, 0) == camera
+    )  # camera 0
     assert list(view.resolution) == [84, 84] and view.color == "rgb"
     env.close()
 

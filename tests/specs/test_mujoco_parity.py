@@ -20,7 +20,11 @@ gym = pytest.importorskip("gymnasium")
 from visualenv.env.visual_env import VisualEnv  # noqa: E402
 
 SPECS = Path(__file__).resolve().parents[2] / "specs" / "mujoco"
-PORTS = [("inverted_pendulum.yaml", "InvertedPendulum-v5"), ("half_cheetah.yaml", "HalfCheetah-v5"), ("reacher.yaml", "Reacher-v5")]
+PORTS = [
+    ("inverted_pendulum.yaml", "InvertedPendulum-v5"),
+    ("half_cheetah.yaml", "HalfCheetah-v5"),
+    ("reacher.yaml", "Reacher-v5"),
+]
 
 
 def run_both(spec: str, gym_id: str, seed: int, steps: int) -> int:
@@ -38,8 +42,12 @@ def run_both(spec: str, gym_id: str, seed: int, steps: int) -> int:
         obs_a, rew_a, term_a, trunc_a, _ = ours.step(action)
         obs_b, rew_b, term_b, trunc_b, _ = theirs.step(action)
         where = f"{gym_id} seed {seed} step {step}"
-        np.testing.assert_allclose(ours.unwrapped.data.qpos, theirs.unwrapped.data.qpos, rtol=0, atol=1e-9, err_msg=where)
-        np.testing.assert_allclose(ours.unwrapped.data.qvel, theirs.unwrapped.data.qvel, rtol=0, atol=1e-9, err_msg=where)
+        np.testing.assert_allclose(
+            ours.unwrapped.data.qpos, theirs.unwrapped.data.qpos, rtol=0, atol=1e-9, err_msg=where
+        )
+        np.testing.assert_allclose(
+            ours.unwrapped.data.qvel, theirs.unwrapped.data.qvel, rtol=0, atol=1e-9, err_msg=where
+        )
         np.testing.assert_allclose(obs_a, obs_b, rtol=0, atol=1e-9, err_msg=where)
         assert abs(float(rew_a) - float(rew_b)) <= 1e-9, (where, rew_a, rew_b)
         assert (term_a, trunc_a) == (term_b, trunc_b), (where, term_a, trunc_a, term_b, trunc_b)

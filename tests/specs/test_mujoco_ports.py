@@ -77,7 +77,10 @@ def test_the_pinned_files_are_gymnasiums_own() -> None:
     cheetah = (ASSETS / vendor.EDITED).read_text(encoding="utf-8")
     compiler = re.search(r"<compiler [^>]*>", cheetah)
     assert compiler is not None and "settotalmass" not in compiler.group(0) and cheetah.count("<inertial ") == 7
-    ours, gymnasiums = vendor.compile_quietly(cheetah), vendor.compile_quietly((theirs / vendor.EDITED).read_text(encoding="utf-8"))
+    ours, gymnasiums = (
+        vendor.compile_quietly(cheetah),
+        vendor.compile_quietly((theirs / vendor.EDITED).read_text(encoding="utf-8")),
+    )
     assert vendor.differences(ours, gymnasiums) == []
     heavier = vendor.compile_quietly(cheetah.replace('mass="6.25020920502092"', 'mass="6.250209205020921"'))
     assert "body_mass" in vendor.differences(heavier, gymnasiums)  # the control: the comparison sees one bit
@@ -96,8 +99,14 @@ def test_compiling_and_stepping_a_bundled_spec_warns_nothing(spec: Path) -> None
 
 
 def test_validating_the_bundled_specs_prints_nothing_on_stderr() -> None:
-    done = subprocess.run([sys.executable, "-m", "visualenv.cli", "validate", *map(str, BUNDLED)], capture_output=True, text=True,
-                          timeout=300, cwd=ROOT, env={**os.environ, "PYTHONPATH": str(ROOT)})
+    done = subprocess.run(
+        [sys.executable, "-m", "visualenv.cli", "validate", *map(str, BUNDLED)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert done.returncode == 0 and done.stdout.count(": ok") == len(BUNDLED), done.stdout + done.stderr
     assert done.stderr == ""
 
@@ -106,8 +115,22 @@ def test_validating_the_bundled_specs_prints_nothing_on_stderr() -> None:
 def test_building_half_cheetah_prints_nothing_on_stderr(tmp_path: Path) -> None:
     """The port that used to print MuJoCo's settotalmass deprecation: its build, rendered by Blender, prints no warning."""
     pytest.importorskip("bpy")
-    done = subprocess.run([sys.executable, "-m", "visualenv.cli", "build", str(ROOT / "specs" / "mujoco" / "half_cheetah.yaml"),
-                           "-o", str(tmp_path), "--quiet"], capture_output=True, text=True, timeout=300, cwd=ROOT,
-                          env={**os.environ, "PYTHONPATH": str(ROOT)})
+    done = subprocess.run(
+        [
+            sys.executable,
+            "-m",
+            "visualenv.cli",
+            "build",
+            str(ROOT / "specs" / "mujoco" / "half_cheetah.yaml"),
+            "-o",
+            str(tmp_path),
+            "--quiet",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
+        cwd=ROOT,
+        env={**os.environ, "PYTHONPATH": str(ROOT)},
+    )
     assert done.returncode == 0 and "built VisualHalfCheetah-v0" in done.stdout, done.stdout + done.stderr
     assert done.stderr == "" and "warning" not in done.stdout.lower()

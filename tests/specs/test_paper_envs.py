@@ -115,7 +115,12 @@ def test_goalie_moves_exactly_one_unit_and_ball_angle_is_within_limits():
         _, info = env.reset(seed=seed)
         angles.append(info["state"]["angle"])
     magnitudes = np.degrees(np.abs(angles))
-    assert magnitudes.min() >= 5 and magnitudes.max() <= 25 and (np.array(angles) < 0).any() and (np.array(angles) > 0).any()
+    assert (
+        magnitudes.min() >= 5
+        and magnitudes.max() <= 25
+        and (np.array(angles) < 0).any()
+        and (np.array(angles) > 0).any()
+    )
     env.reset(seed=0)
     assert [env.step(a)[4]["state"]["gx"] for a in (1, 1, 0)] == [1.0, 2.0, 1.0]
 
@@ -138,7 +143,7 @@ def test_lunar_landing_a_soft_landing_in_the_zone_is_a_success_worth_10(seed):
     s = info["state"]
     assert terminated and info["outcome"] == "landed" and info["is_success"]
     assert s["z"] <= 0 and abs(s["x"] - s["tx"]) <= 3 and abs(s["vz"]) <= 2 and 0 < s["fuel"] < 1
-    assert total > 10   # the landing bonus plus the shaping earned on the way down
+    assert total > 10  # the landing bonus plus the shaping earned on the way down
 
 
 def test_lunar_landing_with_the_engine_off_crashes_and_at_half_throttle_climbs_away():
@@ -155,9 +160,10 @@ def test_lunar_landing_a_soft_touchdown_outside_the_zone_is_a_miss():
 
 
 def test_lunar_landing_hovering_burns_the_fuel_and_drifting_leaves_the_area():
-    def hover(s):   # brake to a stop and stay there
+    def hover(s):  # brake to a stop and stay there
         throttle = np.clip((1.62 - 2.0 * s["vz"]) * (1.0 + 0.5 * s["fuel"]) / 5.4, 0, 1)
         return np.array([2 * throttle - 1, np.clip(-2.0 * s["vx"], -1, 1)], np.float32)
+
     info, total, terminated, _ = run("LunarLanding-v0", hover, seed=0)
     assert terminated and info["outcome"] == "out_of_fuel" and info["state"]["fuel"] == 0 and info["state"]["z"] > 20
     info, _, terminated, _ = run("LunarLanding-v0", lambda s: np.array([hover(s)[0], 1.0], np.float32), seed=0)
@@ -167,19 +173,19 @@ def test_lunar_landing_hovering_burns_the_fuel_and_drifting_leaves_the_area():
 def test_lunar_landing_thrust_is_divided_by_a_mass_that_falls_as_fuel_burns():
     env = visualenv.make("LunarLanding-v0", render=False)
     env.reset(seed=0, options={"state": {"x": 0.0, "z": 20.0, "vx": 0.0, "vz": 0.0, "fuel": 1.0, "tx": 0.0}})
-    _, _, _, _, info = env.step(np.array([1.0, 1.0], np.float32))      # full main and side thrust for 0.5 s
+    _, _, _, _, info = env.step(np.array([1.0, 1.0], np.float32))  # full main and side thrust for 0.5 s
     full = info["state"]
     assert full["vz"] == pytest.approx(0.5 * (5.4 / 1.5 - 1.62))
     assert full["vx"] == pytest.approx(0.5 * 1.0 / 1.5)
     assert full["fuel"] == pytest.approx(1 - 0.025 - 0.01)
     env.reset(seed=0, options={"state": {"x": 0.0, "z": 20.0, "vx": 0.0, "vz": 0.0, "fuel": 0.2, "tx": 0.0}})
     _, _, _, _, info = env.step(np.array([1.0, 0.0], np.float32))
-    assert info["state"]["vz"] == pytest.approx(0.5 * (5.4 / 1.1 - 1.62))   # lighter: the same thrust pushes harder
+    assert info["state"]["vz"] == pytest.approx(0.5 * (5.4 / 1.1 - 1.62))  # lighter: the same thrust pushes harder
 
 
 def test_lunar_landing_starts_and_zones_are_random_within_their_ranges():
     env = visualenv.make("LunarLanding-v0", render=False)
-    starts = np.array([env.reset(seed=seed)[0] for seed in range(200)])    # x, z, vx, vz, fuel, tx
+    starts = np.array([env.reset(seed=seed)[0] for seed in range(200)])  # x, z, vx, vz, fuel, tx
     for column, (low, high) in enumerate([(-8, 8), (24, 30), (-1, 1), (-2, -1), (1, 1), (-8, 8)]):
         assert starts[:, column].min() >= low and starts[:, column].max() <= high
     assert starts[:, 5].std() > 3 and starts[:, 0].std() > 3
@@ -192,14 +198,14 @@ def test_lunar_landing_the_camera_rides_the_lander_so_the_zone_grows_and_shifts(
 
     def zone(x: float, z: float) -> tuple[int, float]:
         obs, _ = env.reset(seed=0, options={"state": {"x": x, "z": z, "vx": 0.0, "vz": 0.0, "fuel": 1.0, "tx": 0.0}})
-        bright = obs[..., 0] > 225          # the glowing zone is the brightest thing on the ground
+        bright = obs[..., 0] > 225  # the glowing zone is the brightest thing on the ground
         return int(bright.sum()), float(np.nonzero(bright)[1].mean())
 
     high_area, high_col = zone(0.0, 25.0)
     low_area, low_col = zone(0.0, 8.0)
-    assert low_area > 4 * high_area > 0                    # seen from a third of the height: about 9 times the area
+    assert low_area > 4 * high_area > 0  # seen from a third of the height: about 9 times the area
     assert abs(high_col - 49.5) < 3 and abs(low_col - 49.5) < 3
-    _, left_col = zone(6.0, 25.0)                         # the lander east of the zone sees it to the west
+    _, left_col = zone(6.0, 25.0)  # the lander east of the zone sees it to the west
     assert left_col < high_col - 5
     env.close()
 
@@ -209,8 +215,15 @@ def test_the_worked_example_in_the_docs_is_the_bundled_lunar_landing_spec():
     from pathlib import Path
 
     root = Path(__file__).resolve().parents[2]
-    doc = (root / "docs" / "spec.md").read_text(encoding="utf-8").split("## Worked example")[1].split("```yaml")[1].split("```")[0]
-    def code(line: str) -> str:   # without its comment, spaces collapsed
+    doc = (
+        (root / "docs" / "spec.md")
+        .read_text(encoding="utf-8")
+        .split("## Worked example")[1]
+        .split("```yaml")[1]
+        .split("```")[0]
+    )
+
+    def code(line: str) -> str:  # without its comment, spaces collapsed
         return " ".join(line.split(" #")[0].split())
 
     spec = {code(line) for line in (root / "specs" / "lunar_landing.yaml").read_text(encoding="utf-8").splitlines()}

@@ -27,48 +27,111 @@ def expected_share(workers: int) -> tuple[bool, object]:
 
 def test_bench_prints_every_figure(tmp_path):
     out = tmp_path / "bench.json"
-    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "2", "--soak", "50", "--json", str(out)])
+    result = CliRunner().invoke(
+        main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "2", "--soak", "50", "--json", str(out)]
+    )
     assert result.exit_code == 0, result.output
-    for label in ["env steps/s", "render call (median/p99)", "raw render floor", "with objects moved", "naive PNG round trip", "framework overhead",
-                  "outside the render call", "speed vs floor / naive", "resident memory", "2 parallel envs", "step in a worker", "per worker",
-                  "soak: 50 steps"]:
+    for label in [
+        "env steps/s",
+        "render call (median/p99)",
+        "raw render floor",
+        "with objects moved",
+        "naive PNG round trip",
+        "framework overhead",
+        "outside the render call",
+        "speed vs floor / naive",
+        "resident memory",
+        "2 parallel envs",
+        "step in a worker",
+        "per worker",
+        "soak: 50 steps",
+    ]:
         assert label in result.output, label
-    assert result.output.count("render call (median/p99)") == 2 and result.output.count("outside the render call") == 2  # one env, then the workers
+    assert (
+        result.output.count("render call (median/p99)") == 2 and result.output.count("outside the render call") == 2
+    )  # one env, then the workers
     figures = json.loads(out.read_text())[0]
-    assert figures["steps_per_s"] > 0 and figures["floor_ms_median"] > 0 and figures["moved_floor_ms_median"] > 0 and 0 <= figures["own_overhead_share"] < 1
+    assert (
+        figures["steps_per_s"] > 0
+        and figures["floor_ms_median"] > 0
+        and figures["moved_floor_ms_median"] > 0
+        and 0 <= figures["own_overhead_share"] < 1
+    )
     assert 0 < figures["outside_ms_median"] < figures["step_ms_median"]
     parallel = figures["parallel"]
     pinned, cores_each = expected_share(2)
-    assert parallel["workers"] == 2 and parallel["pinned"] is pinned and parallel["cores_each"] == cores_each and parallel["steps_per_s"] > 0
+    assert (
+        parallel["workers"] == 2
+        and parallel["pinned"] is pinned
+        and parallel["cores_each"] == cores_each
+        and parallel["steps_per_s"] > 0
+    )
     assert 0 < parallel["render_ms_median"] and 0 < parallel["outside_share"] < 1
     # each worker holds a Blender of its own (one bpy process alone is about 300 MB), and the total is theirs
     each = parallel["rss_each_mb"]
-    assert len(each) == 2 and min(each) > 100 and parallel["rss_total_mb"] == sum(each) and parallel["rss_final_mb"] == max(each)
+    assert (
+        len(each) == 2
+        and min(each) > 100
+        and parallel["rss_total_mb"] == sum(each)
+        and parallel["rss_final_mb"] == max(each)
+    )
 
 
 def test_bench_measures_scaling_against_one_confined_worker(tmp_path):
     out = tmp_path / "bench.json"
-    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "1,2", "--json", str(out)])
+    result = CliRunner().invoke(
+        main, ["bench", "VisualCartPole-v0", "--steps", "30", "--workers", "1,2", "--json", str(out)]
+    )
     assert result.exit_code == 0, result.output
     assert "scaling: one worker confined to one core" in result.output and "vs n x one confined" in result.output
     one, *rows = json.loads(out.read_text())[0]["scaling"]
-    assert one["workers"] == 1 and one["cores_each"] == 1 and one["threads"] == 1 and one["pinned"] is True and one["steps_per_s"] > 0
+    assert (
+        one["workers"] == 1
+        and one["cores_each"] == 1
+        and one["threads"] == 1
+        and one["pinned"] is True
+        and one["steps_per_s"] > 0
+    )
     assert [r["workers"] for r in rows] == [1, 2] and all(r["vs_confined"] > 0 for r in rows)
-    pinned, cores_each = expected_share(2)  # two workers: half the cores each (one on two cores), none confined on one core
+    pinned, cores_each = expected_share(
+        2
+    )  # two workers: half the cores each (one on two cores), none confined on one core
     assert rows[1]["cores_each"] == cores_each and rows[1]["pinned"] is pinned
-    assert rows[0]["pinned"] is False and rows[0]["cores_each"] == "all"  # one worker of the scaling rows is never confined
+    assert (
+        rows[0]["pinned"] is False and rows[0]["cores_each"] == "all"
+    )  # one worker of the scaling rows is never confined
 
 
 def test_bench_compares_batches_with_the_per_process_vector_env(tmp_path):
     out = tmp_path / "bench.json"
-    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--steps", "20", "--batched", "1,3", "--autoreset", "same_step",
-                                       "--device", "cpu", "--json", str(out)])
+    result = CliRunner().invoke(
+        main,
+        [
+            "bench",
+            "VisualCartPole-v0",
+            "--steps",
+            "20",
+            "--batched",
+            "1,3",
+            "--autoreset",
+            "same_step",
+            "--device",
+            "cpu",
+            "--json",
+            str(out),
+        ],
+    )
     assert result.exit_code == 0, result.output
-    assert "batched (one process, autoreset same_step)" in result.output and "per-process vector env, 2 workers" in result.output
+    assert (
+        "batched (one process, autoreset same_step)" in result.output
+        and "per-process vector env, 2 workers" in result.output
+    )
     (record,) = json.loads(out.read_text())
     assert [b["envs"] for b in record["batched"]] == [1, 3]
     assert all(b["autoreset"] == "same_step" and b["calls_per_step"] >= 1 for b in record["batched"]), record
-    assert all(b["steps_per_s"] > 0 and b["render_ms"] > 0 and b["rss_mb"] > 0 and b["alone_ms"] > 0 for b in record["batched"]), record
+    assert all(
+        b["steps_per_s"] > 0 and b["render_ms"] > 0 and b["rss_mb"] > 0 and b["alone_ms"] > 0 for b in record["batched"]
+    ), record
     assert record["per_process"]["workers"] == 2 and record["per_process"]["steps_per_s"] > 0
     bad = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--batched", "0,4"])
     assert bad.exit_code == 2 and "expected batch sizes or a list such as 1,2,4,8, got '0,4'" in bad.output
@@ -76,19 +139,30 @@ def test_bench_compares_batches_with_the_per_process_vector_env(tmp_path):
 
 def test_bad_arguments_are_refused_before_anything_runs(tmp_path):
     (tmp_path / "afile").write_text("")
-    result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--json", str(tmp_path / "afile" / "figures.json")])
+    result = CliRunner().invoke(
+        main, ["bench", "VisualCartPole-v0", "--json", str(tmp_path / "afile" / "figures.json")]
+    )
     assert result.exit_code == 2 and "cannot write" in result.output and "env steps/s" not in result.output
     for args in (["build", "Goalie-v0", "--out"], ["preview", "Goalie-v0", "--out"], ["train", "Goalie-v0", "--out"]):
         result = CliRunner().invoke(main, [*args, str(tmp_path / "afile" / "out")])
-        assert result.exit_code == 1 and "cannot create the folder" in result.output and "Not a directory" in result.output, args
+        assert (
+            result.exit_code == 1 and "cannot create the folder" in result.output and "Not a directory" in result.output
+        ), args
     result = CliRunner().invoke(main, ["play", "Goalie-v0", "--record", str(tmp_path / "afile" / "play.gif")])
     assert result.exit_code == 2 and "cannot create the folder" in result.output
     for workers in ("-1", "1,x", "0,2"):
         result = CliRunner().invoke(main, ["bench", "VisualCartPole-v0", "--workers", workers])
-        assert result.exit_code == 2 and "expected a number of workers or a list such as 1,2,4,8" in result.output, workers
-    for args in (["bench", "VisualCartPole-v0", "--steps", "0"],
-                 ["play", "Goalie-v0", "--episodes", "0"], ["train", "Goalie-v0", "--envs", "0"], ["preview", "Goalie-v0", "--steps", "0"],
-                 ["build", "Goalie-v0", "--seed", "-1"], ["play", "Goalie-v0", "--seed", "-1"]):
+        assert result.exit_code == 2 and "expected a number of workers or a list such as 1,2,4,8" in result.output, (
+            workers
+        )
+    for args in (
+        ["bench", "VisualCartPole-v0", "--steps", "0"],
+        ["play", "Goalie-v0", "--episodes", "0"],
+        ["train", "Goalie-v0", "--envs", "0"],
+        ["preview", "Goalie-v0", "--steps", "0"],
+        ["build", "Goalie-v0", "--seed", "-1"],
+        ["play", "Goalie-v0", "--seed", "-1"],
+    ):
         result = CliRunner().invoke(main, args)
         assert result.exit_code == 2 and "is not in the range" in result.output, args
 
@@ -102,7 +176,9 @@ def test_step_times_pairs_each_step_with_its_render_calls():
         for _ in range(5):
             env.step(0)
         timings = env.timings()
-        assert len(timings["step"]) == len(timings["render"]) == len(timings["outside"]) == 5  # one observation render per step
+        assert (
+            len(timings["step"]) == len(timings["render"]) == len(timings["outside"]) == 5
+        )  # one observation render per step
         # each step's own render call was timed inside it: a step outlasts its render (actions, dynamics, readback)
         assert all(0 < render < step for step, render in zip(timings["step"], timings["render"]))
         assert renderer.profile is None  # timing stopped: the renderer records nothing more

@@ -58,17 +58,58 @@ def test_random_shift_moves_each_image_by_at_most_the_shift():
 def teacher(tmp_path_factory):
     """A state-only Goalie policy file: a few hundred PPO steps make a teacher good enough to imitate."""
     out = tmp_path_factory.mktemp("teacher")
-    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--state-only", "--steps", "256", "--envs", "1", "--eval-every", "256",
-                                       "--eval-episodes", "1", "--final-episodes", "1", "--set", "n_steps=128", "--set", "batch_size=64",
-                                       "--out", str(out), "--no-progress"])
+    result = CliRunner().invoke(
+        main,
+        [
+            "train",
+            "Goalie-v0",
+            "--state-only",
+            "--steps",
+            "256",
+            "--envs",
+            "1",
+            "--eval-every",
+            "256",
+            "--eval-episodes",
+            "1",
+            "--final-episodes",
+            "1",
+            "--set",
+            "n_steps=128",
+            "--set",
+            "batch_size=64",
+            "--out",
+            str(out),
+            "--no-progress",
+        ],
+    )
     assert result.exit_code == 0, result.output
     return next((out / "Goalie-v0").iterdir()) / "best_model.safetensors"
 
 
 @pytest.mark.slow
 def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
-    result = CliRunner().invoke(main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--rounds", "2", "--episodes", "2",
-                                       "--eval-episodes", "1", "--final-episodes", "2", "--frame-stack", "2", "--out", str(tmp_path)])
+    result = CliRunner().invoke(
+        main,
+        [
+            "distill",
+            "Goalie-v0",
+            "--teacher",
+            str(teacher),
+            "--rounds",
+            "2",
+            "--episodes",
+            "2",
+            "--eval-episodes",
+            "1",
+            "--final-episodes",
+            "2",
+            "--frame-stack",
+            "2",
+            "--out",
+            str(tmp_path),
+        ],
+    )
     assert result.exit_code == 0, result.output
     run = next((tmp_path / "Goalie-v0").iterdir())
     with (run / "rounds.csv").open() as f:
@@ -81,24 +122,70 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
     meta = json.loads((run / "best_model.json").read_text())
     assert meta["algorithm"] == "dagger" and meta["frame_stack"] == 2 and meta["observation_space"]["shape"][0] == 2
     results = json.loads((run / "results.json").read_text())
-    assert results["episodes"] == 2 and results["frames"] == int(rounds[1]["frames"]) and results["model"] == "best_model.safetensors"
+    assert (
+        results["episodes"] == 2
+        and results["frames"] == int(rounds[1]["frames"])
+        and results["model"] == "best_model.safetensors"
+    )
     replay = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(run / "best_model.safetensors")])
     assert replay.exit_code == 0 and "reproduces its run's results.json" in replay.output, replay.output
     # a second segment starts from the first's student, which acts from its first round on
-    again = CliRunner().invoke(main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--student", str(run / "best_model.safetensors"),
-                                      "--rounds", "1", "--episodes", "1", "--mixing", "0.5", "--eval-episodes", "1", "--final-episodes", "1",
-                                      "--frame-stack", "2", "--out", str(tmp_path / "again")])
+    again = CliRunner().invoke(
+        main,
+        [
+            "distill",
+            "Goalie-v0",
+            "--teacher",
+            str(teacher),
+            "--student",
+            str(run / "best_model.safetensors"),
+            "--rounds",
+            "1",
+            "--episodes",
+            "1",
+            "--mixing",
+            "0.5",
+            "--eval-episodes",
+            "1",
+            "--final-episodes",
+            "1",
+            "--frame-stack",
+            "2",
+            "--out",
+            str(tmp_path / "again"),
+        ],
+    )
     assert again.exit_code == 0 and "(the teacher's share 50%)" in again.output, again.output
     second = next((tmp_path / "again" / "Goalie-v0").iterdir())
-    assert json.loads((second / "config.json").read_text())["student"]["sha256"] == hashlib.sha256((run / "best_model.safetensors").read_bytes()).hexdigest()
-    refused = CliRunner().invoke(main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--student", str(run / "best_model.safetensors"),
-                                        "--out", str(tmp_path / "refused")])  # frame stack 3 by default: the student sees 2
-    assert refused.exit_code != 0 and "the student to start from sees" in refused.output and "Traceback" not in refused.output, refused.output
+    assert (
+        json.loads((second / "config.json").read_text())["student"]["sha256"]
+        == hashlib.sha256((run / "best_model.safetensors").read_bytes()).hexdigest()
+    )
+    refused = CliRunner().invoke(
+        main,
+        [
+            "distill",
+            "Goalie-v0",
+            "--teacher",
+            str(teacher),
+            "--student",
+            str(run / "best_model.safetensors"),
+            "--out",
+            str(tmp_path / "refused"),
+        ],
+    )  # frame stack 3 by default: the student sees 2
+    assert (
+        refused.exit_code != 0
+        and "the student to start from sees" in refused.output
+        and "Traceback" not in refused.output
+    ), refused.output
     assert not (tmp_path / "refused" / "Goalie-v0").exists()
 
 
 def test_a_teacher_of_another_env_is_refused_before_anything_runs(teacher, tmp_path):
     result = CliRunner().invoke(main, ["distill", "Hover2D-v0", "--teacher", str(teacher), "--out", str(tmp_path)])
     assert result.exit_code != 0 and "Traceback" not in result.output
-    assert "the teacher acts on observations of shape (4,)" in result.output and "have shape (6,)" in result.output, result.output
+    assert "the teacher acts on observations of shape (4,)" in result.output and "have shape (6,)" in result.output, (
+        result.output
+    )
     assert not (tmp_path / "Hover2D-v0").exists()

@@ -8,8 +8,18 @@ import pytest
 
 from hypothesis import given, strategies as st
 
-from visualenv.train.evaluation import (FRESH_SEED, bootstrap_mean_interval, differences, final_seed, replays_prefix,
-                                        recorded_evaluation, seed_purpose, selection_record, selection_seed, wilson_interval)
+from visualenv.train.evaluation import (
+    FRESH_SEED,
+    bootstrap_mean_interval,
+    differences,
+    final_seed,
+    replays_prefix,
+    recorded_evaluation,
+    seed_purpose,
+    selection_record,
+    selection_seed,
+    wilson_interval,
+)
 from visualenv.train.run_folder import MAX_TRAIN_SEED, legacy_eval_seed
 
 pytestmark = pytest.mark.blender
@@ -33,12 +43,25 @@ def test_bootstrap_interval_is_reproducible_and_brackets_the_mean():
 def _run_folder(path, *, results, evaluations=(), first_logged=None, per_iteration=512, eval_episodes=20):
     path.mkdir()
     # an SB3 run of the first format (before pin, batched, workers and render_device)
-    config = {"spec": "Goalie-v0", "algo": "ppo", "steps": 100_000, "envs": 4, "frame_stack": 4, "eval_every": 10_000,
-              "eval_episodes": eval_episodes, "final_eval_episodes": 50, "seed": 3, "render": True,
-              "hyperparams": {"n_steps": 128}, "progress": False}
+    config = {
+        "spec": "Goalie-v0",
+        "algo": "ppo",
+        "steps": 100_000,
+        "envs": 4,
+        "frame_stack": 4,
+        "eval_every": 10_000,
+        "eval_episodes": eval_episodes,
+        "final_eval_episodes": 50,
+        "seed": 3,
+        "render": True,
+        "hyperparams": {"n_steps": 128},
+        "progress": False,
+    }
     (path / "config.json").write_text(json.dumps({"command": "visualenv train Goalie-v0", "config": config}))
     (path / "results.json").write_text(json.dumps(results))
-    np.savez(path / "evaluations.npz", timesteps=np.array(evaluations), results=np.zeros((len(evaluations), eval_episodes)))
+    np.savez(
+        path / "evaluations.npz", timesteps=np.array(evaluations), results=np.zeros((len(evaluations), eval_episodes))
+    )
     if first_logged is not None:
         (path / "logs").mkdir()
         with (path / "logs" / "progress.csv").open("w", newline="") as f:
@@ -55,17 +78,31 @@ OLD_RESULTS = {"episodes": 50, "mean_reward": 6.8, "std_reward": 7.3, "mean_leng
 def test_a_run_that_records_its_eval_seed_is_replayed_from_it(tmp_path):
     run = _run_folder(tmp_path / "run", results={**OLD_RESULTS, "eval_seed": 10_003}, evaluations=[10_000, 20_000])
     recorded = recorded_evaluation(run)
-    assert (recorded.seed, recorded.episodes, recorded.resets_before, recorded.frame_stack, recorded.algo) == (10_003, 50, 0, 4, "ppo")
+    assert (recorded.seed, recorded.episodes, recorded.resets_before, recorded.frame_stack, recorded.algo) == (
+        10_003,
+        50,
+        0,
+        4,
+        "ppo",
+    )
 
 
 def test_an_older_run_is_replayed_after_the_resets_of_its_periodic_evaluations(tmp_path):
     # never resumed: the eval env was reset once at the start and 20 + 1 times by each of the 3 periodic evaluations
     run = _run_folder(tmp_path / "fresh", results=OLD_RESULTS, evaluations=[10_000, 20_000, 30_000], first_logged=512)
     recorded = recorded_evaluation(run)
-    assert recorded.seed == legacy_eval_seed(3) == 10_003 and recorded.resets_before == 1 + 3 * 21 and recorded.note is None
+    assert (
+        recorded.seed == legacy_eval_seed(3) == 10_003
+        and recorded.resets_before == 1 + 3 * 21
+        and recorded.note is None
+    )
     # resumed at step 36356 (a stop between two evaluations): only the evaluations after it used the final evaluation's env
-    run = _run_folder(tmp_path / "resumed", results=OLD_RESULTS, evaluations=[10_000, 20_000, 30_000, 46_356, 56_356, 66_356],
-                      first_logged=36_868)
+    run = _run_folder(
+        tmp_path / "resumed",
+        results=OLD_RESULTS,
+        evaluations=[10_000, 20_000, 30_000, 46_356, 56_356, 66_356],
+        first_logged=36_868,
+    )
     assert recorded_evaluation(run).resets_before == 1 + 3 * 21
 
 
@@ -87,26 +124,50 @@ def test_training_selection_and_final_seeds_never_meet(run, other, env):
     trained, picked = run + env, selection_seed(run)
     reported = {final_seed(other), FRESH_SEED}
     assert trained not in reported and picked not in reported and trained != selection_seed(other)
-    assert (seed_purpose(trained), seed_purpose(picked), seed_purpose(final_seed(other)), seed_purpose(FRESH_SEED)) == \
-        ("training", "selection", "final", "fresh")
+    assert (seed_purpose(trained), seed_purpose(picked), seed_purpose(final_seed(other)), seed_purpose(FRESH_SEED)) == (
+        "training",
+        "selection",
+        "final",
+        "fresh",
+    )
 
 
 def test_the_selection_record_is_the_evaluation_that_picked_the_best_model(tmp_path):
-    np.savez(tmp_path / "evaluations.npz", timesteps=np.array([10, 20, 30]), results=np.array([[1.0, 3.0], [5.0, 5.0], [5.0, 5.0]]),
-             successes=np.array([[0, 1], [1, 0], [1, 1]]))
+    np.savez(
+        tmp_path / "evaluations.npz",
+        timesteps=np.array([10, 20, 30]),
+        results=np.array([[1.0, 3.0], [5.0, 5.0], [5.0, 5.0]]),
+        successes=np.array([[0, 1], [1, 0], [1, 1]]),
+    )
     record = selection_record(tmp_path, selection_seed(7))
-    assert record == {"eval_seed": selection_seed(7), "evaluations": 3, "best_at_step": 20, "episodes": 2, "mean_reward": 5.0, "success_rate": 0.5}
+    assert record == {
+        "eval_seed": selection_seed(7),
+        "evaluations": 3,
+        "best_at_step": 20,
+        "episodes": 2,
+        "mean_reward": 5.0,
+        "success_rate": 0.5,
+    }
     assert selection_record(tmp_path / "missing", 0) is None
 
 
 def test_a_shorter_evaluation_is_compared_episode_by_episode_with_the_recorded_ones():
-    recorded = {"episodes": 4, "mean_reward": 1.5, "per_episode": {"returns": [1.0, 2.0, 1.0, 2.0], "lengths": [3, 4, 3, 4],
-                                                                  "successes": [True, False, True, False]}}
+    recorded = {
+        "episodes": 4,
+        "mean_reward": 1.5,
+        "per_episode": {
+            "returns": [1.0, 2.0, 1.0, 2.0],
+            "lengths": [3, 4, 3, 4],
+            "successes": [True, False, True, False],
+        },
+    }
     same = {"episodes": 2, "per_episode": {"returns": [1.0, 2.0], "lengths": [3, 4], "successes": [True, False]}}
     other = {"episodes": 2, "per_episode": {"returns": [1.0, 3.0], "lengths": [3, 4], "successes": [True, False]}}
     assert replays_prefix(same, recorded) and differences(same, recorded) == []
     assert differences(other, recorded) == ["episode 1: returns 3.0 (results.json: 2.0)"]
-    assert not replays_prefix(same, {"episodes": 4, "mean_reward": 1.5})  # a results.json without its episodes: no prefix to check
+    assert not replays_prefix(
+        same, {"episodes": 4, "mean_reward": 1.5}
+    )  # a results.json without its episodes: no prefix to check
 
 
 def test_eval_of_random_actions_is_the_seeded_baseline(tmp_path):
@@ -117,7 +178,10 @@ def test_eval_of_random_actions_is_the_seeded_baseline(tmp_path):
 
     def run(seed: int) -> dict:
         out = tmp_path / f"random-{seed}.json"
-        result = CliRunner().invoke(main, ["eval", "LunarLanding-v0", "--model", "random", "--episodes", "30", "--seed", str(seed), "-o", str(out)])
+        result = CliRunner().invoke(
+            main,
+            ["eval", "LunarLanding-v0", "--model", "random", "--episodes", "30", "--seed", str(seed), "-o", str(out)],
+        )
         assert result.exit_code == 0, result.output
         assert "uniform random actions" in result.output
         return json.loads(out.read_text())
@@ -125,7 +189,7 @@ def test_eval_of_random_actions_is_the_seeded_baseline(tmp_path):
     first, again, other = run(7), run(7), run(8)
     assert first["per_episode"] == again["per_episode"] and first["eval_seed"] == 7
     assert first["per_episode"] != other["per_episode"]
-    assert first["success_rate"] < 0.2 and 10 < first["mean_length"] < 40     # a random lander mostly crashes
+    assert first["success_rate"] < 0.2 and 10 < first["mean_length"] < 40  # a random lander mostly crashes
 
 
 def test_a_policy_acts_on_one_torch_thread_without_onednn_and_torch_is_restored():
@@ -181,13 +245,17 @@ def pinned_forward(extra: dict, route: str = "service") -> str:
     import sys
 
     env = {k: v for k, v in os.environ.items() if k not in ("ONEDNN_MAX_CPU_ISA", "ATEN_CPU_CAPABILITY", "MKL_CBWR")}
-    run = subprocess.run([sys.executable, "-c", PINNED_FORWARD, route], env={**env, **extra}, capture_output=True, text=True, timeout=120)
+    run = subprocess.run(
+        [sys.executable, "-c", PINNED_FORWARD, route], env={**env, **extra}, capture_output=True, text=True, timeout=120
+    )
     assert run.returncode == 0, run.stderr
     return run.stdout.strip()
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("dispatch", [{"ONEDNN_MAX_CPU_ISA": "SSE41"}, {"ATEN_CPU_CAPABILITY": "default"}, {"ONEDNN_MAX_CPU_ISA": "AVX2"}])
+@pytest.mark.parametrize(
+    "dispatch", [{"ONEDNN_MAX_CPU_ISA": "SSE41"}, {"ATEN_CPU_CAPABILITY": "default"}, {"ONEDNN_MAX_CPU_ISA": "AVX2"}]
+)
 def test_pinned_inference_gives_the_same_bits_whatever_kernels_the_cpu_offers(dispatch):
     """The vector code oneDNN and ATen pick (AVX-512, AVX2, SSE) must not reach a pinned policy's actions: the same
     CNN forward pass, run with each dispatch forced, gives the same bits as with none forced."""
@@ -212,17 +280,28 @@ def test_a_replay_on_another_machine_is_compared_within_the_stated_tolerance():
     lengths within LENGTH_TOLERANCE steps and returns within RETURN_TOLERANCE."""
     from visualenv.train.evaluation import LENGTH_TOLERANCE, RETURN_TOLERANCE
 
-    recorded = {"episodes": 3, "mean_reward": 12.0, "per_episode": {"returns": [14.3436, 9.0, 12.66], "lengths": [34, 41, 50],
-                                                                    "successes": [True, False, True]}}
-    drift = {"episodes": 2, "per_episode": {"returns": [14.2855, 9.0], "lengths": [34 + LENGTH_TOLERANCE, 41], "successes": [True, False]}}
+    recorded = {
+        "episodes": 3,
+        "mean_reward": 12.0,
+        "per_episode": {"returns": [14.3436, 9.0, 12.66], "lengths": [34, 41, 50], "successes": [True, False, True]},
+    }
+    drift = {
+        "episodes": 2,
+        "per_episode": {"returns": [14.2855, 9.0], "lengths": [34 + LENGTH_TOLERANCE, 41], "successes": [True, False]},
+    }
     assert differences(drift, recorded, tolerant=True) == []
     assert len(differences(drift, recorded)) == 2  # exact: both differences are reported
     assert differences(dict(recorded, episodes=3), recorded, tolerant=True) == []
     assert 15.0 > 14.3436 * (1 + RETURN_TOLERANCE)
-    far = {"episodes": 2, "per_episode": {"returns": [15.0, 9.0], "lengths": [34, 41 + LENGTH_TOLERANCE + 1],
-                                           "successes": [True, True]}}
-    assert differences(far, recorded, tolerant=True) == ["episode 0: returns 15.0 (results.json: 14.3436)",
-                                                         "episode 1: lengths 44 (results.json: 41)", "episode 1: successes True (results.json: False)"]
+    far = {
+        "episodes": 2,
+        "per_episode": {"returns": [15.0, 9.0], "lengths": [34, 41 + LENGTH_TOLERANCE + 1], "successes": [True, True]},
+    }
+    assert differences(far, recorded, tolerant=True) == [
+        "episode 0: returns 15.0 (results.json: 14.3436)",
+        "episode 1: lengths 44 (results.json: 41)",
+        "episode 1: successes True (results.json: False)",
+    ]
 
 
 def test_machines_that_differ_in_what_decides_the_last_digits_are_named():
@@ -230,18 +309,26 @@ def test_machines_that_differ_in_what_decides_the_last_digits_are_named():
     from visualenv.versions import versions
 
     here = machine_record(True)
-    other = "AVX2" if here["cpu_isa"] == "AVX512" else "AVX512"  # whichever ISA this CPU is not: the test holds on either
+    other = (
+        "AVX2" if here["cpu_isa"] == "AVX512" else "AVX512"
+    )  # whichever ISA this CPU is not: the test holds on either
     assert unlike(here, here) == []
     assert unlike(dict(here, cpu_isa=other), here) == [f"cpu_isa {other} there, {here['cpu_isa']} here"]
     assert unlike(dict(here, cpu="another name"), here) == []  # the model name alone decides nothing
     # two CPUs of one ISA with other vector extensions (Cascade Lake and Emerald Rapids) render in other last bits
-    newer = dict(here, cpu_features=here["cpu_features"] + " avx10_fake amx_fake")  # flags no CPU has: the test holds on any
+    newer = dict(
+        here, cpu_features=here["cpu_features"] + " avx10_fake amx_fake"
+    )  # flags no CPU has: the test holds on any
     assert unlike(newer, here) == ["cpu_features amx_fake avx10_fake there only, - here only"]
-    assert "cpu_features" in here and all(f.startswith(("sse", "ssse", "avx", "fma", "f16c", "amx", "vaes", "vpclmulqdq", "gfni", "sha_ni", "bmi", "adx"))
-                                          for f in here["cpu_features"].split())
+    assert "cpu_features" in here and all(
+        f.startswith(("sse", "ssse", "avx", "fma", "f16c", "amx", "vaes", "vpclmulqdq", "gfni", "sha_ni", "bmi", "adx"))
+        for f in here["cpu_features"].split()
+    )
     assert here["mujoco"] == versions().get("mujoco")  # physics steps differ between MuJoCo versions
     assert unlike(dict(here, mujoco="2.3.7"), here) == [f"mujoco 2.3.7 there, {here['mujoco']} here"]
-    assert unlike(None, dict(here, cpu_isa="AVX2")) == ["pinned False there, True here"]  # records before machines were kept
+    assert unlike(None, dict(here, cpu_isa="AVX2")) == [
+        "pinned False there, True here"
+    ]  # records before machines were kept
 
 
 def test_episodes_that_cannot_replay_are_compared_as_a_sample():
@@ -249,9 +336,20 @@ def test_episodes_that_cannot_replay_are_compared_as_a_sample():
     agent that lost its skill does not."""
     from visualenv.train.evaluation import sample_differences
 
-    recorded = {"per_episode": {"returns": [1000.0] * 54 + [900.0] * 46, "lengths": [1000] * 54 + [900] * 46,
-                                "successes": [True] * 54 + [False] * 46}}
-    like = {"per_episode": {"returns": [900.0, 1000.0, 900.0], "lengths": [900, 1000, 900], "successes": [False, True, False]}}
+    recorded = {
+        "per_episode": {
+            "returns": [1000.0] * 54 + [900.0] * 46,
+            "lengths": [1000] * 54 + [900] * 46,
+            "successes": [True] * 54 + [False] * 46,
+        }
+    }
+    like = {
+        "per_episode": {
+            "returns": [900.0, 1000.0, 900.0],
+            "lengths": [900, 1000, 900],
+            "successes": [False, True, False],
+        }
+    }
     assert sample_differences(like, recorded) == []
     lost = {"per_episode": {"returns": [50.0, 60.0, 70.0], "lengths": [51, 61, 71], "successes": [False] * 3}}
     assert [d.split(" of ")[0] for d in sample_differences(lost, recorded)] == ["returns", "lengths"]

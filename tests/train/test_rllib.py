@@ -31,7 +31,12 @@ def tiny_goalie(tmp_path: Path, size: int = 24) -> str:
     """Goalie-v0 at a few pixels: renders in a millisecond or two (the runner tests sample many steps)."""
     from visualenv.env.registration import resolve
 
-    text = resolve("Goalie-v0").read_text().replace("resolution: [100, 100]", f"resolution: [{size}, {size}]").replace("id: Goalie-v0", "id: TinyGoalie-v0")
+    text = (
+        resolve("Goalie-v0")
+        .read_text()
+        .replace("resolution: [100, 100]", f"resolution: [{size}, {size}]")
+        .replace("id: Goalie-v0", "id: TinyGoalie-v0")
+    )
     assert f"[{size}, {size}]" in text
     path = tmp_path / "tiny_goalie.yaml"
     path.write_text(text)
@@ -47,7 +52,10 @@ def test_conv_filters_are_sized_from_the_observation(size):
 
     encoder = CNNEncoderConfig(input_dims=(*size, 4), cnn_filter_specifiers=conv_filters(*size))
     assert encoder.output_dims == (FEATURES,)
-    if size == (100, 100):  # RLlib's own defaults stop at 84x84: sizing the filters is what lets the paper's 100x100 through
+    if size == (
+        100,
+        100,
+    ):  # RLlib's own defaults stop at 84x84: sizing the filters is what lets the paper's 100x100 through
         from ray.rllib.models.utils import get_filter_config
 
         with pytest.raises(ValueError, match="No default CNN configuration"):
@@ -64,9 +72,15 @@ def test_the_image_model_is_sb3s_nature_cnn_initialised_as_sb3_does():
     from visualenv.train.rllib_setup import model_config
 
     space = spaces.Box(0.0, 1.0, (100, 100, 4), np.float32)
-    module = RLModuleSpec(module_class=DefaultPPOTorchRLModule, observation_space=space, action_space=spaces.Discrete(2),
-                          model_config=model_config(space)).build()
-    assert sum(p.numel() for p in module.parameters()) == 2_734_243  # SB3's CnnPolicy on (4, 100, 100) with 2 actions: the same count
+    module = RLModuleSpec(
+        module_class=DefaultPPOTorchRLModule,
+        observation_space=space,
+        action_space=spaces.Discrete(2),
+        model_config=model_config(space),
+    ).build()
+    assert (
+        sum(p.numel() for p in module.parameters()) == 2_734_243
+    )  # SB3's CnnPolicy on (4, 100, 100) with 2 actions: the same count
     convolutions = [m for m in module.modules() if isinstance(m, torch.nn.Conv2d)]
     assert len(convolutions) == 4
     for conv in convolutions:
@@ -82,7 +96,8 @@ def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
     from visualenv.train.rllib_setup import SB3_PPO_DEFAULTS, ppo_config
 
     assert yaml.safe_load((REPO / "examples/hyperparams/goalie-rllib.yaml").read_text()) == {
-        k: v for k, v in SB3_PPO_DEFAULTS.items() if k != "grad_clip_by"}
+        k: v for k, v in SB3_PPO_DEFAULTS.items() if k != "grad_clip_by"
+    }
     config = ppo_config(tiny_goalie(tmp_path))
     assert config.vf_clip_param == float("inf") and config.use_kl_loss is False and config.grad_clip == 0.5
     assert ppo_config(tiny_goalie(tmp_path), hyperparams={"use_kl_loss": True}).use_kl_loss is True
@@ -100,7 +115,9 @@ def test_runner_env_stacks_four_scaled_frames():
         assert not obs[..., :3].any()  # reset zeroes the older slots, as SB3's VecFrameStack does
         for _ in range(3):
             obs, *_ = env.step(1)
-        assert not np.array_equal(obs[..., 0], obs[..., 3])  # the goalie moved: the newest frame differs from the oldest
+        assert not np.array_equal(
+            obs[..., 0], obs[..., 3]
+        )  # the goalie moved: the newest frame differs from the oldest
     finally:
         env.close()
 
@@ -109,22 +126,36 @@ def test_observations_the_encoder_cannot_take_are_refused_before_anything_starts
     from visualenv.env.registration import resolve
 
     spec = tmp_path / "two_cameras.yaml"
-    spec.write_text(resolve("Goalie-v0").read_text().replace(
-        "  camera: Camera\n  resolution: [100, 100]\n  color: grayscale\n",
-        "  cameras:\n    front: {camera: Camera, resolution: [64, 64]}\n    back: {camera: Camera, resolution: [64, 64]}\n"))
+    spec.write_text(
+        resolve("Goalie-v0")
+        .read_text()
+        .replace(
+            "  camera: Camera\n  resolution: [100, 100]\n  color: grayscale\n",
+            "  cameras:\n    front: {camera: Camera, resolution: [64, 64]}\n    back: {camera: Camera, resolution: [64, 64]}\n",
+        )
+    )
     result = CliRunner().invoke(main, ["train", str(spec), "--backend", "rllib", "--out", str(tmp_path / "runs")])
-    assert result.exit_code == 1 and "RLlib's default encoder has no Dict support" in result.output and "Traceback" not in result.output
+    assert (
+        result.exit_code == 1
+        and "RLlib's default encoder has no Dict support" in result.output
+        and "Traceback" not in result.output
+    )
     assert not (tmp_path / "runs").exists()
 
 
-@pytest.mark.parametrize("args, message", [
-    (["--address", "127.0.0.1:1"], "--address 127.0.0.1:1: cannot reach a Ray head there"),
-    (["--address", "nohost"], "expected HOST:PORT of a Ray head"),
-    (["--set", "learning_rate=1e-4"], "RLlib's PPO has no hyperparameter 'learning_rate'"),
-    (["--envs", "4"], "--envs: not for --backend rllib"),
-])
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--address", "127.0.0.1:1"], "--address 127.0.0.1:1: cannot reach a Ray head there"),
+        (["--address", "nohost"], "expected HOST:PORT of a Ray head"),
+        (["--set", "learning_rate=1e-4"], "RLlib's PPO has no hyperparameter 'learning_rate'"),
+        (["--envs", "4"], "--envs: not for --backend rllib"),
+    ],
+)
 def test_bad_rllib_runs_are_refused_with_one_line(tmp_path, args, message):
-    result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--out", str(tmp_path / "runs"), *args])
+    result = CliRunner().invoke(
+        main, ["train", "Goalie-v0", "--backend", "rllib", "--out", str(tmp_path / "runs"), *args]
+    )
     assert result.exit_code in (1, 2) and message in result.output and "Traceback" not in result.output, result.output
     assert not (tmp_path / "runs").exists()
 
@@ -136,20 +167,35 @@ def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
 
     class OtherModel:
         def restore_from_path(self, path: str) -> None:
-            raise RuntimeError("Error(s) in loading state_dict for DefaultPPOTorchRLModule:\n\tsize mismatch for pi.net.mlp.0.weight")
+            raise RuntimeError(
+                "Error(s) in loading state_dict for DefaultPPOTorchRLModule:\n\tsize mismatch for pi.net.mlp.0.weight"
+            )
 
     latest = tmp_path / "checkpoints" / "latest"
     latest.mkdir(parents=True)
     (latest / "visualenv.json").write_text('{"steps": 1024}')
-    with pytest.raises(ConfigError, match=r"cannot resume .*does not fit this run's model.*size mismatch for pi.net.mlp.0.weight"):
+    with pytest.raises(
+        ConfigError, match=r"cannot resume .*does not fit this run's model.*size mismatch for pi.net.mlp.0.weight"
+    ):
         _restore(OtherModel(), tmp_path)
     assert _restore(type("Fits", (), {"restore_from_path": lambda self, path: None})(), tmp_path) == 1024
 
 
 def test_a_resumed_run_keeps_its_backend(tmp_path):
-    config = {"spec": "Goalie-v0", "algo": "ppo", "steps": 1000, "envs": 2, "frame_stack": 4, "eval_every": 500,
-              "eval_episodes": 2, "final_eval_episodes": 2, "seed": 0, "render": True, "hyperparams": {},
-              "progress": False}
+    config = {
+        "spec": "Goalie-v0",
+        "algo": "ppo",
+        "steps": 1000,
+        "envs": 2,
+        "frame_stack": 4,
+        "eval_every": 500,
+        "eval_episodes": 2,
+        "final_eval_episodes": 2,
+        "seed": 0,
+        "render": True,
+        "hyperparams": {},
+        "progress": False,
+    }
     # an SB3 run before format 2: no 'backend' key
     (tmp_path / "config.json").write_text(json.dumps({"config": config}))
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--backend", "rllib", "--resume", str(tmp_path)])
@@ -172,6 +218,7 @@ def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
         algo = ppo_config(tiny_goalie(tmp_path), env_runners=1, envs_per_runner=2).build_algo()
         try:
             assert algo.env_runner.env is None  # the driver's own EnvRunner: a model copy, no env, so no Blender
+
             def sample_and_look(runner):
                 episodes = runner.sample(num_timesteps=8, random_actions=True)
                 frames = np.concatenate([np.asarray(e.get_observations()) for e in episodes])
@@ -179,7 +226,9 @@ def test_each_runner_renders_and_the_driver_runner_makes_no_env(tmp_path):
 
             (sampled,) = algo.env_runner_group.foreach_env_runner(sample_and_look, local_env_runner=False)
             steps, blender, shape, frames = sampled
-            assert steps >= 8 and blender and shape == (2, 24, 24, 4)  # two envs of four stacked frames, made in the runner
+            assert (
+                steps >= 8 and blender and shape == (2, 24, 24, 4)
+            )  # two envs of four stacked frames, made in the runner
             # the runner's observations are Blender's 8-bit images, scaled to 0..1 as the encoder takes them: a lit scene, and the ball moves
             levels = frames[..., -1] * 255
             assert np.allclose(levels, np.round(levels), atol=1e-3) and 0 <= levels.min() and levels.max() <= 255
@@ -202,8 +251,14 @@ def test_a_batched_runner_steps_its_envs_in_one_blender_scene(tmp_path):
         algo = ppo_config(tiny_goalie(tmp_path), env_runners=1, envs_per_runner=3, batched=True).build_algo()
         try:
             (sampled,) = algo.env_runner_group.foreach_env_runner(
-                lambda r: (sum(len(e) for e in r.sample(num_timesteps=30, random_actions=True)), type(r.env.unwrapped).__name__,
-                           r.env.observation_space.shape, r.env.unwrapped.renderer.num_envs), local_env_runner=False)
+                lambda r: (
+                    sum(len(e) for e in r.sample(num_timesteps=30, random_actions=True)),
+                    type(r.env.unwrapped).__name__,
+                    r.env.observation_space.shape,
+                    r.env.unwrapped.renderer.num_envs,
+                ),
+                local_env_runner=False,
+            )
             steps, kind, shape, rendered = sampled
             assert steps >= 30 and kind == "BatchedVectorEnv" and shape == (3, 24, 24, 4) and rendered == 3
         finally:
@@ -232,8 +287,25 @@ def test_vector_frame_stack_restarts_the_stack_of_an_env_that_reset():
         vec.close()
 
 
-TRAIN = ["--backend", "rllib", "--env-runners", "2", "--eval-every", "64", "--eval-episodes", "1", "--final-episodes", "2",
-         "--set", "train_batch_size_per_learner=64", "--set", "minibatch_size=32", "--set", "num_epochs=1", "--no-progress"]
+TRAIN = [
+    "--backend",
+    "rllib",
+    "--env-runners",
+    "2",
+    "--eval-every",
+    "64",
+    "--eval-episodes",
+    "1",
+    "--final-episodes",
+    "2",
+    "--set",
+    "train_batch_size_per_learner=64",
+    "--set",
+    "minibatch_size=32",
+    "--set",
+    "num_epochs=1",
+    "--no-progress",
+]
 
 
 @pytest.mark.slow
@@ -242,8 +314,14 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     """A run stopped with SIGTERM still saves, evaluates and plots; --resume continues its steps and evaluations."""
     spec, out = tiny_goalie(tmp_path), tmp_path / "runs"
     env = {**os.environ, "PYTHONPATH": str(REPO)}
-    process = subprocess.Popen([sys.executable, "-m", "visualenv.cli", "train", spec, "--steps", "100000", "--out", str(out), *TRAIN],
-                               cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    process = subprocess.Popen(
+        [sys.executable, "-m", "visualenv.cli", "train", spec, "--steps", "100000", "--out", str(out), *TRAIN],
+        cwd=REPO,
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+        text=True,
+    )
     deadline = time.monotonic() + 240
     progress = None
     while time.monotonic() < deadline and process.poll() is None:
@@ -252,14 +330,30 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
             progress = runs[0]
             break
         time.sleep(1)
-    assert progress is not None, process.communicate(timeout=60)[0] if process.poll() is not None else "no progress in 240 s"
+    assert progress is not None, (
+        process.communicate(timeout=60)[0] if process.poll() is not None else "no progress in 240 s"
+    )
     process.send_signal(signal.SIGTERM)
     output = process.communicate(timeout=240)[0]
     assert process.returncode == 0, output
     run = progress.parents[1]
-    for name in ["config.json", "results.json", "evaluations.npz", "logs/progress.csv", "plots/rewards.png", "plots/lengths.png",
-                 "plots/success.png", "plots/fps.png", "best_model", "final_model", "checkpoints/latest",
-                 "best_model.safetensors", "best_model.json", "final_model.safetensors", "final_model.json"]:
+    for name in [
+        "config.json",
+        "results.json",
+        "evaluations.npz",
+        "logs/progress.csv",
+        "plots/rewards.png",
+        "plots/lengths.png",
+        "plots/success.png",
+        "plots/fps.png",
+        "best_model",
+        "final_model",
+        "checkpoints/latest",
+        "best_model.safetensors",
+        "best_model.json",
+        "final_model.safetensors",
+        "final_model.json",
+    ]:
         assert (run / name).exists(), name
     results = json.loads((run / "results.json").read_text())
     assert results["stopped_early"] is True and results["episodes"] == 2 and 64 <= results["steps"] < 100000
@@ -272,34 +366,55 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
     assert evaluated
     assert f"eval at {evaluated[0]} steps: mean return " in output  # --no-progress: a line per evaluation
 
-    assert results["model"] == "best_model.safetensors"  # the final evaluation read the policy file train wrote: no pickle
+    assert (
+        results["model"] == "best_model.safetensors"
+    )  # the final evaluation read the policy file train wrote: no pickle
     played = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model.safetensors"), "--episodes", "1"])
     assert played.exit_code == 0 and "episode 0: return" in played.output, played.output
-    replayed = CliRunner().invoke(main, ["eval", spec, "--model", str(run / results["model"])])  # the final evaluation again
+    replayed = CliRunner().invoke(
+        main, ["eval", spec, "--model", str(run / results["model"])]
+    )  # the final evaluation again
     assert replayed.exit_code == 0 and "reproduces its run's results.json" in replayed.output, replayed.output
-    refused = CliRunner().invoke(main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"])  # the checkpoint: a pickle
-    assert refused.exit_code == 1 and "is an RLlib checkpoint folder: a pickle-based file" in refused.output, refused.output
-    exported = CliRunner().invoke(main, ["export-policy", "--trust-pickle", str(run / "best_model"), str(tmp_path / "policy.safetensors")])
+    refused = CliRunner().invoke(
+        main, ["play", spec, "--model", str(run / "best_model"), "--episodes", "1"]
+    )  # the checkpoint: a pickle
+    assert refused.exit_code == 1 and "is an RLlib checkpoint folder: a pickle-based file" in refused.output, (
+        refused.output
+    )
+    exported = CliRunner().invoke(
+        main, ["export-policy", "--trust-pickle", str(run / "best_model"), str(tmp_path / "policy.safetensors")]
+    )
     assert exported.exit_code == 0 and "float16 weights" in exported.output, exported.output  # how results/ ships one
     from visualenv.train.model_files import load_model
 
     full, small = load_model(run / "best_model", trust_pickle=True), load_model(tmp_path / "policy.safetensors")
-    ours = load_model(run / "best_model.safetensors")  # train's float32 policy file: the policy the checkpoint holds, exactly
+    ours = load_model(
+        run / "best_model.safetensors"
+    )  # train's float32 policy file: the policy the checkpoint holds, exactly
     import torch
 
-    scaled = {"obs": torch.as_tensor(np.random.default_rng(1).random((8, *full.observation_space.shape), dtype=np.float32))}
+    scaled = {
+        "obs": torch.as_tensor(np.random.default_rng(1).random((8, *full.observation_space.shape), dtype=np.float32))
+    }
     with torch.no_grad():
-        assert torch.equal(full.module.forward_inference(scaled)["action_dist_inputs"], ours.module.forward_inference(scaled)["action_dist_inputs"])
+        assert torch.equal(
+            full.module.forward_inference(scaled)["action_dist_inputs"],
+            ours.module.forward_inference(scaled)["action_dist_inputs"],
+        )
     frames = np.random.default_rng(0).integers(0, 256, (8, *full.observation_space.shape), dtype=np.uint8)
     assert (full.predict(frames)[0] == small.predict(frames)[0]).mean() >= 0.75  # float16 weights: near-ties may flip
 
     stopped_at = results["steps"]
-    resumed = CliRunner().invoke(main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress"])
+    resumed = CliRunner().invoke(
+        main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress"]
+    )
     assert resumed.exit_code == 0, resumed.output
     results = json.loads((run / "results.json").read_text())
     assert results["steps"] >= stopped_at + 128 and results["stopped_early"] is False
     with np.load(run / "evaluations.npz") as later:
-        assert later["timesteps"].tolist()[:len(evaluated)] == evaluated and len(later["timesteps"]) > len(evaluated)  # history kept
+        assert later["timesteps"].tolist()[: len(evaluated)] == evaluated and len(later["timesteps"]) > len(
+            evaluated
+        )  # history kept
     steps = [int(line.split(",")[0]) for line in (run / "logs" / "progress.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] == results["steps"]  # the resumed run carried on the step count
 
@@ -335,17 +450,51 @@ def test_two_node_cluster_samples_on_both_and_survives_a_killed_runner(tmp_path)
     from ray.cluster_utils import Cluster
 
     spec, out = tiny_goalie(tmp_path), tmp_path / "runs"
-    earlier = {p.pid for p in _descendants()}  # e.g. this process's multiprocessing resource tracker, from earlier tests
+    earlier = {
+        p.pid for p in _descendants()
+    }  # e.g. this process's multiprocessing resource tracker, from earlier tests
     cluster = Cluster(initialize_head=True, head_node_args={"num_cpus": 1, "include_dashboard": False})
     try:
         worker = cluster.add_node(num_cpus=1)
         cluster.wait_for_nodes()
         env = {**os.environ, "PYTHONPATH": str(REPO)}
-        process = subprocess.Popen([sys.executable, "-m", "visualenv.cli", "train", spec, "--steps", "512", "--address", cluster.address,
-                                    "--out", str(out), "--backend", "rllib", "--env-runners", "2",
-                                    "--eval-every", "128", "--eval-episodes", "1", "--final-episodes", "1", "--set", "train_batch_size_per_learner=64",
-                                    "--set", "minibatch_size=32", "--set", "num_epochs=1", "--no-progress"],
-                                   cwd=REPO, env=env, stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        process = subprocess.Popen(
+            [
+                sys.executable,
+                "-m",
+                "visualenv.cli",
+                "train",
+                spec,
+                "--steps",
+                "512",
+                "--address",
+                cluster.address,
+                "--out",
+                str(out),
+                "--backend",
+                "rllib",
+                "--env-runners",
+                "2",
+                "--eval-every",
+                "128",
+                "--eval-episodes",
+                "1",
+                "--final-episodes",
+                "1",
+                "--set",
+                "train_batch_size_per_learner=64",
+                "--set",
+                "minibatch_size=32",
+                "--set",
+                "num_epochs=1",
+                "--no-progress",
+            ],
+            cwd=REPO,
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
         deadline, killed, replaced = time.monotonic() + 300, None, False
         while not replaced and time.monotonic() < deadline and process.poll() is None:
             progress = list(out.glob("*/*/logs/progress.csv")) if out.exists() else []
@@ -366,15 +515,23 @@ def test_two_node_cluster_samples_on_both_and_survives_a_killed_runner(tmp_path)
         by_node = json.loads((run / "logs" / "env_steps_by_node.json").read_text())
         assert set(by_node) == {cluster.head_node.node_id, worker.node_id} and min(by_node.values()) > 0, by_node
         with np.load(run / "evaluations.npz") as evaluations:
-            assert len(evaluations["timesteps"]) == 512 // 128  # an evaluation (and checkpoint) every 128 steps, none lost to the kill
+            assert (
+                len(evaluations["timesteps"]) == 512 // 128
+            )  # an evaluation (and checkpoint) every 128 steps, none lost to the kill
         assert json.loads((run / "checkpoints" / "latest" / "visualenv.json").read_text())["steps"] == results["steps"]
-        assert not (run / "checkpoints" / "latest.old").exists() and not (run / "checkpoints" / "latest.saving").exists()
+        assert (
+            not (run / "checkpoints" / "latest.old").exists() and not (run / "checkpoints" / "latest.saving").exists()
+        )
     finally:
         cluster.shutdown()
     deadline = time.monotonic() + 30
 
     def left_over() -> list[str]:
-        return [_cmdline(p) for p in _descendants() if p.pid not in earlier and p.is_running() and p.status() != psutil.STATUS_ZOMBIE]
+        return [
+            _cmdline(p)
+            for p in _descendants()
+            if p.pid not in earlier and p.is_running() and p.status() != psutil.STATUS_ZOMBIE
+        ]
 
     while time.monotonic() < deadline and left_over():
         time.sleep(0.5)

@@ -7,22 +7,57 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from visualenv.train.run_folder import (FORMAT, FORMAT_VERSION, RunFolder, RunFolderError, legacy_eval_seed, migrate,
-                                        read_config, read_run, record_run, settings, write_config, write_results)
+from visualenv.train.run_folder import (
+    FORMAT,
+    FORMAT_VERSION,
+    RunFolder,
+    RunFolderError,
+    legacy_eval_seed,
+    migrate,
+    read_config,
+    read_run,
+    record_run,
+    settings,
+    write_config,
+    write_results,
+)
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
-SB3_FIRST = {"spec": "Goalie-v0", "algo": "ppo", "steps": 1000, "envs": 2, "frame_stack": 4, "eval_every": 500,
-             "eval_episodes": 10, "final_eval_episodes": 20, "seed": 3, "render": True, "hyperparams": {"n_steps": 64},
-             "progress": False}  # an SB3 run's settings before pin, batched, workers and render_device
-FIGURES = {"eval_seed": 2**33 + 3, "episodes": 2, "mean_reward": 1.5, "std_reward": 0.5, "mean_length": 10.0,
-           "success_rate": 0.5, "per_episode": {"returns": [1.0, 2.0], "lengths": [10, 10], "successes": [True, False]}}
+SB3_FIRST = {
+    "spec": "Goalie-v0",
+    "algo": "ppo",
+    "steps": 1000,
+    "envs": 2,
+    "frame_stack": 4,
+    "eval_every": 500,
+    "eval_episodes": 10,
+    "final_eval_episodes": 20,
+    "seed": 3,
+    "render": True,
+    "hyperparams": {"n_steps": 64},
+    "progress": False,
+}  # an SB3 run's settings before pin, batched, workers and render_device
+FIGURES = {
+    "eval_seed": 2**33 + 3,
+    "episodes": 2,
+    "mean_reward": 1.5,
+    "std_reward": 0.5,
+    "mean_length": 10.0,
+    "success_rate": 0.5,
+    "per_episode": {"returns": [1.0, 2.0], "lengths": [10, 10], "successes": [True, False]},
+}
 
 
 def current(config=None, **record):
     added = {"pin": True, "batched": False, "workers": None, "render_device": None}
-    return {"backend": "sb3", "command": "visualenv train Goalie-v0",
-            "config": {**SB3_FIRST, **added, **(config or {})},
-            "versions": {"visualenv": "0.1.0"}, "spec_path": "specs/goalie.yaml", **record}
+    return {
+        "backend": "sb3",
+        "command": "visualenv train Goalie-v0",
+        "config": {**SB3_FIRST, **added, **(config or {})},
+        "versions": {"visualenv": "0.1.0"},
+        "spec_path": "specs/goalie.yaml",
+        **record,
+    }
 
 
 def test_every_committed_run_reads_through_the_run_folder():
@@ -68,16 +103,34 @@ def test_a_resumed_older_run_is_written_in_the_current_format(tmp_path):
 def test_older_configs_are_migrated():
     sb3 = migrate({"command": "c", "config": SB3_FIRST}).record
     assert sb3["backend"] == "sb3" and sb3["format_version"] == FORMAT_VERSION
-    assert {k: sb3["config"][k] for k in ("pin", "batched", "workers", "render_device")} == \
-        {"pin": True, "batched": False, "workers": None, "render_device": None}
+    assert {k: sb3["config"][k] for k in ("pin", "batched", "workers", "render_device")} == {
+        "pin": True,
+        "batched": False,
+        "workers": None,
+        "render_device": None,
+    }
     rllib_config = {k: v for k, v in SB3_FIRST.items() if k not in ("algo", "envs")}
     rllib_config.update(env_runners=2, envs_per_runner=1, algo="ppo", backend="rllib")
     rllib = migrate({"command": "c", "backend": "rllib", "config": rllib_config}).record
     assert rllib["backend"] == "rllib" and rllib["config"]["pin"] is True and rllib["config"]["batched"] is False
-    distill_config = {"spec": "Goalie-v0", "teacher": "t.safetensors", "rounds": 2, "episodes": 4, "mixing": 0,
-                      "epochs": 1.0, "batch_size": 64, "learning_rate": 3e-4, "shift": 4, "frame_stack": 3,
-                      "eval_episodes": 2, "final_eval_episodes": 2, "seed": 0, "progress": True, "algo": "dagger",
-                      "render": True}
+    distill_config = {
+        "spec": "Goalie-v0",
+        "teacher": "t.safetensors",
+        "rounds": 2,
+        "episodes": 4,
+        "mixing": 0,
+        "epochs": 1.0,
+        "batch_size": 64,
+        "learning_rate": 3e-4,
+        "shift": 4,
+        "frame_stack": 3,
+        "eval_episodes": 2,
+        "final_eval_episodes": 2,
+        "seed": 0,
+        "progress": True,
+        "algo": "dagger",
+        "render": True,
+    }
     distill = migrate({"command": "c", "config": distill_config, "teacher": {"path": "t", "sha256": "0"}}).record
     assert distill["backend"] == "distill" and distill["config"]["student"] is None
     assert migrate(sb3).record == sb3  # the current format stays as it is
@@ -98,16 +151,19 @@ def test_older_results_take_the_legacy_stream_and_its_resets(tmp_path):
     assert run.note is None and run.results["resets_before"] == 1 + 2 * (10 + 1)
 
 
-@pytest.mark.parametrize("change, message", [
-    ({"eval_episodes": 10**9}, r"config.eval_episodes: expected an integer from 1 to 1000000, got 1000000000"),
-    ({"eval_episodes": "10"}, r"config.eval_episodes: expected an integer, got str '10'"),
-    ({"frame_stack": True}, r"config.frame_stack: expected an integer, got bool True"),
-    ({"seed": -1}, r"config.seed: expected an integer from 0 to 2147483647, got -1"),
-    ({"algo": "dagger"}, r"config.algo: a sb3 run trains ppo, a2c, dqn, sac, not 'dagger'"),
-    ({"render_device": "tpu"}, r"config.render_device: expected one of cpu, gpu, got 'tpu'"),
-    ({"workers": 3}, r"config.workers: 3 workers for 2 envs"),
-    ({"learning_rate": 1e-4}, r"unknown setting config.learning_rate for a sb3 run"),
-])
+@pytest.mark.parametrize(
+    "change, message",
+    [
+        ({"eval_episodes": 10**9}, r"config.eval_episodes: expected an integer from 1 to 1000000, got 1000000000"),
+        ({"eval_episodes": "10"}, r"config.eval_episodes: expected an integer, got str '10'"),
+        ({"frame_stack": True}, r"config.frame_stack: expected an integer, got bool True"),
+        ({"seed": -1}, r"config.seed: expected an integer from 0 to 2147483647, got -1"),
+        ({"algo": "dagger"}, r"config.algo: a sb3 run trains ppo, a2c, dqn, sac, not 'dagger'"),
+        ({"render_device": "tpu"}, r"config.render_device: expected one of cpu, gpu, got 'tpu'"),
+        ({"workers": 3}, r"config.workers: 3 workers for 2 envs"),
+        ({"learning_rate": 1e-4}, r"unknown setting config.learning_rate for a sb3 run"),
+    ],
+)
 def test_settings_out_of_bounds_are_refused_with_what_was_expected(tmp_path, change, message):
     (tmp_path / "config.json").write_text(json.dumps(current(change)))
     with pytest.raises(RunFolderError, match=message):
@@ -122,17 +178,23 @@ def test_broken_or_foreign_run_folders_are_refused(tmp_path):
     assert read_run(tmp_path).record is None and read_run(tmp_path).results is None
     no_steps = {"command": "c", "config": {k: v for k, v in SB3_FIRST.items() if k != "steps"}}
     later = {**current(), "format": FORMAT, "format_version": FORMAT_VERSION + 1}
-    for text, message in [("{", "not JSON"), ('{"config": {}}', "a sb3 run's config lacks spec"),
-                          ("[]", "no 'config' mapping"), (json.dumps(no_steps), "lacks steps"),
-                          (json.dumps(later), "written by a later visualenv")]:
+    for text, message in [
+        ("{", "not JSON"),
+        ('{"config": {}}', "a sb3 run's config lacks spec"),
+        ("[]", "no 'config' mapping"),
+        (json.dumps(no_steps), "lacks steps"),
+        (json.dumps(later), "written by a later visualenv"),
+    ]:
         (tmp_path / "config.json").write_text(text)
         with pytest.raises(RunFolderError, match=message):
             read_config(tmp_path)
     write_config(tmp_path, current())
-    for bad, message in [({"success_rate": 1.5}, "success_rate: expected a number from 0 to 1"),
-                         ({"episodes": 3}, "per_episode.returns: expected a list of 3 episodes"),
-                         ({"mean_reward": float("nan")}, "mean_reward: expected a number"),
-                         ({"eval_seed": 2.5}, "eval_seed: expected an integer, got float")]:
+    for bad, message in [
+        ({"success_rate": 1.5}, "success_rate: expected a number from 0 to 1"),
+        ({"episodes": 3}, "per_episode.returns: expected a list of 3 episodes"),
+        ({"mean_reward": float("nan")}, "mean_reward: expected a number"),
+        ({"eval_seed": 2.5}, "eval_seed: expected an integer, got float"),
+    ]:
         with pytest.raises(RunFolderError, match=message):
             write_results(tmp_path, {**FIGURES, **bad})
         (tmp_path / "results.json").write_text(json.dumps({**FIGURES, **bad}))

@@ -24,7 +24,14 @@ from visualenv.train.model_files import pretrained_model
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
 
 # every bundled env's agent
-SHIPPED = ["Goalie-v0", "Hover2D-v0", "LunarLanding-v0", "VisualCartPole-v0", "VisualInvertedPendulum-v0", "DMC-cartpole-swingup-v0"]
+SHIPPED = [
+    "Goalie-v0",
+    "Hover2D-v0",
+    "LunarLanding-v0",
+    "VisualCartPole-v0",
+    "VisualInvertedPendulum-v0",
+    "DMC-cartpole-swingup-v0",
+]
 #: fewer episodes where each is long: a balancing pendulum plays 1,000 steps (one episode is as long as 50 of Goalie's)
 FEWER = {"VisualInvertedPendulum-v0": 2}
 #: agents whose episodes are chaotic: on another CPU's kernels a pixel's last bits differ, now and then by one 8-bit
@@ -54,7 +61,9 @@ def random_policy(env_id: str, episodes: int = 400, seed: int = 0) -> tuple[floa
     return float(np.mean(returns)), float(np.mean(successes))
 
 
-@pytest.mark.parametrize("env_id, low, high", [("Goalie-v0", 0.08, 0.18), ("Hover2D-v0", 0.18, 0.32), ("LunarLanding-v0", 0.0, 0.03)])
+@pytest.mark.parametrize(
+    "env_id, low, high", [("Goalie-v0", 0.08, 0.18), ("Hover2D-v0", 0.18, 0.32), ("LunarLanding-v0", 0.0, 0.03)]
+)
 def test_the_random_baseline_is_the_one_readme_quotes(env_id, low, high):
     """The baseline the agents are held to is the one README quotes (random Goalie catches about 13 %, Hover2D reaches about 25 %, LunarLanding lands under 3 %)."""
     _, success = random_policy(env_id)
@@ -70,8 +79,14 @@ def _eval_in_a_fresh_process(env_id: str, model: str, out: Path, *options: str) 
     """`visualenv eval` as a user runs it, in a process of its own: in the suite's process, which holds every scene
     rendered before, 2,000 steps of VisualCartPole took 258 s. Default options: the first REPLAYED episodes of results.json."""
     options = options or ("--episodes", str(FEWER.get(env_id, REPLAYED)))
-    return subprocess.run([sys.executable, "-m", "visualenv.cli", "eval", env_id, "--model", model, *options, "-o", str(out)],
-                          cwd=REPO, env={**os.environ, "PYTHONPATH": str(REPO)}, capture_output=True, text=True, timeout=600)
+    return subprocess.run(
+        [sys.executable, "-m", "visualenv.cli", "eval", env_id, "--model", model, *options, "-o", str(out)],
+        cwd=REPO,
+        env={**os.environ, "PYTHONPATH": str(REPO)},
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
 
 
 def assert_close_episodes(played: dict, kept: dict, lengths: Any, returns: Any) -> None:
@@ -97,13 +112,17 @@ def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_
     evaluation = json.loads(out.read_text())
     kept, played = {k: v[:replayed] for k, v in recorded["per_episode"].items()}, evaluation["per_episode"]
     assert evaluation["machine"]["pinned"] is True  # a fresh process: MKL pinned before the policy was built
-    if evaluation["comparison"] == "exact":  # rendering is deterministic: every agent, the pendulum included, replays every bit
+    if (
+        evaluation["comparison"] == "exact"
+    ):  # rendering is deterministic: every agent, the pendulum included, replays every bit
         assert kept == played
     elif env_id in CHAOTIC:  # another machine: the episodes are a new sample of the agent's, and must look like one
         assert evaluation["consistent_sample"] is True, result.stdout
     else:
         assert evaluation["comparison"] == "tolerance" and "is unlike the one that wrote results.json" in result.stdout
-        assert_close_episodes(played, kept, LENGTH_TOLERANCE, RETURN_TOLERANCE * np.maximum(1.0, np.abs(kept["returns"])))
+        assert_close_episodes(
+            played, kept, LENGTH_TOLERANCE, RETURN_TOLERANCE * np.maximum(1.0, np.abs(kept["returns"]))
+        )
     # the recorded episodes are the figures results.json reports, of the file that ships
     assert np.mean(recorded["per_episode"]["returns"]) == pytest.approx(recorded["mean_reward"])
     assert np.mean(recorded["per_episode"]["successes"]) == pytest.approx(recorded["success_rate"])

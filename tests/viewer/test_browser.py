@@ -41,7 +41,9 @@ def browser():
     from playwright.sync_api import sync_playwright
 
     with sync_playwright() as playwright:
-        launched = playwright.chromium.launch(executable_path=str(chromium.executable), args=["--no-sandbox"], env={**os.environ, **chromium.env})
+        launched = playwright.chromium.launch(
+            executable_path=str(chromium.executable), args=["--no-sandbox"], env={**os.environ, **chromium.env}
+        )
         yield launched
         launched.close()
 
@@ -65,15 +67,22 @@ def page(browser, cartpole):
     episode = cartpole.state()["values"]["episode"]
     page.fill("#seed", "0")
     page.click("#reset")
-    cartpole.wait_for(lambda s: s["values"]["episode"] > episode and s["values"]["seed"] == 0 and s["values"]["step"] == 0, 60, "a reset")
+    cartpole.wait_for(
+        lambda s: s["values"]["episode"] > episode and s["values"]["seed"] == 0 and s["values"]["step"] == 0,
+        60,
+        "a reset",
+    )
     wait_for_text(page, "#v-step", "0")
     yield page
     page.close()
 
 
 def wait_for_text(page, selector: str, text: str, timeout: float = 60) -> None:
-    page.wait_for_function("([s, t]) => document.querySelector(s) && document.querySelector(s).textContent === t", arg=[selector, text],
-                           timeout=timeout * 1000)
+    page.wait_for_function(
+        "([s, t]) => document.querySelector(s) && document.querySelector(s).textContent === t",
+        arg=[selector, text],
+        timeout=timeout * 1000,
+    )
 
 
 def pixels(page, selector: str) -> np.ndarray:
@@ -85,7 +94,11 @@ def pixels(page, selector: str) -> np.ndarray:
 def colored(image: np.ndarray, channel: int) -> int:
     """Pixels where `channel` (0 red, 1 green) stands out of the other two."""
     others = [c for c in range(3) if c != channel]
-    return int(((image[:, :, channel] > image[:, :, others[0]] + 60) & (image[:, :, channel] > image[:, :, others[1]] + 60)).sum())
+    return int(
+        (
+            (image[:, :, channel] > image[:, :, others[0]] + 60) & (image[:, :, channel] > image[:, :, others[1]] + 60)
+        ).sum()
+    )
 
 
 def until(condition, timeout: float, what: str) -> None:
@@ -97,11 +110,15 @@ def until(condition, timeout: float, what: str) -> None:
 
 def test_the_arrow_keys_move_the_cart(page):
     before = pixels(page, OBSERVATION)
-    assert before.shape[0] >= 300                                # 100 x 100 shown at 3x, without smoothing
+    assert before.shape[0] >= 300  # 100 x 100 shown at 3x, without smoothing
     for _ in range(6):
-        page.keyboard.press("ArrowRight")                        # a tap: one step
+        page.keyboard.press("ArrowRight")  # a tap: one step
     wait_for_text(page, "#v-step", "6")
-    until(lambda: (np.abs(pixels(page, OBSERVATION) - before).max(axis=2) > 16).sum() >= 90, 60, "change of the observation on the page")
+    until(
+        lambda: (np.abs(pixels(page, OBSERVATION) - before).max(axis=2) > 16).sum() >= 90,
+        60,
+        "change of the observation on the page",
+    )
     assert page.locator("#v-action").text_content() == "1: force = force_mag"
 
 
@@ -111,7 +128,9 @@ def test_an_edit_of_the_carts_colour_shows_on_the_page(page, cartpole):
     assert colored(pixels(page, VIEW), 1) < 5
     cartpole.spec.write_text(CARTPOLE.replace(RED_CART, GREEN_CART, 1))
     try:
-        until(lambda: colored(view := pixels(page, VIEW), 1) > 30 and colored(view, 0) < 5, 120, "green cart in the view")
+        until(
+            lambda: colored(view := pixels(page, VIEW), 1) > 30 and colored(view, 0) < 5, 120, "green cart in the view"
+        )
     finally:
         cartpole.spec.write_text(CARTPOLE)
         cartpole.wait_for(lambda s: s["values"]["builds"] >= 3, 120, "the original spec's build")
@@ -124,7 +143,7 @@ def test_a_broken_edit_shows_its_located_error_and_the_fix_clears_it(page, cartp
     spec.write_text(broken)
     page.wait_for_selector("#error:not([hidden])", timeout=60_000)
     assert page.locator("#error").text_content().startswith(f"{spec}:{line}:15: reward: unknown name 'speedd'")
-    page.keyboard.press("ArrowLeft")                             # the last good env goes on, and the server with it
+    page.keyboard.press("ArrowLeft")  # the last good env goes on, and the server with it
     wait_for_text(page, "#v-step", "1")
     assert "disconnected" not in page.locator("#status").text_content()
     spec.write_text(CARTPOLE)
@@ -140,8 +159,15 @@ def test_the_pretrained_agent_plays_goalie_without_a_key(browser, tmp_path):
             first = pixels(page, OBSERVATION)
             page.wait_for_function("() => Number(document.getElementById('v-step').textContent) >= 5", timeout=120_000)
             # the step's number shows before its image has loaded on a busy machine: polled, not read once
-            until(lambda: (np.abs(pixels(page, OBSERVATION) - first).max(axis=2) > 16).sum() > 100, 60, "a changed observation")
-            assert page.locator("#mode").text_content().startswith("agent: ") and "Goalie-v0" in page.locator("#mode").text_content()
+            until(
+                lambda: (np.abs(pixels(page, OBSERVATION) - first).max(axis=2) > 16).sum() > 100,
+                60,
+                "a changed observation",
+            )
+            assert (
+                page.locator("#mode").text_content().startswith("agent: ")
+                and "Goalie-v0" in page.locator("#mode").text_content()
+            )
             page.wait_for_selector(VIEW, timeout=120_000)
             shot = tmp_path / "viewer.png"
             page.screenshot(path=str(shot))

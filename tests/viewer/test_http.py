@@ -52,10 +52,12 @@ def test_keys_step_the_env_and_the_page_shows_each_observation(viewer):
     state = reset(viewer, seed=0)
     assert state["values"]["status"] == "waiting for a key"
     assert {k["text"]: k["keys"] for k in state["values"]["controls"]["keys"]} == {
-        "action 0: force = -force_mag": ["ArrowLeft", "0"], "action 1: force = force_mag": ["ArrowRight", "1"]}
+        "action 0: force = -force_mag": ["ArrowLeft", "0"],
+        "action 1: force = force_mag": ["ArrowRight", "1"],
+    }
     before = observation(viewer)
     assert before.shape == (100, 100) and before.std() > 0
-    for _ in range(6):                                           # six taps of the right arrow: six steps (the pole tilts 0.11 rad)
+    for _ in range(6):  # six taps of the right arrow: six steps (the pole tilts 0.11 rad)
         viewer.send({"type": "key", "key": "ArrowRight", "down": True})
         viewer.send({"type": "key", "key": "ArrowRight", "down": False})
     state = viewer.wait_for(lambda s: s["values"]["step"] == 6, 60, "six steps")
@@ -66,7 +68,7 @@ def test_keys_step_the_env_and_the_page_shows_each_observation(viewer):
 
 def test_a_saved_edit_rebuilds_the_env_and_a_broken_one_shows_its_located_error(viewer):
     spec: Path = viewer.spec
-    builds = reset(viewer, seed=0)["values"]["builds"]            # a rebuild starts the episode of the same seed: the same state
+    builds = reset(viewer, seed=0)["values"]["builds"]  # a rebuild starts the episode of the same seed: the same state
     before = observation(viewer)
     spec.write_text(CARTPOLE.replace(RED_CART, WHITE_CART))
     viewer.wait_for(lambda s: s["values"]["builds"] == builds + 1, 120, "a rebuild")
@@ -77,7 +79,9 @@ def test_a_saved_edit_rebuilds_the_env_and_a_broken_one_shows_its_located_error(
     spec.write_text(broken)
     line = broken.splitlines().index("reward: 1.0 + speedd") + 1
     state = viewer.wait_for(lambda s: s["values"]["error"], 60, "the error of the broken spec")
-    assert state["values"]["error"].startswith(f"{spec}:{line}:15: reward: unknown name 'speedd'"), state["values"]["error"]
+    assert state["values"]["error"].startswith(f"{spec}:{line}:15: reward: unknown name 'speedd'"), state["values"][
+        "error"
+    ]
     step = state["values"]["step"]
     viewer.send({"type": "key", "key": "ArrowLeft", "down": True})
     viewer.send({"type": "key", "key": "ArrowLeft", "down": False})

@@ -44,23 +44,27 @@ def test_gymnasium_make_in_human_mode_resets_steps_renders_and_closes(capfd):
     assert env.render() is None
     _, url = shared_board()
     state = page_state(url)
-    assert state["values"]["env"] == "VisualCartPole-v0" and state["values"]["step"] == 3 and state["values"]["return"] == 3.0
+    assert (
+        state["values"]["env"] == "VisualCartPole-v0"
+        and state["values"]["step"] == 3
+        and state["values"]["return"] == 3.0
+    )
     assert state["values"]["state"]["x"] == pytest.approx(info["state"]["x"])
-    np.testing.assert_array_equal(page_picture(url, "observation"), obs[:, :, 0])   # the observation as the agent got it
+    np.testing.assert_array_equal(page_picture(url, "observation"), obs[:, :, 0])  # the observation as the agent got it
     env.close()
     assert page_state(url)["values"]["status"] == "closed"
     again = gym.make("visualenv/VisualCartPole-v0", render_mode="human")
     again.reset(seed=1)
     again.close()
     printed = capfd.readouterr().err
-    assert printed.count(f"render_mode='human' shows the env at {url}") <= 1      # the URL, once per process
+    assert printed.count(f"render_mode='human' shows the env at {url}") <= 1  # the URL, once per process
 
 
 def test_check_env_passes_in_human_mode():
     env = visualenv.make("VisualCartPole-v0", render_mode="human")
     try:
         with warnings.catch_warnings():
-            warnings.simplefilter("error")                       # check_env makes the env in each render mode: no warning
+            warnings.simplefilter("error")  # check_env makes the env in each render mode: no warning
             check_env(env.unwrapped)
     finally:
         env.close()
@@ -68,8 +72,14 @@ def test_check_env_passes_in_human_mode():
 
 def test_a_watching_page_gets_the_view_too(tmp_path):
     spec = tmp_path / "cartpole.yaml"
-    spec.write_text((REPO / "specs" / "visual_cartpole.yaml").read_text().replace(
-        "render: {engine: cycles, preset: fast, device: cpu}", "render: {engine: cycles, preset: fast, device: cpu, view: {preset: fast, resolution: [80, 60]}}"))
+    spec.write_text(
+        (REPO / "specs" / "visual_cartpole.yaml")
+        .read_text()
+        .replace(
+            "render: {engine: cycles, preset: fast, device: cpu}",
+            "render: {engine: cycles, preset: fast, device: cpu, view: {preset: fast, resolution: [80, 60]}}",
+        )
+    )
     board, url = shared_board()
     watching = threading.Event()
 
@@ -86,7 +96,7 @@ def test_a_watching_page_gets_the_view_too(tmp_path):
     env = visualenv.make(str(spec), render_mode="human")
     try:
         env.reset(seed=0)
-        for _ in range(20):                                      # views are paced: one within a few steps
+        for _ in range(20):  # views are paced: one within a few steps
             env.step(0)
             if "view" in page_state(url)["pictures"]:
                 break
@@ -106,10 +116,10 @@ def test_a_batch_in_human_mode_shows_a_grid_of_its_observations():
         _, url = shared_board()
         assert page_state(url)["values"]["envs"] == 4
         tiled = page_picture(url, "observation")
-        assert tiled.shape == (201, 201)                          # 2 x 2 tiles of 100 x 100, 1 px apart
+        assert tiled.shape == (201, 201)  # 2 x 2 tiles of 100 x 100, 1 px apart
         for i in range(4):
             r, c = divmod(i, 2)
-            np.testing.assert_array_equal(tiled[r * 101:r * 101 + 100, c * 101:c * 101 + 100], obs[i, :, :, 0])
+            np.testing.assert_array_equal(tiled[r * 101 : r * 101 + 100, c * 101 : c * 101 + 100], obs[i, :, :, 0])
     finally:
         batch.close()
     with pytest.raises(ValueError, match="state-only batch"):

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from visualenv.cli.group import (friendly, main)
+from visualenv.cli.group import friendly, main
 from visualenv.errors import SpecError, VisualEnvError
 
 
@@ -43,7 +43,15 @@ def schema() -> None:
 
 @main.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
-@click.option("-o", "--out", "out_dir", default="build", show_default=True, type=click.Path(file_okay=False), help="parent folder of the build")
+@click.option(
+    "-o",
+    "--out",
+    "out_dir",
+    default="build",
+    show_default=True,
+    type=click.Path(file_okay=False),
+    help="parent folder of the build",
+)
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="seed of the previewed reset")
 @click.option("--device", type=click.Choice(["cpu", "gpu", "auto"]), default=None, help="override render.device")
 @click.option("--quiet", is_flag=True, help="do not print the observation preview")
@@ -90,7 +98,14 @@ def inspect(blend: str, as_json: bool) -> None:
 
 @main.command()
 @click.argument("blend", type=click.Path(exists=True, dir_okay=False))
-@click.option("-o", "--out", "out_path", default=None, type=click.Path(dir_okay=False), help="spec file to write [default: <blend name>.yaml here]")
+@click.option(
+    "-o",
+    "--out",
+    "out_path",
+    default=None,
+    type=click.Path(dir_okay=False),
+    help="spec file to write [default: <blend name>.yaml here]",
+)
 @click.option("--force", is_flag=True, help="replace an existing spec file")
 @friendly
 def init(blend: str, out_path: str | None, force: bool) -> None:

@@ -27,14 +27,18 @@ PRETRAINED = "pretrained"  # --model's name for the shipped agent
 RANDOM = "random"  # eval --model's name for uniform random actions (the baseline)
 
 
-MODEL_HELP = ("a policy file (policy.safetensors with its policy.json, as export-policy and train write) or 'pretrained' (the shipped "
-              "agent, results/<Id>/policy.safetensors){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle")
+MODEL_HELP = (
+    "a policy file (policy.safetensors with its policy.json, as export-policy and train write) or 'pretrained' (the shipped "
+    "agent, results/<Id>/policy.safetensors){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle"
+)
 
 
 trust_pickle_option = click.option(
-    "--trust-pickle", is_flag=True,
+    "--trust-pickle",
+    is_flag=True,
     help="also load pickle-based models (SB3 .zip, torch .pt/.pth, RLlib checkpoint folders): unpickling runs whatever code the file "
-         "holds, so only for files you trust (docs/security.md)")
+    "holds, so only for files you trust (docs/security.md)",
+)
 
 
 def friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
@@ -76,7 +80,9 @@ def model_file(spec: str, value: str) -> str:
 
         return str(pretrained_model(load_spec(resolve(spec)).spec.id))
     if not Path(value).exists():  # a file, or an RLlib checkpoint folder: load_model tells which it is not
-        raise click.BadParameter(f"{value}: no such file (or '{PRETRAINED}' for the shipped agent)", param_hint="--model")
+        raise click.BadParameter(
+            f"{value}: no such file (or '{PRETRAINED}' for the shipped agent)", param_hint="--model"
+        )
     return value
 
 
@@ -88,7 +94,9 @@ def check_writable(path: str, option: str) -> None:
         make_dir(Path(path).parent)
         Path(path).touch()
     except (OSError, VisualEnvError) as exc:
-        raise click.BadParameter(f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option) from None
+        raise click.BadParameter(
+            f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option
+        ) from None
 
 
 def worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:

@@ -9,12 +9,20 @@ from typing import Any
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import (check_writable, friendly, main, worker_counts)
+from visualenv.cli.group import check_writable, friendly, main, worker_counts
 from visualenv.render.base import READBACKS
 
 
-def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, cores: int, autoreset: str, results: list[Any],
-                   split: tuple[int, ...] | None = None, device: str | None = None) -> None:
+def _bench_batched(
+    specs: tuple[str, ...],
+    sizes: tuple[int, ...],
+    steps: int,
+    cores: int,
+    autoreset: str,
+    results: list[Any],
+    split: tuple[int, ...] | None = None,
+    device: str | None = None,
+) -> None:
     """`bench --batched`: each batch size in a fresh process (or in K workers each, `split`), then the per-process
     vector env with one worker per usable core."""
     from visualenv.tools.bench import bench_parallel
@@ -22,8 +30,11 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
 
     for k in split or ():
         if not 1 <= k <= min(sizes):
-            raise click.BadParameter(f"with --batched, each count of workers must be from 1 to the smallest batch size ({min(sizes)}): "
-                                     f"each worker holds a batch of at least one env, got {k}", param_hint="--workers")
+            raise click.BadParameter(
+                f"with --batched, each count of workers must be from 1 to the smallest batch size ({min(sizes)}): "
+                f"each worker holds a batch of at least one env, got {k}",
+                param_hint="--workers",
+            )
     for spec in specs:
         batches = bench_batched(spec, sizes, steps, autoreset=autoreset, workers=split or (None,), device=device)
         workers = max(2, cores)
@@ -36,24 +47,70 @@ def _bench_batched(specs: tuple[str, ...], sizes: tuple[int, ...], steps: int, c
 
 @main.command()
 @click.argument("specs", nargs=-1, required=True)
-@click.option("--steps", default=500, show_default=True, type=click.IntRange(min=1), help="measured env steps (after a warm-up)")
-@click.option("--workers", default="2", show_default=True, callback=lambda ctx, param, value: worker_counts(value),
-              help="parallel envs for the parallel figure (0: skip); a list such as 1,2,4,8 measures scaling against one confined worker; "
-                   "with --batched: K worker processes sharing each batch size (a list such as 1,2 measures each)")
-@click.option("--threads", type=click.IntRange(min=1), default=None, help="render threads of the single env (default: all cores)")
-@click.option("--readback", type=click.Choice(READBACKS), default="auto", show_default=True,
-              help="how pixels leave Blender (file: the BMP path, for before/after comparisons)")
+@click.option(
+    "--steps", default=500, show_default=True, type=click.IntRange(min=1), help="measured env steps (after a warm-up)"
+)
+@click.option(
+    "--workers",
+    default="2",
+    show_default=True,
+    callback=lambda ctx, param, value: worker_counts(value),
+    help="parallel envs for the parallel figure (0: skip); a list such as 1,2,4,8 measures scaling against one confined worker; "
+    "with --batched: K worker processes sharing each batch size (a list such as 1,2 measures each)",
+)
+@click.option(
+    "--threads", type=click.IntRange(min=1), default=None, help="render threads of the single env (default: all cores)"
+)
+@click.option(
+    "--readback",
+    type=click.Choice(READBACKS),
+    default="auto",
+    show_default=True,
+    help="how pixels leave Blender (file: the BMP path, for before/after comparisons)",
+)
 @click.option("--pin/--no-pin", default=True, show_default=True, help="confine each parallel worker to its own cores")
-@click.option("--soak", "soak_steps", type=click.IntRange(min=0), default=0, help="also run this many steps and report memory growth (e.g. 50000)")
-@click.option("--batched", "batch_sizes", default=None, callback=lambda ctx, param, value: value and worker_counts(value, "--batched"),
-              help="batch sizes such as 1,16,64: N envs in one Blender against the per-process vector env (one worker per core)")
-@click.option("--autoreset", type=click.Choice(["next_step", "same_step"]), default="next_step", show_default=True,
-              help="with --batched: when an ended env is reset (same_step: as SB3's VecEnvs and train --batched do)")
-@click.option("--device", type=click.Choice(["cpu", "gpu"]), default=None, help="render on this device (default: the spec's render.device)")
+@click.option(
+    "--soak",
+    "soak_steps",
+    type=click.IntRange(min=0),
+    default=0,
+    help="also run this many steps and report memory growth (e.g. 50000)",
+)
+@click.option(
+    "--batched",
+    "batch_sizes",
+    default=None,
+    callback=lambda ctx, param, value: value and worker_counts(value, "--batched"),
+    help="batch sizes such as 1,16,64: N envs in one Blender against the per-process vector env (one worker per core)",
+)
+@click.option(
+    "--autoreset",
+    type=click.Choice(["next_step", "same_step"]),
+    default="next_step",
+    show_default=True,
+    help="with --batched: when an ended env is reset (same_step: as SB3's VecEnvs and train --batched do)",
+)
+@click.option(
+    "--device",
+    type=click.Choice(["cpu", "gpu"]),
+    default=None,
+    help="render on this device (default: the spec's render.device)",
+)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @friendly
-def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads: int | None, readback: str, pin: bool, soak_steps: int,
-          batch_sizes: tuple[int, ...] | None, autoreset: str, device: str | None, json_out: str | None) -> None:
+def bench(
+    specs: tuple[str, ...],
+    steps: int,
+    workers: tuple[int, ...],
+    threads: int | None,
+    readback: str,
+    pin: bool,
+    soak_steps: int,
+    batch_sizes: tuple[int, ...] | None,
+    autoreset: str,
+    device: str | None,
+    json_out: str | None,
+) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
 
@@ -66,17 +123,32 @@ def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads:
         check_writable(json_out, "--json")
     cores = len(usable_cores())
     machine_cores = psutil.cpu_count() or cores
-    click.echo(f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"
-               f"{f' ({cores} usable by this process)' if cores != machine_cores else ''}, "
-               f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}")
+    click.echo(
+        f"machine: {platform.processor() or platform.machine()}, {machine_cores} cores"
+        f"{f' ({cores} usable by this process)' if cores != machine_cores else ''}, "
+        f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}"
+    )
     results: list[Any] = []
     if batch_sizes:
-        split = workers if click.get_current_context().get_parameter_source("workers") is ParameterSource.COMMANDLINE else None
+        split = (
+            workers
+            if click.get_current_context().get_parameter_source("workers") is ParameterSource.COMMANDLINE
+            else None
+        )
         _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split, device)
     for spec in specs if not batch_sizes else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
-        figures = bench_one(spec, steps, workers=single, soak_steps=soak_steps, threads=threads, readback=readback, pin=pin, scaling=scaling,
-                            device=device)
+        figures = bench_one(
+            spec,
+            steps,
+            workers=single,
+            soak_steps=soak_steps,
+            threads=threads,
+            readback=readback,
+            pin=pin,
+            scaling=scaling,
+            device=device,
+        )
         for line in figures.lines():
             click.echo(line)
         results.append(as_dict(figures))
@@ -86,7 +158,11 @@ def bench(specs: tuple[str, ...], steps: int, workers: tuple[int, ...], threads:
 
 @main.command()
 @click.option("--json", "as_json", is_flag=True, help="print the report as JSON")
-@click.option("--warm-gpu", is_flag=True, help="render one Cycles GPU frame now, so the driver compiles and caches the kernels before training")
+@click.option(
+    "--warm-gpu",
+    is_flag=True,
+    help="render one Cycles GPU frame now, so the driver compiles and caches the kernels before training",
+)
 @friendly
 def info(as_json: bool, warm_gpu: bool) -> None:
     """Versions, usable cores, and what Blender can render on here: Cycles devices per backend, EEVEE/Workbench's context, kernel caches."""
@@ -97,9 +173,21 @@ def info(as_json: bool, warm_gpu: bool) -> None:
 
 
 @main.command("compile-kernels")
-@click.option("--arch", "archs", multiple=True, help="CUDA architecture such as sm_90 (repeatable; default: this machine's NVIDIA GPUs)")
-@click.option("--ptxas", type=click.Path(dir_okay=False), default=None, help="the CUDA toolkit's ptxas (default: PATH, $CUDA_HOME, /usr/local/cuda)")
-@click.option("--force", is_flag=True, help="compile again where the kernel cache already holds the architecture's binary")
+@click.option(
+    "--arch",
+    "archs",
+    multiple=True,
+    help="CUDA architecture such as sm_90 (repeatable; default: this machine's NVIDIA GPUs)",
+)
+@click.option(
+    "--ptxas",
+    type=click.Path(dir_okay=False),
+    default=None,
+    help="the CUDA toolkit's ptxas (default: PATH, $CUDA_HOME, /usr/local/cuda)",
+)
+@click.option(
+    "--force", is_flag=True, help="compile again where the kernel cache already holds the architecture's binary"
+)
 @friendly
 def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> None:
     """Compile Cycles' CUDA kernels for GPUs bpy ships no binary for (H100, H200: sm_90) into visualenv's kernel cache
@@ -132,8 +220,20 @@ def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> N
 
 @main.command("bench-rllib")
 @click.argument("spec")
-@click.option("--envs", default=2, show_default=True, type=click.IntRange(min=1), help="envs on each side (RLlib: one runner each)")
-@click.option("--steps", default=200, show_default=True, type=click.IntRange(min=1), help="measured steps per env (after a warm-up)")
+@click.option(
+    "--envs",
+    default=2,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="envs on each side (RLlib: one runner each)",
+)
+@click.option(
+    "--steps",
+    default=200,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="measured steps per env (after a warm-up)",
+)
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @friendly
 def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:

@@ -10,7 +10,7 @@ from typing import Any, Sequence
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import (ALGORITHMS, friendly, main)
+from visualenv.cli.group import ALGORITHMS, friendly, main
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
 from visualenv.train.distill import DistillConfig
@@ -26,42 +26,130 @@ def _parse_value(text: str) -> Any:
 @main.command()
 @click.argument("spec")
 @click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
-@click.option("--steps", type=click.IntRange(min=1), default=None, help="total env steps  [default: 200000, or the resumed run's]")
-@click.option("--envs", default=2, show_default=True, type=click.IntRange(min=1), help="parallel envs, one Blender process each")
-@click.option("--frame-stack", default=4, show_default=True, type=click.IntRange(min=1), help="frames per observation (1: no stacking)")
-@click.option("--eval-every", default=10_000, show_default=True, type=click.IntRange(min=1), help="env steps between evaluations")
+@click.option(
+    "--steps", type=click.IntRange(min=1), default=None, help="total env steps  [default: 200000, or the resumed run's]"
+)
+@click.option(
+    "--envs", default=2, show_default=True, type=click.IntRange(min=1), help="parallel envs, one Blender process each"
+)
+@click.option(
+    "--frame-stack",
+    default=4,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="frames per observation (1: no stacking)",
+)
+@click.option(
+    "--eval-every", default=10_000, show_default=True, type=click.IntRange(min=1), help="env steps between evaluations"
+)
 @click.option("--eval-episodes", default=10, show_default=True, type=click.IntRange(min=1))
-@click.option("--final-episodes", default=100, show_default=True, type=click.IntRange(min=1),
-              help="episodes of the best model's final evaluation, on seeds that neither training nor selection uses")
+@click.option(
+    "--final-episodes",
+    default=100,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="episodes of the best model's final evaluation, on seeds that neither training nor selection uses",
+)
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31 - 1))
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
-@click.option("--set", "overrides", multiple=True, metavar="KEY=VALUE", help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run")
-@click.option("--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters")
+@click.option(
+    "--set",
+    "overrides",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="algorithm hyperparameter, e.g. --set learning_rate=1e-4; lin_3e-4 decays linearly to 0 over the run",
+)
+@click.option(
+    "--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters"
+)
 @click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
-@click.option("--resume", "resume_dir", type=click.Path(exists=True, file_okay=False), help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)")
+@click.option(
+    "--resume",
+    "resume_dir",
+    type=click.Path(exists=True, file_okay=False),
+    help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)",
+)
 @click.option("--no-progress", is_flag=True)
-@click.option("--pin/--no-pin", default=True, show_default=True,
-              help="confine each training env's process (sb3) or EnvRunner (rllib, a free core of its node) to its own cores")
-@click.option("--batched", type=click.IntRange(min=1), default=None,
-              help="N envs in one Blender scene, one render call per step: sb3: in this process (replaces --envs); "
-                   "rllib: in each EnvRunner (replaces --envs-per-runner)")
-@click.option("--workers", "batch_workers", type=click.IntRange(min=1), default=None,
-              help="sb3, with --batched N: K processes, each a batch of about N/K envs on its own share of the cores")
-@click.option("--device", "torch_device", default=None, metavar="auto|cpu|cuda[:N]",
-              help="sb3: where the policy acts and learns (SB3's device; default auto: a CUDA GPU if torch sees one)")
-@click.option("--render-device", type=click.Choice(["cpu", "gpu"]), default=None,
-              help="sb3: where the training envs render (default: the spec's render.device)")
-@click.option("--backend", type=click.Choice(["sb3", "rllib"]), default="sb3", show_default=True,
-              help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)")
-@click.option("--env-runners", default=2, show_default=True, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
-@click.option("--envs-per-runner", default=1, show_default=True, type=click.IntRange(min=1), help="rllib: envs each runner steps")
-@click.option("--address", default=None, help="rllib: the Ray cluster to join (HOST:PORT or 'auto'); default: start a local one")
+@click.option(
+    "--pin/--no-pin",
+    default=True,
+    show_default=True,
+    help="confine each training env's process (sb3) or EnvRunner (rllib, a free core of its node) to its own cores",
+)
+@click.option(
+    "--batched",
+    type=click.IntRange(min=1),
+    default=None,
+    help="N envs in one Blender scene, one render call per step: sb3: in this process (replaces --envs); "
+    "rllib: in each EnvRunner (replaces --envs-per-runner)",
+)
+@click.option(
+    "--workers",
+    "batch_workers",
+    type=click.IntRange(min=1),
+    default=None,
+    help="sb3, with --batched N: K processes, each a batch of about N/K envs on its own share of the cores",
+)
+@click.option(
+    "--device",
+    "torch_device",
+    default=None,
+    metavar="auto|cpu|cuda[:N]",
+    help="sb3: where the policy acts and learns (SB3's device; default auto: a CUDA GPU if torch sees one)",
+)
+@click.option(
+    "--render-device",
+    type=click.Choice(["cpu", "gpu"]),
+    default=None,
+    help="sb3: where the training envs render (default: the spec's render.device)",
+)
+@click.option(
+    "--backend",
+    type=click.Choice(["sb3", "rllib"]),
+    default="sb3",
+    show_default=True,
+    help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)",
+)
+@click.option(
+    "--env-runners",
+    default=2,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="rllib: EnvRunner actors (one Blender each)",
+)
+@click.option(
+    "--envs-per-runner", default=1, show_default=True, type=click.IntRange(min=1), help="rllib: envs each runner steps"
+)
+@click.option(
+    "--address", default=None, help="rllib: the Ray cluster to join (HOST:PORT or 'auto'); default: start a local one"
+)
 @friendly
-def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, eval_every: int, eval_episodes: int,
-          final_episodes: int, seed: int, state_only: bool, overrides: tuple[str, ...], config_file: str | None,
-          out_root: str, resume_dir: str | None, no_progress: bool, pin: bool, batched: int | None, backend: str, env_runners: int,
-          envs_per_runner: int, address: str | None, batch_workers: int | None = None, torch_device: str | None = None,
-          render_device: str | None = None) -> None:
+def train(
+    spec: str,
+    algo: str,
+    steps: int | None,
+    envs: int,
+    frame_stack: int,
+    eval_every: int,
+    eval_episodes: int,
+    final_episodes: int,
+    seed: int,
+    state_only: bool,
+    overrides: tuple[str, ...],
+    config_file: str | None,
+    out_root: str,
+    resume_dir: str | None,
+    no_progress: bool,
+    pin: bool,
+    batched: int | None,
+    backend: str,
+    env_runners: int,
+    envs_per_runner: int,
+    address: str | None,
+    batch_workers: int | None = None,
+    torch_device: str | None = None,
+    render_device: str | None = None,
+) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
@@ -76,25 +164,57 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
     hyper = _hyperparameters(config_file, overrides)
     if torch_device is not None:
         if "device" in hyper and hyper["device"] != torch_device:
-            raise click.BadParameter(f"the hyperparameters set device {hyper['device']!r} as well", param_hint="--device")
+            raise click.BadParameter(
+                f"the hyperparameters set device {hyper['device']!r} as well", param_hint="--device"
+            )
         hyper["device"] = torch_device
     if _chosen_backend(ctx, backend, resume_dir) == "rllib":
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
         return
     if resume_dir:
-        _refuse_fixed_on_resume(ctx, ("algo", "envs", "batched", "batch_workers", "render_device", "frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only",
-                                      "out_root"),
-                                "only --steps, --set and --config change on --resume")
+        _refuse_fixed_on_resume(
+            ctx,
+            (
+                "algo",
+                "envs",
+                "batched",
+                "batch_workers",
+                "render_device",
+                "frame_stack",
+                "eval_every",
+                "eval_episodes",
+                "final_episodes",
+                "seed",
+                "state_only",
+                "out_root",
+            ),
+            "only --steps, --set and --config change on --resume",
+        )
         config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
     else:
-        config = TrainConfig(spec=spec, algo=algo, steps=steps or TrainConfig.steps, envs=envs, frame_stack=frame_stack, eval_every=eval_every,
-                             eval_episodes=eval_episodes, final_eval_episodes=final_episodes, seed=seed,
-                             render=not state_only, hyperparams=hyper, progress=not no_progress, pin=pin, render_device=render_device)
+        config = TrainConfig(
+            spec=spec,
+            algo=algo,
+            steps=steps or TrainConfig.steps,
+            envs=envs,
+            frame_stack=frame_stack,
+            eval_every=eval_every,
+            eval_episodes=eval_episodes,
+            final_eval_episodes=final_episodes,
+            seed=seed,
+            render=not state_only,
+            hyperparams=hyper,
+            progress=not no_progress,
+            pin=pin,
+            render_device=render_device,
+        )
         if batch_workers is not None and not batched:
             raise click.BadParameter("splits a batch among processes: give --batched N as well", param_hint="--workers")
         if batch_workers is not None and batched is not None and batch_workers > batched:
-            raise click.BadParameter(f"{batch_workers} workers for a batch of {batched} envs: each worker holds at least one env",
-                                     param_hint="--workers")
+            raise click.BadParameter(
+                f"{batch_workers} workers for a batch of {batched} envs: each worker holds at least one env",
+                param_hint="--workers",
+            )
         if batched:
             config = dataclasses.replace(config, envs=batched, batched=True, workers=batch_workers)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
@@ -106,44 +226,126 @@ def train(spec: str, algo: str, steps: int | None, envs: int, frame_stack: int, 
 
 @main.command()
 @click.argument("spec")
-@click.option("--teacher", required=True, type=click.Path(exists=True, dir_okay=False),
-              help="a state-only policy file of SPEC (best_model.safetensors of `visualenv train SPEC --state-only`)")
-@click.option("--student", type=click.Path(exists=True, dir_okay=False), default=None,
-              help="start from this policy file of an earlier distillation of SPEC (it acts from the first round on)")
-@click.option("--rounds", default=DistillConfig.rounds, show_default=True, type=click.IntRange(min=1),
-              help="DAgger rounds; the teacher acts in the first, the student in the others")
-@click.option("--episodes", default=DistillConfig.episodes, show_default=True, type=click.IntRange(min=1), help="episodes rolled out per round")
-@click.option("--mixing", default=DistillConfig.mixing, show_default=True, type=click.FloatRange(0, 1),
-              help="the teacher acts a step of round r with probability MIXING ** r, else the student (DAgger's beta)")
-@click.option("--epochs", default=DistillConfig.epochs, show_default=True, type=click.FloatRange(min=0, min_open=True),
-              help="passes over all frames gathered so far, per round")
+@click.option(
+    "--teacher",
+    required=True,
+    type=click.Path(exists=True, dir_okay=False),
+    help="a state-only policy file of SPEC (best_model.safetensors of `visualenv train SPEC --state-only`)",
+)
+@click.option(
+    "--student",
+    type=click.Path(exists=True, dir_okay=False),
+    default=None,
+    help="start from this policy file of an earlier distillation of SPEC (it acts from the first round on)",
+)
+@click.option(
+    "--rounds",
+    default=DistillConfig.rounds,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="DAgger rounds; the teacher acts in the first, the student in the others",
+)
+@click.option(
+    "--episodes",
+    default=DistillConfig.episodes,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="episodes rolled out per round",
+)
+@click.option(
+    "--mixing",
+    default=DistillConfig.mixing,
+    show_default=True,
+    type=click.FloatRange(0, 1),
+    help="the teacher acts a step of round r with probability MIXING ** r, else the student (DAgger's beta)",
+)
+@click.option(
+    "--epochs",
+    default=DistillConfig.epochs,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+    help="passes over all frames gathered so far, per round",
+)
 @click.option("--batch-size", default=DistillConfig.batch_size, show_default=True, type=click.IntRange(min=1))
-@click.option("--learning-rate", default=DistillConfig.learning_rate, show_default=True, type=click.FloatRange(min=0, min_open=True))
-@click.option("--shift", default=DistillConfig.shift, show_default=True, type=click.IntRange(min=0), help="random shift of the frames in pixels")
+@click.option(
+    "--learning-rate",
+    default=DistillConfig.learning_rate,
+    show_default=True,
+    type=click.FloatRange(min=0, min_open=True),
+)
+@click.option(
+    "--shift",
+    default=DistillConfig.shift,
+    show_default=True,
+    type=click.IntRange(min=0),
+    help="random shift of the frames in pixels",
+)
 @click.option("--frame-stack", default=DistillConfig.frame_stack, show_default=True, type=click.IntRange(min=1))
-@click.option("--eval-episodes", default=DistillConfig.eval_episodes, show_default=True, type=click.IntRange(min=1),
-              help="episodes of each round's evaluation, which selects the best round")
-@click.option("--final-episodes", default=DistillConfig.final_eval_episodes, show_default=True, type=click.IntRange(min=1),
-              help="episodes of the best round's final evaluation, on seeds neither rounds nor selection use")
+@click.option(
+    "--eval-episodes",
+    default=DistillConfig.eval_episodes,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="episodes of each round's evaluation, which selects the best round",
+)
+@click.option(
+    "--final-episodes",
+    default=DistillConfig.final_eval_episodes,
+    show_default=True,
+    type=click.IntRange(min=1),
+    help="episodes of the best round's final evaluation, on seeds neither rounds nor selection use",
+)
 @click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31 - 1))
 @click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
 @click.option("--no-progress", is_flag=True)
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the final evaluation replays in `visualenv eval` on any CPU
-def distill(spec: str, teacher: str, student: str | None, rounds: int, episodes: int, mixing: float, epochs: float, batch_size: int, learning_rate: float, shift: int,
-            frame_stack: int, eval_episodes: int, final_episodes: int, seed: int, out_root: str, no_progress: bool) -> None:
+def distill(
+    spec: str,
+    teacher: str,
+    student: str | None,
+    rounds: int,
+    episodes: int,
+    mixing: float,
+    epochs: float,
+    batch_size: int,
+    learning_rate: float,
+    shift: int,
+    frame_stack: int,
+    eval_episodes: int,
+    final_episodes: int,
+    seed: int,
+    out_root: str,
+    no_progress: bool,
+) -> None:
     """Teach a pixel policy (CNN on stacked frames) to act as a state-only TEACHER of SPEC does (DAgger).
 
     Writes runs/<Id>/<timestamp>/: config.json, rounds.csv, best and final policy files, results.json. docs/distill.md.
     """
     from visualenv.train.distill import distill as run_distill
 
-    config = DistillConfig(spec=spec, teacher=teacher, student=student, rounds=rounds, episodes=episodes, mixing=mixing, epochs=epochs, batch_size=batch_size,
-                           learning_rate=learning_rate, shift=shift, frame_stack=frame_stack, eval_episodes=eval_episodes,
-                           final_eval_episodes=final_episodes, seed=seed, progress=not no_progress)
+    config = DistillConfig(
+        spec=spec,
+        teacher=teacher,
+        student=student,
+        rounds=rounds,
+        episodes=episodes,
+        mixing=mixing,
+        epochs=epochs,
+        batch_size=batch_size,
+        learning_rate=learning_rate,
+        shift=shift,
+        frame_stack=frame_stack,
+        eval_episodes=eval_episodes,
+        final_eval_episodes=final_episodes,
+        seed=seed,
+        progress=not no_progress,
+    )
     _, results = run_distill(config, out_root, log=click.echo)
-    click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
-               f"length {results['mean_length']:.1f}; {results['frames']} frames in {results['wall_time_s']:.0f} s")
+    click.echo(
+        f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
+        f"length {results['mean_length']:.1f}; {results['frames']} frames in {results['wall_time_s']:.0f} s"
+    )
 
 
 def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dict[str, Any]:
@@ -159,9 +361,17 @@ def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dic
         except yaml.YAMLError as exc:
             raise click.BadParameter(f"{config_file} is not YAML: {exc}", param_hint="--config") from None
         if not isinstance(loaded, dict):
-            raise click.BadParameter(f"{config_file}: expected a mapping of hyperparameters (name: value), got a {type(loaded).__name__}", param_hint="--config")
+            raise click.BadParameter(
+                f"{config_file}: expected a mapping of hyperparameters (name: value), got a {type(loaded).__name__}",
+                param_hint="--config",
+            )
         # YAML 1.1 reads 3e-4 as text; it is the number --set (JSON) and YAML 1.2 read
-        hyper.update({key: float(value) if isinstance(value, str) and EXPONENT_NUMBER.match(value) else value for key, value in loaded.items()})
+        hyper.update(
+            {
+                key: float(value) if isinstance(value, str) and EXPONENT_NUMBER.match(value) else value
+                for key, value in loaded.items()
+            }
+        )
     for item in overrides:
         key, sep, value = item.partition("=")
         if not sep:
@@ -173,18 +383,26 @@ def _hyperparameters(config_file: str | None, overrides: tuple[str, ...]) -> dic
 def _given(ctx: click.Context, names: Sequence[str]) -> list[str]:
     """The options among `names` given on the command line, as the user spelt them."""
     flags = {"out_root": "--out", "batch_workers": "--workers", "torch_device": "--device"}
-    return [flags.get(n, f"--{n.replace('_', '-')}") for n in names if ctx.get_parameter_source(n) is ParameterSource.COMMANDLINE]
+    return [
+        flags.get(n, f"--{n.replace('_', '-')}")
+        for n in names
+        if ctx.get_parameter_source(n) is ParameterSource.COMMANDLINE
+    ]
 
 
 def _chosen_backend(ctx: click.Context, backend: str, resume_dir: str | None) -> str:
     """The run's backend (a resumed run keeps its own); options of the other backend are refused."""
     saved_backend = _run_backend(resume_dir) if resume_dir else backend
     if resume_dir and _given(ctx, ["backend"]) and backend != saved_backend:
-        raise click.UsageError(f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend")
+        raise click.UsageError(
+            f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend"
+        )
     if saved_backend == "rllib" or backend == "rllib":
         sb3_only = _given(ctx, ["algo", "envs", "batch_workers", "torch_device", "render_device"])
         if sb3_only:
-            raise click.UsageError(f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)")
+            raise click.UsageError(
+                f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)"
+            )
         return "rllib"
     rllib_only = _given(ctx, ["env_runners", "envs_per_runner", "address"])
     if rllib_only:
@@ -218,8 +436,16 @@ def _run_backend(run_dir: str) -> str:
         raise click.BadParameter(str(exc), param_hint="--resume") from None
 
 
-def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[str, Any], resume_dir: str | None, out_root: str,
-                 address: str | None, progress: bool) -> None:
+def _train_rllib(
+    ctx: click.Context,
+    spec: str,
+    steps: int | None,
+    hyper: dict[str, Any],
+    resume_dir: str | None,
+    out_root: str,
+    address: str | None,
+    progress: bool,
+) -> None:
     """`train --backend rllib`: checked before a run folder exists, then visualenv.train.rllib.train."""
     try:
         from visualenv.train.rllib import RLlibTrainConfig, algorithm_config, train as run_training
@@ -232,30 +458,63 @@ def _train_rllib(ctx: click.Context, spec: str, steps: int | None, hyper: dict[s
 
     import logging
 
-    logging.getLogger("ray.rllib").setLevel(logging.ERROR)  # RLlib's notes on its own API changes are not the user's business
+    logging.getLogger("ray.rllib").setLevel(
+        logging.ERROR
+    )  # RLlib's notes on its own API changes are not the user's business
     params = ctx.params
     if resume_dir:
-        _refuse_fixed_on_resume(ctx, ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root", "env_runners",
-                                      "envs_per_runner", "batched"), "only --steps, --set, --config and --address change on --resume")
+        _refuse_fixed_on_resume(
+            ctx,
+            (
+                "frame_stack",
+                "eval_every",
+                "eval_episodes",
+                "final_episodes",
+                "seed",
+                "state_only",
+                "out_root",
+                "env_runners",
+                "envs_per_runner",
+                "batched",
+            ),
+            "only --steps, --set, --config and --address change on --resume",
+        )
         config = _resumed(RLlibTrainConfig, resume_dir, steps, hyper, progress)
     else:
-        config = RLlibTrainConfig(spec=spec, steps=steps or RLlibTrainConfig.steps, env_runners=params["env_runners"],
-                                  envs_per_runner=params["envs_per_runner"], frame_stack=params["frame_stack"], eval_every=params["eval_every"],
-                                  eval_episodes=params["eval_episodes"], final_eval_episodes=params["final_episodes"], seed=params["seed"],
-                                  render=not params["state_only"], hyperparams=hyper, progress=progress, pin=params["pin"])
+        config = RLlibTrainConfig(
+            spec=spec,
+            steps=steps or RLlibTrainConfig.steps,
+            env_runners=params["env_runners"],
+            envs_per_runner=params["envs_per_runner"],
+            frame_stack=params["frame_stack"],
+            eval_every=params["eval_every"],
+            eval_episodes=params["eval_episodes"],
+            final_eval_episodes=params["final_episodes"],
+            seed=params["seed"],
+            render=not params["state_only"],
+            hyperparams=hyper,
+            progress=progress,
+            pin=params["pin"],
+        )
         if params["batched"]:
             config = dataclasses.replace(config, envs_per_runner=params["batched"], batched=True)
     check_address(address)
-    algorithm_config(config)  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
+    algorithm_config(
+        config
+    )  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
-    results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None, address=address)
+    results = run_training(
+        config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None, address=address
+    )
     _report(results, run_dir)
 
 
 def _report(results: dict[str, Any], run_dir: Path) -> None:
-    click.echo(f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
-               f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %")
+    click.echo(
+        f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
+        f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %"
+    )
     from visualenv.train.run_folder import RunFolder
 
     click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {RunFolder(run_dir).plots}")

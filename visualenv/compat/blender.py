@@ -55,8 +55,12 @@ def check_bpy(part: str) -> bool:
         return True
     if part not in _warned:
         _warned.add(part)
-        warnings.warn(f"visualenv's {part} relies on Blender internals checked against bpy {', '.join(CHECKED_BPY)}, "
-                      f"not {version}: run tests/compat/test_blender.py", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"visualenv's {part} relies on Blender internals checked against bpy {', '.join(CHECKED_BPY)}, "
+            f"not {version}: run tests/compat/test_blender.py",
+            RuntimeWarning,
+            stacklevel=3,
+        )
     return False
 
 
@@ -99,7 +103,9 @@ def compile_camera_shader(camera: Any, scene: Any) -> None:
     bundled_packages_on_path()
     with bpy.context.temp_override(scene=scene, object=camera, active_object=camera):
         if not bpy.ops.object.camera_custom_update.poll():
-            raise RuntimeError("Blender cannot update this custom camera (not a custom camera, or the scene's engine is not Cycles)")
+            raise RuntimeError(
+                "Blender cannot update this custom camera (not a custom camera, or the scene's engine is not Cycles)"
+            )
         bpy.ops.object.camera_custom_update()
 
 
@@ -166,7 +172,17 @@ def quat_to_mat3(quats: np.ndarray) -> np.ndarray:
     length = np.sqrt(dot)
     q = q * (np.float32(1.0) / np.where(length == 0, np.float32(1.0), length))[:, None]
     q0, q1, q2, q3 = (np.sqrt(2.0) * q.astype(np.float64)).T
-    qda, qdb, qdc, qaa, qab, qac, qbb, qbc, qcc = q0 * q1, q0 * q2, q0 * q3, q1 * q1, q1 * q2, q1 * q3, q2 * q2, q2 * q3, q3 * q3
+    qda, qdb, qdc, qaa, qab, qac, qbb, qbc, qcc = (
+        q0 * q1,
+        q0 * q2,
+        q0 * q3,
+        q1 * q1,
+        q1 * q2,
+        q1 * q3,
+        q2 * q2,
+        q2 * q3,
+        q3 * q3,
+    )
     out = np.empty((len(q), 3, 3))
     out[:, 0, 0], out[:, 0, 1], out[:, 0, 2] = 1.0 - qbb - qcc, -qdc + qab, qdb + qac
     out[:, 1, 0], out[:, 1, 1], out[:, 1, 2] = qdc + qab, 1.0 - qaa - qcc, -qda + qbc
@@ -278,7 +294,11 @@ def cached_kernel(arch: str, ptx: Path, version: str) -> Path:
 def source_ptx(arch: str, lib: Path) -> Path | None:
     """The PTX Cycles falls back to for `arch` ('sm_90'): the highest ``kernel_compute_XY`` in `lib` not above it."""
     number = int(arch.split("_")[1])
-    found = {int(m.group(1)): p for p in lib.glob("kernel_compute_*.ptx.zst") if (m := re.fullmatch(r"kernel_compute_(\d+)\.ptx\.zst", p.name))}
+    found = {
+        int(m.group(1)): p
+        for p in lib.glob("kernel_compute_*.ptx.zst")
+        if (m := re.fullmatch(r"kernel_compute_(\d+)\.ptx\.zst", p.name))
+    }
     usable = [n for n in found if n <= number]
     return found[max(usable)] if usable else None
 
@@ -349,7 +369,9 @@ def use_cached_kernels() -> Path | None:
             try:
                 folder = cycles_folder_with(kernels, addon)
             except OSError as exc:  # a cache that cannot be written: the driver compiles the PTX, as without a cache
-                warnings.warn(f"cannot use the compiled CUDA kernels in {kernel_cache()}: {exc}", RuntimeWarning, stacklevel=2)
+                warnings.warn(
+                    f"cannot use the compiled CUDA kernels in {kernel_cache()}: {exc}", RuntimeWarning, stacklevel=2
+                )
                 return None
             point_cycles_at(folder)
             _pointed = folder

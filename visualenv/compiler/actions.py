@@ -24,7 +24,9 @@ class ActionsCompiler:
 
     def resolve_actions(self) -> tuple[list[str], int | None, list[tuple[float, float]]]:
         actions = self.spec.actions
-        if actions is None:  # a physics spec's default: one Box dimension per actuator, in its ctrlrange (Gymnasium's action space)
+        if (
+            actions is None
+        ):  # a physics spec's default: one Box dimension per actuator, in its ctrlrange (Gymnasium's action space)
             assert self.plan is not None
             model = self.plan.model
             names = [f"ctrl_{a}" for a in model.actuator_names()]
@@ -44,7 +46,9 @@ class ActionsCompiler:
             return list(dict.fromkeys(k for a in actions.discrete for k in a))
         return list(actions.continuous or {})
 
-    def step_discrete_inputs(self, fb: FunctionBuilder, scope: dict[str, Type], input_names: list[str], discrete: int) -> None:
+    def step_discrete_inputs(
+        self, fb: FunctionBuilder, scope: dict[str, Type], input_names: list[str], discrete: int
+    ) -> None:
         """Every input 0, then the chosen action's inputs (an if-chain on the action index)."""
         fb.assign(local("action"), name("_action"))
         for n in input_names:

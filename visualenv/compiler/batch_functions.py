@@ -34,6 +34,7 @@ from visualenv.expr.codegen import power
 from visualenv.expr.functions import FUNCTIONS
 from visualenv.expr.tolerance import tolerance_columns
 
+
 class Noted:
     """What :func:`float_errors` collected: the operations that met a value Python raises on.
 
@@ -171,6 +172,7 @@ def _reduce(op: Callable[[Any, Any], Any]) -> Callable[..., Any]:
     def call(*args: Any) -> Any:
         items = args[0] if len(args) == 1 and isinstance(args[0], tuple) else args
         return np.asarray(functools.reduce(op, items), dtype=np.float64)
+
     return call
 
 
@@ -180,24 +182,53 @@ def _log(x: Any, base: Any = None) -> Any:
 
 #: numpy's version of each deterministic function; those in _CHECKED are replaced where they differ from Python's
 _NUMPY: dict[str, Callable[..., Any]] = {
-    "sin": np.sin, "cos": np.cos, "tan": np.tan, "asin": np.arcsin, "acos": np.arccos, "atan": np.arctan,
-    "atan2": np.arctan2, "sinh": np.sinh, "cosh": np.cosh, "tanh": np.tanh, "sqrt": np.sqrt, "exp": np.exp,
-    "log": _log, "abs": np.abs, "min": _noting("min", _reduce(np.minimum), _nan), "max": _noting("max", _reduce(np.maximum), _nan),
+    "sin": np.sin,
+    "cos": np.cos,
+    "tan": np.tan,
+    "asin": np.arcsin,
+    "acos": np.arccos,
+    "atan": np.arctan,
+    "atan2": np.arctan2,
+    "sinh": np.sinh,
+    "cosh": np.cosh,
+    "tanh": np.tanh,
+    "sqrt": np.sqrt,
+    "exp": np.exp,
+    "log": _log,
+    "abs": np.abs,
+    "min": _noting("min", _reduce(np.minimum), _nan),
+    "max": _noting("max", _reduce(np.maximum), _nan),
     "clip": _clip,
     "hypot": _elementwise("hypot", math.hypot, (2, 3)),  # numpy's (C's hypot) differs from Python's own algorithm
-    "floor": _noting("floor", np.floor, _not_finite), "ceil": _noting("ceil", np.ceil, _not_finite),
-    "round": _noting("round", np.round, _not_finite), "sign": _noting("sign", np.sign, _nan), "radians": np.radians, "degrees": np.degrees,
+    "floor": _noting("floor", np.floor, _not_finite),
+    "ceil": _noting("ceil", np.ceil, _not_finite),
+    "round": _noting("round", np.round, _not_finite),
+    "sign": _noting("sign", np.sign, _nan),
+    "radians": np.radians,
+    "degrees": np.degrees,
     "tolerance": tolerance_columns,  # dm_control's, the scalar code per env (NaN where its arguments are refused: the lane raises)
 }
 #: the operators Python raises on, as the vectorised code calls them
 OPERATORS: dict[type, Callable[[Any, Any], Any]] = {
-    ast.Div: _noting("/", np.true_divide, _by_zero), ast.FloorDiv: _noting("//", np.floor_divide, _by_zero),
+    ast.Div: _noting("/", np.true_divide, _by_zero),
+    ast.FloorDiv: _noting("//", np.floor_divide, _by_zero),
     ast.Mod: _noting("%", np.remainder, _by_zero),
 }
 #: the functions numpy may compute with its own loops, and the inputs they are compared on (low, high)
 _CHECKED: dict[str, tuple[float, float]] = {
-    "sin": (-20, 20), "cos": (-20, 20), "tan": (-3, 3), "asin": (-1, 1), "acos": (-1, 1), "atan": (-50, 50), "atan2": (-5, 5),
-    "sinh": (-20, 20), "cosh": (-20, 20), "tanh": (-5, 5), "exp": (-50, 50), "log": (1e-6, 1e6), "pow": (0.01, 10),
+    "sin": (-20, 20),
+    "cos": (-20, 20),
+    "tan": (-3, 3),
+    "asin": (-1, 1),
+    "acos": (-1, 1),
+    "atan": (-50, 50),
+    "atan2": (-5, 5),
+    "sinh": (-20, 20),
+    "cosh": (-20, 20),
+    "tanh": (-5, 5),
+    "exp": (-50, 50),
+    "log": (1e-6, 1e6),
+    "pow": (0.01, 10),
 }
 SAMPLE_SIZE = 1024
 
@@ -206,7 +237,9 @@ def _differs(name: str, fast: Callable[..., Any], exact: Callable[..., float]) -
     """Whether numpy's `fast` gives another value than Python's `exact` on a fixed sample of the function's inputs."""
     low, high = _CHECKED[name]
     rng = np.random.default_rng(len(name))
-    args = [rng.uniform(low, high, SAMPLE_SIZE)] + ([rng.uniform(-3, 3, SAMPLE_SIZE)] if name in ("atan2", "pow") else [])
+    args = [rng.uniform(low, high, SAMPLE_SIZE)] + (
+        [rng.uniform(-3, 3, SAMPLE_SIZE)] if name in ("atan2", "pow") else []
+    )
     with np.errstate(all="ignore"):
         ours = np.asarray(fast(*args), dtype=np.float64)
     return ours.tolist() != [exact(*values) for values in zip(*(a.tolist() for a in args))]

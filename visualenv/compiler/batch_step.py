@@ -70,7 +70,14 @@ _SCALAR_ONLY = {FUNC_PREFIX + n for n, f in FUNCTIONS.items() if f.random} | {"_
 def vector_globals() -> dict[str, Any]:
     """The only globals a vectorised function sees: the function table on columns and the element-wise helpers."""
     table = vector_functions()
-    env: dict[str, Any] = {"__builtins__": {}, POW: table["pow"], WHERE: _where, ALL: _all, ANY: _any, NOT: np.logical_not}
+    env: dict[str, Any] = {
+        "__builtins__": {},
+        POW: table["pow"],
+        WHERE: _where,
+        ALL: _all,
+        ANY: _any,
+        NOT: np.logical_not,
+    }
     env.update({FUNC_PREFIX + n: f for n, f in table.items() if n != "pow"})
     env.update({f"_v{op.__name__}": f for op, f in OPERATORS.items()})
     return env
@@ -86,7 +93,9 @@ class _Expressions(ast.NodeTransformer):
     def visit_BinOp(self, node: ast.BinOp) -> ast.AST:
         left, right = self.visit(node.left), self.visit(node.right)
         constant = isinstance(right, ast.Constant) and isinstance(right.value, (int, float)) and right.value != 0
-        if type(node.op) in OPERATORS and not constant:  # a division: by zero, Python raises (noted), numpy gives a number
+        if (
+            type(node.op) in OPERATORS and not constant
+        ):  # a division: by zero, Python raises (noted), numpy gives a number
             return _call(f"_v{type(node.op).__name__}", [left, right])
         return ast.BinOp(left, node.op, right)
 

@@ -20,13 +20,18 @@ from visualenv.spec.models import CameraObject, EmptyObject, LightObject, MeshOb
 #: the expression type of each kind of binding value (BINDABLES' ``value``); a colour's size (3 or 4) is checked apart
 VALUE_TYPES: dict[str, Type] = {"vector": vec(3), "scale": vec(3), "color": vec(0), "number": NUM, "condition": BOOL}
 #: the Blender object type each kind of declared object becomes
-OBJECT_TYPES = ((PrimitiveObject, "MESH"), (MeshObject, "MESH"), (LightObject, "LIGHT"), (CameraObject, "CAMERA"), (EmptyObject, "EMPTY"))
+OBJECT_TYPES = (
+    (PrimitiveObject, "MESH"),
+    (MeshObject, "MESH"),
+    (LightObject, "LIGHT"),
+    (CameraObject, "CAMERA"),
+    (EmptyObject, "EMPTY"),
+)
 
 
 def object_type(obj: Any) -> str:
     """The Blender object type (MESH, LIGHT, CAMERA, EMPTY) a declared scene object becomes."""
     return next(t for cls, t in OBJECT_TYPES if isinstance(obj, cls))
-
 
 
 class BindingsCompiler:
@@ -47,7 +52,10 @@ class BindingsCompiler:
         fb = FunctionBuilder("bind", ["_state", "_steps"])
         fb.unpack([local(n) for n in state_names], "_state")
         fb.assign(local("steps"), name("_steps"))
-        scope: dict[str, Type] = {**self.pnames, **{n: NUM for n in state_names}}  # a physics spec's names too: a camera can follow a body
+        scope: dict[str, Type] = {
+            **self.pnames,
+            **{n: NUM for n in state_names},
+        }  # a physics spec's names too: a camera can follow a body
         scope["steps"] = NUM
         targets: list[BindingTarget] = []
         values: list[ast.expr] = []
@@ -75,17 +83,32 @@ class BindingsCompiler:
             return True  # a geom, light or camera of the MuJoCo model (e.g. a colour drawn at reset: domain randomisation), a body
         if self.spec.scene.file is None and obj_name not in declared:
             known = [*declared, *model_objects]
-            self.error(("actors", obj_name), f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, known).replace("names:", "objects:"), key=True)
+            self.error(
+                ("actors", obj_name),
+                f"no object '{obj_name}' in the scene" + did_you_mean(obj_name, known).replace("names:", "objects:"),
+                key=True,
+            )
             return False
         return True
 
-    def bind_property(self, fb: FunctionBuilder, path: tuple, raw: Any, scope: dict[str, Type],
-                      targets: list[BindingTarget], values: list[ast.expr]) -> None:
+    def bind_property(
+        self,
+        fb: FunctionBuilder,
+        path: tuple,
+        raw: Any,
+        scope: dict[str, Type],
+        targets: list[BindingTarget],
+        values: list[ast.expr],
+    ) -> None:
         """One binding: its object's type checked, its values assigned one line each (so a fault names it), its target recorded."""
         _, obj_name, prop = path
         obj = self.spec.scene.objects.get(obj_name)
-        if self.plan is not None and (why := phys.model_object_problem(self.plan, obj_name, prop, set(self.spec.scene.objects))):
-            self.error(path, why, key=True)  # MuJoCo poses the model's objects: a pose binding would leave the physics behind
+        if self.plan is not None and (
+            why := phys.model_object_problem(self.plan, obj_name, prop, set(self.spec.scene.objects))
+        ):
+            self.error(
+                path, why, key=True
+            )  # MuJoCo poses the model's objects: a pose binding would leave the physics behind
             return
         if obj is None and obj_name in self.physics_objects():
             problem = type_problem(prop, obj_name, self.physics_objects()[obj_name])
@@ -126,13 +149,17 @@ class BindingsCompiler:
         if spec.observation is None or spec.scene.file is not None:
             return
         types = {n: object_type(o) for n, o in spec.scene.objects.items()}
-        types.update({n: t for n, t in self.physics_objects().items() if n not in types})  # the model's cameras, by their MuJoCo names
+        types.update(
+            {n: t for n, t in self.physics_objects().items() if n not in types}
+        )  # the model's cameras, by their MuJoCo names
         for path, camera in spec.camera_uses():
             problem = camera_problem(camera, types)
             if problem:
                 self.error(path, problem)
 
-    def binding_values(self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]) -> list[ast.expr] | tuple[ast.expr, int] | None:
+    def binding_values(
+        self, path: tuple, prop: str, raw: Any, scope: dict[str, Type]
+    ) -> list[ast.expr] | tuple[ast.expr, int] | None:
         """A binding's value as a list of scalar trees, or (vector tree, size) when it is not a literal."""
         kind = BINDABLES[prop].value
         wanted = VALUE_TYPES[kind]
@@ -155,7 +182,11 @@ class BindingsCompiler:
             if checked is None:
                 return None
             size = checked.type.size if checked.type.kind == "vec" else 0
-            if checked.type.kind != "vec" or (wanted.size and size != wanted.size) or (kind == "color" and size not in (3, 4)):
+            if (
+                checked.type.kind != "vec"
+                or (wanted.size and size != wanted.size)
+                or (kind == "color" and size not in (3, 4))
+            ):
                 need = "3 or 4 values" if kind == "color" else f"a vector of {wanted.size}"
                 self.error(path, f"'{prop}' needs {need}, got {checked.type}")
                 return None

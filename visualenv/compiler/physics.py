@@ -54,7 +54,9 @@ class PhysicsPlan:
     redraw_targets: list[str] = field(default_factory=list)  # what each try of the redraw writes, in order
     redraw_attempts: int = 0
     settle: tuple[int, float | None] | None = None  # the reset's settling steps and the time set after them
-    posed_geoms: tuple[int, ...] = ()  # geoms whose model position the reset writes: drawn posed from geom_xpos/geom_xmat
+    posed_geoms: tuple[
+        int, ...
+    ] = ()  # geoms whose model position the reset writes: drawn posed from geom_xpos/geom_xmat
 
     @property
     def dt(self) -> float:
@@ -104,11 +106,14 @@ class PhysicsPlan:
 
 def redraw_failure(attempts: int) -> Any:
     """The call a redraw loop makes when no try met its condition: a fault the env locates at ``physics.reset.redraw.until``."""
+
     def fail() -> None:
         from visualenv.physics.simulation import PhysicsFault
 
-        raise PhysicsFault(f"none of {attempts} tries met the condition (physics.reset.redraw.attempts): draw the values "
-                           "differently, or allow more attempts")
+        raise PhysicsFault(
+            f"none of {attempts} tries met the condition (physics.reset.redraw.attempts): draw the values "
+            "differently, or allow more attempts"
+        )
 
     return fail
 
@@ -178,13 +183,17 @@ def model_object_problem(plan: PhysicsPlan, obj_name: str, prop: str, declared: 
     bodies = {b: i for i, b in enumerate(idents["body"]) if i}  # the world body never moves: no object stands for it
     frame = obj_name.startswith("body:") and obj_name not in declared
     if frame and obj_name[5:] not in bodies:
-        return f"no body '{obj_name[5:]}' in the MuJoCo model for '{obj_name}'" + did_you_mean(obj_name[5:], bodies).replace("names:", "bodies:")
+        return f"no body '{obj_name[5:]}' in the MuJoCo model for '{obj_name}'" + did_you_mean(
+            obj_name[5:], bodies
+        ).replace("names:", "bodies:")
     if not BINDABLES[prop].moves:
         if not frame:
             return None
         drawn = [g.name for g in plan.scene.geoms if g.body == bodies[obj_name[5:]]] if plan.scene is not None else []
-        return (f"'{obj_name}' is the frame of the MuJoCo body '{obj_name[5:]}': bind its geoms by their names instead"
-                + (f" ({', '.join(drawn)})" if drawn else ""))
+        return (
+            f"'{obj_name}' is the frame of the MuJoCo body '{obj_name[5:]}': bind its geoms by their names instead"
+            + (f" ({', '.join(drawn)})" if drawn else "")
+        )
     geoms = [g.name for g in plan.scene.geoms] if plan.scene is not None else idents["geom"]
     body = bodies.get(obj_name[5:] if frame else obj_name) if frame or obj_name in bodies else None
     if body is None and obj_name in geoms and obj_name not in declared:
@@ -192,31 +201,56 @@ def model_object_problem(plan: PhysicsPlan, obj_name: str, prop: str, declared: 
     if body is None:
         if obj_name in declared or obj_name not in [*idents["camera"], *idents["light"]]:
             return None
-        return (f"'{obj_name}' is a {'camera' if obj_name in idents['camera'] else 'light'} of the MuJoCo model, which MuJoCo poses "
-                f"every step: binding its {prop} would fight MuJoCo's pose. Move the body it hangs on, or use an object of the spec's own")
+        return (
+            f"'{obj_name}' is a {'camera' if obj_name in idents['camera'] else 'light'} of the MuJoCo model, which MuJoCo poses "
+            f"every step: binding its {prop} would fight MuJoCo's pose. Move the body it hangs on, or use an object of the spec's own"
+        )
     what = f"the MuJoCo body '{idents['body'][body]}'" if body else "the MuJoCo model's world body (static geoms)"
-    return (f"'{obj_name}' stands for {what}: binding its {prop} would move the picture and not the physics. "
-            f"{how_to_move(plan.model, body)}")
+    return (
+        f"'{obj_name}' stands for {what}: binding its {prop} would move the picture and not the physics. "
+        f"{how_to_move(plan.model, body)}"
+    )
 
 
 def how_to_move(physics: PhysicsModel, body: int) -> str:
     """How a spec moves `body`: its mocap pose, its joints' values, or what to change in the MJCF."""
     model, ident = physics.model, physics.names.ident["body"][body]
     if body and int(model.body_mocapid[body]) >= 0:
-        return (f"It is a mocap body: set mocap_{ident}_x, _y, _z (and _qw, _qx, _qy, _qz) in physics.reset.values or "
-                "dynamics.update")
+        return (
+            f"It is a mocap body: set mocap_{ident}_x, _y, _z (and _qw, _qx, _qy, _qz) in physics.reset.values or "
+            "dynamics.update"
+        )
     joints = [physics.names.ident["joint"][j] for j in range(model.njnt) if int(model.jnt_bodyid[j]) == body]
     if joints:
         names = [n for n in physics.qpos_names() if any(n == f"qpos_{j}" or n.startswith(f"qpos_{j}_") for j in joints)]
         return f"Its joints move it: set {', '.join(names)} in physics.reset.values, or drive them through actuators"
     where = f"make '{ident}' a mocap body" if body else "put the geoms in a body of their own that is a mocap body"
-    return (f"To move a body that has no joint, {where} (<body name=\"{ident if body else 'target'}\" mocap=\"true\">, a child of "
-            "worldbody) and set its mocap_<body>_x, _y, _z in physics.reset.values or dynamics.update; or give it a joint")
+    return (
+        f'To move a body that has no joint, {where} (<body name="{ident if body else "target"}" mocap="true">, a child of '
+        "worldbody) and set its mocap_<body>_x, _y, _z in physics.reset.values or dynamics.update; or give it a joint"
+    )
 
 
 #: the read of the model before its step: the only one a batch's replay of one env's step takes from the batch
 BEFORE = "before"
 
-__all__ = ["ADVANCE", "BEFORE", "FINISH_RESET", "REDRAW_FAILED", "REDRAW_TRIES", "WRITE_REDRAW", "WRITE_RESET", "PhysicsError", "PhysicsPlan",
-           "advance_statement", "call_statement", "how_to_move", "load", "model_object_problem", "physics_scene", "read_statement", "scope",
-           "settable"]
+__all__ = [
+    "ADVANCE",
+    "BEFORE",
+    "FINISH_RESET",
+    "REDRAW_FAILED",
+    "REDRAW_TRIES",
+    "WRITE_REDRAW",
+    "WRITE_RESET",
+    "PhysicsError",
+    "PhysicsPlan",
+    "advance_statement",
+    "call_statement",
+    "how_to_move",
+    "load",
+    "model_object_problem",
+    "physics_scene",
+    "read_statement",
+    "scope",
+    "settable",
+]

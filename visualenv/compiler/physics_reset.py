@@ -45,9 +45,13 @@ class ResetCompiler(Protocol):
 
     def error(self, path: tuple, message: str, *, key: bool = False, column: int | None = None) -> None: ...
 
-    def expr(self, path: tuple, text: Any, names: Mapping[str, Type], *, expect: Type | None = None, random: bool = True) -> Checked | None: ...
+    def expr(
+        self, path: tuple, text: Any, names: Mapping[str, Type], *, expect: Type | None = None, random: bool = True
+    ) -> Checked | None: ...
 
-    def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: Collection[str] = ()) -> None: ...
+    def physics_reads(
+        self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: Collection[str] = ()
+    ) -> None: ...
 
 
 def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
@@ -55,14 +59,18 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
     assert c.plan is not None and c.spec.physics is not None
     plan, section = c.plan, c.spec.physics.reset
     table = plan.model.names.values
-    writable = phys.settable(plan.model) | {n for n, (array, _) in table.items() if is_writable(array)}  # joints, mocap, model fields
+    writable = phys.settable(plan.model) | {
+        n for n, (array, _) in table.items() if is_writable(array)
+    }  # joints, mocap, model fields
     scope: dict[str, Type] = dict(c.pnames)
     start, before = len(fb.body), set(c.used)
     c.used = set()
     targets = entries(c, fb, section.values, ("physics", "reset", "values"), scope, writable)
     plan.reset_targets = targets
     plan.finishes = section.redraw is not None or section.settle is not None
-    fb.add(phys.call_statement(phys.WRITE_RESET, targets), Site("physics.reset", "the reset values, written to the model"))
+    fb.add(
+        phys.call_statement(phys.WRITE_RESET, targets), Site("physics.reset", "the reset values, written to the model")
+    )
     until_used: set[str] = set()
     redrawn: list[str] = []
     if section.redraw is not None:
@@ -72,7 +80,10 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
     plan.settle = (section.settle.steps, section.settle.time) if section.settle is not None else None
     if plan.finishes:
         what = "the settling steps, then the model forwarded" if section.settle is not None else "the model forwarded"
-        fb.add(ast.Expr(ast.Call(name(phys.FINISH_RESET), [], [])), Site("physics.reset.settle" if section.settle else "physics.reset.redraw", what))
+        fb.add(
+            ast.Expr(ast.Call(name(phys.FINISH_RESET), [], [])),
+            Site("physics.reset.settle" if section.settle else "physics.reset.redraw", what),
+        )
     reads = c.used
     c.physics_reads(fb, "reset", start, reads | set(targets) | set(redrawn))
     c.used = before | reads | until_used
@@ -84,8 +95,14 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
         plan.scene = with_posed_geoms(plan.scene, plan.model, geoms)
 
 
-def entries(c: ResetCompiler, fb: FunctionBuilder, values: Mapping[str, Any], where: tuple, scope: dict[str, Type],
-            writable: Collection[str]) -> list[str]:
+def entries(
+    c: ResetCompiler,
+    fb: FunctionBuilder,
+    values: Mapping[str, Any],
+    where: tuple,
+    scope: dict[str, Type],
+    writable: Collection[str],
+) -> list[str]:
     """Statements for reset entries (keys: the model's values to write, or temporaries), in order; the model's values they write."""
     targets: list[str] = []
     for key, value in values.items():
@@ -93,8 +110,12 @@ def entries(c: ResetCompiler, fb: FunctionBuilder, values: Mapping[str, Any], wh
         parts = [p.strip() for p in key.split(",")]
         bad = [p for p in parts if not p.isidentifier()]
         if bad:
-            c.error(path, f"'{bad[0]}' is not a name: a key is a qpos_/qvel_/mocap_ name or a writable model field, several separated "
-                    "by commas, or a new name", key=True)
+            c.error(
+                path,
+                f"'{bad[0]}' is not a name: a key is a qpos_/qvel_/mocap_ name or a writable model field, several separated "
+                "by commas, or a new name",
+                key=True,
+            )
             continue
         if len(parts) > 1 or parts[0].startswith(MODEL_KEYS) or parts[0] in c.pnames:
             problem = next((why(p, c, writable) for p in parts if p not in writable), None)
@@ -123,29 +144,44 @@ def why(key: str, c: ResetCompiler, writable: Collection[str]) -> str:
     assert c.plan is not None
     array = c.plan.model.names.values.get(key, ("", 0))[0]
     if key in c.pnames and array.startswith(MODEL_PREFIX):
-        return (f"'{key}' is read from the model, not written: a reset writes joint values (qpos_, qvel_), geoms' positions "
-                "(model_geom_pos_...) and damping (model_dof_damping_...); the renderer draws a geom at its model size")
+        return (
+            f"'{key}' is read from the model, not written: a reset writes joint values (qpos_, qvel_), geoms' positions "
+            "(model_geom_pos_...) and damping (model_dof_damping_...); the renderer draws a geom at its model size"
+        )
     if key in c.pnames:
         return f"'{key}' is computed by MuJoCo from the state: a reset writes joint values (qpos_, qvel_), mocap poses and writable model fields"
-    what = "writable model field" if key.startswith("model_") else "joint value or mocap pose" if c.plan.model.mocap_names() else "joint value"
+    what = (
+        "writable model field"
+        if key.startswith("model_")
+        else "joint value or mocap pose"
+        if c.plan.model.mocap_names()
+        else "joint value"
+    )
     return f"no {what} '{key}' to set" + did_you_mean(key, sorted(writable))
 
 
-def redraw_loop(c: ResetCompiler, fb: FunctionBuilder, scope: dict[str, Type], writable: Collection[str]) -> tuple[list[str], set[str]]:
+def redraw_loop(
+    c: ResetCompiler, fb: FunctionBuilder, scope: dict[str, Type], writable: Collection[str]
+) -> tuple[list[str], set[str]]:
     """``for _try in tries: <restore>; <entries>; write and forward; read; if until: break`` ``else: fail``; its targets and until's names."""
     assert c.plan is not None and c.spec.physics is not None and c.spec.physics.reset.redraw is not None
     redraw = c.spec.physics.reset.redraw
     where = ("physics", "reset", "redraw")
     mark = len(fb.body)
     targets = entries(c, fb, redraw.values, (*where, "values"), scope, writable)
-    fb.add(phys.call_statement(phys.WRITE_REDRAW, targets), Site("physics.reset.redraw", "the redrawn values, written to the model"))
+    fb.add(
+        phys.call_statement(phys.WRITE_REDRAW, targets),
+        Site("physics.reset.redraw", "the redrawn values, written to the model"),
+    )
     outer, c.used = c.used, set()
     at = len(fb.body)
     checked = c.expr((*where, "until"), redraw.until, scope, expect=BOOL)
     until_used = c.used
     c.physics_reads(fb, "redraw", at, until_used)
     c.used = outer
-    until_site = Site("physics.reset.redraw.until", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ())
+    until_site = Site(
+        "physics.reset.redraw.until", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()
+    )
     fb.add(ast.If(lower(checked.tree) if checked else const(True), [ast.Break()], []), until_site)
     fail = ast.Expr(ast.Call(name(phys.REDRAW_FAILED), [], []))
     fb.add(fail, until_site)

@@ -64,7 +64,9 @@ class Program:
     outcomes: list[OutcomeRule]
     bindings: list[BindingTarget]
     line_maps: dict[str, LineMap] = field(default_factory=dict)  # per generated function: its lines' spec sites
-    physics: "phys.PhysicsPlan | None" = None  # the MuJoCo model and what the generated code reads from it (docs/physics.md)
+    physics: "phys.PhysicsPlan | None" = (
+        None  # the MuJoCo model and what the generated code reads from it (docs/physics.md)
+    )
     _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
     _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
     _render_plan: RenderPlan | None = field(default=None, repr=False)
@@ -98,7 +100,9 @@ class Program:
             env: dict[str, Any] = {}
             self.physics.bind_batch(env, physics)
             builders = self._builders
-            return BatchFunctions(vectorize(builders["step"], env), vectorize(builders["bind"], env), vectorize(builders["observe"], env))
+            return BatchFunctions(
+                vectorize(builders["step"], env), vectorize(builders["bind"], env), vectorize(builders["observe"], env)
+            )
         return BatchFunctions(vectorize(self._builders["step"]), vectorize(self._builders["bind"]))
 
     def render_plan(self) -> RenderPlan:
@@ -158,7 +162,9 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
     def error(self, path: tuple, message: str, *, key: bool = False, column: int | None = None) -> None:
         self.problems.append(self.smap.diagnostic(path, message, key=key, column_offset=column))
 
-    def expr(self, path: tuple, text: Any, names: Mapping[str, Type], *, expect: Type | None = None, random: bool = True) -> Checked | None:
+    def expr(
+        self, path: tuple, text: Any, names: Mapping[str, Type], *, expect: Type | None = None, random: bool = True
+    ) -> Checked | None:
         try:
             checked = check(text, names, constants=self.params, allow_random=random, expect=expect)
             self.used |= checked.names
@@ -173,14 +179,20 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         if not match or len(path) < 2:
             return message
         wanted = match.group(1)
-        sections = {("params",): list(self.spec.params), ("dynamics", "let"): list(self.spec.dynamics.let), ("state",): list(self.spec.state)}
+        sections = {
+            ("params",): list(self.spec.params),
+            ("dynamics", "let"): list(self.spec.dynamics.let),
+            ("state",): list(self.spec.state),
+        }
         for prefix, names in sections.items():
             if tuple(path[: len(prefix)]) == prefix and wanted in names:
                 where = ".".join(prefix)
                 if len(path) > len(prefix) and path[len(prefix)] == wanted:
                     return f"unknown name '{wanted}': '{wanted}' cannot be used in its own definition in {where} (cyclic definitions are not allowed)"
-                return (f"unknown name '{wanted}': '{wanted}' is defined later in {where}: an entry can only use the ones above it "
-                        "(reorder them; cyclic definitions are not allowed)")
+                return (
+                    f"unknown name '{wanted}': '{wanted}' is defined later in {where}: an entry can only use the ones above it "
+                    "(reorder them; cyclic definitions are not allowed)"
+                )
         return message
 
     # -- the passes -----------------------------------------------------------------------------
@@ -202,8 +214,19 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             raise SpecError(in_file_order(self.problems))
         observed = [i for i, n in enumerate(state_names) if spec.state[n].observe]
         return Program(
-            self.loaded, self.params, state_names, observed, input_names, discrete, continuous, outcomes, bindings,
-            line_maps={k: b.line_map() for k, b in builders.items()}, physics=self.plan, _builders=builders, _python_dynamics=python_dynamics,
+            self.loaded,
+            self.params,
+            state_names,
+            observed,
+            input_names,
+            discrete,
+            continuous,
+            outcomes,
+            bindings,
+            line_maps={k: b.line_map() for k, b in builders.items()},
+            physics=self.plan,
+            _builders=builders,
+            _python_dynamics=python_dynamics,
         )
 
     # -- physics ---------------------------------------------------------------------------------
@@ -222,10 +245,15 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         contacts: dict[str, tuple[int, int]] = {}
         for key, pair in section.contacts.items():
             if key in model.names.values:
-                self.error(("physics", "contacts", key), f"'{key}' is a name of the physics model: choose another", key=True)
+                self.error(
+                    ("physics", "contacts", key), f"'{key}' is a name of the physics model: choose another", key=True
+                )
             unknown = [(i, g) for i, g in enumerate(pair) if g not in geoms]
             for i, g in unknown:
-                self.error(("physics", "contacts", key, i), f"no geom '{g}' in the model" + did_you_mean(g, geoms).replace("names:", "geoms:"))
+                self.error(
+                    ("physics", "contacts", key, i),
+                    f"no geom '{g}' in the model" + did_you_mean(g, geoms).replace("names:", "geoms:"),
+                )
             if not unknown:
                 contacts[key] = (geoms[pair[0]], geoms[pair[1]])
         keyframe = None
@@ -233,10 +261,15 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             keys = {n: i for i, n in enumerate(model.names.ident["key"])}
             keyframe = keys.get(section.reset.keyframe)
             if keyframe is None:
-                self.error(("physics", "reset", "keyframe"), f"no keyframe '{section.reset.keyframe}' in the model"
-                           + did_you_mean(section.reset.keyframe, keys).replace("names:", "keyframes:"))
+                self.error(
+                    ("physics", "reset", "keyframe"),
+                    f"no keyframe '{section.reset.keyframe}' in the model"
+                    + did_you_mean(section.reset.keyframe, keys).replace("names:", "keyframes:"),
+                )
         if "dt" in self.spec.model_fields_set:
-            self.error(("dt",), "with physics, dt is the model's timestep times physics.frame_skip: leave 'dt' out", key=True)
+            self.error(
+                ("dt",), "with physics, dt is the model's timestep times physics.frame_skip: leave 'dt' out", key=True
+            )
         self.plan = phys.PhysicsPlan(model, section.frame_skip, keyframe, contacts, convention=section.convention)
         if self.spec.observation is not None or self.spec.render.view.camera:  # drawn: every geom must be drawable
             try:
@@ -250,9 +283,15 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         if self.plan is None or self.plan.scene is None:
             return {}
         scene = self.plan.scene
-        return {**{g.name: "MESH" for g in scene.geoms}, **{light.name: "LIGHT" for light in scene.lights}, **{c.name: "CAMERA" for c in scene.cameras}}
+        return {
+            **{g.name: "MESH" for g in scene.geoms},
+            **{light.name: "LIGHT" for light in scene.lights},
+            **{c.name: "CAMERA" for c in scene.cameras},
+        }
 
-    def physics_reads(self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: Collection[str] = ()) -> None:
+    def physics_reads(
+        self, fb: FunctionBuilder, key: str, at: int, used: set[str], exclude: Collection[str] = ()
+    ) -> None:
         """Insert, at statement `at` of `fb`, the read of the physics names in `used` (a statement without a site of its own)."""
         if self.plan is None:
             return
@@ -277,7 +316,11 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         entries = self.spec.physics.observe
         if entries is None:
             model = self.plan.model
-            entries = [*model.qpos_names(), *model.qvel_names(), *(n for n in state_names if self.spec.state[n].observe)]
+            entries = [
+                *model.qpos_names(),
+                *model.qvel_names(),
+                *(n for n in state_names if self.spec.state[n].observe),
+            ]
         start, before = len(fb.body), set(self.used)
         self.used = set()
         values: list[ast.expr] = []
@@ -285,7 +328,11 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             path = ("physics", "observe", i) if self.spec.physics.observe is not None else ("physics",)
             checked = self.expr(path, entry, scope, expect=NUM)
             if checked:
-                fb.assign(f"_o{i}", lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                fb.assign(
+                    f"_o{i}",
+                    lower(checked.tree),
+                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
+                )
                 values.append(name(f"_o{i}"))
         self.physics_reads(fb, "observe", start, self.used, set(state_names))
         self.plan.observe_size = len(values)
@@ -298,7 +345,8 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         spec = self.spec
         seen: dict[str, str] = {}
         groups: list[tuple[str, list[str]]] = [
-            ("params", list(spec.params)), ("state", list(spec.state)),
+            ("params", list(spec.params)),
+            ("state", list(spec.state)),
             ("dynamics.let", list(spec.dynamics.let)),
         ]
         if spec.actions is not None and spec.actions.discrete:
@@ -310,10 +358,14 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             for n in names:
                 path: tuple = tuple(group.split(".")) + (n,)
                 if group == "actions.discrete":
-                    index = next(i for i, a in enumerate((spec.actions.discrete if spec.actions else None) or []) if n in a)
+                    index = next(
+                        i for i, a in enumerate((spec.actions.discrete if spec.actions else None) or []) if n in a
+                    )
                     path = ("actions", "discrete", index, n)
                 if n in _RESERVED:
-                    self.error(path, f"'{n}' is a reserved name (a built-in, function or keyword): choose another", key=True)
+                    self.error(
+                        path, f"'{n}' is a reserved name (a built-in, function or keyword): choose another", key=True
+                    )
                 elif n in seen and not (group == "actions.discrete" and seen[n] == group):
                     self.error(path, f"'{n}' is already defined in {seen[n]}", key=True)
                 else:
@@ -323,23 +375,58 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
                 path = ("actions", "discrete") if group == "actions.discrete" else tuple(group.split(".")) + (n,)
                 if n in self.pnames and not (group.startswith("actions") and n.startswith("ctrl_")):
                     self.error(path, f"'{n}' is a name of the physics model: choose another", key=True)
-                elif self.plan is not None and group.startswith("actions") and n.startswith("ctrl_") and n not in self.pnames:
+                elif (
+                    self.plan is not None
+                    and group.startswith("actions")
+                    and n.startswith("ctrl_")
+                    and n not in self.pnames
+                ):
                     controls = [f"ctrl_{a}" for a in self.plan.model.actuator_names()]
-                    self.error(path, f"no actuator '{n[5:]}' in the model for '{n}'" + did_you_mean(n, controls).replace("names:", "controls:"), key=True)
+                    self.error(
+                        path,
+                        f"no actuator '{n[5:]}' in the model for '{n}'"
+                        + did_you_mean(n, controls).replace("names:", "controls:"),
+                        key=True,
+                    )
         if "max_steps" in spec.outcomes:
-            self.error(("outcomes", "max_steps"), "'max_steps' is what info['outcome'] says when an episode reaches max_steps: choose another name", key=True)
+            self.error(
+                ("outcomes", "max_steps"),
+                "'max_steps' is what info['outcome'] says when an episode reaches max_steps: choose another name",
+                key=True,
+            )
         moved = self.plan.model.mocap_names() if self.plan is not None else []  # a mocap pose is set there too
         for n in spec.dynamics.update:
             if n not in spec.state and n not in moved:
-                self.error(("dynamics", "update", n), f"'{n}' is not a state variable" + (" or a mocap pose" if moved else "") + did_you_mean(n, [*spec.state, *moved]).replace("names:", "state and mocap poses:" if moved else "state:"), key=True)
+                self.error(
+                    ("dynamics", "update", n),
+                    f"'{n}' is not a state variable"
+                    + (" or a mocap pose" if moved else "")
+                    + did_you_mean(n, [*spec.state, *moved]).replace(
+                        "names:", "state and mocap poses:" if moved else "state:"
+                    ),
+                    key=True,
+                )
 
     def resolve_params(self) -> dict[str, float | bool]:
         params: dict[str, float | bool] = {}
         for key in self.overrides:
             if key not in self.spec.params:
-                raise SpecError([Diagnostic(OPTIONS_WHERE, None, None, f"params.{key}", f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))])
+                raise SpecError(
+                    [
+                        Diagnostic(
+                            OPTIONS_WHERE,
+                            None,
+                            None,
+                            f"params.{key}",
+                            f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params),
+                        )
+                    ]
+                )
         raw = {**self.spec.params, **self.overrides}
-        builtins = {"max_steps": float(self.spec.max_steps), "dt": float(self.plan.dt if self.plan is not None else self.spec.dt)}
+        builtins = {
+            "max_steps": float(self.spec.max_steps),
+            "dt": float(self.plan.dt if self.plan is not None else self.spec.dt),
+        }
         self.params = {}
         for key, value in raw.items():
             if isinstance(value, bool):
@@ -362,7 +449,17 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         A bad override stops compiling at once: the params that use it would only repeat the problem.
         """
         if key in self.overrides:
-            raise SpecError([Diagnostic(OPTIONS_WHERE, None, None, f"params.{key}", f"{message} (in the override {self.overrides[key]!r})")])
+            raise SpecError(
+                [
+                    Diagnostic(
+                        OPTIONS_WHERE,
+                        None,
+                        None,
+                        f"params.{key}",
+                        f"{message} (in the override {self.overrides[key]!r})",
+                    )
+                ]
+            )
         self.error(("params", key), message, column=column)
 
     def resolve_python_dynamics(self) -> Callable[..., Any] | None:

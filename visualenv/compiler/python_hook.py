@@ -21,10 +21,15 @@ def checked_dynamics(func: Callable[..., Any], state_names: list[str]) -> Callab
         except Exception as exc:  # noqa: BLE001 - the user's code: any failure becomes a located fault
             raise ValueError(f"the function raised {type(exc).__name__}: {exc}") from exc
         if not isinstance(out, Mapping):
-            raise ValueError(f"the function returned {type(out).__name__}, expected a dict of new state values (state: {', '.join(state_names)})")
+            raise ValueError(
+                f"the function returned {type(out).__name__}, expected a dict of new state values (state: {', '.join(state_names)})"
+            )
         unknown = [str(k) for k in out if k not in known]
         if unknown:
-            raise ValueError(f"the function returned {', '.join(map(repr, unknown))}, which is not state" + did_you_mean(unknown[0], state_names).replace("names:", "state:"))
+            raise ValueError(
+                f"the function returned {', '.join(map(repr, unknown))}, which is not state"
+                + did_you_mean(unknown[0], state_names).replace("names:", "state:")
+            )
         new = {}
         for key, value in out.items():
             try:

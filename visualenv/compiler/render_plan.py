@@ -19,9 +19,18 @@ from visualenv.spec.options import check_make_options
 
 #: each spec model and the plan type made of it
 PLAN_TYPES: dict[type[BaseModel], type] = {
-    m.Texture: p.Texture, m.Material: p.Material, m.Craters: p.Craters, m.PrimitiveObject: p.PrimitiveObject,
-    m.MeshObject: p.MeshObject, m.LightObject: p.LightObject, m.CameraObject: p.CameraObject, m.EmptyObject: p.EmptyObject,
-    m.Sensor: p.Sensor, m.CameraView: p.CameraView, m.ViewSettings: p.ViewSettings, m.RenderSettings: p.RenderSettings,
+    m.Texture: p.Texture,
+    m.Material: p.Material,
+    m.Craters: p.Craters,
+    m.PrimitiveObject: p.PrimitiveObject,
+    m.MeshObject: p.MeshObject,
+    m.LightObject: p.LightObject,
+    m.CameraObject: p.CameraObject,
+    m.EmptyObject: p.EmptyObject,
+    m.Sensor: p.Sensor,
+    m.CameraView: p.CameraView,
+    m.ViewSettings: p.ViewSettings,
+    m.RenderSettings: p.RenderSettings,
     m.Distractions: p.Distractions,
 }
 
@@ -40,7 +49,12 @@ def plain(value: Any) -> Any:
 def to_plan(model: BaseModel, **given: Any) -> Any:
     """The plan type of `model`, its fields read from the model unless `given`."""
     kind = PLAN_TYPES[type(model)]
-    return kind(**{f.name: given[f.name] if f.name in given else plain(getattr(model, f.name)) for f in dataclasses.fields(kind)})
+    return kind(
+        **{
+            f.name: given[f.name] if f.name in given else plain(getattr(model, f.name))
+            for f in dataclasses.fields(kind)
+        }
+    )
 
 
 def world_plan(world: m.World) -> p.World:
@@ -51,11 +65,20 @@ def world_plan(world: m.World) -> p.World:
 
 def scene_plan(scene: m.Scene) -> p.Scene:
     default_material = to_plan(m.Material())
-    objects = {name: to_plan(obj, material=plain(obj.material or m.Material())) if isinstance(obj, m.PrimitiveObject) else to_plan(obj)
-               for name, obj in scene.objects.items()}
-    return p.Scene(file=scene.file, file_scene=scene.file_scene, objects=objects,
-                   world=world_plan(scene.world) if scene.world is not None else None,
-                   default_world=world_plan(m.World()), default_material=default_material)
+    objects = {
+        name: to_plan(obj, material=plain(obj.material or m.Material()))
+        if isinstance(obj, m.PrimitiveObject)
+        else to_plan(obj)
+        for name, obj in scene.objects.items()
+    }
+    return p.Scene(
+        file=scene.file,
+        file_scene=scene.file_scene,
+        objects=objects,
+        world=world_plan(scene.world) if scene.world is not None else None,
+        default_world=world_plan(m.World()),
+        default_material=default_material,
+    )
 
 
 def views_plan(observation: m.Observation | None) -> dict[str, p.CameraView]:

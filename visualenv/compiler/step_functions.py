@@ -32,7 +32,6 @@ class StepCompiler:
     step_discrete_inputs: Any
     step_continuous_inputs: Any
 
-
     def build_init(self, state_names: list[str]) -> FunctionBuilder:
         """init(): each state variable in order; an init may read earlier ones."""
         fb = FunctionBuilder("init", [])
@@ -46,7 +45,11 @@ class StepCompiler:
             path = ("state", n, "init")
             checked = self.expr(path, self.spec.state[n].init, scope, expect=NUM)
             if checked:
-                fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                fb.assign(
+                    local(n),
+                    lower(checked.tree),
+                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
+                )
             scope[n] = NUM
         self.physics_reads(fb, "init", start, self.used, set(state_names))
         self.used |= before
@@ -73,9 +76,14 @@ class StepCompiler:
             self.python_call(fb, state_names, input_names)
         else:
             self.step_update(fb, scope, commit=self.plan is None)
-        if self.plan is not None:  # the model's values before the step, for let and update; then the step; then the values after it
+        if (
+            self.plan is not None
+        ):  # the model's values before the step, for let and update; then the step; then the values after it
             self.physics_reads(fb, "before", start, self.used, set(state_names) | set(input_names))
-            fb.add(phys.advance_statement(self.plan), Site("physics", f"{self.spec.physics.model if self.spec.physics else ''}: the MuJoCo step"))
+            fb.add(
+                phys.advance_statement(self.plan),
+                Site("physics", f"{self.spec.physics.model if self.spec.physics else ''}: the MuJoCo step"),
+            )
             self.commit_update(fb)
             after_at = len(fb.body)
         self.used |= before
@@ -84,12 +92,22 @@ class StepCompiler:
         self.used = set()
         # reward and outcomes read the new state
         checked = self.expr(("reward",), self.spec.reward, scope, expect=NUM)
-        fb.assign("_reward", lower(checked.tree) if checked else const(0.0), Site("reward", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()))
+        fb.assign(
+            "_reward",
+            lower(checked.tree) if checked else const(0.0),
+            Site("reward", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()),
+        )
         self.step_outcomes(fb, scope)
         if self.plan is not None:
-            self.physics_reads(fb, "after", after_at, self.used, set(state_names) | set(input_names) | set(self.spec.dynamics.let))
+            self.physics_reads(
+                fb, "after", after_at, self.used, set(state_names) | set(input_names) | set(self.spec.dynamics.let)
+            )
         self.used |= before_reward
-        fb.returns(tuple_of([tuple_of([name(local(n)) for n in state_names]), name("_reward"), name("_outcome"), name("_fired")]))
+        fb.returns(
+            tuple_of(
+                [tuple_of([name(local(n)) for n in state_names]), name("_reward"), name("_outcome"), name("_fired")]
+            )
+        )
         return fb
 
     def step_let(self, fb: FunctionBuilder, scope: dict[str, Type]) -> None:
@@ -98,7 +116,11 @@ class StepCompiler:
             path = ("dynamics", "let", n)
             checked = self.expr(path, value, scope, expect=NUM)
             if checked:
-                fb.assign(local(n), lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                fb.assign(
+                    local(n),
+                    lower(checked.tree),
+                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
+                )
             scope[n] = NUM
 
     def step_update(self, fb: FunctionBuilder, scope: dict[str, Type], commit: bool = True) -> None:
@@ -106,12 +128,18 @@ class StepCompiler:
         spec = self.spec
         new_names = []
         for n, value in spec.dynamics.update.items():
-            if n not in spec.state and n not in self.pnames:  # a mocap pose (check_names refused the rest) is set in the MuJoCo step
+            if (
+                n not in spec.state and n not in self.pnames
+            ):  # a mocap pose (check_names refused the rest) is set in the MuJoCo step
                 continue
             path = ("dynamics", "update", n)
             checked = self.expr(path, value, scope, expect=NUM)
             if checked:
-                fb.assign("_new_" + n, lower(checked.tree), Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))))
+                fb.assign(
+                    "_new_" + n,
+                    lower(checked.tree),
+                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
+                )
                 new_names.append(n)
         self.updated = [n for n in new_names if n in spec.state]
         if self.plan is not None:
@@ -139,14 +167,18 @@ class StepCompiler:
             if not (when and reward):
                 continue
             if isinstance(when.tree, ast.Constant) and when.tree.value is False:
-                self.error(("outcomes", rule_name, "when"), "this condition is always false: the outcome can never happen")
+                self.error(
+                    ("outcomes", rule_name, "when"), "this condition is always false: the outcome can never happen"
+                )
             add_reward = ast.AugAssign(ast.Name("_reward", ast.Store()), ast.Add(), lower(reward.tree))
             set_outcome = ast.Assign([ast.Name("_outcome", ast.Store())], const(index))
             if rule.end == "none":
                 bit = milestone_bits[rule_name]
                 not_fired = ast.Compare(ast.BinOp(name("_fired"), ast.BitAnd(), const(bit)), [ast.Eq()], [const(0)])
                 mark = ast.AugAssign(ast.Name("_fired", ast.Store()), ast.BitOr(), const(bit))
-                milestones.insert(0, ast.If(ast.BoolOp(ast.And(), [not_fired, lower(when.tree)]), [add_reward, mark], []))
+                milestones.insert(
+                    0, ast.If(ast.BoolOp(ast.And(), [not_fired, lower(when.tree)]), [add_reward, mark], [])
+                )
             else:
                 ending = ast.If(lower(when.tree), [add_reward, set_outcome], [ending] if ending is not None else [])
         if ending is not None:
@@ -156,11 +188,21 @@ class StepCompiler:
 
     def python_call(self, fb: FunctionBuilder, state_names: list[str], input_names: list[str]) -> None:
         """Call the trusted 'module:function' escape hatch with plain dicts."""
+
         def as_dict(names: list[str]) -> ast.expr:
             return ast.Dict([const(n) for n in names], [name(local(n)) for n in names])
 
         params = ast.Dict([const(k) for k in self.params], [const(v) for v in self.params.values()])
-        call = ast.Call(name("_python_dynamics"), [as_dict(state_names), as_dict(input_names), params, ast.Attribute(name("_random"), "generator", ast.Load())], [])
+        call = ast.Call(
+            name("_python_dynamics"),
+            [
+                as_dict(state_names),
+                as_dict(input_names),
+                params,
+                ast.Attribute(name("_random"), "generator", ast.Load()),
+            ],
+            [],
+        )
         fb.assign("_py", call, Site("dynamics.python", self.spec.dynamics.python or ""))
         for n in state_names:
             get = ast.Call(ast.Attribute(name("_py"), "get", ast.Load()), [const(n), name(local(n))], [])

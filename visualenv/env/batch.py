@@ -128,17 +128,29 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if isinstance(spec, Program) and not params:
             program = spec
         else:
-            loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec)))
+            loaded = (
+                spec.loaded
+                if isinstance(spec, Program)
+                else (spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec)))
+            )
             program = compile_spec(loaded, params)
         self.program = program
         self.num_envs = n = int(num_envs)
         observation = program.spec.observation
         if render and observation is None:
-            raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
+            raise SpecError(
+                [
+                    program.loaded.source.diagnostic(
+                        (), "render=True needs an 'observation' section (a camera) in the spec"
+                    )
+                ]
+            )
         self.uses_camera = observation is not None and render is not False
         if render_mode == "human" and not self.uses_camera:
-            raise ValueError("render_mode='human' shows a grid of the observations, and a state-only batch has none: "
-                             "use render_mode='rgb_array' for the views")
+            raise ValueError(
+                "render_mode='human' shows a grid of the observations, and a state-only batch has none: "
+                "use render_mode='rgb_array' for the views"
+            )
         self._display: HumanDisplay | None = None  # render_mode="human": where the grid is shown, opened at first
         #: what each env's observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = distraction_settings(distractions, program.spec.distractions) if self.uses_camera else None
@@ -147,16 +159,24 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self.action_repeat < 1:
             raise ValueError(f"action_repeat must be an integer of at least 1, got {action_repeat!r}")
         #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
-        step_limit_ = program.spec.max_steps if max_episode_steps is None else step_limit(program, max_episode_steps) * self.action_repeat
+        step_limit_ = (
+            program.spec.max_steps
+            if max_episode_steps is None
+            else step_limit(program, max_episode_steps) * self.action_repeat
+        )
         #: episodes are truncated after this many step() calls
         self.max_episode_steps = -(-step_limit_ // self.action_repeat)
         #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
         self.rules = EpisodeRules(program, step_limit_, observes_state=not self.uses_camera and program.physics is None)
-        self._lanes = [VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)]  # the batch repeats
+        self._lanes = [
+            VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)
+        ]  # the batch repeats
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
-        self._pose_sources: list[Any] | None = None  # what the pose arrays view: each env's MjData, or MuJoCo's batch's rows
+        self._pose_sources: list[Any] | None = (
+            None  # what the pose arrays view: each env's MjData, or MuJoCo's batch's rows
+        )
         if program.physics is not None:
             physics = program.physics.batch([lane.simulation for lane in self._lanes])
             self._batch = program.batch_functions(physics)
@@ -177,7 +197,11 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self.observation_space = batch_space(self.single_observation_space, n)
         views = views_plan(observation) if self.uses_camera else {}
         space = self.single_observation_space
-        shapes = {key: sub.shape for key, sub in space.spaces.items()} if isinstance(space, gym.spaces.Dict) else {key: space.shape for key in views}
+        shapes = (
+            {key: sub.shape for key, sub in space.spaces.items()}
+            if isinstance(space, gym.spaces.Dict)
+            else {key: space.shape for key in views}
+        )
         self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
         names = program.state_names
         self._state = np.zeros((len(names), n))
@@ -189,7 +213,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         self._autoreset = np.zeros(n, dtype=bool)
         self._was_reset = False
         #: each env's distractions, drawn from its own generator as the env alone draws them (its lane's seed)
-        self._distractions = [EpisodeDistractions(to_plan(self.distractions)) for _ in range(n)] if self.distractions is not None else []
+        self._distractions = (
+            [EpisodeDistractions(to_plan(self.distractions)) for _ in range(n)] if self.distractions is not None else []
+        )
 
     @property
     def lanes(self) -> list[VisualEnv]:
@@ -202,9 +228,15 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
-    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
         """Reset every env; env i gets seed ``seed + i`` (or ``seed[i]``)."""
-        seeds = seed if isinstance(seed, (list, tuple)) else [None if seed is None else seed + i for i in range(self.num_envs)]
+        seeds = (
+            seed
+            if isinstance(seed, (list, tuple))
+            else [None if seed is None else seed + i for i in range(self.num_envs)]
+        )
         if len(seeds) != self.num_envs:
             raise ValueError(f"reset got {len(seeds)} seeds for {self.num_envs} envs")
         for i, s in enumerate(seeds):
@@ -249,7 +281,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             obs = self._observe()
         info = self._info(np.ones(n, dtype=bool))
         if final is not None:
-            info["final_obs"] = np.empty(n, dtype=object)  # one object per env, even when every env ended (np.array would stack them)
+            info["final_obs"] = np.empty(
+                n, dtype=object
+            )  # one object per env, even when every env ended (np.array would stack them)
             for i in np.flatnonzero(done):
                 info["final_obs"][i] = _select(final[0], int(i))
             info["_final_obs"] = done
@@ -290,12 +324,23 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self._display is None:
             self._display = open_human_display()
         pictures = {key: grid(frames) for key, frames in obs.items()} if isinstance(obs, dict) else grid(obs)
-        values = {"envs": self.num_envs, "steps": int(self._steps[0]), "state": {n: float(v) for n, v in zip(self.program.state_names, self._state[:, 0])}}
+        values = {
+            "envs": self.num_envs,
+            "steps": int(self._steps[0]),
+            "state": {n: float(v) for n, v in zip(self.program.state_names, self._state[:, 0])},
+        }
         self._display.show(self.program.spec.id, pictures, values)
 
     # -- the step -----------------------------------------------------------------------------------
 
-    def _repeat(self, actions: np.ndarray, stepping: np.ndarray, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+    def _repeat(
+        self,
+        actions: np.ndarray,
+        stepping: np.ndarray,
+        rewards: np.ndarray,
+        terminated: np.ndarray,
+        truncated: np.ndarray,
+    ) -> None:
         """The action repeat: each stepping env's spec step ``action_repeat`` times with its action, its rewards summed,
         stopping where its episode ends; a step a fault ended has no reward (as one env's)."""
         if self.action_repeat == 1:
@@ -314,7 +359,14 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
                 break
         rewards[stepping & (self._errors != None)] = 0.0  # noqa: E711 - element-wise: ended by a fault (on_fault: terminate)
 
-    def _advance(self, actions: np.ndarray, stepping: np.ndarray, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+    def _advance(
+        self,
+        actions: np.ndarray,
+        stepping: np.ndarray,
+        rewards: np.ndarray,
+        terminated: np.ndarray,
+        truncated: np.ndarray,
+    ) -> None:
         """Every stepping env's step at once, then the lanes of those the vectorised step could not do.
 
         An env goes to its lane when its result is one the episode's rules refuse (NaN, an infinity,
@@ -362,7 +414,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self._physics is not None:
             self._physics.kept.clear()
 
-    def _replay_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+    def _replay_lane(
+        self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
+    ) -> None:
         """Env i's step, whose MuJoCo step the batch took, run again by its lane: its result or its located fault, as env i alone."""
         physics, simulation = self._physics, self._lanes[i].simulation
         try:
@@ -372,7 +426,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             if not simulation.replay_stepped:  # it faulted before its MuJoCo step: alone, its data was not stepped
                 physics.put_back(i)
 
-    def _step_lane(self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray) -> None:
+    def _step_lane(
+        self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
+    ) -> None:
         """Env i stepped by its lane: the scalar step, with its checks and faults."""
         lane = self._lane_at(i)
         try:
@@ -413,7 +469,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if array.dtype.kind not in "iuf" or array.dtype == np.bool_:
             raise TypeError(f"actions must be numbers: the action space is {self.action_space}")
         if array.shape != self.action_space.shape:
-            raise ValueError(f"actions of shape {array.shape} for {self.num_envs} envs: the action space is {self.action_space}")
+            raise ValueError(
+                f"actions of shape {array.shape} for {self.num_envs} envs: the action space is {self.action_space}"
+            )
         if self.program.discrete is not None:
             if array.dtype.kind == "f" and not np.all(array == np.round(array)):
                 raise TypeError(f"discrete actions must be integers, got {actions!r}")
@@ -428,12 +486,17 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
     def renderer(self) -> Renderer:
         """The batch renderer, built on first use."""
         if self._renderer is None:
-            self._renderer = load_backend(self._backend)(self._render_plan(), self._renderer_options, num_envs=self.num_envs)
+            self._renderer = load_backend(self._backend)(
+                self._render_plan(), self._renderer_options, num_envs=self.num_envs
+            )
         return self._renderer
 
     def _render_plan(self) -> RenderPlan:
         """The program's render plan with the options' overrides and the distractions the envs will draw."""
-        return replace(self.program.render_plan().with_options(self._renderer_options), distractions=distractions_plan(self.distractions))
+        return replace(
+            self.program.render_plan().with_options(self._renderer_options),
+            distractions=distractions_plan(self.distractions),
+        )
 
     @property
     def segmentation_ids(self) -> dict[str, int]:
@@ -449,7 +512,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
         if self.program.physics is not None:
             plan = self.program.physics
             sources = self._physics.pose_sources() if self._physics is not None else [lane.data for lane in self._lanes]
-            if self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources:  # live views, made once (moved geoms: copies)
+            if (
+                self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources
+            ):  # live views, made once (moved geoms: copies)
                 self._pose_arrays = [plan.poses(source) for source in sources]
                 self._pose_sources = sources
             poses = self._pose_arrays
@@ -480,7 +545,11 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             return np.stack([self._lane_at(i).physics_observation() for i in rows])
         with float_errors() as errors:
             columns = observe(tuple(self._state), self._steps)
-        table = np.ascontiguousarray(np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in columns]).reshape(len(columns), n).T)
+        table = np.ascontiguousarray(
+            np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in columns])
+            .reshape(len(columns), n)
+            .T
+        )
         for i in range(n) if errors else np.flatnonzero(~np.isfinite(table).all(axis=1)):
             table[i] = self._lane_at(int(i)).physics_observation()  # the same values, or the lane's own error
         return table if envs is None else table[list(rows)]
@@ -512,7 +581,11 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             return np.array([self._lane_bindings(i) for i in range(n)], dtype=np.float64).reshape(n, -1)
         with float_errors() as errors:
             values = bind(tuple(self._state), self._steps)
-        table = np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values]).reshape(len(values), n).T.copy()
+        table = (
+            np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values])
+            .reshape(len(values), n)
+            .T.copy()
+        )
         for i in range(n) if errors else np.flatnonzero(~np.isfinite(table).all(axis=1)):
             table[i] = self._lane_bindings(int(i))  # the same values, or the located fault
         return table
@@ -525,7 +598,9 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             raise err.in_env(i) from None
 
     def _info(self, mask: np.ndarray) -> dict[str, Any]:
-        return self.rules.batch_info(self._state, self._steps, self._outcome, self._fired, self._success, self._errors, mask)
+        return self.rules.batch_info(
+            self._state, self._steps, self._outcome, self._fired, self._success, self._errors, mask
+        )
 
 
 def _select(obs: Any, i: int) -> Any:
@@ -542,7 +617,15 @@ def _with_rows(obs: Any, rows: np.ndarray, new: Any) -> Any:
 
 
 #: the keywords of make_batched (and make_vec(batched=True)) that are the batch's own; the rest are renderer options
-BATCH_OPTIONS = ("render", "params", "autoreset_mode", "render_mode", "max_episode_steps", "action_repeat", "distractions")
+BATCH_OPTIONS = (
+    "render",
+    "params",
+    "autoreset_mode",
+    "render_mode",
+    "max_episode_steps",
+    "action_repeat",
+    "distractions",
+)
 
 
 def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: Any) -> BatchedVectorEnv:

@@ -36,8 +36,10 @@ def batch_sizes(num_envs: int, workers: int) -> list[int]:
     if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
         raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
     if isinstance(workers, bool) or not isinstance(workers, (int, np.integer)) or not 1 <= workers <= num_envs:
-        raise ValueError(f"workers must be an integer from 1 to num_envs ({num_envs}): each worker holds a batch of at least one env, "
-                         f"got {workers!r}")
+        raise ValueError(
+            f"workers must be an integer from 1 to num_envs ({num_envs}): each worker holds a batch of at least one env, "
+            f"got {workers!r}"
+        )
     n, k = int(num_envs), int(workers)
     return [n // k + (1 if w < n % k else 0) for w in range(k)]
 
@@ -53,8 +55,9 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
 
     metadata = {"autoreset_mode": AutoresetMode.NEXT_STEP, "render_modes": ["rgb_array"], "render_fps": 30}
 
-    def __init__(self, target: str, num_envs: int, workers: int, *, pin: bool = True, threads: int | None = None,
-                 **kwargs: Any) -> None:
+    def __init__(
+        self, target: str, num_envs: int, workers: int, *, pin: bool = True, threads: int | None = None, **kwargs: Any
+    ) -> None:
         self._closed_workers = True
         self.sizes = batch_sizes(num_envs, workers)
         bounds = np.cumsum([0, *self.sizes])
@@ -63,9 +66,13 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         self.num_envs = int(num_envs)
         self.render_mode = kwargs.get("render_mode")
         if self.render_mode not in (None, *self.metadata["render_modes"]):  # 'human' would open a page in each worker
-            raise ValueError(f"render_mode must be one of {self.metadata['render_modes']} with workers, got {self.render_mode!r} "
-                             "(render_mode='human' shows one batch: leave workers out)")
-        self._check_spec(str(target), max(self.sizes), kwargs)  # a bad spec is reported here, located, before any worker starts
+            raise ValueError(
+                f"render_mode must be one of {self.metadata['render_modes']} with workers, got {self.render_mode!r} "
+                "(render_mode='human' shows one batch: leave workers out)"
+            )
+        self._check_spec(
+            str(target), max(self.sizes), kwargs
+        )  # a bad spec is reported here, located, before any worker starts
         self._pipes: list[Any] = []
         self.processes: list[Any] = []
         self._closed_workers = False  # from here on, close() stops the workers
@@ -74,11 +81,17 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         try:
             for w, (size, share) in enumerate(zip(self.sizes, shares)):
                 options = dict(kwargs)
-                if options.get("render") is not False and "threads" not in options:  # its share's threads (state-only: none)
+                if (
+                    options.get("render") is not False and "threads" not in options
+                ):  # its share's threads (state-only: none)
                     options["threads"] = render_threads(share, len(self.sizes), threads)
                 parent, child = context.Pipe()
-                process = context.Process(target=_worker, args=(child, str(target), size, options, share), daemon=True,
-                                          name=f"visualenv-batch-{w}")
+                process = context.Process(
+                    target=_worker,
+                    args=(child, str(target), size, options, share),
+                    daemon=True,
+                    name=f"visualenv-batch-{w}",
+                )
                 process.start()
                 child.close()
                 self._pipes.append(parent)
@@ -111,9 +124,15 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
-    def reset(self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None) -> tuple[Any, dict[str, Any]]:
+    def reset(
+        self, *, seed: int | list[int | None] | None = None, options: dict[str, Any] | None = None
+    ) -> tuple[Any, dict[str, Any]]:
         """Reset every env; env i gets seed ``seed + i`` (or ``seed[i]``)."""
-        seeds = list(seed) if isinstance(seed, (list, tuple)) else [None if seed is None else seed + i for i in range(self.num_envs)]
+        seeds = (
+            list(seed)
+            if isinstance(seed, (list, tuple))
+            else [None if seed is None else seed + i for i in range(self.num_envs)]
+        )
         if len(seeds) != self.num_envs:
             raise ValueError(f"reset got {len(seeds)} seeds for {self.num_envs} envs")
         for pipe, part in zip(self._pipes, self._slices):
@@ -124,13 +143,20 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
     def step(self, actions: Any) -> tuple[Any, np.ndarray, np.ndarray, np.ndarray, dict[str, Any]]:
         array = np.asarray(actions)
         if array.shape != self.action_space.shape:
-            raise ValueError(f"actions of shape {array.shape} for {self.num_envs} envs: the action space is {self.action_space}")
+            raise ValueError(
+                f"actions of shape {array.shape} for {self.num_envs} envs: the action space is {self.action_space}"
+            )
         for pipe, part in zip(self._pipes, self._slices):
             self._send(pipe, ("step", array[part]))
         replies = self._gather("step")
         obs, rewards, terminated, truncated, infos = zip(*replies)
-        return (_concat(list(obs)), np.concatenate(rewards), np.concatenate(terminated), np.concatenate(truncated),
-                merge_infos(list(infos), self.sizes))
+        return (
+            _concat(list(obs)),
+            np.concatenate(rewards),
+            np.concatenate(terminated),
+            np.concatenate(truncated),
+            merge_infos(list(infos), self.sizes),
+        )
 
     def render(self) -> tuple[np.ndarray, ...] | None:  # type: ignore[override]
         """Each env's view (render_mode="rgb_array"), as one batch's ``render()`` gives them."""
@@ -204,7 +230,9 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         except _BROKEN:
             raise self._worker_error(call) from None
         if not ok:
-            if isinstance(value, StepError) and value.env is not None:  # env j of worker w's batch is env start + j of the whole
+            if (
+                isinstance(value, StepError) and value.env is not None
+            ):  # env j of worker w's batch is env start + j of the whole
                 raise value.in_env(self._slices[w].start + value.env) from None
             raise value
         return value
@@ -213,7 +241,9 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         for process in self.processes:
             process.join(timeout=0.5 if not process.is_alive() else 0)
         dead = [f"#{i} (pid {p.pid}, exit code {p.exitcode})" for i, p in enumerate(self.processes) if not p.is_alive()]
-        return WorkerError(f"batch worker {', '.join(dead) or 'a worker'} died during {call}(); close the vector env and make a new one")
+        return WorkerError(
+            f"batch worker {', '.join(dead) or 'a worker'} died during {call}(); close the vector env and make a new one"
+        )
 
 
 def _concat(parts: list[Any]) -> Any:
@@ -272,8 +302,16 @@ def _worker(pipe: Any, target: str, size: int, options: dict[str, Any], share: S
         from visualenv.env.batch import make_batched
 
         batch = make_batched(target, size, **options)
-        pipe.send((True, {"observation_space": batch.single_observation_space, "action_space": batch.single_action_space,
-                          "autoreset_mode": batch.autoreset_mode}))
+        pipe.send(
+            (
+                True,
+                {
+                    "observation_space": batch.single_observation_space,
+                    "action_space": batch.single_action_space,
+                    "autoreset_mode": batch.autoreset_mode,
+                },
+            )
+        )
     except BaseException as exc:  # noqa: BLE001 - reported to the parent
         pipe.send((False, _picklable(exc)))
         return

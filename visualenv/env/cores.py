@@ -51,7 +51,7 @@ def worker_cores(n: int, pin: bool = True) -> list[Share | None]:
     if n >= c:
         return [(cores[i % c],) for i in range(n)]
     bounds = [i * c // n for i in range(n + 1)]
-    return [tuple(cores[bounds[i]:bounds[i + 1]]) for i in range(n)]
+    return [tuple(cores[bounds[i] : bounds[i + 1]]) for i in range(n)]
 
 
 def render_threads(share: Share | None, n: int, threads: int | None = None) -> int:

@@ -34,7 +34,11 @@ def step_limit(program: Program, max_episode_steps: Any) -> int:
     """The step after which episodes are truncated: the spec's ``max_steps``, or Gymnasium's ``max_episode_steps`` when given."""
     if max_episode_steps is None:
         return program.spec.max_steps
-    if isinstance(max_episode_steps, bool) or not isinstance(max_episode_steps, (int, np.integer)) or max_episode_steps < 1:
+    if (
+        isinstance(max_episode_steps, bool)
+        or not isinstance(max_episode_steps, (int, np.integer))
+        or max_episode_steps < 1
+    ):
         raise ValueError(f"max_episode_steps must be an integer of at least 1, got {max_episode_steps!r}")
     return int(max_episode_steps)
 
@@ -59,7 +63,9 @@ class EpisodeRules:
         self.milestones = [r.name for r in milestones]
         self.success_bits = sum(1 << i for i, r in enumerate(milestones) if r.success)
         # one row per outcome index the generated step returns, and a last one for -1 (no outcome held)
-        table = [(r.end == "terminate", r.end == "truncate", r.name, r.success) for r in rules] + [(False, False, None, False)]
+        table = [(r.end == "terminate", r.end == "truncate", r.name, r.success) for r in rules] + [
+            (False, False, None, False)
+        ]
         self._endings = [row[:3] for row in table]
         self._successful = [row[3] for row in table]
         self._terminates = np.array([row[0] for row in table], dtype=bool)
@@ -91,9 +97,17 @@ class EpisodeRules:
         """The fired milestones' names, in spec order."""
         return [m for i, m in enumerate(self.milestones) if fired >> i & 1] if fired else []
 
-    def info(self, state: dict[str, float], steps: int, outcome: str | None, fired: int, success: bool) -> dict[str, Any]:
+    def info(
+        self, state: dict[str, float], steps: int, outcome: str | None, fired: int, success: bool
+    ) -> dict[str, Any]:
         """One env's ``info`` (:data:`INFO_KEYS`)."""
-        return {"state": state, "steps": steps, "outcome": outcome, "milestones": self.milestone_names(fired), "is_success": success}
+        return {
+            "state": state,
+            "steps": steps,
+            "outcome": outcome,
+            "milestones": self.milestone_names(fired),
+            "is_success": success,
+        }
 
     def fault_info(self, state: dict[str, float], steps: int, fired: int, success: bool, error: str) -> dict[str, Any]:
         """The ``info`` of a step a fault ended (``on_fault: terminate``): outcome ``"error"``, the message in ``error``.
@@ -135,7 +149,9 @@ class EpisodeRules:
     def unfit(self, state: np.ndarray, reward: np.ndarray) -> np.ndarray:
         """The envs whose result (state as ``(variables, envs)``, reward) :meth:`check` refuses: their lanes step them, and fault."""
         bad = ~np.isfinite(reward)
-        if state.size and not np.abs(state).max() <= self._tightest:  # NaN, an infinity or a large value somewhere: whose?
+        if (
+            state.size and not np.abs(state).max() <= self._tightest
+        ):  # NaN, an infinity or a large value somewhere: whose?
             bad |= ~(np.abs(state) <= self._limits).all(axis=0)
         return bad
 
@@ -147,8 +163,16 @@ class EpisodeRules:
             lists[j] = self.milestone_names(bits)
         return lists[which]
 
-    def batch_info(self, state: np.ndarray, steps: np.ndarray, outcome: np.ndarray, fired: np.ndarray, success: np.ndarray,
-                   errors: np.ndarray, mask: np.ndarray) -> dict[str, Any]:
+    def batch_info(
+        self,
+        state: np.ndarray,
+        steps: np.ndarray,
+        outcome: np.ndarray,
+        fired: np.ndarray,
+        success: np.ndarray,
+        errors: np.ndarray,
+        mask: np.ndarray,
+    ) -> dict[str, Any]:
         """N envs' :meth:`info` in Gymnasium's vector layout: each key with its ``_key`` mask; ``state`` a dict of arrays
         (each variable with its ``_name`` mask, as Sync/AsyncVectorEnv nest a dict); ``error`` where a fault ended an env."""
         nested: dict[str, Any] = {}

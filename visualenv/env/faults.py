@@ -53,7 +53,9 @@ class FaultDiagnosis:
         lines = self.program.line_maps["step"]
         for name, value in zip(self.program.state_names, state):
             if not math.isfinite(value):
-                raise self.describe(lines.find(f"dynamics.update.{name}"), f"state '{name}' became {value}", values, steps)
+                raise self.describe(
+                    lines.find(f"dynamics.update.{name}"), f"state '{name}' became {value}", values, steps
+                )
         if not math.isfinite(reward):
             raise self.describe(lines.find("reward"), f"the reward became {reward}", values, steps)
 
@@ -70,7 +72,9 @@ class FaultDiagnosis:
                 name = self.program.state_names[i]
                 function = "init" if what.startswith("state.") else "step"
                 site = self.program.line_maps[function].find(what.format(name))
-                raise self.describe(site, f"state '{name}' = {state[i]!r} is too large for the float32 observation", values, steps)
+                raise self.describe(
+                    site, f"state '{name}' = {state[i]!r} is too large for the float32 observation", values, steps
+                )
 
     def describe(self, site: Site | None, message: str, values: dict[str, Any], steps: int) -> StepError:
         """The error for a fault at ``site``: its file:line and expression, the message, and the values the expression read."""

@@ -68,5 +68,5 @@ def grid(batch: np.ndarray, limit: int = GRID_LIMIT) -> np.ndarray:
     out = np.zeros((rows * (h + 1) - 1, columns * (w + 1) - 1, c), dtype=images.dtype)
     for i in range(n):
         r, k = divmod(i, columns)
-        out[r * (h + 1):r * (h + 1) + h, k * (w + 1):k * (w + 1) + w] = images[i]
+        out[r * (h + 1) : r * (h + 1) + h, k * (w + 1) : k * (w + 1) + w] = images[i]
     return out

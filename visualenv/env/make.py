@@ -57,18 +57,48 @@ def make(
     (``env.spec.make(render_mode=...)``, as ``check_env`` does).
     """
     if max_episode_steps is None:
-        max_episode_steps = make_time_limit()  # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
-    check_make_options(render=render, render_mode=render_mode, params=params, frame_stack=frame_stack, grayscale=grayscale, resize=resize,
-                       max_episode_steps=max_episode_steps, action_repeat=action_repeat, distractions=distractions)
+        max_episode_steps = (
+            make_time_limit()
+        )  # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
+    check_make_options(
+        render=render,
+        render_mode=render_mode,
+        params=params,
+        frame_stack=frame_stack,
+        grayscale=grayscale,
+        resize=resize,
+        max_episode_steps=max_episode_steps,
+        action_repeat=action_repeat,
+        distractions=distractions,
+    )
     options = checked_options(renderer_options)
     path = resolve(target)
-    unwrapped = VisualEnv(load_spec(path), render=render, render_mode=render_mode, params=params, renderer_options=options,
-                          max_episode_steps=max_episode_steps, action_repeat=action_repeat, distractions=distractions)
-    given = {"render": render, "render_mode": render_mode, "params": params, "frame_stack": frame_stack, "grayscale": grayscale or None,
-             "resize": resize, "action_repeat": action_repeat, "distractions": distractions, **renderer_options}
+    unwrapped = VisualEnv(
+        load_spec(path),
+        render=render,
+        render_mode=render_mode,
+        params=params,
+        renderer_options=options,
+        max_episode_steps=max_episode_steps,
+        action_repeat=action_repeat,
+        distractions=distractions,
+    )
+    given = {
+        "render": render,
+        "render_mode": render_mode,
+        "params": params,
+        "frame_stack": frame_stack,
+        "grayscale": grayscale or None,
+        "resize": resize,
+        "action_repeat": action_repeat,
+        "distractions": distractions,
+        **renderer_options,
+    }
     unwrapped.spec = EnvSpec(
-        id=f"{NAMESPACE}/{unwrapped.program.spec.id}", entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT,
-        max_episode_steps=unwrapped.max_episode_steps, kwargs={"target": str(path.resolve()), **{k: v for k, v in given.items() if v is not None}},
+        id=f"{NAMESPACE}/{unwrapped.program.spec.id}",
+        entry_point=ENTRY_POINT,
+        vector_entry_point=VECTOR_ENTRY_POINT,
+        max_episode_steps=unwrapped.max_episode_steps,
+        kwargs={"target": str(path.resolve()), **{k: v for k, v in given.items() if v is not None}},
     )
     return wrap_observation(unwrapped, grayscale=grayscale, resize=resize, frame_stack=frame_stack)
-

@@ -98,8 +98,11 @@ def _header_values(path: Path) -> tuple[str | None, int | None, int]:
 def _header(path: str, mtime_ns: int, size: int) -> tuple[str | None, int | None, int]:
     values = read_top_level(path, ("id", "max_steps", "action_repeat"))
     env_id, max_steps, repeat = values.get("id"), values.get("max_steps"), values.get("action_repeat")
-    return (env_id if isinstance(env_id, str) and env_id else None,
-            max_steps if _count(max_steps) else None, repeat if _count(repeat) else 1)  # type: ignore[return-value]
+    return (
+        env_id if isinstance(env_id, str) and env_id else None,
+        max_steps if _count(max_steps) else None,
+        repeat if _count(repeat) else 1,
+    )  # type: ignore[return-value]
 
 
 def _count(value: object) -> bool:
@@ -121,8 +124,15 @@ def _duplicate_id(env_id: str, files: list[Path]) -> SpecError:
     problems = []
     for path in others:
         where = _id_position(path)
-        problems.append(Diagnostic(str(path), where.line if where else None, where.column if where else None, "id",
-                                   f"the id '{env_id}' is also defined by {first}: give one of the two specs another id (e.g. a new -vN)"))
+        problems.append(
+            Diagnostic(
+                str(path),
+                where.line if where else None,
+                where.column if where else None,
+                "id",
+                f"the id '{env_id}' is also defined by {first}: give one of the two specs another id (e.g. a new -vN)",
+            )
+        )
     return SpecError(problems)
 
 
@@ -142,22 +152,45 @@ def resolve(target: str | os.PathLike[str]) -> Path:
         try:
             source = Path(json.loads(record_file.read_text())["source"])
         except (OSError, ValueError, KeyError, TypeError) as exc:
-            raise SpecError([Diagnostic(str(record_file), None, None, "", f"not a build record of `visualenv build` ({type(exc).__name__}: {exc}): build the spec again")]) from None
+            raise SpecError(
+                [
+                    Diagnostic(
+                        str(record_file),
+                        None,
+                        None,
+                        "",
+                        f"not a build record of `visualenv build` ({type(exc).__name__}: {exc}): build the spec again",
+                    )
+                ]
+            ) from None
         if not source.is_file():
-            raise SpecError([Diagnostic(str(record_file), None, None, "source", f"the spec it was built from is gone: {source}")])
+            raise SpecError(
+                [Diagnostic(str(record_file), None, None, "source", f"the spec it was built from is gone: {source}")]
+            )
         return source
     if path.suffix in SPEC_SUFFIXES or path.exists():
         return path
     name = str(target)
     if name.startswith(NAMESPACE + "/"):
-        name = name[len(NAMESPACE) + 1:]
+        name = name[len(NAMESPACE) + 1 :]
     index, clashes = _scan()
     if name in clashes:
         raise _duplicate_id(name, clashes[name])
     if name in index:
         return index[name]
-    raise SpecError([Diagnostic(str(target), None, None, "", "not a spec file, build folder or known env id" + did_you_mean(name, index).replace("names:", "ids:")
-                                + f"; your own specs: visualenv.register(path) or the folders in ${SPECS_PATH_VARIABLE}")])
+    raise SpecError(
+        [
+            Diagnostic(
+                str(target),
+                None,
+                None,
+                "",
+                "not a spec file, build folder or known env id"
+                + did_you_mean(name, index).replace("names:", "ids:")
+                + f"; your own specs: visualenv.register(path) or the folders in ${SPECS_PATH_VARIABLE}",
+            )
+        ]
+    )
 
 
 def _register_id(env_id: str, target: str, max_steps: int | None) -> str:
@@ -168,7 +201,13 @@ def _register_id(env_id: str, target: str, max_steps: int | None) -> str:
     if old is not None and old.kwargs == kwargs and old.max_episode_steps == max_steps:
         return full
     gym.registry.pop(full, None)
-    gym.register(id=full, entry_point=ENTRY_POINT, vector_entry_point=VECTOR_ENTRY_POINT, kwargs=kwargs, max_episode_steps=max_steps)
+    gym.register(
+        id=full,
+        entry_point=ENTRY_POINT,
+        vector_entry_point=VECTOR_ENTRY_POINT,
+        kwargs=kwargs,
+        max_episode_steps=max_steps,
+    )
     return full
 
 
@@ -185,7 +224,13 @@ def register_bundled() -> list[str]:
             ids.append(_register_id(env_id, env_id, None))
             continue
         max_steps = read_header(path)[1]
-        ids.append(_register_id(env_id, str(path), time_limit(max_steps if max_steps is not None else default_steps, read_action_repeat(path))))
+        ids.append(
+            _register_id(
+                env_id,
+                str(path),
+                time_limit(max_steps if max_steps is not None else default_steps, read_action_repeat(path)),
+            )
+        )
     return ids
 
 
@@ -205,7 +250,9 @@ def register(target: str | os.PathLike[str]) -> list[str]:
     if path.is_dir():
         files = spec_files(path)
         if not files:
-            raise SpecError([Diagnostic(str(path), None, None, "", f"no spec files ({', '.join(SPEC_SUFFIXES)}) in this folder")])
+            raise SpecError(
+                [Diagnostic(str(path), None, None, "", f"no spec files ({', '.join(SPEC_SUFFIXES)}) in this folder")]
+            )
     else:
         files = [path]
     problems: list[Diagnostic] = []

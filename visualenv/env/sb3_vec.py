@@ -12,8 +12,18 @@ from visualenv.env.cores import Share, worker_cores
 from visualenv.env.vector import make_in_worker, warn_gpu_workers, with_render_threads
 
 
-def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None, pin: bool = True,
-                 monitor_dir: str | None = None, monitor_append: bool = False, **kwargs: Any) -> Any:
+def make_sb3_vec(
+    target: str,
+    n: int,
+    *,
+    seed: int = 0,
+    frame_stack: int = 4,
+    threads: int | None = None,
+    pin: bool = True,
+    monitor_dir: str | None = None,
+    monitor_append: bool = False,
+    **kwargs: Any,
+) -> Any:
     """`n` envs in SB3's ``SubprocVecEnv`` (``DummyVecEnv`` for one), frames stacked by ``VecFrameStack``.
 
     Like SB3's ``make_vec_env``: env ``i`` is seeded ``seed + i`` and wrapped in a
@@ -24,9 +34,18 @@ def make_sb3_vec(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, th
     from stable_baselines3.common.vec_env import DummyVecEnv, SubprocVecEnv, VecFrameStack
 
     warn_gpu_workers(target, n, kwargs)
-    fns = [partial(_make_monitored, str(target), with_render_threads(kwargs, share, n, threads), share, seed + i,
-                   monitor_dir and os.path.join(monitor_dir, str(i)), monitor_append)
-           for i, share in enumerate(worker_cores(n, pin))]
+    fns = [
+        partial(
+            _make_monitored,
+            str(target),
+            with_render_threads(kwargs, share, n, threads),
+            share,
+            seed + i,
+            monitor_dir and os.path.join(monitor_dir, str(i)),
+            monitor_append,
+        )
+        for i, share in enumerate(worker_cores(n, pin))
+    ]
     if monitor_dir:
         os.makedirs(monitor_dir, exist_ok=True)
     vec: Any = SubprocVecEnv(fns, start_method="spawn") if n > 1 else DummyVecEnv(fns)  # type: ignore[arg-type]  # partials are env makers
@@ -44,8 +63,9 @@ def _env_id(target: str) -> str:
     return f"{NAMESPACE}/{spec_id}" if spec_id else str(target)
 
 
-def _make_monitored(target: str, kwargs: dict[str, Any], cores: Share | None, seed: int, monitor_file: str | None,
-                    append: bool = False) -> gym.Env:
+def _make_monitored(
+    target: str, kwargs: dict[str, Any], cores: Share | None, seed: int, monitor_file: str | None, append: bool = False
+) -> gym.Env:
     from stable_baselines3.common.monitor import Monitor
 
     env = make_in_worker(target, kwargs, cores)
@@ -53,9 +73,19 @@ def _make_monitored(target: str, kwargs: dict[str, Any], cores: Share | None, se
     return Monitor(env, filename=monitor_file, override_existing=not append)
 
 
-def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4, threads: int | None = None,
-                     monitor_dir: str | None = None, monitor_append: bool = False, workers: int | None = None, pin: bool = True,
-                     **kwargs: Any) -> Any:
+def make_sb3_batched(
+    target: str,
+    n: int,
+    *,
+    seed: int = 0,
+    frame_stack: int = 4,
+    threads: int | None = None,
+    monitor_dir: str | None = None,
+    monitor_append: bool = False,
+    workers: int | None = None,
+    pin: bool = True,
+    **kwargs: Any,
+) -> Any:
     """`n` envs in one process and one Blender (a :class:`BatchedVectorEnv`) as an SB3 VecEnv, frames stacked by ``VecFrameStack``.
 
     Env ``i`` is seeded ``seed + i``; ``VecMonitor`` writes ``monitor_dir/batch.monitor.csv``
@@ -71,7 +101,9 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     if workers is not None:
         from visualenv.env.batch_workers import MultiBatchVectorEnv
 
-        batch: Any = MultiBatchVectorEnv(target, n, workers, pin=pin, threads=threads, autoreset_mode="same_step", **kwargs)
+        batch: Any = MultiBatchVectorEnv(
+            target, n, workers, pin=pin, threads=threads, autoreset_mode="same_step", **kwargs
+        )
     else:
         if threads is not None:
             kwargs["threads"] = threads
@@ -81,8 +113,11 @@ def make_sb3_batched(target: str, n: int, *, seed: int = 0, frame_stack: int = 4
     vec = VecMonitor(vec)
     if monitor_dir:
         # VecMonitor's own writer always starts the file afresh: a resumed run would lose its earlier episodes
-        vec.results_writer = ResultsWriter(os.path.join(monitor_dir, "batch"), header={"t_start": vec.t_start, "env_id": _env_id(target)},
-                                           override_existing=not monitor_append)
+        vec.results_writer = ResultsWriter(
+            os.path.join(monitor_dir, "batch"),
+            header={"t_start": vec.t_start, "env_id": _env_id(target)},
+            override_existing=not monitor_append,
+        )
     if frame_stack and frame_stack > 1 and kwargs.get("render") is not False:
         vec = VecFrameStack(vec, n_stack=frame_stack)
     return vec

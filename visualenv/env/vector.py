@@ -28,8 +28,9 @@ from visualenv.errors import WorkerError
 _BROKEN = (EOFError, BrokenPipeError, ConnectionResetError)
 
 
-def env_factory(target: str, *, cores: Share | None = None, wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
-                **kwargs: Any) -> Callable[[], gym.Env]:
+def env_factory(
+    target: str, *, cores: Share | None = None, wrapper_class: Callable[[gym.Env], gym.Env] | None = None, **kwargs: Any
+) -> Callable[[], gym.Env]:
     """A picklable function that makes one env (for vector env workers), confined to `cores` if given.
 
     `wrapper_class` (a class or module-level function, so that it pickles) wraps the env in its worker.
@@ -37,10 +38,16 @@ def env_factory(target: str, *, cores: Share | None = None, wrapper_class: Calla
     return partial(make_in_worker, str(target), kwargs, cores, wrapper_class)
 
 
-def make_in_worker(target: str, kwargs: dict[str, Any], cores: Share | None = None,
-                   wrapper_class: Callable[[gym.Env], gym.Env] | None = None) -> gym.Env:
+def make_in_worker(
+    target: str,
+    kwargs: dict[str, Any],
+    cores: Share | None = None,
+    wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
+) -> gym.Env:
     """One env made by :func:`visualenv.make`; in a worker process, confined to `cores` and deaf to Ctrl-C."""
-    if multiprocessing.parent_process() is not None:  # in a worker (Gymnasium also calls this in the parent, for the spaces)
+    if (
+        multiprocessing.parent_process() is not None
+    ):  # in a worker (Gymnasium also calls this in the parent, for the spaces)
         apply_policy()  # a process visualenv started: freed memory kept for the next render call
         if cores is not None:
             confine(cores)
@@ -119,18 +126,31 @@ def warn_gpu_workers(target: str, n: int, kwargs: dict[str, Any]) -> None:
             return
     if device == "gpu":
         _warned_gpu = True
-        print(f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly "
-              "(several Blender processes on one GPU step slower than as many CPU workers): one worker per core on the CPU is "
-              "faster today; "
-              "see docs/performance.md#which-device", file=sys.stderr, flush=True)
+        print(
+            f"visualenv: {n} envs with render.device 'gpu', one Blender process each, share the GPU badly "
+            "(several Blender processes on one GPU step slower than as many CPU workers): one worker per core on the CPU is "
+            "faster today; "
+            "see docs/performance.md#which-device",
+            file=sys.stderr,
+            flush=True,
+        )
 
 
 _warned_gpu = False
 
 
-def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | None = None, pin: bool = True,
-             wrapper_class: Callable[[gym.Env], gym.Env] | None = None, batched: bool = False, workers: int | None = None,
-             **kwargs: Any) -> gym.vector.VectorEnv:
+def make_vec(
+    target: str,
+    n: int,
+    *,
+    asynchronous: bool = True,
+    threads: int | None = None,
+    pin: bool = True,
+    wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
+    batched: bool = False,
+    workers: int | None = None,
+    **kwargs: Any,
+) -> gym.vector.VectorEnv:
     """`n` copies of an env as a Gymnasium vector env (AsyncVectorEnv: one process each).
 
     Each worker is confined to its own share of the cores and renders with that many threads
@@ -144,14 +164,18 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
     share of the cores (:class:`~visualenv.env.batch_workers.MultiBatchVectorEnv`), still one vector env of `n` envs.
     """
     if workers is not None and not batched:
-        raise ValueError("workers= splits a batch among processes: it goes with batched=True (without it, each env has its own process)")
+        raise ValueError(
+            "workers= splits a batch among processes: it goes with batched=True (without it, each env has its own process)"
+        )
     if batched:
         from visualenv.env.batch import make_batched
 
         per_env = sorted(k for k in ("frame_stack", "grayscale", "resize") if kwargs.get(k) not in (None, False))
         if per_env or wrapper_class is not None:
-            raise ValueError(f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
-                             "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)")
+            raise ValueError(
+                f"make_vec(batched=True) takes no per-env wrappers ({', '.join(per_env) or 'wrapper_class'}): "
+                "wrap the vector env instead (SB3's VecFrameStack stacks frames; `visualenv train --batched` does)"
+            )
         if workers is not None:
             from visualenv.env.batch_workers import MultiBatchVectorEnv
 
@@ -161,7 +185,15 @@ def make_vec(target: str, n: int, *, asynchronous: bool = True, threads: int | N
         return make_batched(target, n, **kwargs)
     if asynchronous and n > 1:
         warn_gpu_workers(target, n, kwargs)
-        return WorkerVectorEnv([env_factory(target, cores=share, wrapper_class=wrapper_class, **with_render_threads(kwargs, share, n, threads))
-                                for share in worker_cores(n, pin)], context="spawn", shared_memory=True)
+        return WorkerVectorEnv(
+            [
+                env_factory(
+                    target, cores=share, wrapper_class=wrapper_class, **with_render_threads(kwargs, share, n, threads)
+                )
+                for share in worker_cores(n, pin)
+            ],
+            context="spawn",
+            shared_memory=True,
+        )
     kwargs = with_render_threads(kwargs, None, n, threads)
     return gym.vector.SyncVectorEnv([env_factory(target, wrapper_class=wrapper_class, **kwargs) for _ in range(n)])

@@ -112,26 +112,50 @@ class VisualEnv(gym.Env):
         if isinstance(spec, Program) and not params:
             program = spec
         else:
-            loaded = spec.loaded if isinstance(spec, Program) else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
+            loaded = (
+                spec.loaded
+                if isinstance(spec, Program)
+                else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
+            )
             program = compile_spec(loaded, params)
-        self._init_args = {"render": render, "render_mode": render_mode, "params": params, "renderer_options": renderer_options, "backend": backend,
-                           "max_episode_steps": max_episode_steps, "action_repeat": action_repeat, "distractions": distractions}
+        self._init_args = {
+            "render": render,
+            "render_mode": render_mode,
+            "params": params,
+            "renderer_options": renderer_options,
+            "backend": backend,
+            "max_episode_steps": max_episode_steps,
+            "action_repeat": action_repeat,
+            "distractions": distractions,
+        }
         self.program = program
         s = program.spec
         #: the spec's steps per step() (dm_control's action repeat), each with the same action
         self.action_repeat: int = s.action_repeat if action_repeat is None else int(action_repeat)
         #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
-        self._step_limit = s.max_steps if max_episode_steps is None else step_limit(program, max_episode_steps) * self.action_repeat
+        self._step_limit = (
+            s.max_steps if max_episode_steps is None else step_limit(program, max_episode_steps) * self.action_repeat
+        )
         #: episodes are truncated after this many step() calls: the spec's max_steps (over the action repeat), or Gymnasium's
         self.max_episode_steps: int = -(-self._step_limit // self.action_repeat)
-        if s.observation is None and not s.render.view.camera:  # no camera to render a view with: no render mode (check_env reads it)
+        if (
+            s.observation is None and not s.render.view.camera
+        ):  # no camera to render a view with: no render mode (check_env reads it)
             self.metadata = {**self.metadata, "render_modes": []}
             if render_mode is not None:
-                raise ValueError(f"render_mode={render_mode!r} needs a camera: the spec has no 'observation' and no 'render.view.camera'")
+                raise ValueError(
+                    f"render_mode={render_mode!r} needs a camera: the spec has no 'observation' and no 'render.view.camera'"
+                )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
         if render and s.observation is None:
-            raise SpecError([program.loaded.source.diagnostic((), "render=True needs an 'observation' section (a camera) in the spec")])
+            raise SpecError(
+                [
+                    program.loaded.source.diagnostic(
+                        (), "render=True needs an 'observation' section (a camera) in the spec"
+                    )
+                ]
+            )
         self.render_mode = render_mode
         self.uses_camera = s.observation is not None and render is not False
         self._backend = backend
@@ -146,11 +170,16 @@ class VisualEnv(gym.Env):
         self._sim = program.physics.simulation() if program.physics is not None else None
         self.model: Any = self._sim.model if self._sim is not None else None
         if program.physics is not None:  # videos play at the simulation's speed, as Gymnasium's MuJoCo envs say
-            self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / (program.physics.dt * self.action_repeat))))}
+            self.metadata = {
+                **self.metadata,
+                "render_fps": max(1, int(round(1.0 / (program.physics.dt * self.action_repeat)))),
+            }
         self.data: Any = self._sim.data if self._sim is not None else None
         self._fns = program.functions(self._random, self._sim)
         #: the episode's endings, success, info and faults (shared with the batch: visualenv.env.episode)
-        self._rules = EpisodeRules(program, self._step_limit, observes_state=not self.uses_camera and program.physics is None)
+        self._rules = EpisodeRules(
+            program, self._step_limit, observes_state=not self.uses_camera and program.physics is None
+        )
         self._faults = self._rules.faults
         self._state: tuple[float, ...] = tuple(0.0 for _ in program.state_names)
         self._steps = 0
@@ -171,8 +200,11 @@ class VisualEnv(gym.Env):
         self._sensors: dict[str, SensorModel] = {}
         if self.uses_camera:
             self.observation_space = observation_space(s.observation)  # type: ignore[arg-type]
-            shapes = {key: space.shape for key, space in self.observation_space.spaces.items()} if isinstance(self.observation_space, spaces.Dict) \
+            shapes = (
+                {key: space.shape for key, space in self.observation_space.spaces.items()}
+                if isinstance(self.observation_space, spaces.Dict)
                 else {next(iter(views)): self.observation_space.shape}
+            )
             self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
         elif program.physics is not None:  # Gymnasium's MuJoCo envs observe float64 vectors, unbounded
             self.observation_space = spaces.Box(-np.inf, np.inf, (program.physics.observe_size,), np.float64)
@@ -183,7 +215,11 @@ class VisualEnv(gym.Env):
         self._observed = program.observed
         #: what the observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = distraction_settings(distractions, s.distractions)
-        self._distractions = EpisodeDistractions(to_plan(self.distractions)) if self.distractions is not None and self.uses_camera else None
+        self._distractions = (
+            EpisodeDistractions(to_plan(self.distractions))
+            if self.distractions is not None and self.uses_camera
+            else None
+        )
 
     # -- Gymnasium API ------------------------------------------------------------------------------
 
@@ -232,7 +268,9 @@ class VisualEnv(gym.Env):
     def step(self, action: Any) -> tuple[Any, SupportsFloat, bool, bool, dict[str, Any]]:
         """The action, the generated step (checked, not yet committed), the commit, the episode's end, the observation."""
         if not self._was_reset:
-            raise ResetNeeded(f"call reset() before step(): {self._not_carried or 'the state is set by reset'} (Gymnasium's order)")
+            raise ResetNeeded(
+                f"call reset() before step(): {self._not_carried or 'the state is set by reset'} (Gymnasium's order)"
+            )
         a = self._action(action)
         rules = self._rules
         total = 0.0
@@ -296,7 +334,11 @@ class VisualEnv(gym.Env):
 
     def _fault_in_step(self, exc: BaseException, action: Any) -> tuple[Any, float, bool, bool, dict[str, Any]]:
         """A fault computing the step, which leaves the state as it was: raised located, or (``on_fault: terminate``) the episode's end."""
-        err = exc if isinstance(exc, StepError) else self._faults.raised("step", exc, self._values(self._state, action), self._steps)
+        err = (
+            exc
+            if isinstance(exc, StepError)
+            else self._faults.raised("step", exc, self._values(self._state, action), self._steps)
+        )
         if self._rules.raises:
             raise err from None
         self._steps += 1
@@ -314,7 +356,9 @@ class VisualEnv(gym.Env):
         """An int, a numpy integer or a 0-d integer array (as SB3 passes them); a bool, float or text is refused."""
         value = action[()] if isinstance(action, np.ndarray) and action.shape == () else action
         if isinstance(value, (bool, np.bool_)) or not isinstance(value, (int, np.integer)):
-            raise TypeError(f"action {action!r} is not an integer: the action space is {self.action_space}, actions 0 to {n - 1}")
+            raise TypeError(
+                f"action {action!r} is not an integer: the action space is {self.action_space}, actions 0 to {n - 1}"
+            )
         if not 0 <= value < n:
             raise ValueError(f"action {action!r} is out of range: the action space is {self.action_space}")
         return int(value)
@@ -326,7 +370,9 @@ class VisualEnv(gym.Env):
             raise TypeError(f"action {action!r} is not an array of numbers: the action space is {self.action_space}")
         a = tuple(values.astype(np.float64).reshape(-1).tolist())
         if len(a) != len(self.program.continuous):
-            raise ValueError(f"action has {len(a)} values, expected {len(self.program.continuous)}: the action space is {self.action_space}")
+            raise ValueError(
+                f"action has {len(a)} values, expected {len(self.program.continuous)}: the action space is {self.action_space}"
+            )
         return a
 
     def _reset_generator(self, seed: int | None) -> Any:
@@ -348,7 +394,10 @@ class VisualEnv(gym.Env):
             return {}
         unknown = [key for key in options if key not in RESET_OPTIONS]
         if unknown:
-            raise ValueError(f"unknown reset option {unknown[0]!r}" + did_you_mean(str(unknown[0]), RESET_OPTIONS).replace("names:", "options:"))
+            raise ValueError(
+                f"unknown reset option {unknown[0]!r}"
+                + did_you_mean(str(unknown[0]), RESET_OPTIONS).replace("names:", "options:")
+            )
         given = options.get("state") or {}
         if not isinstance(given, Mapping):
             raise ValueError(f"options['state'] must map state variables to numbers, got {given!r}")
@@ -448,7 +497,9 @@ class VisualEnv(gym.Env):
         """render_mode="human": the observation, the values and the view (called only when shown) on the display."""
         if self._display is None:
             self._display = open_human_display()
-        self._display.show(self.program.spec.id, self._last_obs if self.uses_camera else None, {"reward": reward, **info}, self._view)
+        self._display.show(
+            self.program.spec.id, self._last_obs if self.uses_camera else None, {"reward": reward, **info}, self._view
+        )
 
     def _observe(self) -> Any:
         if self.uses_camera:
@@ -503,14 +554,27 @@ class VisualEnv(gym.Env):
         its own module is that module's in the receiving process.
         """
         episode = {
-            "state": self._state, "steps": self._steps, "fired": self._fired, "done": self._done, "success": self._success,
-            "np_random": self._np_random, "np_random_seed": self._np_random_seed, "sensor_rng": self._sensor_rng,
-            "action_space_rng": space_generator(self.action_space), "last_obs": self._last_obs,
+            "state": self._state,
+            "steps": self._steps,
+            "fired": self._fired,
+            "done": self._done,
+            "success": self._success,
+            "np_random": self._np_random,
+            "np_random_seed": self._np_random_seed,
+            "sensor_rng": self._sensor_rng,
+            "action_space_rng": space_generator(self.action_space),
+            "last_obs": self._last_obs,
             "legacy_random": self._legacy_random,
-            "physics": self._physics_state(), "model": written_fields(self._sim.model) if self._sim is not None else None,
+            "physics": self._physics_state(),
+            "model": written_fields(self._sim.model) if self._sim is not None else None,
             "distractions": self._distractions,
         }
-        return {"loaded": self.program.loaded, "args": self._init_args, "spec": self.spec, "episode": episode if self._was_reset else None}
+        return {
+            "loaded": self.program.loaded,
+            "args": self._init_args,
+            "spec": self.spec,
+            "episode": episode if self._was_reset else None,
+        }
 
     def __setstate__(self, data: dict[str, Any]) -> None:
         self.__init__(data["loaded"], **data["args"])  # type: ignore[misc]
@@ -523,15 +587,26 @@ class VisualEnv(gym.Env):
         except Exception as exc:  # noqa: BLE001 - whatever went wrong, the copy must not step a half-restored episode
             self._was_reset = False
             self._not_carried = f"the episode it was pickled in could not be carried over ({type(exc).__name__}: {exc})"
-            warnings.warn(f"visualenv: {self.program.spec.id}: {self._not_carried}; call reset() to start a new one", RuntimeWarning, stacklevel=2)
+            warnings.warn(
+                f"visualenv: {self.program.spec.id}: {self._not_carried}; call reset() to start a new one",
+                RuntimeWarning,
+                stacklevel=2,
+            )
 
     def _carry_over(self, episode: dict[str, Any]) -> None:
         """The episode of the pickled env, put in place (see :meth:`__getstate__`)."""
-        if episode.get("model") is not None and self._sim is not None:  # the model fields a reset wrote (reacher's target)
+        if (
+            episode.get("model") is not None and self._sim is not None
+        ):  # the model fields a reset wrote (reacher's target)
             restore_fields(self._sim.model, episode["model"])
         self._set_physics_state(episode["physics"])
         self._state = tuple(episode["state"])
-        self._steps, self._fired, self._done, self._success = episode["steps"], episode["fired"], episode["done"], episode["success"]
+        self._steps, self._fired, self._done, self._success = (
+            episode["steps"],
+            episode["fired"],
+            episode["done"],
+            episode["success"],
+        )
         self._np_random, self._np_random_seed = episode["np_random"], episode["np_random_seed"]
         self._legacy_random = episode.get("legacy_random")
         self._random.generator = self._legacy_random if self._legacy_random is not None else self._np_random
@@ -555,6 +630,8 @@ class VisualEnv(gym.Env):
         mujoco, model = self._sim.mujoco, self._sim.model
         signature = mujoco.mjtState.mjSTATE_INTEGRATION
         if state.shape != (mujoco.mj_stateSize(model, signature),):
-            raise ValueError(f"MuJoCo's state has {state.size} values, this MuJoCo ({mujoco.__version__}) expects {mujoco.mj_stateSize(model, signature)}")
+            raise ValueError(
+                f"MuJoCo's state has {state.size} values, this MuJoCo ({mujoco.__version__}) expects {mujoco.mj_stateSize(model, signature)}"
+            )
         mujoco.mj_setState(model, self._sim.data, state, signature)
         mujoco.mj_forward(model, self._sim.data)

@@ -48,7 +48,9 @@ class Grayscale(gym.ObservationWrapper):
 
     def __init__(self, env: gym.Env):
         super().__init__(env)
-        self.observation_space = _map_space(env.observation_space, lambda s: spaces.Box(0, 255, s.shape[:2] + (1,), np.uint8))
+        self.observation_space = _map_space(
+            env.observation_space, lambda s: spaces.Box(0, 255, s.shape[:2] + (1,), np.uint8)
+        )
 
     @staticmethod
     def convert(image: np.ndarray) -> np.ndarray:
@@ -67,14 +69,18 @@ class Resize(gym.ObservationWrapper):
         super().__init__(env)
         self.size = (int(size[0]), int(size[1]))
         w, h = self.size
-        self.observation_space = _map_space(env.observation_space, lambda s: spaces.Box(0, 255, (h, w, s.shape[2]), np.uint8))
+        self.observation_space = _map_space(
+            env.observation_space, lambda s: spaces.Box(0, 255, (h, w, s.shape[2]), np.uint8)
+        )
 
     def _resize(self, image: np.ndarray) -> np.ndarray:
         if image.shape[1] == self.size[0] and image.shape[0] == self.size[1]:
             return image
         channels = image.shape[2]
         mode_image = Image.fromarray(image[..., 0] if channels == 1 else image)
-        out = np.asarray(mode_image.resize(self.size, Image.Resampling.BOX if self._shrinks(image) else Image.Resampling.BILINEAR))
+        out = np.asarray(
+            mode_image.resize(self.size, Image.Resampling.BOX if self._shrinks(image) else Image.Resampling.BILINEAR)
+        )
         return out[..., None] if channels == 1 else out
 
     def _shrinks(self, image: np.ndarray) -> bool:
@@ -133,7 +139,9 @@ def _zeros_like(obs: Any) -> Any:
     return {k: np.zeros_like(v) for k, v in obs.items()} if isinstance(obs, dict) else np.zeros_like(obs)
 
 
-def wrap_observation(env: gym.Env, *, grayscale: bool = False, resize: tuple[int, int] | None = None, frame_stack: int | None = None) -> gym.Env:
+def wrap_observation(
+    env: gym.Env, *, grayscale: bool = False, resize: tuple[int, int] | None = None, frame_stack: int | None = None
+) -> gym.Env:
     """Apply the standard image pipeline: grayscale, then resize, then frame stack."""
     if grayscale:
         env = Grayscale(env)
@@ -170,7 +178,7 @@ class VectorFrameStack(gym.vector.VectorObservationWrapper):
     def reset(self, **kwargs: Any) -> tuple[Any, dict[str, Any]]:
         obs, info = self.env.reset(**kwargs)
         self._stack[:] = 0
-        self._stack[..., -self._channels:] = obs
+        self._stack[..., -self._channels :] = obs
         self._ended[:] = False
         return self._stack.copy(), info
 

@@ -34,11 +34,23 @@ MAX_LITERAL = 1e300
 _BINOPS = {ast.Add: "+", ast.Sub: "-", ast.Mult: "*", ast.Div: "/", ast.FloorDiv: "//", ast.Mod: "%", ast.Pow: "**"}
 _CMPOPS = {ast.Lt: "<", ast.LtE: "<=", ast.Gt: ">", ast.GtE: ">=", ast.Eq: "==", ast.NotEq: "!="}
 _DESCRIBE = {
-    ast.Attribute: "attribute access ('.')", ast.Subscript: "subscripts ('[...]' after a value)", ast.Lambda: "lambda",
-    ast.ListComp: "comprehensions", ast.SetComp: "comprehensions", ast.DictComp: "comprehensions",
-    ast.GeneratorExp: "generator expressions", ast.JoinedStr: "f-strings", ast.FormattedValue: "f-strings",
-    ast.NamedExpr: "assignment expressions (':=')", ast.Starred: "'*' unpacking", ast.Dict: "dicts", ast.Set: "sets",
-    ast.Tuple: "tuples (use [a, b, c] for a vector)", ast.Await: "await", ast.Yield: "yield", ast.YieldFrom: "yield",
+    ast.Attribute: "attribute access ('.')",
+    ast.Subscript: "subscripts ('[...]' after a value)",
+    ast.Lambda: "lambda",
+    ast.ListComp: "comprehensions",
+    ast.SetComp: "comprehensions",
+    ast.DictComp: "comprehensions",
+    ast.GeneratorExp: "generator expressions",
+    ast.JoinedStr: "f-strings",
+    ast.FormattedValue: "f-strings",
+    ast.NamedExpr: "assignment expressions (':=')",
+    ast.Starred: "'*' unpacking",
+    ast.Dict: "dicts",
+    ast.Set: "sets",
+    ast.Tuple: "tuples (use [a, b, c] for a vector)",
+    ast.Await: "await",
+    ast.Yield: "yield",
+    ast.YieldFrom: "yield",
     ast.Slice: "slices",
 }
 
@@ -96,8 +108,14 @@ def _parse(text: str | float | int | bool) -> tuple[ast.expr, str, int]:
     return module.body, parsed, lead
 
 
-def check(text: str | float | int | bool, names: Mapping[str, Type], *, constants: Mapping[str, float] | None = None,
-          allow_random: bool = True, expect: Type | None = None) -> Checked:
+def check(
+    text: str | float | int | bool,
+    names: Mapping[str, Type],
+    *,
+    constants: Mapping[str, float] | None = None,
+    allow_random: bool = True,
+    expect: Type | None = None,
+) -> Checked:
     """Parse and check `text`; `names` are the variables in scope with their types.
 
     `constants` (params) are substituted and folded. `expect` is the type the
@@ -105,8 +123,10 @@ def check(text: str | float | int | bool, names: Mapping[str, Type], *, constant
     """
     tree, parsed, lead = _parse(text)
     if _tree_depth(tree) > MAX_TREE_DEPTH:
-        raise ExpressionError(f"expression is too long: more than {MAX_TREE_DEPTH} operations chained one after another; "
-                              "split it into named parts with dynamics.let")
+        raise ExpressionError(
+            f"expression is too long: more than {MAX_TREE_DEPTH} operations chained one after another; "
+            "split it into named parts with dynamics.let"
+        )
     checker = _Checker(names, {**CONSTANTS, **(constants or {})}, allow_random)
     try:
         new_tree, typ = checker.visit(tree, 0)
@@ -115,7 +135,7 @@ def check(text: str | float | int | bool, names: Mapping[str, Type], *, constant
     except RecursionError:
         raise ExpressionError("expression is too deeply nested") from None
     except ExpressionError as exc:  # the node's offset counts UTF-8 bytes of the parsed text: as characters of `text`
-        exc.offset = lead + len(parsed.encode("utf-8")[:exc.offset].decode("utf-8", "ignore"))
+        exc.offset = lead + len(parsed.encode("utf-8")[: exc.offset].decode("utf-8", "ignore"))
         raise
     checked = Checked(text if isinstance(text, str) else repr(text), new_tree, typ, checker.used, checker.random)
     if isinstance(new_tree, ast.Constant):
@@ -299,7 +319,9 @@ class _Checker:
         func = FUNCTIONS.get(name)
         if func is None:
             kind = "unknown function" if name not in self.names else "not a function:"
-            raise self.fail(node.func, f"{kind} '{name}'" + did_you_mean(name, FUNCTIONS).replace("names:", "functions:"))
+            raise self.fail(
+                node.func, f"{kind} '{name}'" + did_you_mean(name, FUNCTIONS).replace("names:", "functions:")
+            )
         if func.params:
             return self.call_with_params(node, func, depth)
         if node.keywords:
@@ -354,7 +376,11 @@ class _Checker:
             if kw.arg is None:
                 raise self.fail(kw, "'**' unpacking not allowed in expressions")
             if kw.arg not in names:
-                raise self.fail(kw, f"{name}() has no argument '{kw.arg}'" + did_you_mean(kw.arg, names).replace("names:", "arguments:"))
+                raise self.fail(
+                    kw,
+                    f"{name}() has no argument '{kw.arg}'"
+                    + did_you_mean(kw.arg, names).replace("names:", "arguments:"),
+                )
             if kw.arg in given:
                 raise self.fail(kw, f"{name}() got two values for '{kw.arg}'")
             given[kw.arg] = kw.value
@@ -382,8 +408,11 @@ class _Checker:
         if not (isinstance(arg, ast.Constant) and isinstance(arg.value, str)):
             raise self.fail(arg, f"'{param.name}' of {function}() is one of {options}, written in quotes")
         if arg.value not in param.choices:
-            raise self.fail(arg, f"'{param.name}' of {function}() has no choice \"{arg.value}\""
-                            + did_you_mean(arg.value, param.choices).replace("names:", "choices:"))
+            raise self.fail(
+                arg,
+                f"'{param.name}' of {function}() has no choice \"{arg.value}\""
+                + did_you_mean(arg.value, param.choices).replace("names:", "choices:"),
+            )
         return ast.Constant(float(param.choices.index(arg.value)))
 
     def check_tolerance(self, node: ast.Call, args: list[ast.expr]) -> None:
@@ -393,8 +422,14 @@ class _Checker:
         def constant(tree: ast.expr, otherwise: float) -> float:
             return float(tree.value) if isinstance(tree, ast.Constant) and isinstance(tree.value, float) else otherwise
 
-        lower, upper = (constant(e, f) for e, f in zip(bounds.elts, (-math.inf, math.inf))) if isinstance(bounds, ast.List) else (-math.inf, math.inf)
-        why = tolerance_problem(lower, upper, constant(margin, 1.0), SIGMOIDS[int(constant(sigmoid, 0))], constant(value, 0.5))
+        lower, upper = (
+            (constant(e, f) for e, f in zip(bounds.elts, (-math.inf, math.inf)))
+            if isinstance(bounds, ast.List)
+            else (-math.inf, math.inf)
+        )
+        why = tolerance_problem(
+            lower, upper, constant(margin, 1.0), SIGMOIDS[int(constant(sigmoid, 0))], constant(value, 0.5)
+        )
         if why:
             raise self.fail(node, why)
 
@@ -438,8 +473,12 @@ class _Checker:
             raise self.fail(node, f"math error: {exc}") from None
         if isinstance(value, float) and math.isnan(value):
             raise self.fail(node, "math error: the result is not a number (NaN)")
-        if isinstance(value, float) and not math.isfinite(value) and not any(
-            isinstance(c, ast.Constant) and isinstance(c.value, float) and math.isinf(c.value) for c in children
+        if (
+            isinstance(value, float)
+            and not math.isfinite(value)
+            and not any(
+                isinstance(c, ast.Constant) and isinstance(c.value, float) and math.isinf(c.value) for c in children
+            )
         ):
             raise self.fail(node, "numeric overflow: the result is not finite")
         return ast.Constant(value)

@@ -30,7 +30,7 @@ POW = "_pow"
 
 def power(base: float, exponent: float) -> float:
     """``base ** exponent`` for numbers; a negative base to a fractional power is a domain error, not a complex number."""
-    result = base ** exponent
+    result = base**exponent
     if isinstance(result, complex):
         raise ValueError("a negative number to a fractional power")
     return result
@@ -169,7 +169,7 @@ class FunctionBuilder:
         line = self._line(site)
         for node in ast.walk(stmt):
             if hasattr(node, "lineno") or isinstance(node, (ast.expr, ast.stmt)):
-                node.lineno = line  # type: ignore[attr-defined]
+                node.lineno = line
                 node.end_lineno = line  # type: ignore[attr-defined]
                 node.col_offset = 0  # type: ignore[attr-defined]
                 node.end_col_offset = 0  # type: ignore[attr-defined]
@@ -179,7 +179,9 @@ class FunctionBuilder:
         self._add(ast.Return(value), None)
 
     def build(self, env: dict[str, Any]) -> Callable[..., Any]:
-        args = ast.arguments(posonlyargs=[], args=[ast.arg(a) for a in self.args], kwonlyargs=[], kw_defaults=[], defaults=[])
+        args = ast.arguments(
+            posonlyargs=[], args=[ast.arg(a) for a in self.args], kwonlyargs=[], kw_defaults=[], defaults=[]
+        )
         fn = ast.FunctionDef(self.name, args, self.body or [ast.Pass()], [], None, type_params=[])  # type: ignore[call-arg]  # 3.12 field, harmless on 3.11
         module = ast.Module([fn], type_ignores=[])
         ast.fix_missing_locations(module)

@@ -76,7 +76,16 @@ class Function:
     params: tuple[Param, ...] = ()  # set: the arguments are these, by position or keyword (each with its own type)
 
 
-def _f(name: str, impl: Callable[..., Any] | None, n: int | tuple[int, int | None], doc: str, *, arg: Type = NUM, returns: Type = NUM, random: bool = False) -> Function:
+def _f(
+    name: str,
+    impl: Callable[..., Any] | None,
+    n: int | tuple[int, int | None],
+    doc: str,
+    *,
+    arg: Type = NUM,
+    returns: Type = NUM,
+    random: bool = False,
+) -> Function:
     lo, hi = (n, n) if isinstance(n, int) else n
     return Function(name, impl, lo, hi, arg, returns, random, doc)
 
@@ -111,13 +120,39 @@ FUNCTIONS: dict[str, Function] = {
         _f("uniform", None, 2, "uniform(low, high): a random number in [low, high)", random=True),
         _f("normal", None, 2, "normal(mean, std): a Gaussian random number", random=True),
         _f("randint", None, 2, "randint(low, high): a random integer in [low, high], both included", random=True),
-        _f("choice", None, (1, None), "choice(a, b, ...) or choice([a, b, ...]): one of the values at random", random=True),
-        Function("tolerance", tolerance, 1, 5, NUM, NUM, doc="tolerance(x, bounds=[lower, upper], margin=0, sigmoid=\"gaussian\", "
-                 "value_at_margin=0.1): dm_control's soft indicator, 1 inside the bounds and falling off outside them",
-                 params=(Param("x"), Param("bounds", vec(2), (0.0, 0.0)), Param("margin", NUM, 0.0),
-                         Param("sigmoid", NUM, "gaussian", SIGMOIDS), Param("value_at_margin", NUM, DEFAULT_VALUE_AT_MARGIN))),
-        _f("uniform_disk", None, 1, "uniform_disk(r): a point [x, y] uniform in the disk of radius r (pairs drawn in the square "
-           "until one falls inside, as Gymnasium's Reacher draws its goal)", returns=vec(2), random=True),
+        _f(
+            "choice",
+            None,
+            (1, None),
+            "choice(a, b, ...) or choice([a, b, ...]): one of the values at random",
+            random=True,
+        ),
+        Function(
+            "tolerance",
+            tolerance,
+            1,
+            5,
+            NUM,
+            NUM,
+            doc='tolerance(x, bounds=[lower, upper], margin=0, sigmoid="gaussian", '
+            "value_at_margin=0.1): dm_control's soft indicator, 1 inside the bounds and falling off outside them",
+            params=(
+                Param("x"),
+                Param("bounds", vec(2), (0.0, 0.0)),
+                Param("margin", NUM, 0.0),
+                Param("sigmoid", NUM, "gaussian", SIGMOIDS),
+                Param("value_at_margin", NUM, DEFAULT_VALUE_AT_MARGIN),
+            ),
+        ),
+        _f(
+            "uniform_disk",
+            None,
+            1,
+            "uniform_disk(r): a point [x, y] uniform in the disk of radius r (pairs drawn in the square "
+            "until one falls inside, as Gymnasium's Reacher draws its goal)",
+            returns=vec(2),
+            random=True,
+        ),
     ]
 }
 
@@ -151,7 +186,9 @@ class RandomSource:
         return float(self.generator.integers(int(low), int(high), endpoint=True))
 
     def uniform_disk(self, radius: float) -> tuple[float, float]:
-        while True:  # the draws of Gymnasium's Reacher-v5 goal, exactly: uniform(-r, r, size=2) until its norm is below r
+        while (
+            True
+        ):  # the draws of Gymnasium's Reacher-v5 goal, exactly: uniform(-r, r, size=2) until its norm is below r
             point = self.generator.uniform(low=-radius, high=radius, size=2)
             if radius <= 0 or float(np.linalg.norm(point)) < radius:
                 return float(point[0]), float(point[1])
@@ -164,4 +201,10 @@ class RandomSource:
 
 def bind_random(source: RandomSource) -> dict[str, Callable[..., Any]]:
     """The implementations of the random functions, drawing from `source`."""
-    return {"uniform": source.uniform, "normal": source.normal, "randint": source.randint, "choice": source.choice, "uniform_disk": source.uniform_disk}
+    return {
+        "uniform": source.uniform,
+        "normal": source.normal,
+        "randint": source.randint,
+        "choice": source.choice,
+        "uniform_disk": source.uniform_disk,
+    }

@@ -74,8 +74,13 @@ def sigmoid_value(d: float, value_at_1: float, sigmoid: str) -> float:
     return 1 - t * t
 
 
-def tolerance(x: float, bounds: tuple[float, float] = (0.0, 0.0), margin: float = 0.0, sigmoid: float = 0.0,
-              value_at_margin: float = DEFAULT_VALUE_AT_MARGIN) -> float:
+def tolerance(
+    x: float,
+    bounds: tuple[float, float] = (0.0, 0.0),
+    margin: float = 0.0,
+    sigmoid: float = 0.0,
+    value_at_margin: float = DEFAULT_VALUE_AT_MARGIN,
+) -> float:
     """``dm_control.utils.rewards.tolerance(x, bounds, margin, SIGMOIDS[sigmoid], value_at_margin)`` for one number.
 
     ValueError, with dm_control's reason, for arguments it refuses (the env reports it located).
@@ -94,7 +99,9 @@ def tolerance(x: float, bounds: tuple[float, float] = (0.0, 0.0), margin: float 
     return float(sigmoid_value(d, value_at_margin, name))
 
 
-def _tolerance_or_nan(x: float, lower: float, upper: float, margin: float, sigmoid: float, value_at_margin: float) -> float:
+def _tolerance_or_nan(
+    x: float, lower: float, upper: float, margin: float, sigmoid: float, value_at_margin: float
+) -> float:
     try:
         return tolerance(x, (lower, upper), margin, sigmoid, value_at_margin)
     except (ValueError, ArithmeticError):  # the env whose arguments fail steps again alone, and raises there, located
@@ -104,13 +111,20 @@ def _tolerance_or_nan(x: float, lower: float, upper: float, margin: float, sigmo
 _ELEMENTWISE = np.frompyfunc(_tolerance_or_nan, 6, 1)
 
 
-def tolerance_columns(x: Any, bounds: tuple[Any, Any] = (0.0, 0.0), margin: Any = 0.0, sigmoid: Any = 0.0,
-                      value_at_margin: Any = DEFAULT_VALUE_AT_MARGIN) -> np.ndarray:
+def tolerance_columns(
+    x: Any,
+    bounds: tuple[Any, Any] = (0.0, 0.0),
+    margin: Any = 0.0,
+    sigmoid: Any = 0.0,
+    value_at_margin: Any = DEFAULT_VALUE_AT_MARGIN,
+) -> np.ndarray:
     """:func:`tolerance` on columns (one value per env): the scalar code per element, so a batch equals its envs alone.
 
     An env whose arguments dm_control would refuse gets NaN: a batch steps such an env again
     alone, which raises the located fault.
     """
     lower, upper = bounds
-    with np.errstate(all="ignore"):  # Python's float arithmetic overflowing to inf, as dm_control's numpy does, silently
+    with np.errstate(
+        all="ignore"
+    ):  # Python's float arithmetic overflowing to inf, as dm_control's numpy does, silently
         return np.asarray(_ELEMENTWISE(x, lower, upper, margin, sigmoid, value_at_margin), dtype=np.float64)

@@ -53,8 +53,15 @@ def default_workers(num_envs: int) -> int:
 class BatchSimulation:
     """The simulations of a batch's envs (one per env, in env order), stepped and read together."""
 
-    def __init__(self, sims: Sequence[Simulation], reads: Mapping[str, Sequence[str]], controls: Sequence[str],
-                 workers: int | None = None, moved: Sequence[str] = (), models_written: bool = False) -> None:
+    def __init__(
+        self,
+        sims: Sequence[Simulation],
+        reads: Mapping[str, Sequence[str]],
+        controls: Sequence[str],
+        workers: int | None = None,
+        moved: Sequence[str] = (),
+        models_written: bool = False,
+    ) -> None:
         self.sims = list(sims)
         first = self.sims[0]
         self.num_envs = n = len(self.sims)
@@ -63,7 +70,9 @@ class BatchSimulation:
         self.contacts = dict(first.contacts)
         used = {table[name][0] for names in reads.values() for name in names if name in table}
         self.fields = sorted(used | {"qpos", "qvel"})  # qpos and qvel always: a NaN in them is a blow-up
-        self.values = {f: np.zeros((n, 1 if f in SCALARS else array_view(first.model, first.data, f).size)) for f in self.fields}
+        self.values = {
+            f: np.zeros((n, 1 if f in SCALARS else array_view(first.model, first.data, f).size)) for f in self.fields
+        }
         self.touching = {c: np.zeros(n, dtype=bool) for names in reads.values() for c in names if c in self.contacts}
         self._copies = [self._copies_of(i) for i in range(n)]
         self._ctrl_at = np.array([table[c][1] for c in controls], dtype=int)
@@ -84,15 +93,29 @@ class BatchSimulation:
         #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
         self._last: dict[str, tuple[list[str], list[np.ndarray]]] = {}
         self._physics_step = first.physics_step  # the spec's convention's step (visualenv.physics.conventions)
-        self._extra = any(f in self.values for f in SCALARS) or bool(self.touching)  # copied by refresh(), not by the plain row copies
+        self._extra = any(f in self.values for f in SCALARS) or bool(
+            self.touching
+        )  # copied by refresh(), not by the plain row copies
         #: per env, what its step touches: model, data, MuJoCo's warning counters, its ctrl, its row of controls, its copies
-        self._lanes = [(sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
-                       for i, sim in enumerate(self.sims)]
+        self._lanes = [
+            (sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
+            for i, sim in enumerate(self.sims)
+        ]
         self.workers = max(1, min(default_workers(n) if workers is None else workers, n))
         api = batch_module(first.convention, bool(self.touching), bool(moved))
         #: MuJoCo's own batch API stepping the envs (None: the lanes' MjData are stepped here, on a thread pool)
-        self.engine = None if api is None else MujocoBatch(api, self.sims, [f for f in self.fields if not f.startswith(MODEL_PREFIX)],
-                                                           self.workers, moved, models_written)
+        self.engine = (
+            None
+            if api is None
+            else MujocoBatch(
+                api,
+                self.sims,
+                [f for f in self.fields if not f.startswith(MODEL_PREFIX)],
+                self.workers,
+                moved,
+                models_written,
+            )
+        )
         self._pool = None
         if self.engine is None and self.workers > 1:
             self._pool = ThreadPoolExecutor(self.workers - 1, thread_name_prefix="visualenv-mujoco")
@@ -205,7 +228,9 @@ class BatchSimulation:
             ctrl[:, self._ctrl_at] = np.column_stack(columns[:count])
         self.blown[:] = False
         active = self.active.tolist()
-        if self._movers is not None:  # an env whose mocap pose is not finite is not stepped: alone, it raises before its step
+        if (
+            self._movers is not None
+        ):  # an env whose mocap pose is not finite is not stepped: alone, it raises before its step
             self._moved[:] = np.column_stack(columns[count:])
             finite = np.isfinite(self._moved).all(axis=1)
             self.blown[[i for i in active if not finite[i]]] = True
@@ -216,7 +241,7 @@ class BatchSimulation:
             warned = self._run(active)
         else:
             size = -(-len(active) // self.workers)
-            chunks = [active[k:k + size] for k in range(0, len(active), size)]
+            chunks = [active[k : k + size] for k in range(0, len(active), size)]
             futures = [self._pool.submit(self._run, chunk) for chunk in chunks[1:]]
             warned = self._run(chunks[0])
             for future in futures:

@@ -46,8 +46,15 @@ def batch_module(convention: str, contacts: bool, moved: bool) -> Any | None:
 class MujocoBatch:
     """The lanes' simulations (`sims`, one per env) in one persistent ``mujoco.batch.Batch`` on `workers` threads."""
 
-    def __init__(self, api: Any, sims: Sequence[Any], fields: Sequence[str], workers: int, moved: Sequence[str] = (),
-                 models_written: bool = False) -> None:
+    def __init__(
+        self,
+        api: Any,
+        sims: Sequence[Any],
+        fields: Sequence[str],
+        workers: int,
+        moved: Sequence[str] = (),
+        models_written: bool = False,
+    ) -> None:
         first = sims[0]
         mujoco = self.mujoco = first.mujoco
         self.sims = list(sims)
@@ -58,16 +65,27 @@ class MujocoBatch:
         self._models_written, self._models_changed = models_written, False
         self.frame_skip = first.frame_skip
         #: dm_control's step ends with mj_step1 (positions, velocities and what depends on them at the new state): stage VEL
-        self._stage = int(mujoco.mjtStage.mjSTAGE_VEL if first.convention == "dm_control" else mujoco.mjtStage.mjSTAGE_NONE)
-        self._post = first.convention != "dm_control"  # Gymnasium's step ends with mj_rnePostConstraint: a synced lane does too
+        self._stage = int(
+            mujoco.mjtStage.mjSTAGE_VEL if first.convention == "dm_control" else mujoco.mjtStage.mjSTAGE_NONE
+        )
+        self._post = (
+            first.convention != "dm_control"
+        )  # Gymnasium's step ends with mj_rnePostConstraint: a synced lane does too
         #: the batch's (N, size) views of what each env's reads take (MjData fields: the state's, and what a step computed)
         self.outputs = {f: self.batch.bind(f).reshape(n, -1) for f in fields}
         self.ctrl = self.batch.bind("ctrl").reshape(n, -1)
         table = first.physics.names.values
-        self._moved = [(self.batch.bind(array).reshape(n, -1), np.array([table[m][1] for m in moved if table[m][0] == array], int),
-                        np.array([k for k, m in enumerate(moved) if table[m][0] == array], int))
-                       for array in sorted({table[m][0] for m in moved})]
-        self.warnings = self.batch.warning  # (N, warnings, (lastinfo, number)): each simulation's own counters, writable
+        self._moved = [
+            (
+                self.batch.bind(array).reshape(n, -1),
+                np.array([table[m][1] for m in moved if table[m][0] == array], int),
+                np.array([k for k, m in enumerate(moved) if table[m][0] == array], int),
+            )
+            for array in sorted({table[m][0] for m in moved})
+        ]
+        self.warnings = (
+            self.batch.warning
+        )  # (N, warnings, (lastinfo, number)): each simulation's own counters, writable
         self._signature = mujoco.mjtState.mjSTATE_INTEGRATION
         #: whether env i's lane holds its whole MjData (after a reset or a sync); else the batch's MjData i is ahead of it
         self.current = np.ones(n, dtype=bool)
@@ -106,7 +124,9 @@ class MujocoBatch:
         for view, at, columns in self._moved:
             view[np.ix_(envs, at)] = moved[np.ix_(envs, columns)]
         before = self.warnings[:, fatal, 1].sum(axis=1)
-        self.batch.step(None if envs.size == self.num_envs else envs.astype(np.int32), nstep=self.frame_skip, stage=self._stage)
+        self.batch.step(
+            None if envs.size == self.num_envs else envs.astype(np.int32), nstep=self.frame_skip, stage=self._stage
+        )
         self._mark(envs, False)
         rose = self.warnings[:, fatal, 1].sum(axis=1) != before
         return [int(i) for i in envs[rose[envs]]]
@@ -115,7 +135,9 @@ class MujocoBatch:
         """Per env, what a renderer poses it from: its lane's MjData where that holds it, else the batch's rows (live views);
         the same list until an env moves from one to the other."""
         if self._sources is None:
-            self._sources = [sim.data if current else row for sim, current, row in zip(self.sims, self.current.tolist(), self._rows)]
+            self._sources = [
+                sim.data if current else row for sim, current, row in zip(self.sims, self.current.tolist(), self._rows)
+            ]
         return self._sources
 
     def _mark(self, envs: Any, current: bool) -> None:

@@ -39,7 +39,9 @@ def step_function(convention: str, mujoco: Any) -> Step:
         step, step1, step2, rk4 = mujoco.mj_step, mujoco.mj_step1, mujoco.mj_step2, int(mujoco.mjtIntegrator.mjINT_RK4)
 
         def legacy_step(model: Any, data: Any, nstep: int) -> None:
-            if model.opt.integrator != rk4:  # mj_step1 ran after the last step (or the reset's forward): finish that step first
+            if (
+                model.opt.integrator != rk4
+            ):  # mj_step1 ran after the last step (or the reset's forward): finish that step first
                 step2(model, data)
                 if nstep > 1:
                     step(model, data, nstep=nstep - 1)
@@ -60,7 +62,7 @@ def step_function(convention: str, mujoco: Any) -> Step:
 def forward_function(convention: str, mujoco: Any) -> Forward:
     """The forward pass after a reset's writes: ``mj_forward``, with actuation disabled for dm_control (its ``after_reset``)."""
     if convention != "dm_control":
-        return mujoco.mj_forward  # type: ignore[no-any-return]
+        return mujoco.mj_forward
     forward, actuation = mujoco.mj_forward, int(mujoco.mjtDisableBit.mjDSBL_ACTUATION)
 
     def forward_without_actuation(model: Any, data: Any) -> None:

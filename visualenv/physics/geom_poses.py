@@ -37,9 +37,14 @@ def with_posed_geoms(scene: PhysicsScene, physics: PhysicsModel, geoms: Sequence
         i = drawn[names[g]]
         shapes[i] = replace(shapes[i], body=first + k, pos=(0.0, 0.0, 0.0), quat=(1.0, 0.0, 0.0, 0.0))
     xpos, xquat = geom_world_poses(data, moved)
-    return replace(scene, body_names=(*scene.body_names, *(f"geom:{names[g]}" for g in moved)),
-                   body_pos=np.concatenate([scene.body_pos, xpos]), body_quat=np.concatenate([scene.body_quat, xquat]),
-                   moving=np.concatenate([scene.moving, np.arange(first, first + len(moved))]), geoms=tuple(shapes))
+    return replace(
+        scene,
+        body_names=(*scene.body_names, *(f"geom:{names[g]}" for g in moved)),
+        body_pos=np.concatenate([scene.body_pos, xpos]),
+        body_quat=np.concatenate([scene.body_quat, xquat]),
+        moving=np.concatenate([scene.moving, np.arange(first, first + len(moved))]),
+        geoms=tuple(shapes),
+    )
 
 
 def geom_world_poses(data: Any, geoms: Sequence[int]) -> tuple[np.ndarray, np.ndarray]:
@@ -58,5 +63,11 @@ def render_poses(data: Any, geoms: Sequence[int]) -> tuple:
     if not geoms:
         return data.xpos, data.xquat, data.cam_xpos, data.cam_xmat, data.light_xpos, data.light_xdir
     xpos, xquat = geom_world_poses(data, geoms)
-    return (np.concatenate([data.xpos, xpos]), np.concatenate([data.xquat, xquat]), data.cam_xpos, data.cam_xmat,
-            data.light_xpos, data.light_xdir)
+    return (
+        np.concatenate([data.xpos, xpos]),
+        np.concatenate([data.xquat, xquat]),
+        data.cam_xpos,
+        data.cam_xmat,
+        data.light_xpos,
+        data.light_xdir,
+    )

@@ -41,8 +41,22 @@ from visualenv.physics.model_fields import MODEL_FIELDS, model_values
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
 #: arrays a name can point into (attributes of MjData; ``time`` and ``ncon`` are scalars; ``model.<field>``: MjModel's)
-ARRAYS = ("qpos", "qvel", "xpos", "xquat", "xmat", "site_xpos", "geom_xpos", "sensordata", "ctrl", "time", "ncon", "mocap_pos", "mocap_quat",
-          *(f"model.{field}" for field in MODEL_FIELDS))
+ARRAYS = (
+    "qpos",
+    "qvel",
+    "xpos",
+    "xquat",
+    "xmat",
+    "site_xpos",
+    "geom_xpos",
+    "sensordata",
+    "ctrl",
+    "time",
+    "ncon",
+    "mocap_pos",
+    "mocap_quat",
+    *(f"model.{field}" for field in MODEL_FIELDS),
+)
 #: the arrays a spec writes: joint values at reset, mocap poses at reset and in ``dynamics.update``
 SETTABLE = ("qpos", "qvel", "mocap_pos", "mocap_quat")
 #: the arrays of a mocap body's pose, which ``dynamics.update`` also writes (before each MuJoCo step)
@@ -142,11 +156,15 @@ class PhysicsModel:
 
     def qpos_names(self) -> list[str]:
         """Every qpos name in qpos order."""
-        return sorted((n for n, (a, _) in self.names.values.items() if a == "qpos"), key=lambda n: self.names.values[n][1])
+        return sorted(
+            (n for n, (a, _) in self.names.values.items() if a == "qpos"), key=lambda n: self.names.values[n][1]
+        )
 
     def qvel_names(self) -> list[str]:
         """Every qvel name in qvel order."""
-        return sorted((n for n, (a, _) in self.names.values.items() if a == "qvel"), key=lambda n: self.names.values[n][1])
+        return sorted(
+            (n for n, (a, _) in self.names.values.items() if a == "qvel"), key=lambda n: self.names.values[n][1]
+        )
 
     def mocap_names(self) -> list[str]:
         """Every mocap body's pose names (``mocap_<b>_x ... _qz``), in body order: what ``dynamics.update`` may set."""
@@ -155,12 +173,20 @@ class PhysicsModel:
     def listing(self) -> dict[str, list[str]]:
         """The names by kind, for ``visualenv inspect`` and the starter spec."""
         groups: dict[str, list[str]] = {"joint positions": self.qpos_names(), "joint velocities": self.qvel_names()}
-        for title, array in (("bodies", "xpos"), ("body orientations", "xquat"), ("body rotation matrices", "xmat"), ("sites", "site_xpos"), ("sensors", "sensordata"), ("actuator controls", "ctrl")):
+        for title, array in (
+            ("bodies", "xpos"),
+            ("body orientations", "xquat"),
+            ("body rotation matrices", "xmat"),
+            ("sites", "site_xpos"),
+            ("sensors", "sensordata"),
+            ("actuator controls", "ctrl"),
+        ):
             groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
         groups["mocap bodies (set in physics.reset.values and dynamics.update)"] = self.mocap_names()
         groups["geom positions"] = [n for n, (a, _) in self.names.values.items() if a == "geom_xpos"]
-        groups["model fields (model_geom_pos_... and model_dof_damping_... written at reset)"] = \
-            [n for n, (a, _) in self.names.values.items() if a.startswith("model.")]
+        groups["model fields (model_geom_pos_... and model_dof_damping_... written at reset)"] = [
+            n for n, (a, _) in self.names.values.items() if a.startswith("model.")
+        ]
         groups["contacts"] = ["ncon"]
         groups["geoms (for contacts)"] = list(self.names.ident["geom"])
         groups["keyframes"] = list(self.names.ident["key"])
@@ -250,8 +276,17 @@ class _Names:
 
 def name_tables(model: Any) -> NameTables:
     """Every readable name of `model`, computed once; PhysicsError naming both when two elements make one name."""
-    kinds = {"joint": model.njnt, "body": model.nbody, "geom": model.ngeom, "site": model.nsite, "sensor": model.nsensor,
-             "actuator": model.nu, "key": model.nkey, "camera": model.ncam, "light": model.nlight}
+    kinds = {
+        "joint": model.njnt,
+        "body": model.nbody,
+        "geom": model.ngeom,
+        "site": model.nsite,
+        "sensor": model.nsensor,
+        "actuator": model.nu,
+        "key": model.nkey,
+        "camera": model.ncam,
+        "light": model.nlight,
+    }
     ident: dict[str, list[str]] = {}
     by_name: dict[str, dict[str, int]] = {}
     owners: dict[str, list[str]] = {}
@@ -268,7 +303,9 @@ def name_tables(model: Any) -> NameTables:
     for s, name in enumerate(ident["sensor"]):
         adr, dim = int(model.sensor_adr[s]), int(model.sensor_dim[s])
         for i in range(dim):
-            names.add(f"sensor_{name}" if dim == 1 else f"sensor_{name}_{i}", ("sensordata", adr + i), owners["sensor"][s])
+            names.add(
+                f"sensor_{name}" if dim == 1 else f"sensor_{name}_{i}", ("sensordata", adr + i), owners["sensor"][s]
+            )
     for a, name in enumerate(ident["actuator"]):
         names.add(f"ctrl_{name}", ("ctrl", a), owners["actuator"][a])
     names.add("sim_time", ("time", 0), "the simulation time")
@@ -283,9 +320,20 @@ def name_tables(model: Any) -> NameTables:
         names.clashes.update(seen.clashes)
     if names.clashes:
         pairs = "; ".join(f"{first} and {second} are both '{name}'" for (first, second), name in names.clashes.items())
-        raise PhysicsError(f"two elements of the model have one name in visualenv: {pairs}. Rename one of each in the MJCF "
-                           "(a name keeps its letters, digits and '_'; any other character becomes '_')")
-    return NameTables(names.values, by_name["joint"], by_name["body"], by_name["geom"], by_name["site"], by_name["actuator"], by_name["key"], ident)
+        raise PhysicsError(
+            f"two elements of the model have one name in visualenv: {pairs}. Rename one of each in the MJCF "
+            "(a name keeps its letters, digits and '_'; any other character becomes '_')"
+        )
+    return NameTables(
+        names.values,
+        by_name["joint"],
+        by_name["body"],
+        by_name["geom"],
+        by_name["site"],
+        by_name["actuator"],
+        by_name["key"],
+        ident,
+    )
 
 
 def _mocap_values(names: _Names, body: str, mocap: int, owner: str) -> None:

@@ -48,7 +48,7 @@ def model_array(field: str) -> str:
 
 def is_writable(array: str) -> bool:
     """Whether a name of this array may be written by a reset (a model field of :data:`WRITABLE`)."""
-    return array.startswith(MODEL_PREFIX) and array[len(MODEL_PREFIX):] in WRITABLE
+    return array.startswith(MODEL_PREFIX) and array[len(MODEL_PREFIX) :] in WRITABLE
 
 
 def written_geoms(names: Sequence[str], table: Mapping[str, tuple[str, int]]) -> list[int]:
@@ -64,12 +64,13 @@ def live_array(model: Any, data: Any, array: str) -> np.ndarray | None:
 def array_view(model: Any, data: Any, array: str) -> np.ndarray:
     """The flat live view of an array that is not a scalar (:data:`SCALARS`): MjModel's field or MjData's array."""
     if array.startswith(MODEL_PREFIX):
-        return np.asarray(getattr(model, array[len(MODEL_PREFIX):])).reshape(-1)
+        return np.asarray(getattr(model, array[len(MODEL_PREFIX) :])).reshape(-1)
     return np.atleast_1d(getattr(data, array)).reshape(-1)
 
 
-def model_values(model: Any, ident: Mapping[str, list[str]], owners: Mapping[str, list[str]],
-                 qvel: Mapping[str, int]) -> list[tuple[str, tuple[str, int], str]]:
+def model_values(
+    model: Any, ident: Mapping[str, list[str]], owners: Mapping[str, list[str]], qvel: Mapping[str, int]
+) -> list[tuple[str, tuple[str, int], str]]:
     """Every name of this module for `model`, as (name, (array, flat index), the element an error names it by).
 
     `ident` and `owners` hold each element's identifier and description by kind (``geom``, ``site``,
@@ -80,7 +81,7 @@ def model_values(model: Any, ident: Mapping[str, list[str]], owners: Mapping[str
         for i, p in enumerate("xyz"):
             out.append((f"geom_{name}_{p}", ("geom_xpos", 3 * g + i), owners["geom"][g]))
     out.append(("ncon", ("ncon", 0), "the contact count"))
-    dofs = {index: name[len("qvel_"):] for name, index in qvel.items()}
+    dofs = {index: name[len("qvel_") :] for name, index in qvel.items()}
     for field, (kind, columns) in MODEL_FIELDS.items():
         width = max(len(columns), 1)
         if kind == "dof":
@@ -89,11 +90,19 @@ def model_values(model: Any, ident: Mapping[str, list[str]], owners: Mapping[str
             rows = [(k, name, owners[kind][k]) for k, name in enumerate(ident[kind])]
         for k, name, owner in rows:
             for c, column in enumerate(columns or ("",)):
-                out.append((f"model_{field}_{name}" + (f"_{column}" if column else ""), (model_array(field), width * k + c), owner))
+                out.append(
+                    (
+                        f"model_{field}_{name}" + (f"_{column}" if column else ""),
+                        (model_array(field), width * k + c),
+                        owner,
+                    )
+                )
     return out
 
 
-def model_writer(model: Any, table: Mapping[str, tuple[str, int]], names: Sequence[str]) -> Callable[[np.ndarray], None]:
+def model_writer(
+    model: Any, table: Mapping[str, tuple[str, int]], names: Sequence[str]
+) -> Callable[[np.ndarray], None]:
     """write(values): the model fields among `names` (values in `names`' order) written into `model`; nothing for the others."""
     plan = []
     for array in sorted({table[n][0] for n in names if table[n][0].startswith(MODEL_PREFIX)}):

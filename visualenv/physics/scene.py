@@ -37,16 +37,24 @@ class GeomShape:
     name: str  # the geom's name, or geom<i>
     kind: str  # a value of GEOM_KINDS
     body: int
-    size: tuple[float, float, float]  # MuJoCo's size (half extents, radius and half length...); a plane's: its half extents
+    size: tuple[
+        float, float, float
+    ]  # MuJoCo's size (half extents, radius and half length...); a plane's: its half extents
     pos: tuple[float, float, float]  # in the body's frame
     quat: tuple[float, float, float, float]  # w, x, y, z, in the body's frame
     rgba: tuple[float, float, float, float]
     vertices: np.ndarray | None = None  # mesh geoms: (n, 3) in the geom's frame
     faces: np.ndarray | None = None  # mesh geoms: (m, 3) vertex indices
-    texture: np.ndarray | None = None  # the material's texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
+    texture: np.ndarray | None = (
+        None  # the material's texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
+    )
     texture_type: str = "2d"  # "2d", or "cube": six square faces stacked (h = 6 w), or one face for all six (h = w)
     texture_id: int = -1  # the MuJoCo texture's index (geoms that share one share its image)
-    texscale: tuple[float, float, float] = (1.0, 1.0, 1.0)  # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
+    texscale: tuple[float, float, float] = (
+        1.0,
+        1.0,
+        1.0,
+    )  # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
     unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
     texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
     #: added to a finite plane's vertices before its 2-D texture's mapping: MuJoCo 3.17's renderer lays the texture from
@@ -69,7 +77,11 @@ class LightInfo:
     ambient: tuple[float, float, float] = (0.0, 0.0, 0.0)
     castshadow: bool = True
     exponent: float = 10.0  # a spot's intensity falls as cos(angle from its axis) ** exponent
-    attenuation: tuple[float, float, float] = (1.0, 0.0, 0.0)  # a spot's intensity over (a0 + a1 d + a2 d^2), d its distance
+    attenuation: tuple[float, float, float] = (
+        1.0,
+        0.0,
+        0.0,
+    )  # a spot's intensity over (a0 + a1 d + a2 d^2), d its distance
 
 
 @dataclass(frozen=True)
@@ -87,8 +99,17 @@ class CameraInfo:
     name: str
     fovy: float  # vertical field of view (degrees)
     moves: bool = False  # it tracks a body, or hangs on one that moves
-    pos: tuple[float, float, float] = (0.0, 0.0, 0.0)  # world, at qpos0 (cam_xpos): where a camera that never moves stays
-    quat: tuple[float, float, float, float] = (1.0, 0.0, 0.0, 0.0)  # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
+    pos: tuple[float, float, float] = (
+        0.0,
+        0.0,
+        0.0,
+    )  # world, at qpos0 (cam_xpos): where a camera that never moves stays
+    quat: tuple[float, float, float, float] = (
+        1.0,
+        0.0,
+        0.0,
+        0.0,
+    )  # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
     #: its orientation changes (it hangs on a moving body, or aims at one); a track or trackcom camera keeps its own
     turns: bool = False
 
@@ -130,15 +151,26 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True, look: str = "m
         gtype = int(model.geom_type[g])
         if gtype not in GEOM_KINDS:
             kind = {1: "a height field (hfield)", 8: "an SDF"}.get(gtype, f"of type {gtype}")
-            raise PhysicsError(f"geom '{idents['geom'][g]}' is {kind}, which visualenv cannot draw yet: move it to group 3 "
-                               "(hidden) or replace it with a mesh or boxes")
+            raise PhysicsError(
+                f"geom '{idents['geom'][g]}' is {kind}, which visualenv cannot draw yet: move it to group 3 "
+                "(hidden) or replace it with a mesh or boxes"
+            )
         geoms.append(_geom(model, g, GEOM_KINDS[gtype], idents["geom"][g], textures))
     lights = tuple(
-        LightInfo(idents["light"][i], light_directional(model, i),
-                  _floats(data.light_xpos[i]), _floats(data.light_xdir[i]),  # type: ignore[arg-type]
-                  _floats(model.light_diffuse[i]), float(model.light_cutoff[i]), _floats(model.light_ambient[i]),  # type: ignore[arg-type]
-                  bool(model.light_castshadow[i]), float(model.light_exponent[i]), _floats(model.light_attenuation[i]))  # type: ignore[arg-type]
-        for i in range(model.nlight))
+        LightInfo(
+            idents["light"][i],
+            light_directional(model, i),
+            _floats(data.light_xpos[i]),  # type: ignore[arg-type]
+            _floats(data.light_xdir[i]),  # type: ignore[arg-type]
+            _floats(model.light_diffuse[i]),  # type: ignore[arg-type]
+            float(model.light_cutoff[i]),
+            _floats(model.light_ambient[i]),  # type: ignore[arg-type]
+            bool(model.light_castshadow[i]),
+            float(model.light_exponent[i]),
+            _floats(model.light_attenuation[i]),  # type: ignore[arg-type]
+        )
+        for i in range(model.nlight)
+    )
     head = model.vis.headlight
     headlight = Headlight(_floats(head.ambient), _floats(head.diffuse), _floats(head.specular), bool(head.active))  # type: ignore[arg-type]
     moving = np.flatnonzero((model.body_weldid != 0) | (model.body_mocapid >= 0))
@@ -146,8 +178,19 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True, look: str = "m
     skyboxes = [t for t in range(model.ntex) if int(model.tex_type[t]) == 2]  # mjTEXTURE_SKYBOX
     sky = cube_to_equirect(_pixels(model, skyboxes[0])) if skyboxes else None
     sites = visible_sites(physics) if draw_sites else ()
-    return PhysicsScene(tuple(idents["body"]), data.xpos.copy(), data.xquat.copy(), moving, tuple(geoms), lights, cameras, sky, sites,
-                        headlight, look)
+    return PhysicsScene(
+        tuple(idents["body"]),
+        data.xpos.copy(),
+        data.xquat.copy(),
+        moving,
+        tuple(geoms),
+        lights,
+        cameras,
+        sky,
+        sites,
+        headlight,
+        look,
+    )
 
 
 #: MuJoCo's camera modes (mjtCamLight) that keep a camera's orientation in the world: track, trackcom
@@ -159,8 +202,14 @@ def _camera(model: Any, data: Any, i: int, name: str, moving: set[int]) -> Camer
     mode, on_moving = int(model.cam_mode[i]), int(model.cam_bodyid[i]) in moving
     moves = mode != 0 or on_moving
     turns = moves and mode not in STEADY_MODES  # fixed on a moving body, or aimed at a body (targetbody, targetbodycom)
-    return CameraInfo(name, float(model.cam_fovy[i]), moves, tuple(map(float, data.cam_xpos[i])),  # type: ignore[arg-type]
-                      _quat(mujoco_module(), data.cam_xmat[i]), turns)  # type: ignore[arg-type]
+    return CameraInfo(
+        name,
+        float(model.cam_fovy[i]),
+        moves,
+        tuple(map(float, data.cam_xpos[i])),  # type: ignore[arg-type]
+        _quat(mujoco_module(), data.cam_xmat[i]),  # type: ignore[arg-type]
+        turns,
+    )
 
 
 def _floats(values: Any) -> tuple[float, ...]:
@@ -175,15 +224,30 @@ def visible_sites(physics: PhysicsModel) -> tuple[GeomShape, ...]:
     for i, ident in enumerate(physics.names.ident["site"]):
         kind = GEOM_KINDS.get(int(model.site_type[i]))
         rgba = tuple(float(v) for v in model.site_rgba[i])
-        if int(model.site_group[i]) >= VISIBLE_GROUPS or rgba[3] == 0.0 or kind not in ("sphere", "capsule", "ellipsoid", "cylinder", "box"):
+        if (
+            int(model.site_group[i]) >= VISIBLE_GROUPS
+            or rgba[3] == 0.0
+            or kind not in ("sphere", "capsule", "ellipsoid", "cylinder", "box")
+        ):
             continue
         mat = int(model.site_matid[i])
         if mat >= 0 and np.allclose(rgba, _DEFAULT_RGBA):
             rgba = tuple(float(v) for v in model.mat_rgba[mat])
         emission, specular, shininess = _shading(model, mat)
-        out.append(GeomShape(f"site:{ident}", kind, int(model.site_bodyid[i]), tuple(float(v) for v in model.site_size[i]),  # type: ignore[arg-type]
-                             tuple(map(float, model.site_pos[i])), tuple(map(float, model.site_quat[i])), rgba,  # type: ignore[arg-type]
-                             emission=emission, specular=specular, shininess=shininess))
+        out.append(
+            GeomShape(
+                f"site:{ident}",
+                kind,
+                int(model.site_bodyid[i]),
+                tuple(float(v) for v in model.site_size[i]),  # type: ignore[arg-type]
+                tuple(map(float, model.site_pos[i])),  # type: ignore[arg-type]
+                tuple(map(float, model.site_quat[i])),  # type: ignore[arg-type]
+                rgba,  # type: ignore[arg-type]
+                emission=emission,
+                specular=specular,
+                shininess=shininess,
+            )
+        )
     return tuple(out)
 
 
@@ -206,19 +270,35 @@ def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarr
         mesh = int(model.geom_dataid[g])
         v0, nv = int(model.mesh_vertadr[mesh]), int(model.mesh_vertnum[mesh])
         f0, nf = int(model.mesh_faceadr[mesh]), int(model.mesh_facenum[mesh])
-        vertices = np.array(model.mesh_vert[v0:v0 + nv], dtype=np.float64)
-        faces = np.array(model.mesh_face[f0:f0 + nf], dtype=np.int64)
+        vertices = np.array(model.mesh_vert[v0 : v0 + nv], dtype=np.float64)
+        faces = np.array(model.mesh_face[f0 : f0 + nf], dtype=np.int64)
     emission, specular, shininess = _shading(model, mat)
-    shape = GeomShape(name, kind, int(model.geom_bodyid[g]), size, tuple(map(float, model.geom_pos[g])),  # type: ignore[arg-type]
-                      tuple(map(float, model.geom_quat[g])), rgba, vertices, faces,  # type: ignore[arg-type]
-                      emission=emission, specular=specular, shininess=shininess)
+    shape = GeomShape(
+        name,
+        kind,
+        int(model.geom_bodyid[g]),
+        size,  # type: ignore[arg-type]
+        tuple(map(float, model.geom_pos[g])),  # type: ignore[arg-type]
+        tuple(map(float, model.geom_quat[g])),  # type: ignore[arg-type]
+        rgba,  # type: ignore[arg-type]
+        vertices,
+        faces,
+        emission=emission,
+        specular=specular,
+        shininess=shininess,
+    )
     tex = _texture_id(model, mat)
     if tex < 0:
         return shape
     if tex not in textures:
         textures[tex] = _pixels(model, tex)
-    return replace(shape, texture=textures[tex], texture_type="cube" if int(model.tex_type[tex]) == 1 else "2d", texture_id=tex,
-                   **_texgen(model, g, kind, mat, tex))
+    return replace(
+        shape,
+        texture=textures[tex],
+        texture_type="cube" if int(model.tex_type[tex]) == 1 else "2d",
+        texture_id=tex,
+        **_texgen(model, g, kind, mat, tex),
+    )
 
 
 def _shading(model: Any, mat: int) -> tuple[float, float, float]:
@@ -246,7 +326,9 @@ def _texgen(model: Any, g: int, kind: str, mat: int, tex: int) -> dict[str, Any]
     their size (``unit`` 1), so a 2-D texture's repeat is divided by it.
     """
     raw = tuple(float(v) for v in model.geom_size[g])
-    size = {"sphere": (raw[0],) * 3, "capsule": (raw[0], raw[0], raw[1]), "cylinder": (raw[0], raw[0], raw[1])}.get(kind, raw)
+    size = {"sphere": (raw[0],) * 3, "capsule": (raw[0], raw[0], raw[1]), "cylinder": (raw[0], raw[0], raw[1])}.get(
+        kind, raw
+    )
     drawn_at_size = kind in ("plane", "mesh")
     uniform = bool(model.mat_texuniform[mat])
     fields: dict[str, Any] = {"unit": (1.0, 1.0, 1.0) if drawn_at_size else size}
@@ -273,7 +355,9 @@ def _mesh_texcoords(model: Any, mesh: int) -> np.ndarray | None:
     if adr < 0:
         return None
     f0, nf = int(model.mesh_faceadr[mesh]), int(model.mesh_facenum[mesh])
-    uv = np.asarray(model.mesh_texcoord, dtype=np.float64)[adr + np.asarray(model.mesh_facetexcoord[f0:f0 + nf], dtype=np.int64)]
+    uv = np.asarray(model.mesh_texcoord, dtype=np.float64)[
+        adr + np.asarray(model.mesh_facetexcoord[f0 : f0 + nf], dtype=np.int64)
+    ]
     uv[..., 1] = 1.0 - uv[..., 1]  # OpenGL's t counts rows from the image's first (top) one
     return uv
 
@@ -283,9 +367,9 @@ def _pixels(model: Any, tex: int) -> np.ndarray:
     w, h = int(model.tex_width[tex]), int(model.tex_height[tex])
     channels = texture_channels(model, tex)
     adr = int(model.tex_adr[tex])
-    pixels = np.asarray(model.tex_data[adr:adr + w * h * channels], dtype=np.float32).reshape(h, w, channels) / 255.0
+    pixels = np.asarray(model.tex_data[adr : adr + w * h * channels], dtype=np.float32).reshape(h, w, channels) / 255.0
     rgba = np.ones((h, w, 4), np.float32)
-    rgba[..., :min(channels, 3)] = pixels[..., :3]
+    rgba[..., : min(channels, 3)] = pixels[..., :3]
     if channels == 1:
         rgba[..., 1] = rgba[..., 2] = pixels[..., 0]
     return rgba[::-1].copy()

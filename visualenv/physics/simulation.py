@@ -41,7 +41,6 @@ def touching(data: Any, pair: tuple[int, int]) -> bool:
     return bool((((g1 == a) & (g2 == b)) | ((g1 == b) & (g2 == a))).any())
 
 
-
 def integration_state(data: Any) -> np.ndarray:
     """MuJoCo's whole integration state of `data` (``mjSTATE_INTEGRATION``: time, qpos, qvel, act, warm start,
     controls...): what the next ``mj_step`` starts from, so that two equal states step alike to the bit."""
@@ -51,12 +50,18 @@ def integration_state(data: Any) -> np.ndarray:
     mujoco.mj_getState(data.model, data, state, signature)
     return state
 
+
 class Simulation:
     """An env's MjModel (its own copy, so randomising one env's model leaves the others alone, without the textures
     only the renderer reads: :attr:`PhysicsModel.dynamics`) and MjData."""
 
-    def __init__(self, physics: PhysicsModel, frame_skip: int, contacts: dict[str, tuple[int, int]] | None = None,
-                 convention: str = "gymnasium") -> None:
+    def __init__(
+        self,
+        physics: PhysicsModel,
+        frame_skip: int,
+        contacts: dict[str, tuple[int, int]] | None = None,
+        convention: str = "gymnasium",
+    ) -> None:
         self.mujoco = mujoco_module()
         #: whose MuJoCo calls the steps and resets make (:mod:`visualenv.physics.conventions`)
         self.convention = convention
@@ -86,7 +91,11 @@ class Simulation:
         set_state; dm_control's after_reset), unless not `forward` (a reset that goes on with a redraw or settling steps)."""
         write = self.scatter(names)
         write_model = model_writer(self.model, self.physics.names.values, names)
-        data, model, forward_pass = self.data, self.model, forward_function(self.convention, self.mujoco) if forward else None
+        data, model, forward_pass = (
+            self.data,
+            self.model,
+            forward_function(self.convention, self.mujoco) if forward else None,
+        )
 
         def set_state(values: Sequence[float]) -> None:
             given = np.asarray(values, dtype=np.float64)
@@ -175,7 +184,11 @@ class Simulation:
             info = self.data.warning[index]
             if info.number:
                 dof = self.physics.qvel_names()
-                where = f" at {dof[info.lastinfo]}" if w in ("mjWARN_BADQACC", "mjWARN_BADQVEL") and 0 <= info.lastinfo < len(dof) else ""
+                where = (
+                    f" at {dof[info.lastinfo]}"
+                    if w in ("mjWARN_BADQACC", "mjWARN_BADQVEL") and 0 <= info.lastinfo < len(dof)
+                    else ""
+                )
                 parts.append(f"MuJoCo warning {w[7:]}{where}")
         for array in ("qpos", "qvel", "qacc"):
             values = getattr(self.data, array)
@@ -184,8 +197,10 @@ class Simulation:
                 names = self.physics.qpos_names() if array == "qpos" else self.physics.qvel_names()
                 parts.append(f"{array} not finite: " + ", ".join(f"{names[i]}={values[i]!r}" for i in bad[:6]))
         state = ", ".join(f"{n}={v:.6g}" for n, v in zip(self.physics.qpos_names(), self.data.qpos[:8]))
-        return (f"the MuJoCo simulation blew up at sim_time={self.data.time:.6g} ({'; '.join(parts) or 'unstable'}); "
-                f"qpos: {state}; lower the timestep or the controls, or check the model")
+        return (
+            f"the MuJoCo simulation blew up at sim_time={self.data.time:.6g} ({'; '.join(parts) or 'unstable'}); "
+            f"qpos: {state}; lower the timestep or the controls, or check the model"
+        )
 
     # -- reading named values -----------------------------------------------------------------------
 

@@ -29,11 +29,11 @@ import numpy as np
 #: OpenGL's cube map selection (OpenGL 4.6 core, table 8.19), per face in MuJoCo's order:
 #: (major axis, its sign, (axis, sign) of s_c, (axis, sign) of t_c)
 CUBE_FACES = (
-    (0, 1.0, (2, -1.0), (1, -1.0)),   # +X
-    (0, -1.0, (2, 1.0), (1, -1.0)),   # -X
-    (1, 1.0, (0, 1.0), (2, 1.0)),     # +Y
-    (1, -1.0, (0, 1.0), (2, -1.0)),   # -Y
-    (2, 1.0, (0, 1.0), (1, -1.0)),    # +Z
+    (0, 1.0, (2, -1.0), (1, -1.0)),  # +X
+    (0, -1.0, (2, 1.0), (1, -1.0)),  # -X
+    (1, 1.0, (0, 1.0), (2, 1.0)),  # +Y
+    (1, -1.0, (0, 1.0), (2, -1.0)),  # -Y
+    (2, 1.0, (0, 1.0), (1, -1.0)),  # +Z
     (2, -1.0, (0, -1.0), (1, -1.0)),  # -Z
 )
 #: CUBE_FACES as rows of numbers: major axis, its sign, s_c's axis and sign, t_c's axis and sign
@@ -51,8 +51,10 @@ def _on_face(points: np.ndarray, face: np.ndarray) -> tuple[np.ndarray, np.ndarr
     table = _FACE_TABLE[face]
     rows = np.arange(len(points))
     major = np.maximum(points[rows, table[:, 0].astype(int)] * table[:, 1], 1e-9)
-    return (points[rows, table[:, 2].astype(int)] * table[:, 3] / major,
-            points[rows, table[:, 4].astype(int)] * table[:, 5] / major)
+    return (
+        points[rows, table[:, 2].astype(int)] * table[:, 3] / major,
+        points[rows, table[:, 4].astype(int)] * table[:, 5] / major,
+    )
 
 
 def planar_uv(points: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
@@ -62,7 +64,9 @@ def planar_uv(points: np.ndarray, scale: tuple[float, float]) -> np.ndarray:
     return np.stack([s, 1.0 - t], axis=1)
 
 
-def cube_uv(points: np.ndarray, loop_starts: np.ndarray, loop_vertex: np.ndarray, *, faces: int, texels: int) -> np.ndarray:
+def cube_uv(
+    points: np.ndarray, loop_starts: np.ndarray, loop_vertex: np.ndarray, *, faces: int, texels: int
+) -> np.ndarray:
     """(loops, 2) Blender UVs in a cube texture stored as `faces` (6, or 1 repeated) square images of `texels` a side,
     stacked from the top (face 0) down, for polygons whose loops start at `loop_starts` and visit `loop_vertex`.
 
@@ -91,11 +95,17 @@ def average_faces(pixels: np.ndarray, most: int = SKY_FACE_TEXELS) -> np.ndarray
     """A cube map (faces stacked, bottom row first) with each face averaged in square blocks to at most `most` texels a
     side, by the smallest block that divides the face (the map unchanged when it is small enough, or no block divides it)."""
     texels = pixels.shape[1]
-    block = next((b for b in range(2, texels + 1) if texels % b == 0 and texels // b <= most), 1) if texels > most else 1
+    block = (
+        next((b for b in range(2, texels + 1) if texels % b == 0 and texels // b <= most), 1) if texels > most else 1
+    )
     if block == 1:
         return pixels
     rows, channels = pixels.shape[0], pixels.shape[2]
-    return pixels.reshape(rows // block, block, texels // block, block, channels).mean(axis=(1, 3), dtype=np.float64).astype(pixels.dtype)
+    return (
+        pixels.reshape(rows // block, block, texels // block, block, channels)
+        .mean(axis=(1, 3), dtype=np.float64)
+        .astype(pixels.dtype)
+    )
 
 
 def cube_to_equirect(pixels: np.ndarray, *, width: int | None = None) -> np.ndarray:
@@ -119,8 +129,12 @@ def cube_to_equirect(pixels: np.ndarray, *, width: int | None = None) -> np.ndar
     v = (np.arange(height) + 0.5) / height
     azimuth = (0.5 - u)[None, :] * 2.0 * np.pi
     elevation = (v - 0.5)[:, None] * np.pi
-    d = np.stack(np.broadcast_arrays(np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth),
-                                     np.sin(elevation)), axis=-1).reshape(-1, 3)
+    d = np.stack(
+        np.broadcast_arrays(
+            np.cos(elevation) * np.cos(azimuth), np.cos(elevation) * np.sin(azimuth), np.sin(elevation)
+        ),
+        axis=-1,
+    ).reshape(-1, 3)
     tex = np.stack([d[:, 0], d[:, 2], -d[:, 1]], axis=1)
     face = _face_of(tex)
     sc, tc = _on_face(tex, face)

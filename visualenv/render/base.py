@@ -124,6 +124,8 @@ def load_backend(entry_point: str) -> Callable[..., Renderer]:
     return getattr(importlib.import_module(module_name), attribute)
 
 
-def create_renderer(plan: RenderPlan, backend: str = BLENDER_BACKEND, options: RendererOptions = DEFAULT_OPTIONS) -> Renderer:
+def create_renderer(
+    plan: RenderPlan, backend: str = BLENDER_BACKEND, options: RendererOptions = DEFAULT_OPTIONS
+) -> Renderer:
     """The renderer of `backend` for `plan`, its settings merged with `options` (a backend is called as ``cls(plan, options)``)."""
     return load_backend(backend)(plan.with_options(options), options)

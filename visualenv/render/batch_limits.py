@@ -38,41 +38,81 @@ ONE_PROCESS_EACH = "use one process per env (visualenv.make_vec(..., batched=Fal
 
 
 def engine_message(engine: str) -> str:
-    return (f"render.engine '{engine}' cannot render a batch in one call: only Cycles can (through its custom camera); "
-            "use engine: cycles, or one process per env (visualenv.make_vec(..., batched=False))")
+    return (
+        f"render.engine '{engine}' cannot render a batch in one call: only Cycles can (through its custom camera); "
+        "use engine: cycles, or one process per env (visualenv.make_vec(..., batched=False))"
+    )
 
 
 def turning_error(plan: RenderPlan, camera: str, why: str) -> SpecError:
-    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' cannot be batched ({why}): a batch "
-                      "renders every env through one custom camera with one lens; it follows a camera that moves (each env's copy "
-                      "moved) and turns (each env's rays turned), but no move of a copy zooms like a lens (a uniform scale about "
-                      "the camera changes nothing in the image, a scale across its view distorts the shading), and it follows no "
-                      f"scale or constraint on the camera or its parents; {ONE_PROCESS_EACH}")])
+    return SpecError(
+        [
+            plan.source.diagnostic(
+                ("observation",),
+                f"camera '{camera}' cannot be batched ({why}): a batch "
+                "renders every env through one custom camera with one lens; it follows a camera that moves (each env's copy "
+                "moved) and turns (each env's rays turned), but no move of a copy zooms like a lens (a uniform scale about "
+                "the camera changes nothing in the image, a scale across its view distorts the shading), and it follows no "
+                f"scale or constraint on the camera or its parents; {ONE_PROCESS_EACH}",
+            )
+        ]
+    )
 
 
 def turning_limit_error(plan: RenderPlan, camera: str, why: str, cause: str = "turns with the state") -> SpecError:
-    return SpecError([plan.source.diagnostic(("observation",), f"camera '{camera}' {cause}: a batch turns each env's "
-                      f"rays in its camera's shader, {why}; {ONE_PROCESS_EACH}")])
+    return SpecError(
+        [
+            plan.source.diagnostic(
+                ("observation",),
+                f"camera '{camera}' {cause}: a batch turns each env's "
+                f"rays in its camera's shader, {why}; {ONE_PROCESS_EACH}",
+            )
+        ]
+    )
 
 
 def world_error(plan: RenderPlan, name: str) -> SpecError:
-    return SpecError([plan.source.diagnostic(("actors", name), "the world (its sky's strength, rotation or tint) is bound to the state: "
-                      f"a batch's envs share one world; {ONE_PROCESS_EACH}", key=True)])
+    return SpecError(
+        [
+            plan.source.diagnostic(
+                ("actors", name),
+                "the world (its sky's strength, rotation or tint) is bound to the state: "
+                f"a batch's envs share one world; {ONE_PROCESS_EACH}",
+                key=True,
+            )
+        ]
+    )
 
 
 def sun_error(plan: RenderPlan, name: str, num_envs: int) -> SpecError:
-    return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state: each env of a batch then has "
-                      f"its own sun, lighting only its own copy through Cycles' light linking, which tells at most {MAX_LINKED_ENVS} "
-                      f"such sets apart, not {num_envs}; use batches of at most {MAX_LINKED_ENVS} envs (make_vec(..., workers=K) "
-                      f"runs several), or {ONE_PROCESS_EACH}", key=True)])
+    return SpecError(
+        [
+            plan.source.diagnostic(
+                ("actors", name),
+                f"sun '{name}' is bound to the state: each env of a batch then has "
+                f"its own sun, lighting only its own copy through Cycles' light linking, which tells at most {MAX_LINKED_ENVS} "
+                f"such sets apart, not {num_envs}; use batches of at most {MAX_LINKED_ENVS} envs (make_vec(..., workers=K) "
+                f"runs several), or {ONE_PROCESS_EACH}",
+                key=True,
+            )
+        ]
+    )
 
 
 def sun_world_error(plan: RenderPlan, name: str) -> SpecError:
-    return SpecError([plan.source.diagnostic(("actors", name), f"sun '{name}' is bound to the state while the world is not one "
-                      "colour (an image sky, or a .blend file's world with textures): each env of a batch then has its own sun "
-                      "(Cycles' light linking), and with such a world Cycles' light sampling lit all but one env's copy otherwise "
-                      "than one env alone (most of a tile's pixels off); use a world colour, or "
-                      f"{ONE_PROCESS_EACH}", key=True)])
+    return SpecError(
+        [
+            plan.source.diagnostic(
+                ("actors", name),
+                f"sun '{name}' is bound to the state while the world is not one "
+                "colour (an image sky, or a .blend file's world with textures): each env of a batch then has its own sun "
+                "(Cycles' light linking), and with such a world Cycles' light sampling lit all but one env's copy otherwise "
+                "than one env alone (most of a tile's pixels off); use a world colour, or "
+                f"{ONE_PROCESS_EACH}",
+                key=True,
+            )
+        ]
+    )
 
 
 def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
@@ -100,18 +140,32 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
         spec = objects.get(name)
         if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > MAX_LINKED_ENVS:
             raise sun_error(plan, name, num_envs)
-        if isinstance(spec, LightObject) and spec.light == "sun" and num_envs > 1 and plan.scene.world is not None \
-                and plan.scene.world.image is not None:
+        if (
+            isinstance(spec, LightObject)
+            and spec.light == "sun"
+            and num_envs > 1
+            and plan.scene.world is not None
+            and plan.scene.world.image is not None
+        ):
             raise sun_world_error(plan, name)
 
 
-def check_turning(plan: RenderPlan, camera: str, color: str, num_envs: int, cause: str = "turns with the state") -> None:
+def check_turning(
+    plan: RenderPlan, camera: str, color: str, num_envs: int, cause: str = "turns with the state"
+) -> None:
     """Refuse what a batch of a turning camera cannot render: more envs than its shader holds, depth along turned rays."""
     if num_envs > MAX_TURNING_ENVS:
-        raise turning_limit_error(plan, camera, f"which holds at most {MAX_TURNING_ENVS} envs, not {num_envs}; use batches of "
-                                  f"at most {MAX_TURNING_ENVS} envs (make_vec(..., workers=K) runs several)", cause)
+        raise turning_limit_error(
+            plan,
+            camera,
+            f"which holds at most {MAX_TURNING_ENVS} envs, not {num_envs}; use batches of "
+            f"at most {MAX_TURNING_ENVS} envs (make_vec(..., workers=K) runs several)",
+            cause,
+        )
     if color == "depth":
-        raise turning_limit_error(plan, camera, "while a depth observation is measured along one camera's forward axis for every env", cause)
+        raise turning_limit_error(
+            plan, camera, "while a depth observation is measured along one camera's forward axis for every env", cause
+        )
 
 
 def model_turns(plan: RenderPlan, camera: str) -> bool:

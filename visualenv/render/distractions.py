@@ -65,9 +65,16 @@ def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
     if not settings.camera:
         angles, zoom = np.zeros(3), 1.0
     background_seed = int(rng.integers(0, 2**31 - 1))  # drawn last: the draws before it are those of a spec without it
-    return Distraction(yaw=float(angles[0]), pitch=float(angles[1]), roll=float(angles[2]), zoom=zoom,
-                       color_shift=scale if settings.colors else 0.0, colors_seed=seed,
-                       background=scale if settings.background else 0.0, background_seed=background_seed)
+    return Distraction(
+        yaw=float(angles[0]),
+        pitch=float(angles[1]),
+        roll=float(angles[2]),
+        zoom=zoom,
+        color_shift=scale if settings.colors else 0.0,
+        colors_seed=seed,
+        background=scale if settings.background else 0.0,
+        background_seed=background_seed,
+    )
 
 
 def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Generator) -> Distraction | None:
@@ -85,9 +92,15 @@ def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Gen
     played = settings.background_time + (BACKGROUND_STEP if limits.background else 0.0)
     if not limits.camera:
         return replace(settings, colors_phase=phase, background_time=played)
-    return replace(settings, yaw=moved(settings.yaw, step[0], -bound, bound), pitch=moved(settings.pitch, step[1], -bound, bound),
-                   roll=moved(settings.roll, step[2], -bound, bound), zoom=moved(settings.zoom, step[3], 1 - scale / 2, 1 + scale / 2),
-                   colors_phase=phase, background_time=played)
+    return replace(
+        settings,
+        yaw=moved(settings.yaw, step[0], -bound, bound),
+        pitch=moved(settings.pitch, step[1], -bound, bound),
+        roll=moved(settings.roll, step[2], -bound, bound),
+        zoom=moved(settings.zoom, step[3], 1 - scale / 2, 1 + scale / 2),
+        colors_phase=phase,
+        background_time=played,
+    )
 
 
 #: the difficulty from which the background hides the sky wholly (the suite's hardest level); below, in proportion
@@ -117,8 +130,13 @@ def background(distraction: Distraction) -> Background | None:
     spread = rng.uniform(-1.0, 1.0, size=3) * distraction.background
     first, second = np.clip(mean + spread, 0.0, 1.0), np.clip(mean - spread, 0.0, 1.0)
     scale, start = float(rng.uniform(2.0, 8.0)), float(rng.uniform(0.0, 100.0))
-    return Background(tuple(first.tolist()), tuple(second.tolist()), scale, start + distraction.background_time,  # type: ignore[arg-type]
-                      min(1.0, distraction.background / OPAQUE_FROM))
+    return Background(
+        tuple(first.tolist()),
+        tuple(second.tolist()),
+        scale,
+        start + distraction.background_time,
+        min(1.0, distraction.background / OPAQUE_FROM),
+    )
 
 
 def color_shifts(distraction: Distraction, count: int) -> np.ndarray:

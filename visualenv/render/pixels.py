@@ -29,7 +29,7 @@ def read_bmp(path: str) -> np.ndarray:
     if bpp != 24:
         raise OSError(f"{path}: expected a 24-bit BMP, got {bpp} bits per pixel")
     stride = (width * 3 + 3) & ~3
-    rows = data[offset:offset + stride * abs(height)].reshape(abs(height), stride)[:, : width * 3]
+    rows = data[offset : offset + stride * abs(height)].reshape(abs(height), stride)[:, : width * 3]
     image = rows.reshape(abs(height), width, 3)[:, :, ::-1]  # BGR -> RGB
     if height > 0:  # bottom-up
         image = image[::-1]

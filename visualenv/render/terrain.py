@@ -60,28 +60,36 @@ def read_heightmap(path: Path) -> np.ndarray:
         except (OSError, ValueError) as exc:
             raise HeightmapError(f"cannot read {path} as a .npy array: {exc}") from None
         if data.ndim != 2 or data.dtype.kind not in "iuf":
-            raise HeightmapError(f"{path}: a heightmap array must be 2-D numbers, got shape {data.shape} of {data.dtype}")
+            raise HeightmapError(
+                f"{path}: a heightmap array must be 2-D numbers, got shape {data.shape} of {data.dtype}"
+            )
     else:
         from PIL import Image, UnidentifiedImageError
 
         try:
             with Image.open(path) as image:
                 if image.mode not in _GRAY_MODES:
-                    raise HeightmapError(f"{path} is a {image.mode} image: a heightmap is one channel (grayscale PNG of 8 or 16 bits, "
-                                         "a 1-band TIFF, or a .npy array)")
+                    raise HeightmapError(
+                        f"{path} is a {image.mode} image: a heightmap is one channel (grayscale PNG of 8 or 16 bits, "
+                        "a 1-band TIFF, or a .npy array)"
+                    )
                 data = np.array(image)
         except (OSError, UnidentifiedImageError) as exc:
             raise HeightmapError(f"cannot read {path} as an image (PNG, TIFF) or .npy array: {exc}") from None
     heights = data.astype(np.float64)
     if min(heights.shape) < 2:
-        raise HeightmapError(f"{path}: a heightmap needs at least 2 x 2 values, got {heights.shape[1]} x {heights.shape[0]}")
+        raise HeightmapError(
+            f"{path}: a heightmap needs at least 2 x 2 values, got {heights.shape[1]} x {heights.shape[0]}"
+        )
     if not np.isfinite(heights).all():
         raise HeightmapError(f"{path}: the heightmap holds NaN or infinite values (fill the voids of the DEM first)")
     low, high = heights.min(), heights.max()
     return (heights - low) / (high - low) if high > low else np.zeros_like(heights)
 
 
-def heightmap_heights(x: np.ndarray, y: np.ndarray, heights: np.ndarray, size: tuple[float, float, float]) -> np.ndarray:
+def heightmap_heights(
+    x: np.ndarray, y: np.ndarray, heights: np.ndarray, size: tuple[float, float, float]
+) -> np.ndarray:
     """Height at the points (x, y) of a ground of ``size`` [x, y, z] centred on the origin: the map sampled bilinearly, scaled to z."""
     rows, cols = heights.shape
     u = np.clip((np.asarray(x) / size[0] + 0.5) * (cols - 1), 0, cols - 1)

@@ -34,10 +34,28 @@ _PATTERNS = {
 }
 #: names other tools (Blender's Python API first) give the fields of a spec, for "did you mean" where spelling is no guide
 _SYNONYMS = {
-    "energy": "strength", "power": "strength", "intensity": "strength", "colour": "color", "position": "location", "pos": "location",
-    "focal_length": "lens", "target": "look_at", "hidden": "visible", "hide": "visible", "rotation_euler": "rotation", "steps": "max_steps",
+    "energy": "strength",
+    "power": "strength",
+    "intensity": "strength",
+    "colour": "color",
+    "position": "location",
+    "pos": "location",
+    "focal_length": "lens",
+    "target": "look_at",
+    "hidden": "visible",
+    "hide": "visible",
+    "rotation_euler": "rotation",
+    "steps": "max_steps",
 }
-_TYPE_NAMES = {bool: "a boolean", int: "an integer", float: "a number", str: "text", list: "a list", dict: "a mapping", type(None): "nothing"}
+_TYPE_NAMES = {
+    bool: "a boolean",
+    int: "an integer",
+    float: "a number",
+    str: "text",
+    list: "a list",
+    dict: "a mapping",
+    type(None): "nothing",
+}
 
 
 @dataclass(frozen=True)
@@ -67,7 +85,9 @@ def load_spec_text(text: str, name: str = "<string>.yaml", base_dir: str | Path 
 
 def validate_data(data: Any, smap: SourceMap, base_dir: Path) -> LoadedSpec:
     if not isinstance(data, dict):
-        raise SpecError([smap.diagnostic((), f"expected a mapping of spec fields at the top level, got {_type_name(data)}")])
+        raise SpecError(
+            [smap.diagnostic((), f"expected a mapping of spec fields at the top level, got {_type_name(data)}")]
+        )
     try:
         spec = Spec.model_validate(data)
     except ValidationError as exc:
@@ -142,7 +162,7 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
             break
     msg = err["msg"]
     if msg.startswith("Value error, "):
-        msg = msg[len("Value error, "):]
+        msg = msg[len("Value error, ") :]
     if err["type"] == "string_pattern_mismatch":
         pattern = err.get("ctx", {}).get("pattern", "")
         what = _PATTERNS.get(pattern, f"text matching {pattern}")
@@ -151,12 +171,17 @@ def _message(path: tuple, errs: list[dict], data: Any) -> str:
         return _length_message(err, path)
     if err["type"] == "literal_error":
         return _literal_message(err, value)
-    if err["type"].endswith("_type") or err["type"] in ("int_from_float", "bool_parsing", "float_parsing", "int_parsing"):
+    if err["type"].endswith("_type") or err["type"] in (
+        "int_from_float",
+        "bool_parsing",
+        "float_parsing",
+        "int_parsing",
+    ):
         if isinstance(value, (dict, list)):
             return f"expected {_expected(err)}, got {_type_name(value)}"
         return f"expected {_expected(err)}, got {_type_name(value)} {value!r}" + _strict_hint(_expected(err), value)
     if msg.startswith("Input should be "):
-        msg = "expected a value " + msg[len("Input should be "):] + f", got {value!r}"
+        msg = "expected a value " + msg[len("Input should be ") :] + f", got {value!r}"
     return msg
 
 
@@ -171,7 +196,12 @@ def _misplaced_hint(path: tuple, errs: list[dict], data: Any) -> str:
                 where = f"'{format_path(path[:depth])}'" if depth else "the top level"
                 return f" ('{key}' belongs to {where}: is it indented too far?)"
         return ""
-    if len(path) >= 2 and not isinstance(_value_at(path, data), dict) and key in _fields_at(path, data) and not _fields_at(path[:-1], data):
+    if (
+        len(path) >= 2
+        and not isinstance(_value_at(path, data), dict)
+        and key in _fields_at(path, data)
+        and not _fields_at(path[:-1], data)
+    ):
         parent = format_path(path[:-1])
         return f" ('{key}' is a field of each entry of '{parent}': is it indented too little, beside the entries instead of inside one?)"
     return ""
@@ -189,7 +219,11 @@ def _length_message(err: dict, path: tuple) -> str:
         bound = high
     else:
         count = f"{'at least' if side == 0 else 'at most'} {bound}"
-    items = ("entr" + ("y" if bound == 1 else "ies")) if ctx.get("field_type") == "Dictionary" else ("value" + ("" if bound == 1 else "s"))
+    items = (
+        ("entr" + ("y" if bound == 1 else "ies"))
+        if ctx.get("field_type") == "Dictionary"
+        else ("value" + ("" if bound == 1 else "s"))
+    )
     return f"expected {count} {items}, got {ctx.get('actual_length')}"
 
 
@@ -243,7 +277,9 @@ def _unknown_key_message(path: tuple, data: Any) -> str:
     synonym = _SYNONYMS.get(key.lower())
     if synonym in allowed:
         return f"unknown key '{key}' (did you mean '{synonym}'? expected one of: {', '.join(allowed)})"
-    return f"unknown key '{path[-1]}'" + (did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else "")
+    return f"unknown key '{path[-1]}'" + (
+        did_you_mean(str(path[-1]), allowed).replace("names:", "expected one of:") if allowed else ""
+    )
 
 
 def _literal_message(err: dict, value: Any) -> str:
@@ -270,7 +306,11 @@ def _strict_hint(expected: str, value: Any) -> str:
         return " (write the number without quotes)"
     if isinstance(value, float) and expected == "an integer" and value.is_integer() and abs(value) < 1e16:
         return f" (an integer is written with digits only, without a decimal point or exponent: {int(value)})"
-    if isinstance(value, str) and expected == "a boolean" and value.strip().lower() in ("true", "false", "yes", "no", "on", "off"):
+    if (
+        isinstance(value, str)
+        and expected == "a boolean"
+        and value.strip().lower() in ("true", "false", "yes", "no", "on", "off")
+    ):
         return " (write true or false without quotes)"
     if isinstance(value, bool) and expected in ("an integer", "a number"):
         return " (a boolean is not a number)"
@@ -280,9 +320,19 @@ def _strict_hint(expected: str, value: Any) -> str:
 def _expected(err: dict) -> str:
     kind = err["type"]
     return {
-        "bool_type": "a boolean", "bool_parsing": "a boolean", "int_type": "an integer", "int_parsing": "an integer",
-        "int_from_float": "an integer", "float_type": "a number", "float_parsing": "a number", "string_type": "text",
-        "list_type": "a list", "tuple_type": "a tuple", "dict_type": "a mapping", "model_type": "a mapping", "model_attributes_type": "a mapping",
+        "bool_type": "a boolean",
+        "bool_parsing": "a boolean",
+        "int_type": "an integer",
+        "int_parsing": "an integer",
+        "int_from_float": "an integer",
+        "float_type": "a number",
+        "float_parsing": "a number",
+        "string_type": "text",
+        "list_type": "a list",
+        "tuple_type": "a tuple",
+        "dict_type": "a mapping",
+        "model_type": "a mapping",
+        "model_attributes_type": "a mapping",
     }.get(kind, kind.replace("_", " "))
 
 
@@ -320,7 +370,11 @@ def _fields_at(path: tuple, data: Any) -> list[str]:
                 annotation = args[0]
             else:
                 return []
-        node = node.get(part) if isinstance(node, dict) else (node[part] if isinstance(node, list) and isinstance(part, int) and part < len(node) else None)
+        node = (
+            node.get(part)
+            if isinstance(node, dict)
+            else (node[part] if isinstance(node, list) and isinstance(part, int) and part < len(node) else None)
+        )
     annotation = _unwrap(annotation, node)
     if isinstance(annotation, type) and issubclass(annotation, BaseModel):
         return list(annotation.model_fields)
@@ -335,7 +389,11 @@ def _unwrap(annotation: Any, node: Any) -> Any:
             annotation = typing.get_args(annotation)[0]
             continue
         if origin in (typing.Union, types.UnionType):
-            models = [a for a in (_strip(x) for x in typing.get_args(annotation)) if isinstance(a, type) and issubclass(a, BaseModel)]
+            models = [
+                a
+                for a in (_strip(x) for x in typing.get_args(annotation))
+                if isinstance(a, type) and issubclass(a, BaseModel)
+            ]
             containers = [a for a in typing.get_args(annotation) if typing.get_origin(_strip(a)) in (dict, list)]
             if isinstance(node, dict) and len(models) > 1:
                 for model in models:

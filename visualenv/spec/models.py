@@ -77,8 +77,13 @@ class Actions(StrictModel):
 
 
 class Dynamics(StrictModel):
-    let: dict[Name, Expr] = Field(default_factory=dict, description="derived quantities, computed in order from the old state")
-    update: dict[Name, Expr] = Field(default_factory=dict, description="new state values (and, with physics, mocap poses mocap_<body>_...); all right-hand sides read the old state")
+    let: dict[Name, Expr] = Field(
+        default_factory=dict, description="derived quantities, computed in order from the old state"
+    )
+    update: dict[Name, Expr] = Field(
+        default_factory=dict,
+        description="new state values (and, with physics, mocap poses mocap_<body>_...); all right-hand sides read the old state",
+    )
     python: str | None = Field(
         None,
         pattern=r"^[A-Za-z_][\w.]*:[A-Za-z_]\w*$",
@@ -101,18 +106,31 @@ class Outcome(StrictModel):
 class Redraw(StrictModel):
     """Values drawn again until a condition holds (dm_control's rejection loops: joints redrawn until nothing touches)."""
 
-    values: Annotated[dict[str, Expr], Field(min_length=1)] = Field(description=(
-        "each try's values, as physics.reset.values (written, then the model forwarded); every try starts from the state "
-        "physics.reset.values left"))
-    until: Expr = Field(description="a condition read after each try's forward, e.g. 'ncon == 0' (nothing touches): the first try that meets it is kept")
-    attempts: int = Field(1000, ge=1, le=1_000_000, description="tries at most; none meeting 'until' is a located fault at reset")
+    values: Annotated[dict[str, Expr], Field(min_length=1)] = Field(
+        description=(
+            "each try's values, as physics.reset.values (written, then the model forwarded); every try starts from the state "
+            "physics.reset.values left"
+        )
+    )
+    until: Expr = Field(
+        description="a condition read after each try's forward, e.g. 'ncon == 0' (nothing touches): the first try that meets it is kept"
+    )
+    attempts: int = Field(
+        1000, ge=1, le=1_000_000, description="tries at most; none meeting 'until' is a located fault at reset"
+    )
 
 
 class Settle(StrictModel):
     """Physics steps taken at reset, after the values are written (dm_control's cheetah settles 200 steps), with the controls the reset left (zero, or a keyframe's)."""
 
-    steps: int = Field(ge=1, le=1_000_000, description="physics steps (the convention's step, in one call), before the episode's first")
-    time: float | None = Field(None, allow_inf_nan=False, description="the simulation time set after them (dm_control: 0); default: as they leave it")
+    steps: int = Field(
+        ge=1, le=1_000_000, description="physics steps (the convention's step, in one call), before the episode's first"
+    )
+    time: float | None = Field(
+        None,
+        allow_inf_nan=False,
+        description="the simulation time set after them (dm_control: 0); default: as they leave it",
+    )
 
 
 class PhysicsReset(StrictModel):
@@ -120,11 +138,15 @@ class PhysicsReset(StrictModel):
     optionally values drawn again until a condition holds (redraw) and settling steps (settle): docs/physics.md#reset."""
 
     keyframe: str | None = Field(None, description="start from this named keyframe of the model instead of its qpos0")
-    values: dict[str, Expr] = Field(default_factory=dict, description=(
-        "evaluated in order after the reset: a key 'qpos_<joint>', 'qvel_<joint>', 'mocap_<body>_x' (_y, _z, _qw...) or a writable "
-        "model field ('model_geom_pos_<geom>_x', 'model_dof_damping_<joint>') sets that value, 'qpos_a, qpos_b' sets "
-        "several from a vector, any other name is a temporary later entries can read; an entry reads the model's reset values "
-        "by the same names (e.g. qpos_hinge: qpos_hinge + uniform(-0.01, 0.01)); draws happen in this order"))
+    values: dict[str, Expr] = Field(
+        default_factory=dict,
+        description=(
+            "evaluated in order after the reset: a key 'qpos_<joint>', 'qvel_<joint>', 'mocap_<body>_x' (_y, _z, _qw...) or a writable "
+            "model field ('model_geom_pos_<geom>_x', 'model_dof_damping_<joint>') sets that value, 'qpos_a, qpos_b' sets "
+            "several from a vector, any other name is a temporary later entries can read; an entry reads the model's reset values "
+            "by the same names (e.g. qpos_hinge: qpos_hinge + uniform(-0.01, 0.01)); draws happen in this order"
+        ),
+    )
     redraw: Redraw | None = Field(None, description="values drawn again, after 'values', until a condition holds")
     settle: Settle | None = Field(None, description="physics steps taken last, e.g. {steps: 200, time: 0}")
 
@@ -133,33 +155,60 @@ class Physics(StrictModel):
     """MuJoCo physics: the MJCF model the env steps between the action and the reward (docs/physics.md)."""
 
     engine: Literal["mujoco"] = Field("mujoco", description="the physics engine")
-    model: str = Field(description="the MJCF file, relative to the spec, or package:<package>/<path> for a file an installed package ships (found on disk; the package is not imported)")
-    frame_skip: int = Field(1, ge=1, le=100_000, description="physics steps per env step; dt in expressions is timestep * frame_skip")
-    convention: Literal["gymnasium", "dm_control"] = Field("gymnasium", description=(
-        "whose MuJoCo calls the env makes: Gymnasium's MujocoEnv (mj_step, then mj_rnePostConstraint; draws from np_random) or "
-        "dm_control's Physics (its legacy step ending in mj_step1, forwards with actuation disabled at reset; draws from "
-        "RandomState(seed), continued across episodes), so the library's env is reproduced to the bit (docs/dmc.md)"))
+    model: str = Field(
+        description="the MJCF file, relative to the spec, or package:<package>/<path> for a file an installed package ships (found on disk; the package is not imported)"
+    )
+    frame_skip: int = Field(
+        1, ge=1, le=100_000, description="physics steps per env step; dt in expressions is timestep * frame_skip"
+    )
+    convention: Literal["gymnasium", "dm_control"] = Field(
+        "gymnasium",
+        description=(
+            "whose MuJoCo calls the env makes: Gymnasium's MujocoEnv (mj_step, then mj_rnePostConstraint; draws from np_random) or "
+            "dm_control's Physics (its legacy step ending in mj_step1, forwards with actuation disabled at reset; draws from "
+            "RandomState(seed), continued across episodes), so the library's env is reproduced to the bit (docs/dmc.md)"
+        ),
+    )
     reset: PhysicsReset = Field(default_factory=PhysicsReset)
     contacts: dict[Name, Annotated[list[str], Field(min_length=2, max_length=2)]] = Field(
-        default_factory=dict, description="name: [geom, geom]: a condition, true while the two geoms touch")
+        default_factory=dict, description="name: [geom, geom]: a condition, true while the two geoms touch"
+    )
     observe: Annotated[list[Expr], Field(min_length=1)] | None = Field(
-        None, description="the state-only observation (float64), one number per entry; default: every qpos, then every qvel, then the observed state")
-    draw_sites: bool = Field(True, description="draw the model's sites as MuJoCo's viewer does (groups 0 to 2, their rgba and size); false: not drawn")
-    look: Literal["mujoco", "physical"] = Field("mujoco", description=(
-        "how the model is lit and coloured: 'mujoco' as MuJoCo's renderer draws it (its headlight and lights, their ambient and "
-        "diffuse terms, shadows, colours written without a display transform), evenly lit at 1 sample; 'physical': Blender's "
-        "path-traced light (the model's lights, or a sun standing in for the headlight, the world's light, sRGB colours)"))
+        None,
+        description="the state-only observation (float64), one number per entry; default: every qpos, then every qvel, then the observed state",
+    )
+    draw_sites: bool = Field(
+        True,
+        description="draw the model's sites as MuJoCo's viewer does (groups 0 to 2, their rgba and size); false: not drawn",
+    )
+    look: Literal["mujoco", "physical"] = Field(
+        "mujoco",
+        description=(
+            "how the model is lit and coloured: 'mujoco' as MuJoCo's renderer draws it (its headlight and lights, their ambient and "
+            "diffuse terms, shadows, colours written without a display transform), evenly lit at 1 sample; 'physical': Blender's "
+            "path-traced light (the model's lights, or a sun standing in for the headlight, the world's light, sRGB colours)"
+        ),
+    )
 
 
 # -- actors, observation, rendering --------------------------------------------------------------
 
 
 #: the type of a binding's value in the file, by the value kind of :mod:`bindables`
-_BINDING_TYPES: dict[str, Any] = {"vector": Vec3Expr, "scale": Union[Vec3Expr, Expr], "color": ColorExpr, "number": Expr, "condition": Expr}
+_BINDING_TYPES: dict[str, Any] = {
+    "vector": Vec3Expr,
+    "scale": Union[Vec3Expr, Expr],
+    "color": ColorExpr,
+    "number": Expr,
+    "condition": Expr,
+}
 
 #: Properties of a scene object recomputed from state before every render: one optional field per entry of ``BINDABLES``.
 Actor = create_model(
-    "Actor", __base__=StrictModel, __module__=__name__, __doc__="Properties of a scene object recomputed from state before every render.",
+    "Actor",
+    __base__=StrictModel,
+    __module__=__name__,
+    __doc__="Properties of a scene object recomputed from state before every render.",
     **{b.name: (Optional[_BINDING_TYPES[b.value]], Field(None, description=b.description)) for b in BINDABLES.values()},  # type: ignore[call-overload]
 )
 
@@ -170,7 +219,9 @@ Actor = create_model(
 class Spec(StrictModel):
     """A visualenv environment: scene, state, dynamics, actions, rewards and observation."""
 
-    model_config = ConfigDict(extra="forbid", frozen=True, strict=True, json_schema_extra={"$id": "https://visualenv.dev/schema/spec.json"})
+    model_config = ConfigDict(
+        extra="forbid", frozen=True, strict=True, json_schema_extra={"$id": "https://visualenv.dev/schema/spec.json"}
+    )
 
     id: str = Field(pattern=r"^[A-Za-z][A-Za-z0-9_.-]*-v\d+$", description="environment id, e.g. VisualCartPole-v0")
     description: str = ""
@@ -180,35 +231,60 @@ class Spec(StrictModel):
     )
     physics: Physics | None = Field(None, description="MuJoCo physics stepped between the action and the reward")
     # both default to None only to tell "not given" apart: _state_given and _actions_given turn it into {} or an error
-    state: dict[Name, StateVar] = Field(None, validate_default=True, description="state variables, in observation order (at least one without physics)")  # type: ignore[assignment]
-    actions: Actions | None = Field(None, validate_default=True, description="required without physics; with it, default: one Box dimension per actuator (its ctrlrange)")
+    state: dict[Name, StateVar] = Field(
+        None, validate_default=True, description="state variables, in observation order (at least one without physics)"
+    )
+    actions: Actions | None = Field(
+        None,
+        validate_default=True,
+        description="required without physics; with it, default: one Box dimension per actuator (its ctrlrange)",
+    )
     dynamics: Dynamics = Field(default_factory=Dynamics)
-    actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")  # type: ignore[valid-type]  # Actor is made from BINDABLES
+    actors: dict[BlenderName, Actor] = Field(
+        default_factory=dict, description="scene objects bound to expressions"
+    )  # Actor is made from BINDABLES
     observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
     render: RenderSettings = Field(default_factory=RenderSettings)
     reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")
-    outcomes: dict[Name, Outcome] = Field(default_factory=dict, description="named rules checked in order; the first ending one ends the episode")
+    outcomes: dict[Name, Outcome] = Field(
+        default_factory=dict, description="named rules checked in order; the first ending one ends the episode"
+    )
     max_steps: int = Field(1000, ge=1, le=100_000_000, description="episodes are truncated after this many steps")
-    action_repeat: int = Field(1, ge=1, le=10_000, description=(
-        "steps the spec makes per env.step() with the same action (dm_control's action repeat): their rewards summed, one "
-        "observation; max_steps, steps and dt count the spec's own steps; make(action_repeat=k) overrides it"))
-    distractions: Optional[Distractions] = Field(None, description=(
-        "changes of the observation's camera and colours per episode, the state and rewards untouched; make(distractions=...) overrides it"))
+    action_repeat: int = Field(
+        1,
+        ge=1,
+        le=10_000,
+        description=(
+            "steps the spec makes per env.step() with the same action (dm_control's action repeat): their rewards summed, one "
+            "observation; max_steps, steps and dt count the spec's own steps; make(action_repeat=k) overrides it"
+        ),
+    )
+    distractions: Optional[Distractions] = Field(
+        None,
+        description=(
+            "changes of the observation's camera and colours per episode, the state and rewards untouched; make(distractions=...) overrides it"
+        ),
+    )
     dt: float = Field(1.0, gt=0, description="seconds per step, available as 'dt' in expressions")
     on_fault: Literal["raise", "terminate"] = Field(
-        "raise", description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']"
+        "raise",
+        description="a NaN/inf state or math error in a step: raise StepError, or end the episode with info['error']",
     )
 
     @field_validator("state", mode="before")
     @classmethod
     def _state_given(cls, value: Any, info: ValidationInfo) -> Any:
         """State is required and not empty, except beside physics (whose state is the model's)."""
-        if info.data.get("physics") is not None or "physics" not in info.data:  # physics given (or given and invalid: reported there)
+        if (
+            info.data.get("physics") is not None or "physics" not in info.data
+        ):  # physics given (or given and invalid: reported there)
             return {} if value is None else value
         if value is None:
             raise PydanticCustomError("missing", "Field required")
         if isinstance(value, dict) and not value:
-            raise PydanticCustomError("too_short", "at least 1 entry", {"field_type": "Dictionary", "min_length": 1, "actual_length": 0})
+            raise PydanticCustomError(
+                "too_short", "at least 1 entry", {"field_type": "Dictionary", "min_length": 1, "actual_length": 0}
+            )
         return value
 
     @field_validator("actions", mode="before")
@@ -224,8 +300,10 @@ class Spec(StrictModel):
         uses: list[tuple[tuple, str]] = []
         if self.observation is not None:
             single = self.observation.cameras is None
-            uses += [(("observation", "camera") if single else ("observation", "cameras", key, "camera"), view.camera)
-                     for key, view in self.observation.views().items()]
+            uses += [
+                (("observation", "camera") if single else ("observation", "cameras", key, "camera"), view.camera)
+                for key, view in self.observation.views().items()
+            ]
         if self.render.view.camera:
             uses.append((("render", "view", "camera"), self.render.view.camera))
         return uses

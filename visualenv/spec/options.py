@@ -32,27 +32,41 @@ class MakeOptions(StrictModel):
 
     render: Optional[bool] = Field(None, description="False: the state-only env (no Blender)")
     render_mode: Optional[Literal["rgb_array", "human"]] = None
-    params: Optional[dict[Name, Union[bool, int, float, str]]] = Field(None, description="overrides of the spec's params")
+    params: Optional[dict[Name, Union[bool, int, float, str]]] = Field(
+        None, description="overrides of the spec's params"
+    )
     frame_stack: Optional[Annotated[int, Field(ge=1, le=64)]] = Field(None, description="stack this many frames")
     grayscale: bool = False
     resize: Optional[tuple[_Pixels, _Pixels]] = Field(None, description="(width, height) of the observation")
     max_episode_steps: Optional[Annotated[int, Field(ge=1, le=100_000_000)]] = Field(
-        None, description="Gymnasium's name: episodes are truncated after this many steps, in place of the spec's max_steps")
+        None,
+        description="Gymnasium's name: episodes are truncated after this many steps, in place of the spec's max_steps",
+    )
     action_repeat: Optional[Annotated[int, Field(ge=1, le=10_000)]] = Field(
-        None, description="the spec's steps per step() with the same action, rewards summed (in place of the spec's action_repeat)")
-    distractions: Optional[Union[Annotated[float, Field(ge=0.0, le=1.0)], Literal["easy", "medium", "hard"], Distractions]] = Field(
-        None, description="a difficulty (every kind, fixed per episode), one of the Distracting Control Suite's levels by name "
-        "(easy 0.1, medium 0.2, hard 0.3) or the spec's distractions section as a dict; 0 turns the spec's off")
+        None,
+        description="the spec's steps per step() with the same action, rewards summed (in place of the spec's action_repeat)",
+    )
+    distractions: Optional[
+        Union[Annotated[float, Field(ge=0.0, le=1.0)], Literal["easy", "medium", "hard"], Distractions]
+    ] = Field(
+        None,
+        description="a difficulty (every kind, fixed per episode), one of the Distracting Control Suite's levels by name "
+        "(easy 0.1, medium 0.2, hard 0.3) or the spec's distractions section as a dict; 0 turns the spec's off",
+    )
 
     @field_validator("distractions", mode="before")
     @classmethod
     def _a_level_by_name(cls, value: Any) -> Any:
         if isinstance(value, str) and value not in DISTRACTION_LEVELS:
-            raise ValueError(f"expected a difficulty from 0 to 1, a level by name ({', '.join(DISTRACTION_LEVELS)}) or a mapping, got {value!r}")
+            raise ValueError(
+                f"expected a difficulty from 0 to 1, a level by name ({', '.join(DISTRACTION_LEVELS)}) or a mapping, got {value!r}"
+            )
         return value
 
 
-def distraction_settings(given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None) -> Distractions | None:
+def distraction_settings(
+    given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None
+) -> Distractions | None:
     """The distractions an env draws: the option's (a difficulty, a level's name, or a section as a dict), else the spec's;
     None for none."""
     if isinstance(given, str):
@@ -65,7 +79,11 @@ def distraction_settings(given: float | str | Mapping[str, Any] | Distractions |
         chosen = Distractions.model_validate(dict(given))
     else:
         chosen = Distractions(difficulty=float(given))
-    return chosen if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors or chosen.background) else None
+    return (
+        chosen
+        if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors or chosen.background)
+        else None
+    )
 
 
 class _DistractionsSection(StrictModel):
@@ -84,13 +102,19 @@ def check_make_options(**options: Any) -> None:
         options["resize"] = tuple(options["resize"])
     problems = []
     render = tuple(RenderSettings.model_fields)
-    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [(RenderSettings, render),
-                                                               (MakeOptions, tuple(MakeOptions.model_fields))]
-    if isinstance(options.get("distractions"), Mapping):  # checked as the spec's section alone, not as either branch of the option
+    checks: list[tuple[type[StrictModel], tuple[str, ...]]] = [
+        (RenderSettings, render),
+        (MakeOptions, tuple(MakeOptions.model_fields)),
+    ]
+    if isinstance(
+        options.get("distractions"), Mapping
+    ):  # checked as the spec's section alone, not as either branch of the option
         options["distractions"] = dict(options["distractions"])
-        checks = [(RenderSettings, render),
-                  (MakeOptions, tuple(k for k in MakeOptions.model_fields if k != "distractions")),
-                  (_DistractionsSection, ("distractions",))]
+        checks = [
+            (RenderSettings, render),
+            (MakeOptions, tuple(k for k in MakeOptions.model_fields if k != "distractions")),
+            (_DistractionsSection, ("distractions",)),
+        ]
     for model, names in checks:
         given = {k: options[k] for k in names if options.get(k) is not None}
         try:

@@ -15,9 +15,13 @@ class Texture(StrictModel):
     type: Literal["noise", "voronoi", "checker", "wave", "image"] = Field(description="texture kind")
     scale: float = Field(5.0, gt=0, description="texture coordinate scale (procedural kinds)")
     detail: float = Field(2.0, ge=0, le=15, description="noise detail")
-    colors: Annotated[list[Color], Field(min_length=2, max_length=2)] | None = Field(None, description="two colours the texture value blends between (procedural kinds)")
+    colors: Annotated[list[Color], Field(min_length=2, max_length=2)] | None = Field(
+        None, description="two colours the texture value blends between (procedural kinds)"
+    )
     image: Union[str, Annotated[list[str], Field(min_length=1)], None] = Field(
-        None, description="image file, relative to the spec (type: image); or a list of files, a texture set an actor's 'texture' picks from")
+        None,
+        description="image file, relative to the spec (type: image); or a list of files, a texture set an actor's 'texture' picks from",
+    )
 
     @model_validator(mode="after")
     def _image_needs_file(self) -> "Texture":
@@ -56,7 +60,9 @@ class Craters(StrictModel):
     """
 
     count: int = Field(40, ge=1, le=2000, description="number of craters")
-    radius: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=2, max_length=2)] = Field([0.5, 5.0], description="[smallest, largest] crater radius (m)")
+    radius: Annotated[list[Annotated[float, Field(gt=0)]], Field(min_length=2, max_length=2)] = Field(
+        [0.5, 5.0], description="[smallest, largest] crater radius (m)"
+    )
     depth: float = Field(0.2, ge=0, le=1, description="bowl depth as a fraction of the diameter")
     rim: float = Field(0.04, ge=0, le=1, description="rim height as a fraction of the diameter")
     seed: int = Field(0, ge=0, description="seed of the crater places and sizes")
@@ -73,15 +79,24 @@ class PrimitiveObject(ObjectBase):
     """A mesh primitive built by the compiler."""
 
     primitive: Literal["cube", "plane", "sphere", "cylinder", "cone", "torus", "disk", "ring", "terrain"]
-    size: Union[Annotated[float, Field(gt=0)], Vec3] = Field(1.0, description="cube/plane/terrain edge length, or [x, y, z] dimensions")
+    size: Union[Annotated[float, Field(gt=0)], Vec3] = Field(
+        1.0, description="cube/plane/terrain edge length, or [x, y, z] dimensions"
+    )
     radius: float = Field(0.5, gt=0, description="sphere/cylinder/cone/disk/torus radius")
     depth: float = Field(1.0, gt=0, description="cylinder/cone height")
     thickness: float = Field(0.05, gt=0, description="ring/torus tube thickness")
-    segments: int = Field(32, ge=3, le=512, description="round primitives: segments around; terrain: grid cells along each side")
+    segments: int = Field(
+        32, ge=3, le=512, description="round primitives: segments around; terrain: grid cells along each side"
+    )
     craters: Craters | None = Field(None, description="terrain: craters pressed into the ground")
-    label: Name | None = Field(None, description="segmentation: objects that share a label share an id (default: the object's own name)")
-    heightmap: str | None = Field(None, description="terrain: elevation data, relative to the spec: a grayscale PNG (8 or 16 bit), TIFF or .npy; "
-                                  "size [x, y, z] spans it, the lowest value at 0 and the highest at z")
+    label: Name | None = Field(
+        None, description="segmentation: objects that share a label share an id (default: the object's own name)"
+    )
+    heightmap: str | None = Field(
+        None,
+        description="terrain: elevation data, relative to the spec: a grayscale PNG (8 or 16 bit), TIFF or .npy; "
+        "size [x, y, z] spans it, the lowest value at 0 and the highest at z",
+    )
     origin: Literal["center", "bottom"] = Field("center", description="where the object's origin sits")
     smooth: bool = False
     material: Material | None = None
@@ -89,7 +104,9 @@ class PrimitiveObject(ObjectBase):
     @model_validator(mode="after")
     def _heightmap_needs_a_height(self) -> "PrimitiveObject":
         if self.heightmap is not None and self.primitive == "terrain" and not isinstance(self.size, list):
-            raise ValueError("a terrain with a heightmap needs size: [x, y, z] (z: the height of the map's highest value)")
+            raise ValueError(
+                "a terrain with a heightmap needs size: [x, y, z] (z: the height of the map's highest value)"
+            )
         return self
 
 
@@ -98,7 +115,9 @@ class MeshObject(ObjectBase):
 
     mesh: str = Field(description="mesh file, relative to the spec")
     material: Material | None = None
-    label: Name | None = Field(None, description="segmentation: objects that share a label share an id (default: the object's own name)")
+    label: Name | None = Field(
+        None, description="segmentation: objects that share a label share an id (default: the object's own name)"
+    )
 
 
 class LightObject(ObjectBase):
@@ -163,11 +182,19 @@ class World(StrictModel):
     Bind ``strength``, ``rotation`` or ``color`` (a tint of the image) through an actor named ``World``.
     """
 
-    color: Color | None = Field(None, description="background colour (default dark grey); with an image, a tint that multiplies it (default white)")
+    color: Color | None = Field(
+        None,
+        description="background colour (default dark grey); with an image, a tint that multiplies it (default white)",
+    )
     strength: float = Field(1.0, ge=0)
-    image: str | None = Field(None, description="an environment map (equirectangular: .hdr, .exr, .png, .jpg, any image Blender reads), "
-                              "relative to the spec: it lights the scene and shows behind it")
-    rotation: Union[float, Vec3] = Field(0.0, description="turns the image: radians about the vertical axis, or Euler XYZ [x, y, z]")
+    image: str | None = Field(
+        None,
+        description="an environment map (equirectangular: .hdr, .exr, .png, .jpg, any image Blender reads), "
+        "relative to the spec: it lights the scene and shows behind it",
+    )
+    rotation: Union[float, Vec3] = Field(
+        0.0, description="turns the image: radians about the vertical axis, or Euler XYZ [x, y, z]"
+    )
 
     def tint(self) -> list[float]:
         """The colour as given, else dark grey (a plain background) or white (an image shown as it is)."""
@@ -179,9 +206,15 @@ class World(StrictModel):
 class Scene(StrictModel):
     """The Blender scene: a .blend file, declared objects, or both."""
 
-    file: str | None = Field(None, description="a .blend file made in Blender, relative to the spec; its objects are bound by name")
-    file_scene: BlenderName | None = Field(None, description="which scene of the .blend to use; needed when the file has more than one")
-    objects: dict[BlenderName, SceneObject] = Field(default_factory=dict, description="objects to build (added to the file's scene, if any)")
+    file: str | None = Field(
+        None, description="a .blend file made in Blender, relative to the spec; its objects are bound by name"
+    )
+    file_scene: BlenderName | None = Field(
+        None, description="which scene of the .blend to use; needed when the file has more than one"
+    )
+    objects: dict[BlenderName, SceneObject] = Field(
+        default_factory=dict, description="objects to build (added to the file's scene, if any)"
+    )
     world: World | None = Field(None, description="background; default: the file's world, or dark grey")
 
     @model_validator(mode="after")

@@ -21,7 +21,14 @@ import yaml
 from visualenv.errors import Diagnostic, SpecError
 from visualenv.source_map import Position, SourceMap, SpecPath, format_path
 from visualenv.spec.text_places import toml_places, yaml_places
-from visualenv.spec.yaml_pitfalls import EXPONENT_NUMBER, YAML11_BOOLEANS, boolean_word, explain_syntax_error, opens_and_closes
+from visualenv.spec.yaml_pitfalls import (
+    EXPONENT_NUMBER,
+    YAML11_BOOLEANS,
+    boolean_word,
+    explain_syntax_error,
+    opens_and_closes,
+)
+
 
 def load_document(path: str | Path) -> tuple[Any, SourceMap]:
     """Load a spec file (by extension: .yaml/.yml or .toml) with its source map."""
@@ -38,13 +45,21 @@ def load_document(path: str | Path) -> tuple[Any, SourceMap]:
     except UnicodeDecodeError as exc:
         before = raw[: exc.start]
         line, column = before.count(b"\n") + 1, exc.start - (before.rfind(b"\n") + 1) + 1
-        raise SpecError([Diagnostic(name, line, column, "", f"the file is not UTF-8 text: {exc.reason} (byte 0x{raw[exc.start]:02x})")]) from None
+        raise SpecError(
+            [
+                Diagnostic(
+                    name, line, column, "", f"the file is not UTF-8 text: {exc.reason} (byte 0x{raw[exc.start]:02x})"
+                )
+            ]
+        ) from None
     suffix = p.suffix.lower()
     if suffix == ".toml":
         return load_toml_text(text, name)
     if suffix in (".yaml", ".yml", ".json"):
         return load_yaml_text(text, name)
-    raise SpecError([Diagnostic(name, None, None, "", f"unknown spec file type '{suffix}': expected .yaml, .yml or .toml")])
+    raise SpecError(
+        [Diagnostic(name, None, None, "", f"unknown spec file type '{suffix}': expected .yaml, .yml or .toml")]
+    )
 
 
 # -- YAML -------------------------------------------------------------------------------------
@@ -95,7 +110,17 @@ def _check_structure(text: str, name: str) -> bool:
             depth += 1
             if depth > MAX_NESTING:
                 mark = event.start_mark
-                raise SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", f"nested too deeply (more than {MAX_NESTING} levels of mappings and lists)")])
+                raise SpecError(
+                    [
+                        Diagnostic(
+                            name,
+                            mark.line + 1,
+                            mark.column + 1,
+                            "",
+                            f"nested too deeply (more than {MAX_NESTING} levels of mappings and lists)",
+                        )
+                    ]
+                )
             open_anchors.append(event.anchor)
         elif isinstance(event, yaml.CollectionEndEvent):
             depth -= 1
@@ -104,7 +129,17 @@ def _check_structure(text: str, name: str) -> bool:
             aliases = True
             if event.anchor in open_anchors:
                 mark = event.start_mark
-                raise SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor")])
+                raise SpecError(
+                    [
+                        Diagnostic(
+                            name,
+                            mark.line + 1,
+                            mark.column + 1,
+                            "",
+                            f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor",
+                        )
+                    ]
+                )
     return aliases
 
 
@@ -117,7 +152,9 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         before = text[: exc.position]
         line, column = before.count("\n") + 1, exc.position - (before.rfind("\n") + 1) + 1
         char = f"U+{exc.character:04X}" if isinstance(exc.character, int) else repr(exc.character)
-        raise SpecError([Diagnostic(name, line, column, "", f"YAML does not allow the control character {char} in a file")]) from None
+        raise SpecError(
+            [Diagnostic(name, line, column, "", f"YAML does not allow the control character {char} in a file")]
+        ) from None
     except yaml.MarkedYAMLError as exc:
         at_line, at_column, message = explain_syntax_error(exc, text)
         raise SpecError([Diagnostic(name, at_line, at_column, "", message)]) from None
@@ -132,7 +169,9 @@ def load_yaml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
         data = _convert(node, (), smap, problems, [0])
     except _TooLarge as exc:
         why = " (YAML aliases expand to copies of what they name)" if aliases else ""
-        raise SpecError([Diagnostic(name, *_lc(exc.node), "", f"the document is too large: more than {MAX_VALUES} values{why}")]) from None
+        raise SpecError(
+            [Diagnostic(name, *_lc(exc.node), "", f"the document is too large: more than {MAX_VALUES} values{why}")]
+        ) from None
     if problems:
         raise SpecError(problems)
     return data, smap
@@ -151,7 +190,14 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
         raise _TooLarge(node)
     smap.values[path] = _pos(node)
     if node.tag not in _PLAIN_TAGS:  # e.g. !!python/object/apply: never constructed, reported
-        problems.append(Diagnostic(smap.file, *_lc(node), format_path(path), f"YAML tags such as '{node.tag.replace('tag:yaml.org,2002:', '!!')}' are not allowed"))
+        problems.append(
+            Diagnostic(
+                smap.file,
+                *_lc(node),
+                format_path(path),
+                f"YAML tags such as '{node.tag.replace('tag:yaml.org,2002:', '!!')}' are not allowed",
+            )
+        )
         return None
     if isinstance(node, yaml.CollectionNode) and node.flow_style and _split(node):
         smap.split[path] = "{" if isinstance(node, yaml.MappingNode) else "["
@@ -159,15 +205,25 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
         out: dict[Any, Any] = {}
         for key_node, value_node in node.value:
             if not isinstance(key_node, yaml.ScalarNode):
-                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "mapping keys must be plain names"))
+                problems.append(
+                    Diagnostic(smap.file, *_lc(key_node), format_path(path), "mapping keys must be plain names")
+                )
                 continue
             key = _scalar(key_node)
             if (isinstance(key, bool) or key is None) and key_node.style is None:
-                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path),
-                                           f"YAML 1.1 reads the key '{key_node.value}' as {_yaml_word(key)}: quote it ('{key_node.value}':)"))
+                problems.append(
+                    Diagnostic(
+                        smap.file,
+                        *_lc(key_node),
+                        format_path(path),
+                        f"YAML 1.1 reads the key '{key_node.value}' as {_yaml_word(key)}: quote it ('{key_node.value}':)",
+                    )
+                )
                 continue
             if key == "<<":
-                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(path), "YAML merge keys ('<<') are not supported"))
+                problems.append(
+                    Diagnostic(smap.file, *_lc(key_node), format_path(path), "YAML merge keys ('<<') are not supported")
+                )
                 continue
             if isinstance(key, float) and EXPONENT_NUMBER.match(key_node.value):
                 key = key_node.value  # a key is a name: kept as written
@@ -177,7 +233,14 @@ def _convert(node: yaml.Node, path: SpecPath, smap: SourceMap, problems: list[Di
             child = path + (key,)
             if key in out:
                 first = smap.keys[child]
-                problems.append(Diagnostic(smap.file, *_lc(key_node), format_path(child), f"duplicate key '{key}' (first defined on line {first.line})"))
+                problems.append(
+                    Diagnostic(
+                        smap.file,
+                        *_lc(key_node),
+                        format_path(child),
+                        f"duplicate key '{key}' (first defined on line {first.line})",
+                    )
+                )
                 continue
             smap.keys[child] = _pos(key_node)
             out[key] = _convert(value_node, child, smap, problems, count)
@@ -234,8 +297,7 @@ def _construct_scalar_value(node: yaml.ScalarNode) -> Any:
         return node.value
 
 
-_PositionLoader.construct_scalar_value = staticmethod(_construct_scalar_value)  # type: ignore[attr-defined]
-
+_PositionLoader.construct_scalar_value = staticmethod(_construct_scalar_value)
 
 
 # -- the top-level values alone ------------------------------------------------------------------
@@ -300,7 +362,9 @@ def _event_value(event: yaml.ScalarEvent) -> Any:
 def _toml_top_level(text: str, keys: tuple[str, ...]) -> dict[str, Any]:
     try:
         data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as exc:  # what precedes the error's line, which holds the top-level keys if it is below them
+    except (
+        tomllib.TOMLDecodeError
+    ) as exc:  # what precedes the error's line, which holds the top-level keys if it is below them
         m = re.search(r"\(at line (\d+)", str(exc))
         try:
             data = tomllib.loads("\n".join(text.splitlines()[: int(m.group(1)) - 1])) if m else {}
@@ -314,7 +378,9 @@ def _toml_top_level(text: str, keys: tuple[str, ...]) -> dict[str, Any]:
 # -- TOML -------------------------------------------------------------------------------------
 
 _TABLE = re.compile(r"^\s*(\[\[?)\s*([^\]]+?)\s*\]\]?\s*(#.*)?$")
-_KEY = re.compile(r"""(?:^|[{,])\s*((?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*'))*)\s*=\s*""")
+_KEY = re.compile(
+    r"""(?:^|[{,])\s*((?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*')(?:\s*\.\s*(?:[A-Za-z0-9_-]+|"[^"]*"|'[^']*'))*)\s*=\s*"""
+)
 
 
 def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
@@ -329,12 +395,23 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
     try:
         data = tomllib.loads(text)
     except RecursionError:
-        raise SpecError([Diagnostic(name, *_deepest(text), "", f"nested too deeply (more than {MAX_NESTING} levels of tables and arrays)")]) from None
+        raise SpecError(
+            [
+                Diagnostic(
+                    name,
+                    *_deepest(text),
+                    "",
+                    f"nested too deeply (more than {MAX_NESTING} levels of tables and arrays)",
+                )
+            ]
+        ) from None
     except ValueError as exc:
         if isinstance(exc, tomllib.TOMLDecodeError):
             _toml_syntax_error(exc, text, name)
         m = re.search(r"\d{1000,}", text)
-        at_line, at_col = (text.count("\n", 0, m.start()) + 1, m.start() - text.rfind("\n", 0, m.start())) if m else (None, None)
+        at_line, at_col = (
+            (text.count("\n", 0, m.start()) + 1, m.start() - text.rfind("\n", 0, m.start())) if m else (None, None)
+        )
         raise SpecError([Diagnostic(name, at_line, at_col, "", f"cannot read this value: {_short(exc)}")]) from None
     if not data:
         raise SpecError([Diagnostic(name, 1, 1, "", "the file is empty: expected a table with at least 'id'")])
@@ -368,7 +445,7 @@ def load_toml_text(text: str, name: str = "<string>") -> tuple[Any, SourceMap]:
             value_col = km.end() + 1
             smap.keys.setdefault(full, Position(lineno, col))
             is_string = km.end() < len(line) and line[km.end()] in "\"'"
-            single = is_string and not line[km.end():].startswith(('"""', "'''"))
+            single = is_string and not line[km.end() :].startswith(('"""', "'''"))
             smap.values.setdefault(full, Position(lineno, value_col, 1 if single else None))
     for path, pos in smap.values.items():  # multi-line strings: where each character is
         value = _toml_value(data, path) if pos.text_offset is None else None

@@ -60,7 +60,7 @@ def toml_places(text: str, line: int, column: int, value: str) -> Places | None:
     lines = text.splitlines(keepends=True)
     if not 0 < line <= len(lines):
         return None
-    start = sum(len(t) for t in lines[:line - 1]) + column - 1
-    if text[start:start + 3] not in ('"""', "'''"):
+    start = sum(len(t) for t in lines[: line - 1]) + column - 1
+    if text[start : start + 3] not in ('"""', "'''"):
         return None
     return places(value, text, start + 3, line, column + 3)

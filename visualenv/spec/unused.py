@@ -11,10 +11,14 @@ from visualenv.spec.models import CameraObject, LightObject, PrimitiveObject, Sp
 
 #: the shape fields each primitive kind uses (every other shape field is ignored)
 PRIMITIVE_FIELDS = {
-    "cube": {"size"}, "plane": {"size"},
-    "sphere": {"radius", "segments"}, "disk": {"radius", "segments"},
-    "cylinder": {"radius", "depth", "segments"}, "cone": {"radius", "depth", "segments"},
-    "torus": {"radius", "thickness", "segments"}, "ring": {"radius", "thickness", "segments"},
+    "cube": {"size"},
+    "plane": {"size"},
+    "sphere": {"radius", "segments"},
+    "disk": {"radius", "segments"},
+    "cylinder": {"radius", "depth", "segments"},
+    "cone": {"radius", "depth", "segments"},
+    "torus": {"radius", "thickness", "segments"},
+    "ring": {"radius", "thickness", "segments"},
     "terrain": {"size", "segments", "craters", "heightmap"},
 }
 _SHAPE_FIELDS = {"size", "radius", "depth", "thickness", "segments", "craters", "heightmap"}
@@ -30,7 +34,12 @@ def unused_fields(spec: Spec) -> list[tuple[tuple, str]]:
             for field in sorted(obj.model_fields_set & (_SHAPE_FIELDS - used), key=list(type(obj).model_fields).index):
                 out.append((path + (field,), f"'{field}' does nothing on a {obj.primitive} (it uses {_words(used)})"))
         elif isinstance(obj, LightObject) and obj.light != "spot" and "spot_size" in obj.model_fields_set:
-            out.append((path + ("spot_size",), f"'spot_size' does nothing on a {obj.light} light (only spot lights have a cone)"))
+            out.append(
+                (
+                    path + ("spot_size",),
+                    f"'spot_size' does nothing on a {obj.light} light (only spot lights have a cone)",
+                )
+            )
         elif isinstance(obj, CameraObject):
             wrong = "ortho_scale" if obj.camera == "perspective" else "lens"
             if wrong in obj.model_fields_set:

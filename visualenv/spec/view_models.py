@@ -20,10 +20,17 @@ class Sensor(StrictModel):
     """
 
     read_noise: float = Field(0.0, ge=0, le=1, description="std of Gaussian noise, as a fraction of full scale")
-    shot_noise: float = Field(0.0, ge=0, le=1, description="photon noise: std shot_noise * sqrt(v) at intensity v (fraction of full scale)")
+    shot_noise: float = Field(
+        0.0, ge=0, le=1, description="photon noise: std shot_noise * sqrt(v) at intensity v (fraction of full scale)"
+    )
     gain: float = Field(1.0, gt=0, le=100, description="exposure: intensities multiplied by this")
     gamma: float = Field(1.0, gt=0, le=10, description="response curve v ** gamma (below 1 brightens the shadows)")
-    vignetting: float = Field(0.0, ge=0, le=1, description="darkening at the corners: the fraction of light lost there (falls off as r squared)")
+    vignetting: float = Field(
+        0.0,
+        ge=0,
+        le=1,
+        description="darkening at the corners: the fraction of light lost there (falls off as r squared)",
+    )
 
 
 def _sensor_on_light(color: str, sensor: "Sensor | None") -> None:
@@ -42,7 +49,9 @@ class CameraView(StrictModel):
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = Field(
         [0.0, 20.0], description="depth observations: distances mapped to 0..255"
     )
-    sensor: Sensor | None = Field(None, description="camera imperfections (noise, gain, gamma, vignetting) on this camera's frames")
+    sensor: Sensor | None = Field(
+        None, description="camera imperfections (noise, gain, gamma, vignetting) on this camera's frames"
+    )
 
     @model_validator(mode="after")
     def _sensor_needs_light(self) -> "CameraView":
@@ -64,8 +73,12 @@ class Observation(StrictModel):
     resolution: Resolution = Field([100, 100], description="[width, height]")
     color: ColorMode = "grayscale"
     depth_range: Annotated[list[Annotated[float, Field(ge=0)]], Field(min_length=2, max_length=2)] = [0.0, 20.0]
-    sensor: Sensor | None = Field(None, description="camera imperfections (noise, gain, gamma, vignetting) on the single camera's frames")
-    cameras: Annotated[dict[Name, CameraView], Field(min_length=1)] | None = Field(None, description="several cameras: a Dict observation keyed by these names")
+    sensor: Sensor | None = Field(
+        None, description="camera imperfections (noise, gain, gamma, vignetting) on the single camera's frames"
+    )
+    cameras: Annotated[dict[Name, CameraView], Field(min_length=1)] | None = Field(
+        None, description="several cameras: a Dict observation keyed by these names"
+    )
 
     @field_validator("resolution")
     @classmethod
@@ -86,7 +99,15 @@ class Observation(StrictModel):
         if self.cameras is not None:
             return dict(self.cameras)
         assert self.camera is not None
-        return {self.camera: CameraView(camera=self.camera, resolution=self.resolution, color=self.color, depth_range=self.depth_range, sensor=self.sensor)}
+        return {
+            self.camera: CameraView(
+                camera=self.camera,
+                resolution=self.resolution,
+                color=self.color,
+                depth_range=self.depth_range,
+                sensor=self.sensor,
+            )
+        }
 
 
 class ViewSettings(StrictModel):
@@ -106,14 +127,20 @@ class RenderSettings(StrictModel):
     """The spec's ``render`` section: engine, quality preset, device and threads of every render, and the human view."""
 
     engine: Literal["cycles", "workbench", "eevee"] = "cycles"
-    preset: Literal["fast", "quality"] = Field("fast", description="fast: 1 sample, no bounces (training); quality: previews")
+    preset: Literal["fast", "quality"] = Field(
+        "fast", description="fast: 1 sample, no bounces (training); quality: previews"
+    )
     samples: int | None = Field(None, ge=1, le=4096, description="overrides the preset's samples")
     bounces: int | None = Field(None, ge=0, le=128, description="overrides the preset's light bounces")
-    device: Literal["cpu", "gpu", "auto"] = Field("cpu", description="Cycles device; gpu falls back to cpu with a message")
+    device: Literal["cpu", "gpu", "auto"] = Field(
+        "cpu", description="Cycles device; gpu falls back to cpu with a message"
+    )
     threads: int = Field(0, ge=0, le=256, description="render threads, 0: all cores")
     noise: Literal["independent", "shared"] = Field(
-        "independent", description="Cycles' sampling noise: independent per pixel (Cycles' default), or shared by every pixel "
-        "(scrambling distance 0: a pixel's value does not depend on where it lies in the image; batched envs render so)")
+        "independent",
+        description="Cycles' sampling noise: independent per pixel (Cycles' default), or shared by every pixel "
+        "(scrambling distance 0: a pixel's value does not depend on where it lies in the image; batched envs render so)",
+    )
     view: ViewSettings = Field(default_factory=ViewSettings)
 
 
@@ -121,11 +148,22 @@ class Distractions(StrictModel):
     """The ``distractions`` section: what the observation shows changed per episode (or drifting every step), the
     state and rewards untouched; the Distracting Control Suite's kinds at its scale (docs/distractions.md)."""
 
-    difficulty: float = Field(ge=0.0, le=1.0, description=(
-        "the scale of every change: camera orbit and roll up to difficulty x pi/2, zoom up to difficulty/2, colours "
-        "shifted by up to difficulty per channel (the Distracting Control Suite's 0.1, 0.2, 0.3)"))
+    difficulty: float = Field(
+        ge=0.0,
+        le=1.0,
+        description=(
+            "the scale of every change: camera orbit and roll up to difficulty x pi/2, zoom up to difficulty/2, colours "
+            "shifted by up to difficulty per channel (the Distracting Control Suite's 0.1, 0.2, 0.3)"
+        ),
+    )
     camera: bool = Field(True, description="the observation cameras orbit, roll and zoom about the point they look at")
     colors: bool = Field(True, description="every material's colour and the sky's shift")
-    background: bool = Field(True, description=(
-        "a moving pattern of two random colours in place of the sky, seen by the camera only (standing in for the suite's videos)"))
-    dynamic: bool = Field(False, description="false: drawn at reset and kept for the episode; true: drifting every step as well")
+    background: bool = Field(
+        True,
+        description=(
+            "a moving pattern of two random colours in place of the sky, seen by the camera only (standing in for the suite's videos)"
+        ),
+    )
+    dynamic: bool = Field(
+        False, description="false: drawn at reset and kept for the episode; true: drifting every step as well"
+    )

@@ -19,8 +19,10 @@ EXPONENT_NUMBER = re.compile(r"^[-+]?(?:\.[0-9]+|[0-9]+(?:\.[0-9]*)?)[eE][-+]?[0
 YAML11_BOOLEANS = {"yes": True, "no": False, "on": True, "off": False}
 
 TAB_HINT = "YAML indents with spaces only: replace the tab with spaces"
-INDENT_RULE = ("the keys of one mapping, and the '-' items of one list, start in the same column, "
-               "and what belongs to a key is indented further than the key (with spaces)")
+INDENT_RULE = (
+    "the keys of one mapping, and the '-' items of one list, start in the same column, "
+    "and what belongs to a key is indented further than the key (with spaces)"
+)
 
 
 def split_at_comma(text: str) -> bool:
@@ -67,9 +69,13 @@ def explain_syntax_error(exc: yaml.MarkedYAMLError, text: str) -> tuple[int | No
     if "'\\t'" in problem or "tab" in problem:
         hint = TAB_HINT
     elif mark is not None and problem == "expected <block end>, but found '-'":
-        hint = (f"line {mark.line + 1} starts a '-' list item among the keys of a mapping: a list goes under a key of its own "
-                "('key:', then its '- ' items on the lines below)")
-    elif mark is not None and (problem.startswith("expected <block end>") or problem.startswith("did not find expected")):
+        hint = (
+            f"line {mark.line + 1} starts a '-' list item among the keys of a mapping: a list goes under a key of its own "
+            "('key:', then its '- ' items on the lines below)"
+        )
+    elif mark is not None and (
+        problem.startswith("expected <block end>") or problem.startswith("did not find expected")
+    ):
         hint = _indentation(mark.line, lines)
     elif mark is not None and problem == "mapping values are not allowed here":
         hint = _colon_in_value(mark.line, lines)
@@ -80,8 +86,10 @@ def explain_syntax_error(exc: yaml.MarkedYAMLError, text: str) -> tuple[int | No
     elif context is not None and mark is not None and re.match(r"expected ',' or '[}\]]'", problem):
         bracket = "{" if "}" in problem[:20] else "["
         if context.line != mark.line:
-            hint = (f"the '{bracket}' on line {context.line + 1} is not closed on its line (YAML went on to line {mark.line + 1}): "
-                    f"close it, or quote a value in it that holds ': ' or ','")
+            hint = (
+                f"the '{bracket}' on line {context.line + 1} is not closed on its line (YAML went on to line {mark.line + 1}): "
+                f"close it, or quote a value in it that holds ': ' or ','"
+            )
             mark = context
         else:
             hint = f"a value inside {bracket}...{'}' if bracket == '{' else ']'} holds ': ' or ','; quote it, e.g. {{when: \"x > 0\"}}"
@@ -112,8 +120,10 @@ def _indentation(index: int, lines: list[str]) -> str:
     above = _line_above(index, lines)
     if index >= len(lines) or above is None:
         return f"bad indentation: {INDENT_RULE}"
-    return (f"bad indentation: line {index + 1} is indented by {_spaces(_indent(lines[index]))}, line {above + 1} above it by "
-            f"{_spaces(_indent(lines[above]))}; {INDENT_RULE}")
+    return (
+        f"bad indentation: line {index + 1} is indented by {_spaces(_indent(lines[index]))}, line {above + 1} above it by "
+        f"{_spaces(_indent(lines[above]))}; {INDENT_RULE}"
+    )
 
 
 def _colon_in_value(index: int, lines: list[str]) -> str:
@@ -122,6 +132,8 @@ def _colon_in_value(index: int, lines: list[str]) -> str:
     if index < len(lines) and above is not None and _indent(lines[index]) > _indent(lines[above]):
         head, _, value = lines[above].partition(":")
         if value.split("#", 1)[0].strip():
-            return (f"bad indentation: line {index + 1} is indented under line {above + 1}, which already has a value "
-                    f"('{lines[above].strip()}'); indent it like the keys beside it, or give '{head.strip()}' no value on its line")
+            return (
+                f"bad indentation: line {index + 1} is indented under line {above + 1}, which already has a value "
+                f"('{lines[above].strip()}'); indent it like the keys beside it, or give '{head.strip()}' no value on its line"
+            )
     return "a value that holds ': ' must be quoted, e.g. description: \"note: ...\" (or the line is indented under a value)"

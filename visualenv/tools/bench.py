@@ -74,8 +74,10 @@ class Figures:
             f"  raw render floor (median) {self.floor_ms_median:8.2f} ms   (render call alone, same scene and settings)",
             f"    with objects moved      {self.moved_floor_ms_median:8.2f} ms   (the same, the bound objects moved first: Blender's scene update)",
             f"  naive PNG round trip      {self.naive_ms_median:8.2f} ms   (render, write PNG to disk, load it)",
-            (f"  framework overhead        {100 * self.overhead_share:8.1f} %    of a step (step - raw floor; "
-             f"{100 * self.own_overhead_share:.1f} % without Blender's scene update)"),
+            (
+                f"  framework overhead        {100 * self.overhead_share:8.1f} %    of a step (step - raw floor; "
+                f"{100 * self.own_overhead_share:.1f} % without Blender's scene update)"
+            ),
             f"  outside the render call   {self.outside_ms_median:8.2f} ms   ({100 * self.outside_share:.1f} % of a step: actions, dynamics, bindings, readback)",
             f"  speed vs floor / naive    {speed_vs_floor:8.2f}x / {speed_vs_naive:.2f}x",
             f"  resident memory           {self.rss_peak_mb:8.1f} MB peak, {self.rss_final_mb:.1f} MB final",
@@ -83,25 +85,33 @@ class Figures:
         if self.parallel:
             p = self.parallel
             out += [
-                (f"  {p['workers']} parallel envs           {p['steps_per_s']:8.1f} steps/s  ({p['speedup']:.2f}x one env; "
-                 f"{p['threads']} render thread(s) each, {'pinned' if p['pinned'] else 'not pinned'})"),
+                (
+                    f"  {p['workers']} parallel envs           {p['steps_per_s']:8.1f} steps/s  ({p['speedup']:.2f}x one env; "
+                    f"{p['threads']} render thread(s) each, {'pinned' if p['pinned'] else 'not pinned'})"
+                ),
                 f"    step in a worker (median) {p['step_ms_median']:6.2f} ms",
                 f"    render call (median/p99)  {p['render_ms_median']:6.2f} / {p['render_ms_p99']:.2f} ms",
                 f"    outside the render call   {p['outside_ms_median']:6.2f} ms   ({100 * p['outside_share']:.1f} % of a worker's step)",
-                (f"    resident memory           {p['rss_peak_mb']:6.1f} MB peak, {p['rss_final_mb']:.1f} MB final per worker "
-                 f"({p['rss_total_mb']:.0f} MB for all {p['workers']})"),
+                (
+                    f"    resident memory           {p['rss_peak_mb']:6.1f} MB peak, {p['rss_final_mb']:.1f} MB final per worker "
+                    f"({p['rss_total_mb']:.0f} MB for all {p['workers']})"
+                ),
             ]
         if self.scaling:
             one = self.scaling[0]
             out.append(f"  scaling: one worker confined to one core (1 render thread) {one['steps_per_s']:.1f} steps/s")
             out.append("    workers   steps/s   vs n x one confined   cores each   render threads   memory per worker")
             for row in self.scaling[1:]:
-                out.append(f"    {row['workers']:>7} {row['steps_per_s']:9.1f}   {row['vs_confined']:19.2f}   {row['cores_each']:>10}   "
-                           f"{row['threads']:>14}   {row['rss_final_mb']:>10.0f} MB")
+                out.append(
+                    f"    {row['workers']:>7} {row['steps_per_s']:9.1f}   {row['vs_confined']:19.2f}   {row['cores_each']:>10}   "
+                    f"{row['threads']:>14}   {row['rss_final_mb']:>10.0f} MB"
+                )
         if self.soak:
             s = self.soak
-            out.append(f"  soak: {s['steps']} steps, {s['resets']} resets: memory {s['rss_start_mb']:.1f} -> {s['rss_end_mb']:.1f} MB "
-                       f"(growth {s['growth_mb']:+.1f} MB), Blender data blocks {s['blocks_start']} -> {s['blocks_end']}")
+            out.append(
+                f"  soak: {s['steps']} steps, {s['resets']} resets: memory {s['rss_start_mb']:.1f} -> {s['rss_end_mb']:.1f} MB "
+                f"(growth {s['growth_mb']:+.1f} MB), Blender data blocks {s['blocks_start']} -> {s['blocks_end']}"
+            )
         return out
 
 
@@ -121,6 +131,7 @@ def _peak_rss_mb() -> float:
 
 def timed(fn: Callable[..., Any], times: list[float]) -> Callable[..., Any]:
     """`fn`, recording each call's wall time into `times`."""
+
     def wrapper(*args: Any, **kwargs: Any) -> Any:
         start = time.perf_counter()
         try:
@@ -152,7 +163,10 @@ def run_env(env: Any, actions: list[Any], seed: int) -> list[float]:
 def blender_data_blocks() -> int:
     import bpy
 
-    return sum(len(getattr(bpy.data, kind)) for kind in ("objects", "meshes", "materials", "images", "scenes", "node_groups", "cameras", "lights", "worlds"))
+    return sum(
+        len(getattr(bpy.data, kind))
+        for kind in ("objects", "meshes", "materials", "images", "scenes", "node_groups", "cameras", "lights", "worlds")
+    )
 
 
 def device_option(device: str | None) -> dict[str, Any]:
@@ -160,9 +174,22 @@ def device_option(device: str | None) -> dict[str, Any]:
     return {"device": device} if device else {}
 
 
-def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, floor_renders: int = 200, naive_renders: int = 50,
-              workers: int = 0, soak_steps: int = 0, threads: int | None = None, readback: str = "auto", pin: bool = True,
-              scaling: tuple[int, ...] = (), device: str | None = None) -> Figures:
+def bench_one(
+    spec: str,
+    steps: int = 500,
+    *,
+    seed: int = 0,
+    warmup: int = 20,
+    floor_renders: int = 200,
+    naive_renders: int = 50,
+    workers: int = 0,
+    soak_steps: int = 0,
+    threads: int | None = None,
+    readback: str = "auto",
+    pin: bool = True,
+    scaling: tuple[int, ...] = (),
+    device: str | None = None,
+) -> Figures:
     from visualenv.env.make import make
 
     options: dict[str, Any] = {"readback": readback, **device_option(device)}
@@ -185,7 +212,9 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     base.renderer.render(Frames((base.binding_values(),)))
     scene = renderer.scene
     floor = render_call_times(scene.name, floor_renders)
-    figures.moved_floor_ms_median = 1000 * float(np.median(_moved_floor(env, actions[warmup:warmup + floor_renders], seed + 3)))
+    figures.moved_floor_ms_median = 1000 * float(
+        np.median(_moved_floor(env, actions[warmup : warmup + floor_renders], seed + 3))
+    )
     figures.naive_ms_median = 1000 * float(np.median(_naive_png(scene, naive_renders)))
     total = sum(step_times)
     figures.steps_per_s = steps / total
@@ -202,21 +231,33 @@ def bench_one(spec: str, steps: int = 500, *, seed: int = 0, warmup: int = 20, f
     figures.rss_final_mb = _rss_mb()
     env.close()
     if workers > 1:
-        figures.parallel = bench_parallel(spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin, device=device)
+        figures.parallel = bench_parallel(
+            spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin, device=device
+        )
     if scaling:
         figures.scaling = bench_scaling(spec, scaling, steps, seed, readback=readback, pin=pin, device=device)
     return figures
 
 
-def bench_scaling(spec: str, counts: tuple[int, ...], steps: int, seed: int, *, readback: str = "auto", pin: bool = True,
-                  device: str | None = None) -> list[dict[str, Any]]:
+def bench_scaling(
+    spec: str,
+    counts: tuple[int, ...],
+    steps: int,
+    seed: int,
+    *,
+    readback: str = "auto",
+    pin: bool = True,
+    device: str | None = None,
+) -> list[dict[str, Any]]:
     """steps/s of n parallel workers for each n in `counts`, against n times one worker confined to one core.
 
     The first row is that reference: one worker process on one core with one render thread.
     """
     from visualenv.env.cores import usable_cores
 
-    one = bench_parallel(spec, 1, steps, seed, 0.0, readback=readback, shares=[(usable_cores()[0],)], threads=1, device=device)
+    one = bench_parallel(
+        spec, 1, steps, seed, 0.0, readback=readback, shares=[(usable_cores()[0],)], threads=1, device=device
+    )
     rows = [one]
     for n in counts:
         row = bench_parallel(spec, n, steps, seed, 0.0, readback=readback, pin=pin, device=device)
@@ -294,8 +335,15 @@ def soak(env: Any, steps: int, seed: int, report_every: int = 0) -> dict[str, An
             print(f"  soak {i + 1}/{steps}: {_rss_mb():.1f} MB, {blender_data_blocks()} data blocks", flush=True)
     gc.collect()
     rss_end = _rss_mb()
-    return {"steps": steps, "resets": resets, "rss_start_mb": rss_start, "rss_end_mb": rss_end, "growth_mb": rss_end - rss_start,
-            "blocks_start": blocks_start, "blocks_end": blender_data_blocks()}
+    return {
+        "steps": steps,
+        "resets": resets,
+        "rss_start_mb": rss_start,
+        "rss_end_mb": rss_end,
+        "growth_mb": rss_end - rss_start,
+        "blocks_start": blocks_start,
+        "blocks_end": blender_data_blocks(),
+    }
 
 
 class StepTimes(gym.Wrapper):
@@ -335,7 +383,13 @@ class StepTimes(gym.Wrapper):
     def timings(self) -> dict[str, Any]:
         """What was recorded since :meth:`start_timing`, and stop recording (a long soak must not grow lists)."""
         self._stop_timing()
-        return {"step": self._steps, "render": self._renders, "outside": self._outside, "rss_mb": _rss_mb(), "rss_peak_mb": _peak_rss_mb()}
+        return {
+            "step": self._steps,
+            "render": self._renders,
+            "outside": self._outside,
+            "rss_mb": _rss_mb(),
+            "rss_peak_mb": _peak_rss_mb(),
+        }
 
     def _stop_timing(self) -> None:
         if self._timing:
@@ -343,9 +397,19 @@ class StepTimes(gym.Wrapper):
             self._timing = False
 
 
-def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float, *, readback: str = "auto",
-                   pin: bool = True, shares: list[tuple[int, ...] | None] | None = None, threads: int | None = None,
-                   device: str | None = None) -> dict[str, Any]:
+def bench_parallel(
+    spec: str,
+    workers: int,
+    steps: int,
+    seed: int,
+    single: float,
+    *,
+    readback: str = "auto",
+    pin: bool = True,
+    shares: list[tuple[int, ...] | None] | None = None,
+    threads: int | None = None,
+    device: str | None = None,
+) -> dict[str, Any]:
     """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each).
 
     Each worker gets its own cores as make_vec gives them (`pin`), or the `shares` given.
@@ -355,8 +419,16 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
 
     shares = shares or worker_cores(workers, pin)
     options: dict[str, Any] = {"readback": readback, **device_option(device)}
-    vec: Any = WorkerVectorEnv([env_factory(str(spec), cores=share, wrapper_class=StepTimes, **with_render_threads(options, share, workers, threads))
-                                for share in shares], context="spawn", shared_memory=True)
+    vec: Any = WorkerVectorEnv(
+        [
+            env_factory(
+                str(spec), cores=share, wrapper_class=StepTimes, **with_render_threads(options, share, workers, threads)
+            )
+            for share in shares
+        ],
+        context="spawn",
+        shared_memory=True,
+    )
     pinned = any(share is not None for share in shares)
     threads = render_threads(shares[0], workers, threads)
     try:
@@ -379,12 +451,21 @@ def bench_parallel(spec: str, workers: int, steps: int, seed: int, single: float
     outside = [t for w in measured for t in w["outside"]]
     step_median = float(np.median(step_times))
     return {
-        "workers": workers, "threads": threads, "pinned": pinned, "cores_each": len(shares[0]) if shares[0] else "all", "steps_per_s": rate, "speedup": rate / single if single else 0.0,
+        "workers": workers,
+        "threads": threads,
+        "pinned": pinned,
+        "cores_each": len(shares[0]) if shares[0] else "all",
+        "steps_per_s": rate,
+        "speedup": rate / single if single else 0.0,
         "step_ms_median": 1000 * step_median,
-        "render_ms_median": 1000 * float(np.median(render_times)), "render_ms_p99": 1000 * float(np.percentile(render_times, 99)),
-        "outside_ms_median": 1000 * float(np.median(outside)), "outside_share": float(np.median(outside)) / step_median,
-        "rss_peak_mb": max(w["rss_peak_mb"] for w in measured), "rss_final_mb": max(w["rss_mb"] for w in measured),
-        "rss_total_mb": sum(w["rss_mb"] for w in measured), "rss_each_mb": [w["rss_mb"] for w in measured],
+        "render_ms_median": 1000 * float(np.median(render_times)),
+        "render_ms_p99": 1000 * float(np.percentile(render_times, 99)),
+        "outside_ms_median": 1000 * float(np.median(outside)),
+        "outside_share": float(np.median(outside)) / step_median,
+        "rss_peak_mb": max(w["rss_peak_mb"] for w in measured),
+        "rss_final_mb": max(w["rss_mb"] for w in measured),
+        "rss_total_mb": sum(w["rss_mb"] for w in measured),
+        "rss_each_mb": [w["rss_mb"] for w in measured],
     }
 
 

@@ -29,8 +29,15 @@ def _median_ms(times: list[float]) -> float:
     return 1000 * float(np.median(times)) if times else 0.0
 
 
-def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str = "next_step", instanced: bool = True,
-                  device: str | None = None) -> dict[str, Any]:
+def measure_batch(
+    spec: str,
+    n: int,
+    steps: int,
+    seed: int = 0,
+    autoreset: str = "next_step",
+    instanced: bool = True,
+    device: str | None = None,
+) -> dict[str, Any]:
     """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory).
 
     ``instanced=False`` copies every object, as batches did before instanced copies (for before/after figures).
@@ -81,12 +88,23 @@ def measure_batch(spec: str, n: int, steps: int, seed: int = 0, autoreset: str =
     render = _median_ms(times["render"])
     write = 1000 * sum(times["write"]) / steps  # per step: the copies' writes once, the instances' once per camera
     return {
-        "envs": n, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
-        "dynamics_ms": _median_ms(times["dynamics"]), "bind_ms": _median_ms(times["bind"]), "write_ms": write, "render_ms": render,
-        "scene_update_ms": max(0.0, render - _median_ms(still)), "instanced": instanced, "readback_ms": _median_ms(times["readback"]),
+        "envs": n,
+        "steps_per_s": steps * n / elapsed,
+        "step_ms": 1000 * elapsed / steps,
+        "build_s": build_s,
+        "dynamics_ms": _median_ms(times["dynamics"]),
+        "bind_ms": _median_ms(times["bind"]),
+        "write_ms": write,
+        "render_ms": render,
+        "scene_update_ms": max(0.0, render - _median_ms(still)),
+        "instanced": instanced,
+        "readback_ms": _median_ms(times["readback"]),
         "alone_ms": _median_ms(alone[1:]),
-        "calls_per_step": len(times["render"]) / steps, "autoreset": autoreset,
-        "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n, "python_mb": before / 2**20,
+        "calls_per_step": len(times["render"]) / steps,
+        "autoreset": autoreset,
+        "rss_mb": rss / 2**20,
+        "mb_per_env": rss / 2**20 / n,
+        "python_mb": before / 2**20,
     }
 
 
@@ -105,8 +123,9 @@ def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, device: 
         queue.put({"envs": n, "error": f"{type(exc).__name__}: {exc}"})
 
 
-def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, autoreset: str = "next_step",
-                    device: str | None = None) -> dict[str, Any]:
+def measure_workers(
+    spec: str, n: int, workers: int, steps: int, seed: int = 0, autoreset: str = "next_step", device: str | None = None
+) -> dict[str, Any]:
     """`n` envs as `workers` batches in worker processes (MultiBatchVectorEnv): env-steps/s and the workers' memory.
 
     The stages of a step happen in the workers, so only the whole step is timed here.
@@ -131,8 +150,16 @@ def measure_workers(spec: str, n: int, workers: int, steps: int, seed: int = 0, 
         rss = sum(psutil.Process(p.pid).memory_info().rss for p in env.processes)
     finally:
         env.close()
-    return {"envs": n, "workers": workers, "steps_per_s": steps * n / elapsed, "step_ms": 1000 * elapsed / steps, "build_s": build_s,
-            "autoreset": autoreset, "rss_mb": rss / 2**20, "mb_per_env": rss / 2**20 / n}
+    return {
+        "envs": n,
+        "workers": workers,
+        "steps_per_s": steps * n / elapsed,
+        "step_ms": 1000 * elapsed / steps,
+        "build_s": build_s,
+        "autoreset": autoreset,
+        "rss_mb": rss / 2**20,
+        "mb_per_env": rss / 2**20 / n,
+    }
 
 
 def _result_of(child: Any, queue: Any, n: int) -> dict[str, Any]:
@@ -147,8 +174,15 @@ def _result_of(child: Any, queue: Any, n: int) -> dict[str, Any]:
                 return {"envs": n, "error": f"the measuring process died (exit code {child.exitcode})"}
 
 
-def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, autoreset: str = "next_step",
-                  workers: tuple[int | None, ...] = (None,), device: str | None = None) -> list[dict[str, Any]]:
+def bench_batched(
+    spec: str,
+    sizes: tuple[int, ...],
+    steps: int,
+    seed: int = 0,
+    autoreset: str = "next_step",
+    workers: tuple[int | None, ...] = (None,),
+    device: str | None = None,
+) -> list[dict[str, Any]]:
     """Each batch size in its own fresh process (`workers` None), or split among K worker processes (each K of `workers`);
     a size that fails is reported, not raised."""
     context = multiprocessing.get_context("spawn")
@@ -162,7 +196,9 @@ def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, 
                     out.append({"envs": n, "workers": k, "error": f"{type(exc).__name__}: {exc}"})
                 continue
             queue = context.Queue()
-            child = context.Process(target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, device, queue))
+            child = context.Process(
+                target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, device, queue)
+            )
             child.start()
             out.append(_result_of(child, queue, n))
             child.join()
@@ -172,12 +208,14 @@ def bench_batched(spec: str, sizes: tuple[int, ...], steps: int, seed: int = 0, 
 def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> list[str]:
     """The table `visualenv bench --batched` prints."""
     mode = batches[0].get("autoreset", "next_step") if batches else "next_step"
-    rows = [f"batched (one process, autoreset {mode}):",
-            f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'write':>7} {'render':>8} {'update':>7} {'readback':>9} "
-            f"{'calls':>6} {'alone':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
-            "  (ms per step of all envs, medians; write: the bindings written into the scene, per step; render and readback: per call;"
-            " update: the render call minus the same call with nothing moved (the scene update is write + update); calls: render calls per step;"
-            " alone: env 0's observation re-rendered, as a reset env's is; +MB/env: memory growth per env over the smallest batch)"]
+    rows = [
+        f"batched (one process, autoreset {mode}):",
+        f"  {'envs':>5} {'env-steps/s':>12} {'step ms':>8} {'dynamics':>9} {'bind':>7} {'write':>7} {'render':>8} {'update':>7} {'readback':>9} "
+        f"{'calls':>6} {'alone':>6} {'RSS MB':>7} {'+MB/env':>8} {'build s':>8}",
+        "  (ms per step of all envs, medians; write: the bindings written into the scene, per step; render and readback: per call;"
+        " update: the render call minus the same call with nothing moved (the scene update is write + update); calls: render calls per step;"
+        " alone: env 0's observation re-rendered, as a reset env's is; +MB/env: memory growth per env over the smallest batch)",
+    ]
     ok = [b for b in batches if "error" not in b and "workers" not in b]
     smallest = min(ok, key=lambda b: b["envs"]) if ok else None
     split = [b for b in batches if "workers" in b]
@@ -188,25 +226,41 @@ def lines(batches: list[dict[str, Any]], per_process: dict[str, Any] | None) -> 
         if "workers" in b:
             continue
         assert smallest is not None
-        growth = (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"]) if b["envs"] > smallest["envs"] else float("nan")
-        rows.append(f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
-                    f"{b.get('write_ms', float('nan')):>7.2f} {b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b.get('alone_ms', float('nan')):>6.1f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}")
+        growth = (
+            (b["rss_mb"] - smallest["rss_mb"]) / (b["envs"] - smallest["envs"])
+            if b["envs"] > smallest["envs"]
+            else float("nan")
+        )
+        rows.append(
+            f"  {b['envs']:>5} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['dynamics_ms']:>9.2f} {b['bind_ms']:>7.2f} "
+            f"{b.get('write_ms', float('nan')):>7.2f} {b['render_ms']:>8.1f} {b['scene_update_ms']:>7.1f} {b['readback_ms']:>9.2f} {b['calls_per_step']:>6.2f} {b.get('alone_ms', float('nan')):>6.1f} {b['rss_mb']:>7.0f} {growth:>8.1f} {b['build_s']:>8.1f}"
+        )
     if split:
-        rows.append(f"batched in K worker processes (one batch of about N/K envs each, confined to its cores; autoreset {mode}):")
-        rows.append(f"  {'envs':>5} {'K':>3} {'env-steps/s':>12} {'step ms':>8} {'RSS MB':>7} {'MB/env':>7} {'build s':>8}")
+        rows.append(
+            f"batched in K worker processes (one batch of about N/K envs each, confined to its cores; autoreset {mode}):"
+        )
+        rows.append(
+            f"  {'envs':>5} {'K':>3} {'env-steps/s':>12} {'step ms':>8} {'RSS MB':>7} {'MB/env':>7} {'build s':>8}"
+        )
         for b in split:
             if "error" in b:
                 rows.append(f"  {b['envs']:>5} {b['workers']:>3} failed: {b['error']}")
             else:
-                rows.append(f"  {b['envs']:>5} {b['workers']:>3} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['rss_mb']:>7.0f} "
-                            f"{b['mb_per_env']:>7.1f} {b['build_s']:>8.1f}")
+                rows.append(
+                    f"  {b['envs']:>5} {b['workers']:>3} {b['steps_per_s']:>12.1f} {b['step_ms']:>8.1f} {b['rss_mb']:>7.0f} "
+                    f"{b['mb_per_env']:>7.1f} {b['build_s']:>8.1f}"
+                )
     if per_process:
         workers = per_process["workers"]
-        rows.append(f"per-process vector env, {workers} workers (one Blender each): {per_process['steps_per_s']:.1f} env-steps/s, "
-                    f"{per_process['rss_total_mb'] / workers:.0f} MB per env")
+        rows.append(
+            f"per-process vector env, {workers} workers (one Blender each): {per_process['steps_per_s']:.1f} env-steps/s, "
+            f"{per_process['rss_total_mb'] / workers:.0f} MB per env"
+        )
         for b in batches:
             if "error" not in b:
                 where = f" in {b['workers']} workers" if "workers" in b else ""
-                rows.append(f"  batched {b['envs']}{where}: {b['steps_per_s'] / per_process['steps_per_s']:.2f}x its env-steps/s, "
-                            f"{b['rss_mb'] / per_process['rss_total_mb']:.2f}x the memory of its {workers} workers")
+                rows.append(
+                    f"  batched {b['envs']}{where}: {b['steps_per_s'] / per_process['steps_per_s']:.2f}x its env-steps/s, "
+                    f"{b['rss_mb'] / per_process['rss_total_mb']:.2f}x the memory of its {workers} workers"
+                )
     return rows

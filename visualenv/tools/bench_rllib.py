@@ -77,7 +77,9 @@ def _sb3_steps_per_s(spec: str, envs: int, steps: int, warmup: int) -> tuple[flo
 def _rllib_steps_per_s(runners: Any, steps: int, random_actions: bool) -> float:
     start = time.perf_counter()
     sampled = runners.foreach_env_runner(
-        lambda r: sum(len(e) for e in r.sample(num_timesteps=steps, random_actions=random_actions)), local_env_runner=False)
+        lambda r: sum(len(e) for e in r.sample(num_timesteps=steps, random_actions=random_actions)),
+        local_env_runner=False,
+    )
     return sum(sampled) / (time.perf_counter() - start)
 
 
@@ -89,18 +91,29 @@ def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20) ->
 
     figures = RLlibFigures(spec=spec, envs=envs, steps_per_env=steps)
     process_start = psutil.Process().create_time()
-    ray.init(address="local", num_cpus=max(envs, len(os.sched_getaffinity(0))), include_dashboard=False, log_to_driver=False,
-             logging_level=logging.ERROR)
+    ray.init(
+        address="local",
+        num_cpus=max(envs, len(os.sched_getaffinity(0))),
+        include_dashboard=False,
+        log_to_driver=False,
+        logging_level=logging.ERROR,
+    )
     try:
         algo = ppo_config(spec, env_runners=envs, envs_per_runner=1).build_algo()
         try:
             runners = algo.env_runner_group
-            runners.foreach_env_runner(lambda r: len(r.sample(num_timesteps=1, random_actions=True)), local_env_runner=False)
+            runners.foreach_env_runner(
+                lambda r: len(r.sample(num_timesteps=1, random_actions=True)), local_env_runner=False
+            )
             figures.seconds_to_first_sample = time.time() - process_start
-            runners.foreach_env_runner(lambda r: len(r.sample(num_timesteps=warmup, random_actions=True)), local_env_runner=False)
+            runners.foreach_env_runner(
+                lambda r: len(r.sample(num_timesteps=warmup, random_actions=True)), local_env_runner=False
+            )
             figures.rllib_steps_per_s = _rllib_steps_per_s(runners, steps, random_actions=True)
             figures.rllib_policy_steps_per_s = _rllib_steps_per_s(runners, steps, random_actions=False)
-            figures.runner_rss_mb = runners.foreach_env_runner(lambda r: psutil.Process().memory_info().rss / 2**20, local_env_runner=False)
+            figures.runner_rss_mb = runners.foreach_env_runner(
+                lambda r: psutil.Process().memory_info().rss / 2**20, local_env_runner=False
+            )
         finally:
             algo.stop()
     finally:

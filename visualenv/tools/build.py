@@ -39,7 +39,9 @@ class BuildResult:
     ascii_note: str = ""
 
 
-def build_env(spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0, device: str | None = None) -> BuildResult:
+def build_env(
+    spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0, device: str | None = None
+) -> BuildResult:
     from visualenv.env import VisualEnv
     from visualenv.spec.loader import load_spec
 
@@ -107,7 +109,9 @@ def _swap_in(tmp: Path, final: Path) -> None:
         shutil.rmtree(old, ignore_errors=True)
 
 
-def preview_frames(spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0, progress: bool = False) -> list[Path]:
+def preview_frames(
+    spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0, progress: bool = False
+) -> list[Path]:
     """Frames of a random-action episode (observation beside the view), as PNGs; `progress` shows a bar on stderr
     (each frame is two renders, the high-resolution view a slow one)."""
     from visualenv.env import VisualEnv

@@ -37,26 +37,54 @@ def mjcf_report(path: Path) -> str:
     physics = load_model(path)
     m = physics.model
     idents = physics.names.ident
-    lines = [f"{path} (MJCF): timestep {m.opt.timestep:g} s, {m.nbody - 1} bodies, {m.njnt} joints, {m.nu} actuators, "
-             f"{m.ngeom} geoms, {m.ncam} cameras, {m.nlight} lights, {m.nkey} keyframes"]
+    lines = [
+        f"{path} (MJCF): timestep {m.opt.timestep:g} s, {m.nbody - 1} bodies, {m.njnt} joints, {m.nu} actuators, "
+        f"{m.ngeom} geoms, {m.ncam} cameras, {m.nlight} lights, {m.nkey} keyframes"
+    ]
     for i, name in enumerate(idents["actuator"]):
         lo, hi = physics.ctrl_range(i)
         lines.append(f"  actuator {name}: ctrl_{name} in [{lo:g}, {hi:g}]")
     for title, names in physics.listing().items():
         lines.append(f"{title}: " + ", ".join(names))
-    kinds = {0: "plane", 1: "hfield", 2: "sphere", 3: "capsule", 4: "ellipsoid", 5: "cylinder", 6: "box", 7: "mesh", 8: "sdf"}
-    drawn = [f"{idents['geom'][g]} ({kinds.get(int(m.geom_type[g]), '?')})" for g in range(m.ngeom) if int(m.geom_group[g]) < 3]
+    kinds = {
+        0: "plane",
+        1: "hfield",
+        2: "sphere",
+        3: "capsule",
+        4: "ellipsoid",
+        5: "cylinder",
+        6: "box",
+        7: "mesh",
+        8: "sdf",
+    }
+    drawn = [
+        f"{idents['geom'][g]} ({kinds.get(int(m.geom_type[g]), '?')})"
+        for g in range(m.ngeom)
+        if int(m.geom_group[g]) < 3
+    ]
     hidden = [idents["geom"][g] for g in range(m.ngeom) if int(m.geom_group[g]) >= 3]
-    lines.append("drawn geoms: " + (", ".join(drawn) or "none") + (f"; hidden (group >= 3): {', '.join(hidden)}" if hidden else ""))
+    lines.append(
+        "drawn geoms: "
+        + (", ".join(drawn) or "none")
+        + (f"; hidden (group >= 3): {', '.join(hidden)}" if hidden else "")
+    )
     if m.nsite:
         sites = [f"{s.name[5:]} ({s.kind})" for s in visible_sites(physics)]
-        lines.append("drawn sites (physics.draw_sites): " + (", ".join(sites) or "none") + " (groups 0 to 2, not transparent)")
+        lines.append(
+            "drawn sites (physics.draw_sites): " + (", ".join(sites) or "none") + " (groups 0 to 2, not transparent)"
+        )
     if "hfield" in " ".join(drawn) or "sdf" in " ".join(drawn):
-        lines.append("  a height field or SDF cannot be drawn yet: a rendered spec over this model is refused (hide it in group 3)")
+        lines.append(
+            "  a height field or SDF cannot be drawn yet: a rendered spec over this model is refused (hide it in group 3)"
+        )
     lines.append("cameras (observation.camera): " + (", ".join(idents["camera"]) or "none: the spec adds its own"))
     head = m.vis.headlight
-    lines.append("lights: " + (", ".join(idents["light"]) or "none") + "; MuJoCo's headlight: "
-                 + (f"ambient {head.ambient[0]:g}, diffuse {head.diffuse[0]:g}" if head.active else "off"))
+    lines.append(
+        "lights: "
+        + (", ".join(idents["light"]) or "none")
+        + "; MuJoCo's headlight: "
+        + (f"ambient {head.ambient[0]:g}, diffuse {head.diffuse[0]:g}" if head.active else "off")
+    )
     return "\n".join(lines)
 
 
@@ -90,12 +118,17 @@ def _observation(physics: PhysicsModel) -> list[str]:
     cameras = [f"'{c}'" if c.lower() in _YAML_WORDS else c for c in physics.names.ident["camera"]]
     if cameras:
         others = f"; its others: {', '.join(cameras[1:])}" if len(cameras) > 1 else ""
-        return [f"# the model's first camera, {cameras[0]} (observation.camera takes any of the model's cameras by name{others})",
-                f"observation: {{camera: {cameras[0]}, resolution: [84, 84], color: rgb}}"]
+        return [
+            f"# the model's first camera, {cameras[0]} (observation.camera takes any of the model's cameras by name{others})",
+            f"observation: {{camera: {cameras[0]}, resolution: [84, 84], color: rgb}}",
+        ]
     eye, target = framing(physics)
-    return ["scene:", "  objects:  # the model has no camera: one that frames the model at its reset pose",
-            f"    Camera: {{camera: perspective, lens: 35, location: {eye}, look_at: {target}}}",
-            "observation: {camera: Camera, resolution: [84, 84], color: rgb}"]
+    return [
+        "scene:",
+        "  objects:  # the model has no camera: one that frames the model at its reset pose",
+        f"    Camera: {{camera: perspective, lens: 35, location: {eye}, look_at: {target}}}",
+        "observation: {camera: Camera, resolution: [84, 84], color: rgb}",
+    ]
 
 
 def mjcf_starter_spec(path: Path, spec_path: Path) -> str:
@@ -103,20 +136,38 @@ def mjcf_starter_spec(path: Path, spec_path: Path) -> str:
     physics = load_model(path)
     model_ref = os.path.relpath(path.resolve(), spec_path.resolve().parent).replace(os.sep, "/")
     actuators = [f"ctrl_{a}" for a in physics.actuator_names()]
-    out = [f"# A starter spec for {path.name}, written by `visualenv init`: it builds and steps as it is.",
-           "# Replace the placeholder reward, add outcomes and reset noise; docs/physics.md is the reference.",
-           f"id: {_env_id(path.stem)}", "", "physics:", "  engine: mujoco", f"  model: {model_ref}",
-           f"  frame_skip: 1   # the model's timestep is {physics.timestep:g} s: dt = timestep * frame_skip",
-           "  # reset:", "  #   values: {qpos_<joint>: qpos_<joint> + uniform(-0.1, 0.1)}", "",
-           "# Names expressions can read:"]
+    out = [
+        f"# A starter spec for {path.name}, written by `visualenv init`: it builds and steps as it is.",
+        "# Replace the placeholder reward, add outcomes and reset noise; docs/physics.md is the reference.",
+        f"id: {_env_id(path.stem)}",
+        "",
+        "physics:",
+        "  engine: mujoco",
+        f"  model: {model_ref}",
+        f"  frame_skip: 1   # the model's timestep is {physics.timestep:g} s: dt = timestep * frame_skip",
+        "  # reset:",
+        "  #   values: {qpos_<joint>: qpos_<joint> + uniform(-0.1, 0.1)}",
+        "",
+        "# Names expressions can read:",
+    ]
     for title, names in physics.listing().items():
         shown = ", ".join(names[:60]) + (", ..." if len(names) > 60 else "")
-        out += textwrap.wrap(f"{title}: {shown}", width=118, initial_indent="#   ", subsequent_indent="#       ", break_on_hyphens=False)
+        out += textwrap.wrap(
+            f"{title}: {shown}", width=118, initial_indent="#   ", subsequent_indent="#       ", break_on_hyphens=False
+        )
     out.append("")
     if actuators:
-        out.append(f"# actions: not declared, so one Box dimension per actuator in its ctrlrange: {', '.join(actuators)}")
+        out.append(
+            f"# actions: not declared, so one Box dimension per actuator in its ctrlrange: {', '.join(actuators)}"
+        )
     else:
         out += ["actions:  # the model has no actuators: one action that does nothing", "  discrete: [{}]"]
-    out += ["", *_observation(physics), "",
-            "reward: 0.0  # placeholder, e.g. a body's height: body_<name>_z", "max_steps: 1000", ""]
+    out += [
+        "",
+        *_observation(physics),
+        "",
+        "reward: 0.0  # placeholder, e.g. a body's height: body_<name>_z",
+        "max_steps: 1000",
+        "",
+    ]
     return "\n".join(out)

@@ -46,8 +46,12 @@ class DistillConfig:
     teacher: str  # a state-only policy file of the same spec (`visualenv train --state-only`)
     rounds: int = 8  # DAgger rounds; round 0 is the teacher's own unless a student is given
     episodes: int = 16  # episodes rolled out per round
-    mixing: float = 0.5  # the teacher acts a step of round r with probability mixing ** r (DAgger's beta), else the student
-    student: str | None = None  # a policy file of an earlier distillation of the spec to start from (then mixing ** (r + 1))
+    mixing: float = (
+        0.5  # the teacher acts a step of round r with probability mixing ** r (DAgger's beta), else the student
+    )
+    student: str | None = (
+        None  # a policy file of an earlier distillation of the spec to start from (then mixing ** (r + 1))
+    )
     epochs: float = 2.0  # passes over all frames gathered so far, per round
     batch_size: int = 128
     learning_rate: float = 3e-4
@@ -59,7 +63,9 @@ class DistillConfig:
     progress: bool = True
 
 
-def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str], None] = print) -> tuple[Path, dict[str, Any]]:
+def distill(
+    config: DistillConfig, out_root: str | Path, *, log: Callable[[str], None] = print
+) -> tuple[Path, dict[str, Any]]:
     """Run DAgger rounds, keep the round that evaluates best, evaluate it on fresh seeds: the run folder made under
     `out_root` once the teacher and the student are checked, and results.json's figures."""
     import torch
@@ -93,17 +99,36 @@ def distill(config: DistillConfig, out_root: str | Path, *, log: Callable[[str],
         evaluator.close()
     final_env = make_eval_env(spec_path, seed=final_seed(config.seed), frame_stack=config.frame_stack)
     try:
-        results = final_evaluation(load_model(best_path), final_env, config.final_eval_episodes, final_seed(config.seed))
+        results = final_evaluation(
+            load_model(best_path), final_env, config.final_eval_episodes, final_seed(config.seed)
+        )
     finally:
         final_env.close()
-    results.update({"selection": {"eval_seed": selection_seed(config.seed), "mean_reward": best_score, "episodes": config.eval_episodes},
-                    "frames": frames, "wall_time_s": round(time.perf_counter() - started, 1), "model": best_path.name})
+    results.update(
+        {
+            "selection": {
+                "eval_seed": selection_seed(config.seed),
+                "mean_reward": best_score,
+                "episodes": config.eval_episodes,
+            },
+            "frames": frames,
+            "wall_time_s": round(time.perf_counter() - started, 1),
+            "model": best_path.name,
+        }
+    )
     write_results(folder, results)
     return run_dir, results
 
 
-def _rounds(student: Any, teacher: Any, rollouts: Any, evaluator: Any, config: DistillConfig, table: Path,
-            log: Callable[[str], None]) -> tuple[float, dict[str, Any], int]:
+def _rounds(
+    student: Any,
+    teacher: Any,
+    rollouts: Any,
+    evaluator: Any,
+    config: DistillConfig,
+    table: Path,
+    log: Callable[[str], None],
+) -> tuple[float, dict[str, Any], int]:
     """The DAgger rounds, each a row of `table` (rounds.csv): the best evaluation, the student's weights then, the frames."""
     import torch
 
@@ -127,19 +152,28 @@ def _rounds(student: Any, teacher: Any, rollouts: Any, evaluator: Any, config: D
             scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
             if scored > best[0]:
                 best = (scored, {k: v.clone() for k, v in student.state_dict().items()})
-            row = (round_, sum(len(x) for x in frames), round(float(np.mean(returns)), 3), round(loss, 6), round(scored, 3),
-                   round(time.perf_counter() - started, 1))
+            row = (
+                round_,
+                sum(len(x) for x in frames),
+                round(float(np.mean(returns)), 3),
+                round(loss, 6),
+                round(scored, 3),
+                round(time.perf_counter() - started, 1),
+            )
             writer.writerow(row)
             f.flush()
             if config.progress:
-                log(f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
-                    f"loss {loss:.4f}, evaluation {scored:.1f}")
+                log(
+                    f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
+                    f"loss {loss:.4f}, evaluation {scored:.1f}"
+                )
     return best[0], best[1], sum(len(x) for x in frames)
 
 
 def _record_run(folder: RunFolder, config: DistillConfig, spec_path: str) -> None:
     """config.json: the command, the settings under the keys `eval` and `export-policy` read, the versions, and the
     teacher's file and the student's it started from (path and sha256)."""
+
     def named(path: str) -> dict[str, str]:
         return {"path": path, "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
 
@@ -158,9 +192,11 @@ def _check_teacher(teacher: Any, spec_path: str) -> None:
     finally:
         env.close()
     if teacher.observation_space.shape != state.shape or teacher.action_space != actions:
-        raise ConfigError(f"the teacher acts on observations of shape {teacher.observation_space.shape} with actions {teacher.action_space}; "
-                          f"{spec_path}'s state-only observations have shape {state.shape} and its actions are {actions}: "
-                          "train the teacher on the same spec with `visualenv train --state-only`")
+        raise ConfigError(
+            f"the teacher acts on observations of shape {teacher.observation_space.shape} with actions {teacher.action_space}; "
+            f"{spec_path}'s state-only observations have shape {state.shape} and its actions are {actions}: "
+            "train the teacher on the same spec with `visualenv train --state-only`"
+        )
 
 
 def _student(vec_env: Any, start: Any = None) -> Any:
@@ -173,14 +209,17 @@ def _student(vec_env: Any, start: Any = None) -> Any:
     student = ActorCriticCnnPolicy(vec_env.observation_space, vec_env.action_space, lambda _: 0.0)
     if start is not None:
         if start.observation_space != vec_env.observation_space or start.action_space != vec_env.action_space:
-            raise ConfigError(f"the student to start from sees {start.observation_space} and acts in {start.action_space}; "
-                              f"this env's stacked frames are {vec_env.observation_space} and its actions {vec_env.action_space}")
+            raise ConfigError(
+                f"the student to start from sees {start.observation_space} and acts in {start.action_space}; "
+                f"this env's stacked frames are {vec_env.observation_space} and its actions {vec_env.action_space}"
+            )
         student.load_state_dict(start.state_dict())
     return student.to(memory_format=torch.channels_last)  # type: ignore[call-overload]  # torch takes it; its stubs do not say
 
 
-def _rollouts(vec_env: Any, teacher: Any, student: Any, teacher_share: float, episodes: int,
-              generator: np.random.Generator) -> tuple[np.ndarray, np.ndarray, list[float]]:
+def _rollouts(
+    vec_env: Any, teacher: Any, student: Any, teacher_share: float, episodes: int, generator: np.random.Generator
+) -> tuple[np.ndarray, np.ndarray, list[float]]:
     """`episodes` episodes, each step acted by the teacher with probability `teacher_share`, else by the student:
     each frame and the teacher's action in its state."""
     env = vec_env.unwrapped.envs[0].unwrapped
@@ -203,7 +242,14 @@ def _rollouts(vec_env: Any, teacher: Any, student: Any, teacher_share: float, ep
     return np.stack(frames), np.stack(labels), returns
 
 
-def _fit(student: Any, optimizer: Any, frames: np.ndarray, labels: np.ndarray, config: DistillConfig, generator: np.random.Generator) -> float:
+def _fit(
+    student: Any,
+    optimizer: Any,
+    frames: np.ndarray,
+    labels: np.ndarray,
+    config: DistillConfig,
+    generator: np.random.Generator,
+) -> float:
     """`config.epochs` passes of minibatches over every frame so far; the last pass's mean loss."""
     import torch
 
@@ -212,14 +258,16 @@ def _fit(student: Any, optimizer: Any, frames: np.ndarray, labels: np.ndarray, c
     losses = []
     for _ in range(updates):
         batch = generator.integers(0, len(frames), config.batch_size)
-        images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator).contiguous(memory_format=torch.channels_last)
+        images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator).contiguous(
+            memory_format=torch.channels_last
+        )
         loss = _imitation_loss(student.get_distribution(images).distribution, torch.from_numpy(labels[batch]))
         optimizer.zero_grad()
         loss.backward()
         optimizer.step()
         losses.append(loss.item())
     student.set_training_mode(False)
-    last = losses[-max(1, len(frames) // config.batch_size):]
+    last = losses[-max(1, len(frames) // config.batch_size) :]
     return float(np.mean(last))
 
 
@@ -242,4 +290,4 @@ def _shifted(images: Any, shift: int, generator: np.random.Generator) -> Any:
     n, _, h, w = images.shape
     padded = torch.nn.functional.pad(images.float(), (shift, shift, shift, shift), mode="replicate").to(images.dtype)
     dy, dx = generator.integers(0, 2 * shift + 1, (2, n))
-    return torch.stack([padded[i, :, y:y + h, x:x + w] for i, (y, x) in enumerate(zip(dy, dx))])
+    return torch.stack([padded[i, :, y : y + h, x : x + w] for i, (y, x) in enumerate(zip(dy, dx))])

@@ -34,12 +34,16 @@ from visualenv.train.run_folder import RESULT_KEYS, RunFolder, legacy_eval_seed,
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
 SELECTION_BAND, FINAL_BAND, FRESH_BAND = 1, 2, 3
-FRESH_SEED = FRESH_BAND * SEED_BAND  # `eval` of a model without a run: no run trains, selects or reports on these episodes
+FRESH_SEED = (
+    FRESH_BAND * SEED_BAND
+)  # `eval` of a model without a run: no run trains, selects or reports on these episodes
 FINAL_EPISODES = 100  # the final evaluation's episodes by default
 CONFIDENCE = 0.95
 Z_95 = 1.959963984540054  # standard normal quantile of 0.975
 BOOTSTRAP_RESAMPLES = 10_000
-CI_METHOD = "95 %: percentile bootstrap of the mean (10,000 resamples) for return and length, Wilson score for the success rate"
+CI_METHOD = (
+    "95 %: percentile bootstrap of the mean (10,000 resamples) for return and length, Wilson score for the success rate"
+)
 
 
 def selection_seed(train_seed: int) -> int:
@@ -68,15 +72,27 @@ def selection_record(run_dir: Path, seed: int) -> dict[str, Any] | None:
     if len(timesteps) == 0:
         return None
     best = int(np.argmax(returns.mean(axis=1)))
-    record: dict[str, Any] = {"eval_seed": seed, "evaluations": len(timesteps), "best_at_step": int(timesteps[best]),
-                              "episodes": int(returns.shape[1]), "mean_reward": float(returns[best].mean())}
+    record: dict[str, Any] = {
+        "eval_seed": seed,
+        "evaluations": len(timesteps),
+        "best_at_step": int(timesteps[best]),
+        "episodes": int(returns.shape[1]),
+        "mean_reward": float(returns[best].mean()),
+    }
     if successes is not None and len(successes) == len(timesteps):
         record["success_rate"] = float(np.mean(successes[best]))
     return record
 
 
-def make_eval_env(spec_path: str, *, seed: int, frame_stack: int, render: bool = True, transpose: bool = True,
-                  distractions: float | str | None = None) -> Any:
+def make_eval_env(
+    spec_path: str,
+    *,
+    seed: int,
+    frame_stack: int,
+    render: bool = True,
+    transpose: bool = True,
+    distractions: float | str | None = None,
+) -> Any:
     """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.
 
     RLlib's policies take the images channels last (``transpose=False``). `distractions`: the env's difficulty
@@ -152,12 +168,18 @@ def evaluate(model: Any, vec_env: Any, episodes: int) -> dict[str, Any]:
     }
 
 
-def bootstrap_mean_interval(values: Any, resamples: int = BOOTSTRAP_RESAMPLES, confidence: float = CONFIDENCE) -> list[float]:
+def bootstrap_mean_interval(
+    values: Any, resamples: int = BOOTSTRAP_RESAMPLES, confidence: float = CONFIDENCE
+) -> list[float]:
     """Percentile bootstrap interval of the mean (resampling seed 0: the same values give the same interval)."""
     data = np.asarray(values, dtype=np.float64)
     rng = np.random.default_rng(0)
-    means = np.concatenate([data[rng.integers(0, len(data), (n, len(data)))].mean(axis=1)
-                            for n in np.diff(np.r_[0:resamples:1000, resamples])])
+    means = np.concatenate(
+        [
+            data[rng.integers(0, len(data), (n, len(data)))].mean(axis=1)
+            for n in np.diff(np.r_[0:resamples:1000, resamples])
+        ]
+    )
     tail = 100 * (1 - confidence) / 2
     low, high = np.percentile(means, [tail, 100 - tail])
     return [float(low), float(high)]
@@ -201,10 +223,17 @@ def recorded_evaluation(run_dir: Path) -> RecordedEvaluation | None:
     render = config["render"]
     common = {"algo": config["algo"], "render": render, "frame_stack": config["frame_stack"] if render else 0}
     if results is None:
-        return RecordedEvaluation(seed=legacy_eval_seed(config["seed"]), episodes=config["final_eval_episodes"],
-                                  **common)
-    return RecordedEvaluation(seed=results["eval_seed"], episodes=results["episodes"], results=results,
-                              resets_before=results.get("resets_before", 0), note=run.note, **common)
+        return RecordedEvaluation(
+            seed=legacy_eval_seed(config["seed"]), episodes=config["final_eval_episodes"], **common
+        )
+    return RecordedEvaluation(
+        seed=results["eval_seed"],
+        episodes=results["episodes"],
+        results=results,
+        resets_before=results.get("resets_before", 0),
+        note=run.note,
+        **common,
+    )
 
 
 class RandomPolicy:
@@ -234,9 +263,16 @@ def evaluate_random(spec: str, *, episodes: int | None = None, seed: int | None 
         vec_env.close()
 
 
-def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None, episodes: int | None = None,
-                   seed: int | None = None, trust_pickle: bool = False,
-                   distractions: float | str | None = None) -> tuple[dict[str, Any], RecordedEvaluation | None]:
+def evaluate_model(
+    spec: str,
+    model_path: str | Path,
+    *,
+    algo: str | None = None,
+    episodes: int | None = None,
+    seed: int | None = None,
+    trust_pickle: bool = False,
+    distractions: float | str | None = None,
+) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
 
     Unset arguments take the run's values (config.json and results.json beside the model),
@@ -259,14 +295,27 @@ def evaluate_model(spec: str, model_path: str | Path, *, algo: str | None = None
     space = model.observation_space
     render = recorded.render if recorded else not (isinstance(space, spaces.Box) and len(space.shape) == 1)
     spec_path = str(resolve(spec))
-    probe = stacked_like(VisualEnv(load_spec(spec_path), render=render), model, str(model_path))  # refuses a model of another env
+    probe = stacked_like(
+        VisualEnv(load_spec(spec_path), render=render), model, str(model_path)
+    )  # refuses a model of another env
     probe.close()
     frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
-    vec_env = make_eval_env(spec_path, seed=seed, frame_stack=frame_stack, render=render, transpose=not channels_last_images(space),
-                            distractions=distractions)
+    vec_env = make_eval_env(
+        spec_path,
+        seed=seed,
+        frame_stack=frame_stack,
+        render=render,
+        transpose=not channels_last_images(space),
+        distractions=distractions,
+    )
     try:
-        results = final_evaluation(model, vec_env, episodes or (recorded.episodes if recorded else FINAL_EPISODES), seed,
-                                   resets_before=replayed.resets_before if replayed else 0)
+        results = final_evaluation(
+            model,
+            vec_env,
+            episodes or (recorded.episodes if recorded else FINAL_EPISODES),
+            seed,
+            resets_before=replayed.resets_before if replayed else 0,
+        )
     finally:
         vec_env.close()
     if distractions is not None:
@@ -293,10 +342,17 @@ def differences(results: dict[str, Any], recorded: dict[str, Any], *, tolerant: 
     n = results.get("episodes", 0)
     by_episode = len(kept.get("returns", [])) >= n and len(played.get("returns", [])) == n
     if by_episode and (tolerant or n < recorded.get("episodes", 0)):
-        return [f"episode {i}: {key} {played[key][i]} (results.json: {kept[key][i]})"
-                for key in ("returns", "lengths", "successes") for i in range(n) if not _close(key, played[key][i], kept[key][i], tolerant)]
-    return [f"{key} {results.get(key)} (results.json: {recorded[key]})" for key in RESULT_KEYS
-            if key in recorded and not _close(key, results.get(key), recorded[key], tolerant)]
+        return [
+            f"episode {i}: {key} {played[key][i]} (results.json: {kept[key][i]})"
+            for key in ("returns", "lengths", "successes")
+            for i in range(n)
+            if not _close(key, played[key][i], kept[key][i], tolerant)
+        ]
+    return [
+        f"{key} {results.get(key)} (results.json: {recorded[key]})"
+        for key in RESULT_KEYS
+        if key in recorded and not _close(key, results.get(key), recorded[key], tolerant)
+    ]
 
 
 def _close(key: str, played: Any, kept: Any, tolerant: bool) -> bool:
@@ -332,7 +388,10 @@ def sample_differences(results: dict[str, Any], recorded: dict[str, Any]) -> lis
 
 def replays_prefix(results: dict[str, Any], recorded: dict[str, Any]) -> bool:
     """Whether `results` (fewer episodes, the same seed) can be checked against results.json's per-episode records."""
-    return 0 < results.get("episodes", 0) < recorded.get("episodes", 0) and len(recorded.get("per_episode", {}).get("returns", [])) == recorded["episodes"]
+    return (
+        0 < results.get("episodes", 0) < recorded.get("episodes", 0)
+        and len(recorded.get("per_episode", {}).get("returns", [])) == recorded["episodes"]
+    )
 
 
 def evaluation_line(steps: int, returns: Any, successes: Any = None) -> str:

@@ -64,22 +64,33 @@ def load_model(model_path: str | Path, algo: str = "ppo", *, trust_pickle: bool 
 
 def pickle_refusal(path: Path) -> str:
     """Why a file that is not a policy file is not loaded, and what to do about it."""
-    kind = ("an RLlib checkpoint folder: a pickle-based file" if path.is_dir() else
-            f"a torch {path.suffix} file: a pickle-based file" if path.suffix in (".pt", ".pth") else
-            "an SB3 model: a pickle-based file" if path.suffix == ".zip" else
-            f"not a policy file ({WEIGHTS} with its .json), so it would load as a pickle-based file")
-    return (f"{path} is {kind}, and loading it can run any code it holds. If you trust where it came from, "
-            f"pass --trust-pickle (Python: trust_pickle=True), or convert it once: `visualenv export-policy --trust-pickle {path} "
-            f"OUT{WEIGHTS}`, then use OUT{WEIGHTS} (docs/security.md)")
+    kind = (
+        "an RLlib checkpoint folder: a pickle-based file"
+        if path.is_dir()
+        else f"a torch {path.suffix} file: a pickle-based file"
+        if path.suffix in (".pt", ".pth")
+        else "an SB3 model: a pickle-based file"
+        if path.suffix == ".zip"
+        else f"not a policy file ({WEIGHTS} with its .json), so it would load as a pickle-based file"
+    )
+    return (
+        f"{path} is {kind}, and loading it can run any code it holds. If you trust where it came from, "
+        f"pass --trust-pickle (Python: trust_pickle=True), or convert it once: `visualenv export-policy --trust-pickle {path} "
+        f"OUT{WEIGHTS}`, then use OUT{WEIGHTS} (docs/security.md)"
+    )
 
 
 def _load_rllib(path: Path) -> Any:
     try:
         from visualenv.train.rllib_setup import RLlibPolicy, is_checkpoint
     except ImportError as exc:
-        raise VisualEnvError(f"{path} is a folder: an RLlib checkpoint needs Ray RLlib (pip install 'visualenv[ray]'; {exc})") from None
+        raise VisualEnvError(
+            f"{path} is a folder: an RLlib checkpoint needs Ray RLlib (pip install 'visualenv[ray]'; {exc})"
+        ) from None
     if not is_checkpoint(path):
-        raise VisualEnvError(f"{path} is not a checkpoint of `visualenv train --backend rllib` (no {Path('learner_group', 'learner', 'rl_module')})")
+        raise VisualEnvError(
+            f"{path} is not a checkpoint of `visualenv train --backend rllib` (no {Path('learner_group', 'learner', 'rl_module')})"
+        )
     try:
         return RLlibPolicy.load(path)
     except Exception as exc:  # RLlib raises whatever its unpickling met
@@ -97,7 +108,9 @@ def _load_torch_policy(path: Path) -> Any:
         kind = saved.get("policy_class", "").replace(":", ".") if isinstance(saved, dict) else ""
         policy = sb3_policies()[kind](**saved["data"]) if kind in sb3_policies() else None
         if policy is None:
-            raise ValueError(f"it names no SB3 policy class visualenv knows ({kind or 'none'}): load it with its class's load()")
+            raise ValueError(
+                f"it names no SB3 policy class visualenv knows ({kind or 'none'}): load it with its class's load()"
+            )
         policy.load_state_dict({k: v.float() if v.is_floating_point() else v for k, v in saved["state_dict"].items()})
     except Exception as exc:  # a file of another kind: say so, whatever torch or SB3 raised
         raise VisualEnvError(f"cannot load {path} as a policy file: {type(exc).__name__}: {exc}") from None
@@ -105,7 +118,9 @@ def _load_torch_policy(path: Path) -> Any:
     return policy
 
 
-def save_policy(model: Any, out: str | Path, *, half: bool = True, algorithm: str | None = None, run_dir: Path | None = None) -> Path:
+def save_policy(
+    model: Any, out: str | Path, *, half: bool = True, algorithm: str | None = None, run_dir: Path | None = None
+) -> Path:
     """The policy of an SB3 model (or an SB3 policy) as a policy file OUT.safetensors + OUT.json (`half`: float16 weights).
 
     `run_dir`: the run folder whose config.json names the algorithm, the env and the frame stack."""
@@ -123,7 +138,9 @@ def save_rllib_module(module: Any, out: str | Path, *, half: bool = True, run_di
     return weights
 
 
-def export_policy(model_path: str | Path, out: str | Path, *, algo: str = "ppo", half: bool = True, trust_pickle: bool = False) -> Path:
+def export_policy(
+    model_path: str | Path, out: str | Path, *, algo: str = "ppo", half: bool = True, trust_pickle: bool = False
+) -> Path:
     """`visualenv export-policy`: any model :func:`load_model` takes, as a policy file, with what the run beside it
     records (its config.json); a policy file exported again keeps what it knew."""
     source = Path(model_path)
@@ -131,7 +148,9 @@ def export_policy(model_path: str | Path, out: str | Path, *, algo: str = "ppo",
     if hasattr(model, "module"):  # an RLlib policy
         weights = save_rllib_module(model, out, half=half, run_dir=source.parent)
     else:
-        weights = save_policy(model, out, half=half, algorithm=algo if source.suffix == ".zip" else None, run_dir=source.parent)
+        weights = save_policy(
+            model, out, half=half, algorithm=algo if source.suffix == ".zip" else None, run_dir=source.parent
+        )
     if is_policy_file(source):
         carried, meta_path = read_meta(source), weights.with_suffix(".json")
         meta = json.loads(meta_path.read_text(encoding="utf-8"))
@@ -164,7 +183,10 @@ def run_record(run_dir: Path | None) -> dict[str, Any]:
     record["frame_stack"] = config["frame_stack"] if config["render"] else 0
     try:
         source = resolve(str(config["spec"]))
-        record["spec"] = {"id": load_spec(source).spec.id, "sha256": hashlib.sha256(Path(source).read_bytes()).hexdigest()}
+        record["spec"] = {
+            "id": load_spec(source).spec.id,
+            "sha256": hashlib.sha256(Path(source).read_bytes()).hexdigest(),
+        }
     except (VisualEnvError, OSError):
         pass  # a spec that moved or no longer loads: the file says nothing of it rather than something wrong
     return record
@@ -174,8 +196,10 @@ def pretrained_model(env_id: str) -> Path:
     """The shipped agent of a bundled env: results/<Id>/policy.safetensors (with its policy.json) in the source checkout."""
     path = RunFolder(RESULTS_DIR / env_id).shipped_policy
     if not path.is_file():
-        raise VisualEnvError(f"no shipped model for {env_id}: {path} does not exist "
-                             "(the shipped models come with a checkout of the repository; train one with `visualenv train`)")
+        raise VisualEnvError(
+            f"no shipped model for {env_id}: {path} does not exist "
+            "(the shipped models come with a checkout of the repository; train one with `visualenv train`)"
+        )
     return path
 
 
@@ -186,10 +210,16 @@ def stacked_like(env: Any, model: Any, model_path: str) -> Any:
     if depth > 1:
         env = FrameStack(env, depth)
     actions, ours = model.action_space, env.action_space
-    if not _fits(want, env.observation_space) or type(actions) is not type(ours) or actions.shape != ours.shape \
-            or getattr(actions, "n", None) != getattr(ours, "n", None):
-        raise VisualEnvError(f"{model_path} was trained on observations {_shapes(want)} and actions {actions}; "
-                             f"this env has observations {_shapes(env.observation_space)} and actions {ours}")
+    if (
+        not _fits(want, env.observation_space)
+        or type(actions) is not type(ours)
+        or actions.shape != ours.shape
+        or getattr(actions, "n", None) != getattr(ours, "n", None)
+    ):
+        raise VisualEnvError(
+            f"{model_path} was trained on observations {_shapes(want)} and actions {actions}; "
+            f"this env has observations {_shapes(env.observation_space)} and actions {ours}"
+        )
     return env
 
 
@@ -210,7 +240,11 @@ def _fits(want: Any, have: Any) -> bool:
     """Same keys and shapes; SB3 also takes channel-last images for a channel-first model."""
     w, h = subspaces(want), subspaces(have)
     return w.keys() == h.keys() and all(
-        w[k].shape is not None and h[k].shape is not None and w[k].shape in (h[k].shape, h[k].shape[-1:] + h[k].shape[:-1]) for k in w)  # type: ignore[index]
+        w[k].shape is not None
+        and h[k].shape is not None
+        and w[k].shape in (h[k].shape, h[k].shape[-1:] + h[k].shape[:-1])  # type: ignore[index]
+        for k in w
+    )
 
 
 def _shapes(space: Any) -> Any:

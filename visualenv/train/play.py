@@ -55,9 +55,20 @@ def check_recording(path: str | Path) -> None:
     make_dir(Path(path).parent)
 
 
-def play(spec: str, *, model_path: str | None = None, algo: str = "ppo", episodes: int = 3, seed: int = 0,
-         record: str | None = None, fps: int = 15, max_frames: int = 2000, view_preset: str | None = None,
-         view_size: int | None = None, trust_pickle: bool = False) -> list[Episode]:
+def play(
+    spec: str,
+    *,
+    model_path: str | None = None,
+    algo: str = "ppo",
+    episodes: int = 3,
+    seed: int = 0,
+    record: str | None = None,
+    fps: int = 15,
+    max_frames: int = 2000,
+    view_preset: str | None = None,
+    view_size: int | None = None,
+    trust_pickle: bool = False,
+) -> list[Episode]:
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation.
 
     `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`)."""
@@ -123,8 +134,16 @@ def save_video(frames: list[np.ndarray], path: str | Path, fps: int) -> Path:
     if suffix == ".gif":
         iio.imwrite(path, np.stack(frames), duration=1000 / fps, loop=0)
     elif suffix == ".webp":
-        iio.imwrite(path, np.stack(frames), plugin="pillow", extension=".webp", duration=round(1000 / fps), loop=0,
-                    quality=WEBP_QUALITY, method=4)
+        iio.imwrite(
+            path,
+            np.stack(frames),
+            plugin="pillow",
+            extension=".webp",
+            duration=round(1000 / fps),
+            loop=0,
+            quality=WEBP_QUALITY,
+            method=4,
+        )
     else:
         iio.imwrite(path, np.stack(frames), fps=fps, codec="libx264", macro_block_size=1)
     return path

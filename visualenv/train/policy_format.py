@@ -34,7 +34,20 @@ from visualenv.train.policy_kinds import PolicyFileError, build_rllib_module, bu
 FORMAT, FORMAT_VERSION = "visualenv-policy", 1
 WEIGHTS, META = ".safetensors", ".json"
 #: the dtypes a space may have in a policy file
-SPACE_DTYPES = ("uint8", "int8", "int16", "int32", "int64", "uint16", "uint32", "uint64", "float16", "float32", "float64", "bool")
+SPACE_DTYPES = (
+    "uint8",
+    "int8",
+    "int16",
+    "int32",
+    "int64",
+    "uint16",
+    "uint32",
+    "uint64",
+    "float16",
+    "float32",
+    "float64",
+    "bool",
+)
 NON_FINITE = {"inf": math.inf, "-inf": -math.inf}
 
 
@@ -59,7 +72,13 @@ def space_to_data(space: Any) -> dict[str, Any]:
     from gymnasium import spaces
 
     if isinstance(space, spaces.Box):
-        return {"type": "Box", "shape": list(space.shape), "dtype": str(space.dtype), "low": _bounds(space.low), "high": _bounds(space.high)}
+        return {
+            "type": "Box",
+            "shape": list(space.shape),
+            "dtype": str(space.dtype),
+            "low": _bounds(space.low),
+            "high": _bounds(space.high),
+        }
     if isinstance(space, spaces.Discrete):
         return {"type": "Discrete", "n": int(space.n), "start": int(space.start)}
     if isinstance(space, spaces.MultiDiscrete):
@@ -68,11 +87,14 @@ def space_to_data(space: Any) -> dict[str, Any]:
         return {"type": "MultiBinary", "n": np.asarray(space.n).tolist()}
     if isinstance(space, spaces.Dict):
         return {"type": "Dict", "spaces": {str(k): space_to_data(s) for k, s in space.spaces.items()}}
-    raise PolicyFileError(f"a {type(space).__name__} space cannot be written in a policy file (Box, Discrete, MultiDiscrete, MultiBinary, Dict)")
+    raise PolicyFileError(
+        f"a {type(space).__name__} space cannot be written in a policy file (Box, Discrete, MultiDiscrete, MultiBinary, Dict)"
+    )
 
 
 def _bounds(values: np.ndarray) -> Any:
     """A Box's bounds: one number where all are equal, else nested lists; infinities as "inf" and "-inf"."""
+
     def number(x: float) -> Any:
         return x if math.isfinite(x) else ("inf" if x > 0 else "-inf")
 
@@ -96,18 +118,26 @@ def space_from_data(data: Any, what: str = "space") -> Any:
                 raise PolicyFileError(f"{what}.dtype: {dtype!r} is not one of {', '.join(SPACE_DTYPES)}")
             shape = tuple(int(n) for n in data["shape"])
             low, high = (np.asarray(_numbers(data[k])) for k in ("low", "high"))
-            return spaces.Box(low.astype(dtype) if low.ndim else low.item(), high.astype(dtype) if high.ndim else high.item(), shape,
-                              np.dtype(dtype).type)
+            return spaces.Box(
+                low.astype(dtype) if low.ndim else low.item(),
+                high.astype(dtype) if high.ndim else high.item(),
+                shape,
+                np.dtype(dtype).type,
+            )
         if kind == "Discrete":
             return spaces.Discrete(int(data["n"]), start=int(data.get("start", 0)))
         if kind == "MultiDiscrete":
-            return spaces.MultiDiscrete(np.asarray(data["nvec"], dtype=np.int64), start=np.asarray(data.get("start", 0), dtype=np.int64))
+            return spaces.MultiDiscrete(
+                np.asarray(data["nvec"], dtype=np.int64), start=np.asarray(data.get("start", 0), dtype=np.int64)
+            )
         if kind == "MultiBinary":
             return spaces.MultiBinary(data["n"])
         if kind == "Dict":
             return spaces.Dict({str(k): space_from_data(v, f"{what}.{k}") for k, v in data["spaces"].items()})
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
-        raise PolicyFileError(f"{what}: not a {kind} space as visualenv writes one ({type(exc).__name__}: {exc})") from None
+        raise PolicyFileError(
+            f"{what}: not a {kind} space as visualenv writes one ({type(exc).__name__}: {exc})"
+        ) from None
     raise PolicyFileError(f"{what}.type: {kind!r} is not one of Box, Discrete, MultiDiscrete, MultiBinary, Dict")
 
 
@@ -118,7 +148,7 @@ def _numbers(value: Any) -> Any:
         return NON_FINITE[value]
     if isinstance(value, (int, float)) and not isinstance(value, bool):
         return value
-    raise PolicyFileError(f"a space's bound is {value!r}: expected a number, \"inf\" or \"-inf\"")
+    raise PolicyFileError(f'a space\'s bound is {value!r}: expected a number, "inf" or "-inf"')
 
 
 # -- weights ---------------------------------------------------------------------------------------------------------
@@ -148,14 +178,24 @@ def read_weights_into(module: Any, path: Path) -> None:
         load_model(module, path, strict=True)
     except (SafetensorError, RuntimeError, OSError) as exc:
         detail = " ".join(str(exc).split())[:400]
-        raise PolicyFileError(f"{path}: its weights do not fit the network its policy.json describes: {detail}") from None
+        raise PolicyFileError(
+            f"{path}: its weights do not fit the network its policy.json describes: {detail}"
+        ) from None
 
 
 # -- writing and reading ---------------------------------------------------------------------------------------------
 
 
-def write_policy(out: str | Path, module: Any, *, backend: str, algorithm: str | None, half: bool, frame_stack: int | None = None,
-                 spec: dict[str, Any] | None = None) -> tuple[Path, Path]:
+def write_policy(
+    out: str | Path,
+    module: Any,
+    *,
+    backend: str,
+    algorithm: str | None,
+    half: bool,
+    frame_stack: int | None = None,
+    spec: dict[str, Any] | None = None,
+) -> tuple[Path, Path]:
     """Write `module` (an SB3 policy or an RLlib RLModule) as OUT.safetensors and OUT.json; the two paths."""
     from safetensors.torch import save_file
 
@@ -167,10 +207,21 @@ def write_policy(out: str | Path, module: Any, *, backend: str, algorithm: str |
     weights_path, meta_path = pair
     kind, arguments = sb3_kind(module) if backend == "sb3" else rllib_kind(module)
     machine = {k: v for k, v in machine_record(False).items() if k != "pinned"}
-    meta = {"format": FORMAT, "format_version": FORMAT_VERSION, "backend": backend, "algorithm": algorithm, "policy": kind,
-            "arguments": arguments, "observation_space": space_to_data(module.observation_space),
-            "action_space": space_to_data(module.action_space), "frame_stack": frame_stack, "spec": spec,
-            "weights": weights_path.name, "dtype": "float16" if half else "float32", "machine": machine}
+    meta = {
+        "format": FORMAT,
+        "format_version": FORMAT_VERSION,
+        "backend": backend,
+        "algorithm": algorithm,
+        "policy": kind,
+        "arguments": arguments,
+        "observation_space": space_to_data(module.observation_space),
+        "action_space": space_to_data(module.action_space),
+        "frame_stack": frame_stack,
+        "spec": spec,
+        "weights": weights_path.name,
+        "dtype": "float16" if half else "float32",
+        "machine": machine,
+    }
     text = json.dumps(meta, indent=2, allow_nan=False) + "\n"  # strict JSON: a policy file's numbers are finite
     try:
         weights_path.parent.mkdir(parents=True, exist_ok=True)
@@ -187,7 +238,9 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     if pair is None:
         raise PolicyFileError(f"{path}: not a policy file (expected a name ending in {WEIGHTS} or {META})")
     weights_path, meta_path = pair
-    missing = f"{path}: a policy file is {weights_path.name} with {meta_path.name} beside it, and " + "{} does not exist"
+    missing = (
+        f"{path}: a policy file is {weights_path.name} with {meta_path.name} beside it, and " + "{} does not exist"
+    )
     if not meta_path.is_file():
         raise PolicyFileError(missing.format(meta_path))
     try:
@@ -195,9 +248,11 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise PolicyFileError(f"{meta_path}: not JSON ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise PolicyFileError(f"{meta_path}: not a policy file of visualenv (no \"format\": \"{FORMAT}\")")
+        raise PolicyFileError(f'{meta_path}: not a policy file of visualenv (no "format": "{FORMAT}")')
     if meta.get("format_version") != FORMAT_VERSION:
-        raise PolicyFileError(f"{meta_path}: format_version {meta.get('format_version')!r}; this visualenv reads version {FORMAT_VERSION}")
+        raise PolicyFileError(
+            f"{meta_path}: format_version {meta.get('format_version')!r}; this visualenv reads version {FORMAT_VERSION}"
+        )
     if not weights_path.is_file():
         raise PolicyFileError(missing.format(weights_path))
     return meta
@@ -225,11 +280,15 @@ def read_policy(path: str | Path) -> Any:
     except PolicyFileError as exc:
         raise PolicyFileError(f"{meta_path}: {exc}") from None
     except (TypeError, ValueError, AssertionError) as exc:  # what SB3 and RLlib raise for arguments that do not fit
-        raise PolicyFileError(f"{meta_path}: cannot build {meta.get('policy')} from its arguments: {type(exc).__name__}: {exc}") from None
+        raise PolicyFileError(
+            f"{meta_path}: cannot build {meta.get('policy')} from its arguments: {type(exc).__name__}: {exc}"
+        ) from None
     raise PolicyFileError(f"{meta_path}: backend {backend!r} is not sb3 or rllib")
 
 
-def _rllib_policy(meta: dict[str, Any], arguments: dict[str, Any], observation_space: Any, action_space: Any, weights_path: Path) -> Any:
+def _rllib_policy(
+    meta: dict[str, Any], arguments: dict[str, Any], observation_space: Any, action_space: Any, weights_path: Path
+) -> Any:
     try:
         from visualenv.train.rllib_setup import RLlibPolicy, quiet_deprecations
     except ImportError as exc:

@@ -21,8 +21,20 @@ from visualenv.errors import VisualEnvError
 NOT_ARGUMENTS = ("self", "observation_space", "action_space", "lr_schedule", "optimizer_class", "optimizer_kwargs")
 #: RLlib's activation names (``DefaultModelConfig``'s ``*_activation``) and torch's in-place initializers (``*_initializer``)
 RLLIB_ACTIVATIONS = (None, "linear", "relu", "tanh", "elu", "swish", "silu")
-RLLIB_INITIALIZERS = (None, "orthogonal_", "xavier_uniform_", "xavier_normal_", "kaiming_uniform_", "kaiming_normal_", "zeros_", "ones_",
-                      "normal_", "uniform_", "constant_", "trunc_normal_")
+RLLIB_INITIALIZERS = (
+    None,
+    "orthogonal_",
+    "xavier_uniform_",
+    "xavier_normal_",
+    "kaiming_uniform_",
+    "kaiming_normal_",
+    "zeros_",
+    "ones_",
+    "normal_",
+    "uniform_",
+    "constant_",
+    "trunc_normal_",
+)
 
 
 class PolicyFileError(VisualEnvError):
@@ -40,8 +52,17 @@ def sb3_policies() -> dict[str, type]:
     from stable_baselines3.dqn import policies as dqn
     from stable_baselines3.sac import policies as sac
 
-    kinds = (policies.ActorCriticPolicy, policies.ActorCriticCnnPolicy, policies.MultiInputActorCriticPolicy,
-             dqn.DQNPolicy, dqn.CnnPolicy, dqn.MultiInputPolicy, sac.SACPolicy, sac.CnnPolicy, sac.MultiInputPolicy)
+    kinds = (
+        policies.ActorCriticPolicy,
+        policies.ActorCriticCnnPolicy,
+        policies.MultiInputActorCriticPolicy,
+        dqn.DQNPolicy,
+        dqn.CnnPolicy,
+        dqn.MultiInputPolicy,
+        sac.SACPolicy,
+        sac.CnnPolicy,
+        sac.MultiInputPolicy,
+    )
     return {dotted(cls): cls for cls in kinds}
 
 
@@ -49,19 +70,39 @@ def activations() -> dict[str, type]:
     """torch's activation modules, by the names ``torch.nn.<Name>``."""
     from torch import nn
 
-    return {f"torch.nn.{cls.__name__}": cls for cls in (nn.Tanh, nn.ReLU, nn.LeakyReLU, nn.ELU, nn.SELU, nn.GELU, nn.SiLU, nn.Mish,
-                                                         nn.Sigmoid, nn.Softplus, nn.Identity)}
+    return {
+        f"torch.nn.{cls.__name__}": cls
+        for cls in (
+            nn.Tanh,
+            nn.ReLU,
+            nn.LeakyReLU,
+            nn.ELU,
+            nn.SELU,
+            nn.GELU,
+            nn.SiLU,
+            nn.Mish,
+            nn.Sigmoid,
+            nn.Softplus,
+            nn.Identity,
+        )
+    }
 
 
 def features_extractors() -> dict[str, type]:
     """SB3's own features extractors (a custom one is code: export refuses it)."""
     from stable_baselines3.common import torch_layers
 
-    return {dotted(cls): cls for cls in (torch_layers.NatureCNN, torch_layers.FlattenExtractor, torch_layers.CombinedExtractor)}
+    return {
+        dotted(cls): cls
+        for cls in (torch_layers.NatureCNN, torch_layers.FlattenExtractor, torch_layers.CombinedExtractor)
+    }
 
 
 #: SB3 arguments that are classes, and the table each is named from
-CLASS_ARGUMENTS: dict[str, Callable[[], dict[str, type]]] = {"activation_fn": activations, "features_extractor_class": features_extractors}
+CLASS_ARGUMENTS: dict[str, Callable[[], dict[str, type]]] = {
+    "activation_fn": activations,
+    "features_extractor_class": features_extractors,
+}
 
 
 def rllib_modules() -> dict[str, type]:
@@ -158,9 +199,12 @@ def rllib_kind(module: Any) -> tuple[str, dict[str, Any]]:
         import dataclasses
 
         config = dataclasses.asdict(config)
-    arguments = {"inference_only": bool(kwargs["inference_only"]), "learner_only": bool(kwargs["learner_only"]),
-                 "model_config": as_data(config, "model_config"),
-                 "catalog_class": name_of(rllib_catalogs(), kwargs["catalog_class"], "catalog_class")}
+    arguments = {
+        "inference_only": bool(kwargs["inference_only"]),
+        "learner_only": bool(kwargs["learner_only"]),
+        "model_config": as_data(config, "model_config"),
+        "catalog_class": name_of(rllib_catalogs(), kwargs["catalog_class"], "catalog_class"),
+    }
     check_model_config(arguments["model_config"])
     return name, arguments
 
@@ -172,15 +216,21 @@ def check_model_config(config: Any) -> None:
     from ray.rllib.core.rl_module.default_model_config import DefaultModelConfig
 
     if not isinstance(config, dict):
-        raise PolicyFileError(f"model_config: expected a mapping of RLlib's model settings, got {type(config).__name__}")
+        raise PolicyFileError(
+            f"model_config: expected a mapping of RLlib's model settings, got {type(config).__name__}"
+        )
     known = [f.name for f in dataclasses.fields(DefaultModelConfig)]
     for key, value in config.items():
         if key not in known:
             raise PolicyFileError(f"model_config.{key}: not a setting of RLlib's DefaultModelConfig")
         if key.endswith("_activation") and value not in RLLIB_ACTIVATIONS:
-            raise PolicyFileError(f"model_config.{key}: {value!r} is not one of {', '.join(map(str, RLLIB_ACTIVATIONS))}")
+            raise PolicyFileError(
+                f"model_config.{key}: {value!r} is not one of {', '.join(map(str, RLLIB_ACTIVATIONS))}"
+            )
         if key.endswith("_initializer") and value not in RLLIB_INITIALIZERS:
-            raise PolicyFileError(f"model_config.{key}: {value!r} is not one of {', '.join(map(str, RLLIB_INITIALIZERS))}")
+            raise PolicyFileError(
+                f"model_config.{key}: {value!r} is not one of {', '.join(map(str, RLLIB_INITIALIZERS))}"
+            )
 
 
 def build_rllib_module(kind: Any, arguments: dict[str, Any], observation_space: Any, action_space: Any) -> Any:
@@ -188,8 +238,16 @@ def build_rllib_module(kind: Any, arguments: dict[str, Any], observation_space: 
     cls = chosen(rllib_modules(), kind, "policy")
     expected = {"inference_only", "learner_only", "model_config", "catalog_class"}
     if set(arguments) != expected:
-        raise PolicyFileError(f"arguments: an RLModule takes exactly {', '.join(sorted(expected))}, got {', '.join(sorted(arguments))}")
+        raise PolicyFileError(
+            f"arguments: an RLModule takes exactly {', '.join(sorted(expected))}, got {', '.join(sorted(arguments))}"
+        )
     check_model_config(arguments["model_config"])
     catalog = chosen(rllib_catalogs(), arguments["catalog_class"], "catalog_class")
-    return cls(observation_space=observation_space, action_space=action_space, inference_only=bool(arguments["inference_only"]),
-               learner_only=bool(arguments["learner_only"]), model_config=dict(arguments["model_config"]), catalog_class=catalog)
+    return cls(
+        observation_space=observation_space,
+        action_space=action_space,
+        inference_only=bool(arguments["inference_only"]),
+        learner_only=bool(arguments["learner_only"]),
+        model_config=dict(arguments["model_config"]),
+        catalog_class=catalog,
+    )

@@ -38,7 +38,20 @@ from visualenv.versions import versions
 LIKENESS_KEYS = ("cpu_isa", "cpu_features", "torch", "blender", "numpy", "mujoco", "pinned")
 #: the CPU flags of vector instructions: libraries pick their code by them (two AVX-512 Xeons, Cascade Lake and Emerald
 #: Rapids, rendered Goalie's and the pendulum's same states in other last bits), so machines alike replay bit for bit
-VECTOR_FLAG_PREFIXES = ("sse", "ssse", "avx", "fma", "f16c", "amx", "vaes", "vpclmulqdq", "gfni", "sha_ni", "bmi", "adx")
+VECTOR_FLAG_PREFIXES = (
+    "sse",
+    "ssse",
+    "avx",
+    "fma",
+    "f16c",
+    "amx",
+    "vaes",
+    "vpclmulqdq",
+    "gfni",
+    "sha_ni",
+    "bmi",
+    "adx",
+)
 
 
 @contextmanager
@@ -66,8 +79,13 @@ def pinned_inference() -> Iterator[bool]:
 
 def machine_record(pinned: bool) -> dict[str, Any]:
     """What a replay of an evaluation needs to know about the machine that ran it."""
-    record: dict[str, Any] = {"cpu_isa": cpu_isa(), "cpu_features": cpu_features(), "cpu": _cpu_name(), "machine": platform.machine(),
-                              "pinned": pinned}
+    record: dict[str, Any] = {
+        "cpu_isa": cpu_isa(),
+        "cpu_features": cpu_features(),
+        "cpu": _cpu_name(),
+        "machine": platform.machine(),
+        "pinned": pinned,
+    }
     torch = sys.modules.get("torch")
     record["torch"] = torch.__version__ if torch is not None else None
     known = versions()
@@ -116,11 +134,17 @@ def unlike(recorded: dict[str, Any] | None, here: dict[str, Any]) -> list[str]:
     development machine with AVX2, unpinned.
     """
     recorded = recorded or {"cpu_isa": "AVX2", "pinned": False}
-    return [_difference(key, recorded.get(key), here.get(key)) for key in LIKENESS_KEYS if key in recorded and recorded.get(key) != here.get(key)]
+    return [
+        _difference(key, recorded.get(key), here.get(key))
+        for key in LIKENESS_KEYS
+        if key in recorded and recorded.get(key) != here.get(key)
+    ]
 
 
 def _difference(key: str, there: Any, here: Any) -> str:
-    if key == "cpu_features" and isinstance(there, str) and isinstance(here, str):  # long lists: the flags one side lacks
+    if (
+        key == "cpu_features" and isinstance(there, str) and isinstance(here, str)
+    ):  # long lists: the flags one side lacks
         a, b = set(there.split()), set(here.split())
         return f"cpu_features {' '.join(sorted(a - b)) or '-'} there only, {' '.join(sorted(b - a)) or '-'} here only"
     return f"{key} {there} there, {here} here"

@@ -38,9 +38,19 @@ from visualenv.train.evaluation import FINAL_EPISODES, evaluation_line
 from visualenv.train.run_folder import CHECKPOINT_STEPS, RunFolder, record_run, write_results
 
 BACKEND = "rllib"
-PROGRESS_COLUMNS = ("time/total_timesteps", "time/iterations", "time/fps", "time/time_elapsed", "rollout/ep_rew_mean",
-                    "rollout/ep_len_mean", "rollout/success_rate", "train/learning_rate", "train/policy_loss", "train/value_loss",
-                    "train/entropy")
+PROGRESS_COLUMNS = (
+    "time/total_timesteps",
+    "time/iterations",
+    "time/fps",
+    "time/time_elapsed",
+    "rollout/ep_rew_mean",
+    "rollout/ep_len_mean",
+    "rollout/success_rate",
+    "train/learning_rate",
+    "train/policy_loss",
+    "train/value_loss",
+    "train/entropy",
+)
 
 
 @dataclass
@@ -67,9 +77,17 @@ def algorithm_config(config: RLlibTrainConfig) -> Any:
     """The PPOConfig of this run; checks the spec and the hyperparameters before anything starts."""
     from visualenv.train.rllib_setup import ppo_config
 
-    return ppo_config(config.spec, env_runners=config.env_runners, envs_per_runner=config.envs_per_runner,
-                      frame_stack=config.frame_stack if config.render else 0, seed=config.seed, render=config.render,
-                      hyperparams=config.hyperparams, pin=config.pin, batched=config.batched)
+    return ppo_config(
+        config.spec,
+        env_runners=config.env_runners,
+        envs_per_runner=config.envs_per_runner,
+        frame_stack=config.frame_stack if config.render else 0,
+        seed=config.seed,
+        render=config.render,
+        hyperparams=config.hyperparams,
+        pin=config.pin,
+        batched=config.batched,
+    )
 
 
 @contextmanager
@@ -80,7 +98,12 @@ def ray_cluster(address: str | None, cpus: int) -> Iterator[None]:
     if ray.is_initialized():
         yield
         return
-    kwargs: dict[str, Any] = {"include_dashboard": False, "log_to_driver": False, "configure_logging": True, "logging_level": "ERROR"}
+    kwargs: dict[str, Any] = {
+        "include_dashboard": False,
+        "log_to_driver": False,
+        "configure_logging": True,
+        "logging_level": "ERROR",
+    }
     if address:
         ray.init(address=address, **kwargs)
     else:
@@ -163,7 +186,13 @@ class _Evaluations:
         self.results.append(returns)
         self.ep_lengths.append(lengths)
         self.successes.append(successes)
-        np.savez(self.path, timesteps=self.timesteps, results=self.results, ep_lengths=self.ep_lengths, successes=self.successes)
+        np.savez(
+            self.path,
+            timesteps=self.timesteps,
+            results=self.results,
+            ep_lengths=self.ep_lengths,
+            successes=self.successes,
+        )
 
 
 def _episodes(policy: Any, vec_env: Any, episodes: int) -> tuple[list[float], list[int], list[bool]]:
@@ -176,8 +205,15 @@ def _episodes(policy: Any, vec_env: Any, episodes: int) -> tuple[list[float], li
         if local["done"]:
             successes.append(bool(local["info"].get("is_success", False)))
 
-    returns, lengths = evaluate_policy(policy, vec_env, n_eval_episodes=episodes, deterministic=True, return_episode_rewards=True,
-                                       callback=record, warn=False)
+    returns, lengths = evaluate_policy(
+        policy,
+        vec_env,
+        n_eval_episodes=episodes,
+        deterministic=True,
+        return_episode_rewards=True,
+        callback=record,
+        warn=False,
+    )
     assert isinstance(returns, list) and isinstance(lengths, list)  # return_episode_rewards=True: one entry per episode
     return [float(r) for r in returns], [int(n) for n in lengths], successes[:episodes]
 
@@ -186,11 +222,17 @@ def _progress_row(result: dict[str, Any], steps: int, elapsed: float, iteration_
     runners, learner = result.get("env_runners", {}), result.get("learners", {}).get("default_policy", {})
     seconds = result.get("time_this_iter_s") or 0.0
     return {
-        "time/total_timesteps": steps, "time/iterations": result.get("training_iteration"), "time/time_elapsed": round(elapsed, 1),
+        "time/total_timesteps": steps,
+        "time/iterations": result.get("training_iteration"),
+        "time/time_elapsed": round(elapsed, 1),
         "time/fps": round(iteration_steps / seconds) if seconds else "",
-        "rollout/ep_rew_mean": runners.get("episode_return_mean", ""), "rollout/ep_len_mean": runners.get("episode_len_mean", ""),
-        "rollout/success_rate": runners.get("success_rate", ""), "train/learning_rate": learner.get("default_optimizer_learning_rate", ""),
-        "train/policy_loss": learner.get("policy_loss", ""), "train/value_loss": learner.get("vf_loss", ""), "train/entropy": learner.get("entropy", ""),
+        "rollout/ep_rew_mean": runners.get("episode_return_mean", ""),
+        "rollout/ep_len_mean": runners.get("episode_len_mean", ""),
+        "rollout/success_rate": runners.get("success_rate", ""),
+        "train/learning_rate": learner.get("default_optimizer_learning_rate", ""),
+        "train/policy_loss": learner.get("policy_loss", ""),
+        "train/value_loss": learner.get("vf_loss", ""),
+        "train/entropy": learner.get("entropy", ""),
     }
 
 
@@ -212,8 +254,14 @@ def _append_progress(path: Path, row: dict[str, Any]) -> None:
         writer.writerow({k: ("" if v is None or (isinstance(v, float) and np.isnan(v)) else v) for k, v in row.items()})
 
 
-def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None,
-          address: str | None = None) -> dict[str, Any]:
+def train(
+    config: RLlibTrainConfig,
+    run_dir: Path,
+    *,
+    resume: bool = False,
+    changes: dict[str, Any] | None = None,
+    address: str | None = None,
+) -> dict[str, Any]:
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
     from visualenv.train.plots import training_plots
     from visualenv.env.registration import resolve
@@ -228,7 +276,9 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
     folder = RunFolder(run_dir)
     folder.logs.mkdir(exist_ok=True)
     frame_stack = config.frame_stack if config.render else 0
-    eval_env = make_eval_env(config.spec, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False)
+    eval_env = make_eval_env(
+        config.spec, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False
+    )
     stop = _StopRequest()
     cpus = max(len(usable_cores()), config.env_runners)  # a local cluster: one CPU per runner even on a small machine
     try:
@@ -241,13 +291,33 @@ def train(config: RLlibTrainConfig, run_dir: Path, *, resume: bool = False, chan
             finally:
                 algo.stop()
         model = folder.best_policy if folder.best_policy.exists() else folder.final_policy
-        results.update(final_evaluation(load_model(model), eval_env, config.final_eval_episodes, final_seed(config.seed)))
+        results.update(
+            final_evaluation(load_model(model), eval_env, config.final_eval_episodes, final_seed(config.seed))
+        )
     finally:
         eval_env.close()
     results["model"] = model.name
     results["selection"] = selection_record(run_dir, selection_seed(config.seed))
-    results = {k: results[k] for k in ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate", "reward_ci95", "length_ci95",
-                                       "success_ci95", "ci_method", "eval_seed", "selection", "steps", "wall_time_s", "model", "stopped_early")}
+    results = {
+        k: results[k]
+        for k in (
+            "episodes",
+            "mean_reward",
+            "std_reward",
+            "mean_length",
+            "success_rate",
+            "reward_ci95",
+            "length_ci95",
+            "success_ci95",
+            "ci_method",
+            "eval_seed",
+            "selection",
+            "steps",
+            "wall_time_s",
+            "model",
+            "stopped_early",
+        )
+    }
     write_results(folder, results)
     training_plots(run_dir)
     return results
@@ -262,15 +332,20 @@ def _restore(algo: Any, run_dir: Path) -> int:
         return 0
     try:
         algo.restore_from_path(str(earlier.resolve()))
-    except Exception as exc:  # RLlib raises whatever torch or its unpickling met; a model of another shape is the usual one
+    except (
+        Exception
+    ) as exc:  # RLlib raises whatever torch or its unpickling met; a model of another shape is the usual one
         detail = " ".join(str(exc).split())[:300]
-        raise ConfigError(f"cannot resume {run_dir}: its checkpoint does not fit this run's model (saved by another version of "
-                          f"visualenv or with other settings?): {detail}") from None
+        raise ConfigError(
+            f"cannot resume {run_dir}: its checkpoint does not fit this run's model (saved by another version of "
+            f"visualenv or with other settings?): {detail}"
+        ) from None
     return int(json.loads((earlier / CHECKPOINT_STEPS).read_text())["steps"])
 
 
-def _train_loop(config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env: Any, stop: _StopRequest,
-                steps: int) -> dict[str, Any]:
+def _train_loop(
+    config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env: Any, stop: _StopRequest, steps: int
+) -> dict[str, Any]:
     from tqdm import tqdm
 
     from visualenv.train.model_files import save_rllib_module
@@ -292,7 +367,10 @@ def _train_loop(config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env
             _append_progress(folder.progress, row)
             bar.update(steps - bar.n)
             reward = row["rollout/ep_rew_mean"]
-            bar.set_postfix(reward=f"{reward:.1f}" if reward != "" else "-", runners=result.get("fault_tolerance", {}).get("num_healthy_workers", "?"))
+            bar.set_postfix(
+                reward=f"{reward:.1f}" if reward != "" else "-",
+                runners=result.get("fault_tolerance", {}).get("num_healthy_workers", "?"),
+            )
             if steps - last_eval >= config.eval_every:
                 last_eval = steps
                 returns, lengths, successes = _episodes(RLlibPolicy(algo.get_module()), eval_env, config.eval_episodes)

@@ -35,8 +35,14 @@ from visualenv.compat.ray import DEPRECATION_LOGGER, local_cluster_addresses
 from visualenv.errors import ConfigError, did_you_mean
 
 ENV_PREFIX = "visualenv-rllib:"
-MODULE_DIR = Path("learner_group") / "learner" / "rl_module" / "default_policy"  # the RLModule inside an Algorithm checkpoint
-NATURE_FILTERS: list[list[Any]] = [[32, 8, 4, "valid"], [64, 4, 2, "valid"], [64, 3, 1, "valid"]]  # the paper's (and SB3's NatureCNN) conv stack
+MODULE_DIR = (
+    Path("learner_group") / "learner" / "rl_module" / "default_policy"
+)  # the RLModule inside an Algorithm checkpoint
+NATURE_FILTERS: list[list[Any]] = [
+    [32, 8, 4, "valid"],
+    [64, 4, 2, "valid"],
+    [64, 3, 1, "valid"],
+]  # the paper's (and SB3's NatureCNN) conv stack
 FEATURES = 512  # NatureCNN's features: the one dense layer both heads read
 
 
@@ -130,7 +136,9 @@ def conv_filters(height: int, width: int) -> list[list[Any]]:
         stack = [[16, 3, 2, "valid"], [32, 3, 1, "valid"]]
     else:
         stack = [[16, 2, 1, "valid"]]
-    rows, columns, _ = CNNEncoderConfig(input_dims=[height, width, 1], cnn_filter_specifiers=stack, flatten_at_end=False).output_dims
+    rows, columns, _ = CNNEncoderConfig(
+        input_dims=[height, width, 1], cnn_filter_specifiers=stack, flatten_at_end=False
+    ).output_dims
     return [*stack, [FEATURES, [rows, columns], 1, "valid"]]
 
 
@@ -148,9 +156,15 @@ def model_config(observation_space: spaces.Space) -> Any:
     shape = observation_space.shape or ()
     if len(shape) == 3:
         height, width = shape[:2]
-        return DefaultModelConfig(conv_filters=conv_filters(height, width), conv_activation="relu",  # type: ignore[arg-type]
-                                  conv_kernel_initializer="orthogonal_", conv_kernel_initializer_kwargs={"gain": math.sqrt(2)},
-                                  conv_bias_initializer="zeros_", head_fcnet_hiddens=[], vf_share_layers=True)
+        return DefaultModelConfig(
+            conv_filters=conv_filters(height, width),  # type: ignore[arg-type]
+            conv_activation="relu",
+            conv_kernel_initializer="orthogonal_",
+            conv_kernel_initializer_kwargs={"gain": math.sqrt(2)},
+            conv_bias_initializer="zeros_",
+            head_fcnet_hiddens=[],
+            vf_share_layers=True,
+        )
     return DefaultModelConfig(fcnet_hiddens=[64, 64], vf_share_layers=False)
 
 
@@ -162,8 +176,10 @@ def check_observation(target: str, render: bool = True) -> spaces.Space:
     space = env.observation_space
     env.close()
     if isinstance(space, spaces.Dict):
-        raise ConfigError(f"{target}: --backend rllib trains on one camera; this spec's observation has several "
-                          f"({', '.join(space.spaces)}): RLlib's default encoder has no Dict support (use the SB3 backend)")
+        raise ConfigError(
+            f"{target}: --backend rllib trains on one camera; this spec's observation has several "
+            f"({', '.join(space.spaces)}): RLlib's default encoder has no Dict support (use the SB3 backend)"
+        )
     return space
 
 
@@ -171,18 +187,38 @@ def check_observation(target: str, render: bool = True) -> spaces.Space:
 # own defaults differ, SB3's are kept: RLlib clips the value loss at 10 (returns of +-10 give squared errors of
 # hundreds, whose gradient the clip zeroes), adds an adaptive KL penalty and does not clip gradients.
 SB3_PPO_DEFAULTS: dict[str, Any] = {
-    "train_batch_size_per_learner": 512, "minibatch_size": 128, "num_epochs": 4, "lr": 2.5e-4, "gamma": 0.99, "lambda_": 0.95,
-    "clip_param": 0.1, "entropy_coeff": 0.01, "vf_loss_coeff": 0.5,
-    "vf_clip_param": float("inf"), "use_kl_loss": False, "grad_clip": 0.5, "grad_clip_by": "global_norm",
+    "train_batch_size_per_learner": 512,
+    "minibatch_size": 128,
+    "num_epochs": 4,
+    "lr": 2.5e-4,
+    "gamma": 0.99,
+    "lambda_": 0.95,
+    "clip_param": 0.1,
+    "entropy_coeff": 0.01,
+    "vf_loss_coeff": 0.5,
+    "vf_clip_param": float("inf"),
+    "use_kl_loss": False,
+    "grad_clip": 0.5,
+    "grad_clip_by": "global_norm",
 }
-PPO_NAMES_SET_HERE = ("model_config", "learner_class", "learner_connector", "add_default_connectors_to_learner_pipeline")
+PPO_NAMES_SET_HERE = (
+    "model_config",
+    "learner_class",
+    "learner_connector",
+    "add_default_connectors_to_learner_pipeline",
+)
 
 
 def ppo_hyperparameters() -> list[str]:
     """The names `--set` accepts: keyword arguments of ``PPOConfig.training`` (lr, gamma, minibatch_size, ...)."""
     from ray.rllib.algorithms.ppo import PPOConfig
 
-    names = {n for cls in PPOConfig.__mro__ if "training" in vars(cls) for n in inspect.signature(vars(cls)["training"]).parameters}
+    names = {
+        n
+        for cls in PPOConfig.__mro__
+        if "training" in vars(cls)
+        for n in inspect.signature(vars(cls)["training"]).parameters
+    }
     return sorted(names - {"self", "kwargs", *PPO_NAMES_SET_HERE})
 
 
@@ -193,9 +229,19 @@ def check_hyperparameters(hyperparams: dict[str, Any]) -> None:
             raise ConfigError(f"RLlib's PPO has no hyperparameter '{key}'" + did_you_mean(key, known))
 
 
-def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, frame_stack: int = 4, seed: int = 0,
-               render: bool = True, hyperparams: dict[str, Any] | None = None, cpus_per_runner: int = 1, pin: bool = True,
-               batched: bool = False) -> Any:
+def ppo_config(
+    target: str,
+    *,
+    env_runners: int = 2,
+    envs_per_runner: int = 1,
+    frame_stack: int = 4,
+    seed: int = 0,
+    render: bool = True,
+    hyperparams: dict[str, Any] | None = None,
+    cpus_per_runner: int = 1,
+    pin: bool = True,
+    batched: bool = False,
+) -> Any:
     """A PPOConfig for `target`: `env_runners` remote EnvRunners of `envs_per_runner` envs each, restarted when they die.
 
     `batched`: each runner's envs are one BatchedVectorEnv (one Blender scene, one render call per step)
@@ -216,14 +262,21 @@ def ppo_config(target: str, *, env_runners: int = 2, envs_per_runner: int = 1, f
         height, width, channels = space.shape or (0, 0, 0)
         space = spaces.Box(0.0, 1.0, (height, width, channels * max(1, frame_stack)), np.float32)
     threads = cpus_per_runner if batched else max(1, cpus_per_runner // envs_per_runner)
-    name, env_config = register(target, frame_stack=frame_stack, render=render, threads=threads, pin=pin, batched=batched)
+    name, env_config = register(
+        target, frame_stack=frame_stack, render=render, threads=threads, pin=pin, batched=batched
+    )
     return (
         PPOConfig()
         .api_stack(enable_rl_module_and_learner=True, enable_env_runner_and_connector_v2=True)
         .environment(name, env_config=env_config)
-        .env_runners(num_env_runners=env_runners, num_envs_per_env_runner=envs_per_runner, num_cpus_per_env_runner=cpus_per_runner,
-                     rollout_fragment_length="auto", sample_timeout_s=600.0,
-                     gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT if batched else gym.VectorizeMode.SYNC)
+        .env_runners(
+            num_env_runners=env_runners,
+            num_envs_per_env_runner=envs_per_runner,
+            num_cpus_per_env_runner=cpus_per_runner,
+            rollout_fragment_length="auto",
+            sample_timeout_s=600.0,
+            gym_env_vectorize_mode=gym.VectorizeMode.VECTOR_ENTRY_POINT if batched else gym.VectorizeMode.SYNC,
+        )
         .fault_tolerance(restart_failed_env_runners=True, max_num_env_runner_restarts=100)
         .rl_module(model_config=model_config(space))
         .training(**{**SB3_PPO_DEFAULTS, **hyperparams})
@@ -238,9 +291,13 @@ class VisualEnvCallbacks(RLlibCallback):
     def on_episode_end(self, *, episode: Any, metrics_logger: Any = None, **kwargs: Any) -> None:
         infos = episode.get_infos(-1) if hasattr(episode, "get_infos") else {}
         if metrics_logger is not None:
-            metrics_logger.log_value("success_rate", float(bool((infos or {}).get("is_success", False))), reduce="mean", window=100)
+            metrics_logger.log_value(
+                "success_rate", float(bool((infos or {}).get("is_success", False))), reduce="mean", window=100
+            )
 
-    def on_sample_end(self, *, env_runner: Any = None, metrics_logger: Any = None, samples: Any = None, **kwargs: Any) -> None:
+    def on_sample_end(
+        self, *, env_runner: Any = None, metrics_logger: Any = None, samples: Any = None, **kwargs: Any
+    ) -> None:
         import ray
 
         if metrics_logger is None or not samples:
@@ -272,7 +329,9 @@ class RLlibPolicy:
         with quiet_deprecations():
             return cls(RLModule.from_checkpoint(str(Path(checkpoint).resolve() / MODULE_DIR)))
 
-    def predict(self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True) -> tuple[np.ndarray, None]:
+    def predict(
+        self, observation: Any, state: Any = None, episode_start: Any = None, deterministic: bool = True
+    ) -> tuple[np.ndarray, None]:
         """Actions for a batch of observations (or one), as SB3's ``predict``; `state` and `episode_start` are unused."""
         import torch
 
@@ -330,5 +389,17 @@ def check_address(address: str | None) -> None:
         raise ConfigError(f"--address {address}: cannot reach a Ray head there ({exc.strerror or exc})") from None
 
 
-__all__ = ["RLlibPolicy", "ScaledImage", "VisualEnvCallbacks", "check_address", "check_observation", "conv_filters", "is_checkpoint",
-           "make_rllib_env", "model_config", "ppo_config", "quiet_deprecations", "register"]
+__all__ = [
+    "RLlibPolicy",
+    "ScaledImage",
+    "VisualEnvCallbacks",
+    "check_address",
+    "check_observation",
+    "conv_filters",
+    "is_checkpoint",
+    "make_rllib_env",
+    "model_config",
+    "ppo_config",
+    "quiet_deprecations",
+    "register",
+]

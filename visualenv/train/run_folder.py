@@ -251,12 +251,20 @@ SETTINGS: dict[str, Rule] = {
     **dict.fromkeys(("envs", "env_runners", "envs_per_runner"), COUNT),
     **dict.fromkeys(("eval_episodes", "final_eval_episodes", "rounds", "episodes"), EPISODES),
     **dict.fromkeys(("render", "progress", "pin", "batched"), Rule(bool)),
-    "algo": Rule(str, choices=("ppo", "a2c", "dqn", "sac", "dagger")), "workers": Rule(int, 1, 2**16, optional=True),
-    "frame_stack": Rule(int, 1, 64), "seed": Rule(int, 0, MAX_TRAIN_SEED), "hyperparams": Rule(dict),
-    "render_device": Rule(str, choices=("cpu", "gpu"), optional=True), "backend": Rule(str, choices=("rllib",)),
+    "algo": Rule(str, choices=("ppo", "a2c", "dqn", "sac", "dagger")),
+    "workers": Rule(int, 1, 2**16, optional=True),
+    "frame_stack": Rule(int, 1, 64),
+    "seed": Rule(int, 0, MAX_TRAIN_SEED),
+    "hyperparams": Rule(dict),
+    "render_device": Rule(str, choices=("cpu", "gpu"), optional=True),
+    "backend": Rule(str, choices=("rllib",)),
     # distillation
-    "student": Rule(str, optional=True), "mixing": Rule(float, 0, 1), "epochs": Rule(float, 0, 10**6, above_low=True),
-    "batch_size": Rule(int, 1, 2**20), "learning_rate": Rule(float, 0, 1, above_low=True), "shift": Rule(int, 0, 1024),
+    "student": Rule(str, optional=True),
+    "mixing": Rule(float, 0, 1),
+    "epochs": Rule(float, 0, 10**6, above_low=True),
+    "batch_size": Rule(int, 1, 2**20),
+    "learning_rate": Rule(float, 0, 1, above_low=True),
+    "shift": Rule(int, 0, 1024),
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
 #: each backend's settings: those of its first format, then (with the value an older run takes) those added since
@@ -274,8 +282,10 @@ ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill":
 RECORD_KEYS: dict[str, Rule] = {
     **dict.fromkeys(("command", "spec_path"), Rule(str)),
     **dict.fromkeys(("config", "versions", "teacher", "student"), Rule(dict)),
-    "format": Rule(str, choices=(FORMAT,)), "format_version": Rule(int, 1, FORMAT_VERSION),
-    "backend": Rule(str, choices=BACKENDS), "resumes": Rule(list),
+    "format": Rule(str, choices=(FORMAT,)),
+    "format_version": Rule(int, 1, FORMAT_VERSION),
+    "backend": Rule(str, choices=BACKENDS),
+    "resumes": Rule(list),
 }
 
 
@@ -300,8 +310,9 @@ def check_record(record: Any, where: str = "config.json") -> dict[str, Any]:
         raise RunFolderError(f"{where}: not the config.json of a visualenv run (no 'config' mapping of settings)")
     _check(RECORD_KEYS, record, where, "")
     if record.get("format_version") != FORMAT_VERSION or "backend" not in record:
-        raise RunFolderError(f"{where}: expected format_version {FORMAT_VERSION} and a backend "
-                             "(read_config migrates an older run's)")
+        raise RunFolderError(
+            f"{where}: expected format_version {FORMAT_VERSION} and a backend (read_config migrates an older run's)"
+        )
     backend, config = record["backend"], record["config"]
     missing = [k for k in settings(backend) if k not in config]
     if missing:
@@ -311,13 +322,17 @@ def check_record(record: Any, where: str = "config.json") -> dict[str, Any]:
         raise RunFolderError(f"{where}: unknown setting config.{extra[0]} for a {backend} run")
     _check(SETTINGS, config, where, "config.")
     if config["algo"] not in ALGORITHMS[backend]:
-        raise RunFolderError(f"{where}: config.algo: a {backend} run trains {', '.join(ALGORITHMS[backend])}, "
-                             f"not {config['algo']!r}")
+        raise RunFolderError(
+            f"{where}: config.algo: a {backend} run trains {', '.join(ALGORITHMS[backend])}, not {config['algo']!r}"
+        )
     if config.get("workers") is not None and config["workers"] > config["envs"]:
         raise RunFolderError(f"{where}: config.workers: {config['workers']} workers for {config['envs']} envs")
     for resume in record.get("resumes", []):
-        if not (isinstance(resume, dict) and isinstance(resume.get("command"), str)
-                and isinstance(resume.get("hyperparams"), dict)):
+        if not (
+            isinstance(resume, dict)
+            and isinstance(resume.get("command"), str)
+            and isinstance(resume.get("hyperparams"), dict)
+        ):
             raise RunFolderError(f"{where}: resumes: expected a command and its hyperparameters, got {resume!r}")
     return record
 
@@ -326,9 +341,14 @@ RESULT_RULES: dict[str, Rule] = {
     **dict.fromkeys(("per_episode", "evaluated"), Rule(dict)),
     **dict.fromkeys(("machine", "selection"), Rule(dict, optional=True)),
     **dict.fromkeys(("std_reward", "mean_length", "wall_time_s"), Rule(float, 0)),
-    "episodes": EPISODES, "mean_reward": Rule(float), "success_rate": Rule(float, 0, 1),
-    "eval_seed": Rule(int, 0, 2**63 - 1), "resets_before": Rule(int, 0, 10**9), "steps": Rule(int, 0, 10**12),
-    "model": Rule(str), "stopped_early": Rule(bool),
+    "episodes": EPISODES,
+    "mean_reward": Rule(float),
+    "success_rate": Rule(float, 0, 1),
+    "eval_seed": Rule(int, 0, 2**63 - 1),
+    "resets_before": Rule(int, 0, 10**9),
+    "steps": Rule(int, 0, 10**12),
+    "model": Rule(str),
+    "stopped_early": Rule(bool),
 }
 #: what results.json has always held
 RESULT_KEYS = ("episodes", "mean_reward", "std_reward", "mean_length", "success_rate")
@@ -378,8 +398,9 @@ def read_config(run: str | Path | RunFolder) -> dict[str, Any]:
     """config.json in the current format (an older run's migrated, see :func:`migrate`), its settings checked."""
     folder = _folder(run)
     if not folder.is_run():
-        raise RunFolderError(f"{folder.path} is not a run folder of `visualenv train` nor `visualenv distill` "
-                             f"(no {folder.config.name})")
+        raise RunFolderError(
+            f"{folder.path} is not a run folder of `visualenv train` nor `visualenv distill` (no {folder.config.name})"
+        )
     record = migrate(_read_json(folder.config), where=str(folder.config)).record
     assert record is not None
     return record
@@ -392,8 +413,16 @@ def write_results(run: str | Path | RunFolder, results: dict[str, Any]) -> Path:
     return folder.results
 
 
-def record_run(run: str | Path | RunFolder, config: Any, spec_path: str, *, backend: str, resume: bool = False,
-               changes: dict[str, Any] | None = None, extra: dict[str, Any] | None = None) -> None:
+def record_run(
+    run: str | Path | RunFolder,
+    config: Any,
+    spec_path: str,
+    *,
+    backend: str,
+    resume: bool = False,
+    changes: dict[str, Any] | None = None,
+    extra: dict[str, Any] | None = None,
+) -> None:
     """config.json of a new run (the command, `config`'s settings, the versions, `extra` keys); a resumed run's
     keeps its record, takes the settings now in force and appends the command and the changed hyperparameters."""
     from visualenv.versions import versions
@@ -406,8 +435,14 @@ def record_run(run: str | Path | RunFolder, config: Any, spec_path: str, *, back
         record["config"] = settings_now
         record.setdefault("resumes", []).append({"command": command, "hyperparams": dict(changes or {})})
     else:
-        record = {"backend": backend, "command": command, "config": settings_now, "versions": versions(),
-                  "spec_path": spec_path, **(extra or {})}
+        record = {
+            "backend": backend,
+            "command": command,
+            "config": settings_now,
+            "versions": versions(),
+            "spec_path": spec_path,
+            **(extra or {}),
+        }
     write_config(folder, record)
 
 
@@ -465,8 +500,9 @@ def migrate(record: Any, results: Any = None, folder: RunFolder | None = None, *
         record = _migrated_record(record, where)
     note = None
     if results is not None:
-        results = check_results({k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict)
-                                else results, where)
+        results = check_results(
+            {k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict) else results, where
+        )
         if record is not None and "eval_seed" not in results:
             if not older:
                 raise RunFolderError(f"{where}: results.json has no eval_seed, which every run of format 2 records")
@@ -479,8 +515,10 @@ def _migrated_record(record: Any, where: str) -> dict[str, Any]:
         raise RunFolderError(f"{where}: not the config.json of a visualenv run (no 'config' mapping of settings)")
     version = record.get("format_version", 1)
     if isinstance(version, int) and not isinstance(version, bool) and version > FORMAT_VERSION:
-        raise RunFolderError(f"{where}: written by a later visualenv (run folder format {version}); this one reads "
-                             f"formats up to {FORMAT_VERSION}: upgrade visualenv")
+        raise RunFolderError(
+            f"{where}: written by a later visualenv (run folder format {version}); this one reads "
+            f"formats up to {FORMAT_VERSION}: upgrade visualenv"
+        )
     record = {**record, "config": dict(record["config"])}
     if version == 1:
         config = record["config"]
@@ -491,14 +529,17 @@ def _migrated_record(record: Any, where: str) -> dict[str, Any]:
     return check_record(record, where)
 
 
-def _with_legacy_seed(results: dict[str, Any], record: dict[str, Any], folder: RunFolder | None
-                      ) -> tuple[dict[str, Any], str | None]:
+def _with_legacy_seed(
+    results: dict[str, Any], record: dict[str, Any], folder: RunFolder | None
+) -> tuple[dict[str, Any], str | None]:
     config = record["config"]
     results = {**results, "eval_seed": legacy_eval_seed(config["seed"])}
     periodic = _periodic_evaluations_in_last_segment(folder) if folder and record["backend"] == "sb3" else None
     if periodic is None:
-        return results, ("results.json predates eval_seed: the periodic evaluations before its final one "
-                         "(on the same env) cannot be counted, so its episodes differ")
+        return results, (
+            "results.json predates eval_seed: the periodic evaluations before its final one "
+            "(on the same env) cannot be counted, so its episodes differ"
+        )
     return {**results, "resets_before": 1 + periodic * (config["eval_episodes"] + 1)}, None
 
 
@@ -521,8 +562,11 @@ def _last_segment_start(folder: RunFolder) -> int | None:
         return None
     try:
         with progress.open(newline="") as f:
-            rows = [(float(r["time/iterations"]), float(r["time/total_timesteps"])) for r in csv.DictReader(f)
-                    if r.get("time/iterations") and r.get("time/total_timesteps")]
+            rows = [
+                (float(r["time/iterations"]), float(r["time/total_timesteps"]))
+                for r in csv.DictReader(f)
+                if r.get("time/iterations") and r.get("time/total_timesteps")
+            ]
     except (OSError, KeyError, ValueError, csv.Error):
         return None
     if len(rows) < 2 or rows[1][0] == rows[0][0]:

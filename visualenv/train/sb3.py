@@ -29,8 +29,15 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from visualenv.env.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
-from visualenv.train.evaluation import (FINAL_EPISODES, evaluation_line, final_evaluation, final_seed, make_eval_env, selection_record,
-                                        selection_seed)
+from visualenv.train.evaluation import (
+    FINAL_EPISODES,
+    evaluation_line,
+    final_evaluation,
+    final_seed,
+    make_eval_env,
+    selection_record,
+    selection_seed,
+)
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
 from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
 
@@ -85,7 +92,9 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
             raise ConfigError(f"{algo.upper()} has no hyperparameter '{key}'" + did_you_mean(key, known))
         default = parameters[key].default
         if isinstance(value, str) and isinstance(default, (int, float)) and key not in SCHEDULES:
-            raise ConfigError(f"{key}: expected a {'true/false' if isinstance(default, bool) else 'number'} (default {default}), got {value!r}")
+            raise ConfigError(
+                f"{key}: expected a {'true/false' if isinstance(default, bool) else 'number'} (default {default}), got {value!r}"
+            )
         if key in SCHEDULES and not isinstance(value, (int, float)) and value is not None:
             text = str(value)
             try:
@@ -93,21 +102,33 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
             except ValueError:
                 start = None
             if start is None:
-                raise ConfigError(f"{key}: expected a number or a linear schedule such as lin_3e-4 (from 3e-4 down to 0), got {text!r}")
+                raise ConfigError(
+                    f"{key}: expected a number or a linear schedule such as lin_3e-4 (from 3e-4 down to 0), got {text!r}"
+                )
             value = LinearSchedule(start, 0.0, 1.0)
         kwargs[key] = value
     return kwargs
 
 
-def resumed_config(config_class: Any, run_dir: Path, *, steps: int | None, hyperparams: dict[str, Any], progress: bool) -> Any:
+def resumed_config(
+    config_class: Any, run_dir: Path, *, steps: int | None, hyperparams: dict[str, Any], progress: bool
+) -> Any:
     """The configuration of the run in `run_dir`, carried on: its settings as saved, with the total steps (if given),
     the changed hyperparameters and the progress display of this command. Used by both backends (`config_class`)."""
     record = read_config(run_dir)
     if record["backend"] not in ("sb3", "rllib"):
-        raise ConfigError(f"{run_dir} is a run of `visualenv {record['backend']}`, which `visualenv train` "
-                          "cannot resume")
+        raise ConfigError(
+            f"{run_dir} is a run of `visualenv {record['backend']}`, which `visualenv train` cannot resume"
+        )
     saved = record["config"]
-    return config_class(**{**saved, "steps": steps or saved["steps"], "hyperparams": {**saved["hyperparams"], **hyperparams}, "progress": progress})
+    return config_class(
+        **{
+            **saved,
+            "steps": steps or saved["steps"],
+            "hyperparams": {**saved["hyperparams"], **hyperparams},
+            "progress": progress,
+        }
+    )
 
 
 def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
@@ -116,7 +137,9 @@ def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
     return {"device": config.render_device} if config.render_device else {}
 
 
-def train(config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None) -> dict[str, Any]:
+def train(
+    config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None
+) -> dict[str, Any]:
     """Train, evaluate the best model, draw the plots; returns the final results.
 
     A resumed run continues from ``checkpoints/latest.zip``; `changes` are hyperparameters
@@ -153,14 +176,32 @@ def _make_envs(config: TrainConfig, spec_path: str, folder: RunFolder, resume: b
 
     frame_stack = config.frame_stack if config.render else 0
     if config.batched:
-        train_env = make_sb3_batched(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, workers=config.workers,
-                                     pin=config.pin, monitor_dir=str(folder.monitor), monitor_append=resume,
-                                     **_vec_kwargs(config))
+        train_env = make_sb3_batched(
+            spec_path,
+            config.envs,
+            seed=config.seed,
+            frame_stack=frame_stack,
+            workers=config.workers,
+            pin=config.pin,
+            monitor_dir=str(folder.monitor),
+            monitor_append=resume,
+            **_vec_kwargs(config),
+        )
     else:
-        train_env = make_sb3_vec(spec_path, config.envs, seed=config.seed, frame_stack=frame_stack, pin=config.pin,
-                                 monitor_dir=str(folder.monitor), monitor_append=resume, **_vec_kwargs(config))
+        train_env = make_sb3_vec(
+            spec_path,
+            config.envs,
+            seed=config.seed,
+            frame_stack=frame_stack,
+            pin=config.pin,
+            monitor_dir=str(folder.monitor),
+            monitor_append=resume,
+            **_vec_kwargs(config),
+        )
     try:
-        eval_env = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render)
+        eval_env = make_eval_env(
+            spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render
+        )
         eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
     except BaseException:
         train_env.close()
@@ -168,7 +209,9 @@ def _make_envs(config: TrainConfig, spec_path: str, folder: RunFolder, resume: b
     return train_env, eval_env
 
 
-def _make_model(config: TrainConfig, train_env: Any, checkpoint: Path | None, kwargs: dict[str, Any], changed_kwargs: dict[str, Any]) -> Any:
+def _make_model(
+    config: TrainConfig, train_env: Any, checkpoint: Path | None, kwargs: dict[str, Any], changed_kwargs: dict[str, Any]
+) -> Any:
     """A new model, or the checkpoint's (a resumed run) with the changed hyperparameters set before it is built."""
     algo = algorithm_class(config.algo)
     if checkpoint is not None and checkpoint.exists():
@@ -176,11 +219,20 @@ def _make_model(config: TrainConfig, train_env: Any, checkpoint: Path | None, kw
     try:
         return algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
     except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
-        raise ConfigError(f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}") from None
+        raise ConfigError(
+            f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}"
+        ) from None
 
 
-def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, latest: Path, stopper: _StopOnSignal,
-           resume: bool) -> None:
+def _learn(
+    model: Any,
+    config: TrainConfig,
+    eval_env: Any,
+    folder: RunFolder,
+    latest: Path,
+    stopper: _StopOnSignal,
+    resume: bool,
+) -> None:
     """Learn up to config.steps with periodic evaluation, checkpoints and the progress bar; save the latest and final models."""
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
@@ -188,9 +240,16 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, la
     model.set_logger(configure(str(folder.logs), ["csv", "tensorboard"]))
     per_env = max(1, config.eval_every // config.envs)
     callbacks = [
-        _ResumableEval(eval_env, n_eval_episodes=config.eval_episodes, eval_freq=per_env, log_path=str(folder.path),
-                       best_model_save_path=str(folder.path), deterministic=True, verbose=0,
-                       callback_after_eval=None if config.progress else _EvalLine()),
+        _ResumableEval(
+            eval_env,
+            n_eval_episodes=config.eval_episodes,
+            eval_freq=per_env,
+            log_path=str(folder.path),
+            best_model_save_path=str(folder.path),
+            deterministic=True,
+            verbose=0,
+            callback_after_eval=None if config.progress else _EvalLine(),
+        ),
         _LatestCheckpoint(latest, every=per_env),
         _PhaseThreads(),
         stopper,
@@ -201,34 +260,52 @@ def _learn(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, la
     with stopper.listening(), warnings.catch_warnings():
         # one eval env runs in-process (DummyVecEnv), the training envs in subprocesses: same env, different wrapper
         warnings.filterwarnings("ignore", message="Training and eval env are not of the same type")
-        model.learn(total_timesteps=max(0, config.steps - done), callback=CallbackList(callbacks), reset_num_timesteps=not resume)
+        model.learn(
+            total_timesteps=max(0, config.steps - done),
+            callback=CallbackList(callbacks),
+            reset_num_timesteps=not resume,
+        )
     model.save(latest)
     model.save(folder.final_zip)
     save_policy(model, folder.final_policy, half=False, algorithm=config.algo, run_dir=folder.path)
 
 
-def _finish(model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float,
-            stopped_early: bool) -> dict[str, Any]:
+def _finish(
+    model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float, stopped_early: bool
+) -> dict[str, Any]:
     """The best model as a policy file, its final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
 
     best, evaluated = folder.best_zip, folder.final_policy
     try:
         if best.exists():  # EvalCallback's zip, of this run's own folder: trusted, as --resume trusts its checkpoint
-            evaluated = save_policy(load_model(best, config.algo, trust_pickle=True), folder.best_policy, half=False,
-                                    algorithm=config.algo, run_dir=folder.path)
+            evaluated = save_policy(
+                load_model(best, config.algo, trust_pickle=True),
+                folder.best_policy,
+                half=False,
+                algorithm=config.algo,
+                run_dir=folder.path,
+            )
         results = final_evaluation(load_model(evaluated), eval_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         eval_env.close()
-    results.update({"selection": selection_record(folder.path, selection_seed(config.seed)),
-                    "steps": int(model.num_timesteps), "wall_time_s": round(wall, 1), "model": evaluated.name,
-                    "stopped_early": stopped_early})
+    results.update(
+        {
+            "selection": selection_record(folder.path, selection_seed(config.seed)),
+            "steps": int(model.num_timesteps),
+            "wall_time_s": round(wall, 1),
+            "model": evaluated.name,
+            "stopped_early": stopped_early,
+        }
+    )
     write_results(folder, results)
     training_plots(folder.path)
     return results
 
 
-NATURE_CNN_MIN_SIZE = 36  # SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
+NATURE_CNN_MIN_SIZE = (
+    36  # SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
+)
 
 
 def check_cnn_input(loaded: Any, hyperparams: dict[str, Any]) -> None:
@@ -240,9 +317,18 @@ def check_cnn_input(loaded: Any, hyperparams: dict[str, Any]) -> None:
     for key, view in observation.views().items():
         width, height = view.resolution
         if min(width, height) < NATURE_CNN_MIN_SIZE:
-            path = ("observation", "resolution") if observation.cameras is None else ("observation", "cameras", key, "resolution")
-            problems.append(loaded.source.diagnostic(path, f"{width}x{height} is too small for the CNN policy of `visualenv train` "
-                                                           f"(SB3's NatureCNN): it needs at least {NATURE_CNN_MIN_SIZE}x{NATURE_CNN_MIN_SIZE}"))
+            path = (
+                ("observation", "resolution")
+                if observation.cameras is None
+                else ("observation", "cameras", key, "resolution")
+            )
+            problems.append(
+                loaded.source.diagnostic(
+                    path,
+                    f"{width}x{height} is too small for the CNN policy of `visualenv train` "
+                    f"(SB3's NatureCNN): it needs at least {NATURE_CNN_MIN_SIZE}x{NATURE_CNN_MIN_SIZE}",
+                )
+            )
     if problems:
         raise SpecError(problems)
 
@@ -277,8 +363,10 @@ def check_torch_device(device: Any) -> None:
 
     if not torch.cuda.is_available():
         build = f"built for CUDA {torch.version.cuda}" if torch.version.cuda else "a CPU-only build"
-        raise ConfigError(f"device '{device}': torch {torch.__version__} ({build}) sees no CUDA device on this machine; "
-                          "use --device cpu (or auto), or install a CUDA build of torch where a GPU is")
+        raise ConfigError(
+            f"device '{device}': torch {torch.__version__} ({build}) sees no CUDA device on this machine; "
+            "use --device cpu (or auto), or install a CUDA build of torch where a GPU is"
+        )
 
 
 #: the share of the available memory a replay buffer may take (the envs, the model and the evaluation need the rest)
@@ -304,7 +392,11 @@ def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
     observation = loaded.spec.observation
     if config.render and observation is not None:
         channels = {"rgb": 3, "grayscale": 1, "depth": 1}
-        per_sample = sum(w * h * channels[v.color] * max(1, config.frame_stack) for v in observation.views().values() for w, h in [v.resolution])
+        per_sample = sum(
+            w * h * channels[v.color] * max(1, config.frame_stack)
+            for v in observation.views().values()
+            for w, h in [v.resolution]
+        )
     else:
         per_sample = 4 * sum(1 for var in loaded.spec.state.values() if var.observe)
     return size * per_sample * (1 if optimized else 2)
@@ -319,9 +411,11 @@ def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
         return
     free = psutil.virtual_memory().available
     if need > REPLAY_MEMORY_SHARE * free:
-        raise ConfigError(f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
-                          f"are available: set a smaller buffer_size (--set buffer_size=...), and optimize_memory_usage=true "
-                          "(one copy of each observation; SB3 then needs replay_buffer_kwargs: {handle_timeout_termination: false})")
+        raise ConfigError(
+            f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
+            f"are available: set a smaller buffer_size (--set buffer_size=...), and optimize_memory_usage=true "
+            "(one copy of each observation; SB3 then needs replay_buffer_kwargs: {handle_timeout_termination: false})"
+        )
 
 
 class _ResumableEval(EvalCallback):
@@ -353,8 +447,14 @@ class _EvalLine(BaseCallback):
     def _on_step(self) -> bool:
         parent = self.parent
         if isinstance(parent, EvalCallback) and parent.evaluations_results:
-            successes = parent.evaluations_successes[-1] if len(parent.evaluations_successes) == len(parent.evaluations_results) else None
-            print(evaluation_line(parent.evaluations_timesteps[-1], parent.evaluations_results[-1], successes), flush=True)
+            successes = (
+                parent.evaluations_successes[-1]
+                if len(parent.evaluations_successes) == len(parent.evaluations_results)
+                else None
+            )
+            print(
+                evaluation_line(parent.evaluations_timesteps[-1], parent.evaluations_results[-1], successes), flush=True
+            )
         return True
 
 
@@ -453,7 +553,9 @@ class _ProgressBar(BaseCallback):
         self.bar.update(self.model.num_timesteps - self.bar.n)
         buffer = self.model.ep_info_buffer
         if buffer and self.n_calls % 20 == 0:
-            self.bar.set_postfix(reward=f"{np.mean([e['r'] for e in buffer]):.1f}", length=f"{np.mean([e['l'] for e in buffer]):.0f}")
+            self.bar.set_postfix(
+                reward=f"{np.mean([e['r'] for e in buffer]):.1f}", length=f"{np.mean([e['l'] for e in buffer]):.0f}"
+            )
         return True
 
     def _on_training_end(self) -> None:

@@ -33,8 +33,18 @@ def load_agent(path: Path, model: str, algo: str = "ppo", *, trust_pickle: bool 
     return Agent(load_model(file, algo, trust_pickle=trust_pickle), file)
 
 
-def serve(target: str, *, model: str | None = None, algo: str = "ppo", host: str = "127.0.0.1", port: int | None = None, seed: int = 0,
-          view: ViewOptions = DEFAULT_VIEW, echo: Callable[[str], None] = print, trust_pickle: bool = False) -> None:
+def serve(
+    target: str,
+    *,
+    model: str | None = None,
+    algo: str = "ppo",
+    host: str = "127.0.0.1",
+    port: int | None = None,
+    seed: int = 0,
+    view: ViewOptions = DEFAULT_VIEW,
+    echo: Callable[[str], None] = print,
+    trust_pickle: bool = False,
+) -> None:
     """Serve `target` (a spec file or an id) on ``http://host:port/`` until Ctrl-C, then stop cleanly.
 
     A spec or model that cannot be found, or a port that cannot be had, raises VisualEnvError before anything is
@@ -49,7 +59,9 @@ def serve(target: str, *, model: str | None = None, algo: str = "ppo", host: str
     try:
         echo(f"visualenv view: {server.url} (Ctrl-C stops)")
         if not is_local(host):
-            echo(f"warning: --host {host}: anyone who can reach {server.url} can drive the env and read the spec's errors; there is no password")
+            echo(
+                f"warning: --host {host}: anyone who can reach {server.url} can drive the env and read the spec's errors; there is no password"
+            )
         session.run()
     except KeyboardInterrupt:
         pass
@@ -69,5 +81,6 @@ def _server(board: Board, host: str, port: int | None, path: Path) -> ViewerServ
     except OSError as exc:
         if port is None:  # the default port is taken (another viewer): any free one
             return ViewerServer(board, host=host, port=0, title=path.name)
-        raise VisualEnvError(f"cannot serve on {host}:{port}: {exc.strerror or exc} (choose another --port; 0 takes any free one)") from None
-
+        raise VisualEnvError(
+            f"cannot serve on {host}:{port}: {exc.strerror or exc} (choose another --port; 0 takes any free one)"
+        ) from None

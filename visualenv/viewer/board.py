@@ -51,8 +51,14 @@ class Board:
         #: inputs from the page (dicts checked by the server), read by the stepping thread
         self.inputs: queue.Queue[dict[str, Any]] = queue.Queue()
 
-    def publish(self, values: Mapping[str, Any], pictures: Mapping[str, Any] | None = None, *, kind: str = OBSERVATION,
-                only: bool = False) -> None:
+    def publish(
+        self,
+        values: Mapping[str, Any],
+        pictures: Mapping[str, Any] | None = None,
+        *,
+        kind: str = OBSERVATION,
+        only: bool = False,
+    ) -> None:
         """A new snapshot: `values` replace the old ones; `pictures` (arrays by name, of `kind`; None removes one) replace
         theirs, and with `only` every other picture of that kind goes (a rebuilt env may have other cameras)."""
         with self._condition:

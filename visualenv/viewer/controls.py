@@ -48,7 +48,10 @@ class Controls:
 
     def page(self, values: list[float]) -> dict[str, Any]:
         """The controls as the page draws them (the sliders at `values`)."""
-        sliders = [{"name": name, "low": low, "high": high, "value": value} for (name, low, high), value in zip(self.inputs, values)]
+        sliders = [
+            {"name": name, "low": low, "high": high, "value": value}
+            for (name, low, high), value in zip(self.inputs, values)
+        ]
         return {"keys": self.legend, "sliders": sliders}
 
 
@@ -82,8 +85,8 @@ def _arrows(actions: Sequence[Mapping[str, Any]], inputs: list[str], params: Map
             continue
         moving = [(name, sign) for name, sign in signs.items() if sign]
         if len(moving) == 1:
-            moves.setdefault(moving[0], []).append(index)  # type: ignore[arg-type]
-    axes = [name for name in inputs if any(name == moved for moved, _ in moves)][:len(ARROWS)]
+            moves.setdefault(moving[0], []).append(index)
+    axes = [name for name in inputs if any(name == moved for moved, _ in moves)][: len(ARROWS)]
     arrows = {}
     for (negative, positive), name in zip(ARROWS, axes):
         for key, sign in ((negative, -1), (positive, 1)):
@@ -115,7 +118,9 @@ def _sign(value: Any, params: Mapping[str, Any]) -> int | None:
 
 
 def _continuous(program: Program) -> Controls:
-    controls = Controls(inputs=[(name, float(low), float(high)) for name, (low, high) in zip(program.input_names, program.continuous)])
+    controls = Controls(
+        inputs=[(name, float(low), float(high)) for name, (low, high) in zip(program.input_names, program.continuous)]
+    )
     for index, ((negative, positive), (name, low, high)) in enumerate(zip(ARROWS, controls.inputs)):
         controls.holds[negative] = (index, low)
         controls.holds[positive] = (index, high)

@@ -55,7 +55,9 @@ class PageDisplay:
         self._pacer = ViewPacer()
         self._return = 0.0
 
-    def show(self, title: str, observation: Any, values: Mapping[str, Any], view: Callable[[], np.ndarray] | None = None) -> None:
+    def show(
+        self, title: str, observation: Any, values: Mapping[str, Any], view: Callable[[], np.ndarray] | None = None
+    ) -> None:
         """A step (or reset, when ``values["reward"]`` is None) of the env titled `title`.
 
         `observation` is the env's image observation (an array, or a dict by camera; None for a state vector);
@@ -63,7 +65,14 @@ class PageDisplay:
         passes its grid of observations and no reward (``values`` then hold no return).
         """
         renamed = {"steps": "step", "is_success": "success"}  # the env's info keys, as the page names them
-        shown = plain({"title": title, "env": title, **{renamed.get(k, k): v for k, v in values.items()}, "status": "render_mode='human'"})
+        shown = plain(
+            {
+                "title": title,
+                "env": title,
+                **{renamed.get(k, k): v for k, v in values.items()},
+                "status": "render_mode='human'",
+            }
+        )
         if "reward" in values:  # one env's step (None: its reset): the episode's return so far
             self._return = 0.0 if values["reward"] is None else self._return + float(values["reward"])
             shown["return"] = self._return

@@ -14,8 +14,18 @@ import html
 import json
 
 #: the values shown in the table, in order, with their labels (a value the snapshot lacks is left out)
-FIELDS = (("env", "env"), ("step", "step"), ("episode", "episode"), ("seed", "seed"), ("reward", "reward"), ("return", "return"),
-          ("outcome", "outcome"), ("success", "success"), ("action", "action"), ("envs", "envs"))
+FIELDS = (
+    ("env", "env"),
+    ("step", "step"),
+    ("episode", "episode"),
+    ("seed", "seed"),
+    ("reward", "reward"),
+    ("return", "return"),
+    ("outcome", "outcome"),
+    ("success", "success"),
+    ("action", "action"),
+    ("envs", "envs"),
+)
 
 _PAGE = """<!doctype html>
 <html lang="en">
@@ -237,6 +247,8 @@ events.onerror = () => { $("status").textContent = "disconnected: is the viewer 
 
 def page_html(title: str, interactive: bool) -> str:
     """The page for an env titled `title`; `interactive` shows the controls and sends the keys."""
-    return (_PAGE.replace("__TITLE__", html.escape(title))
-            .replace("__INTERACTIVE__", "true" if interactive else "false")
-            .replace("__FIELDS__", json.dumps(FIELDS)))
+    return (
+        _PAGE.replace("__TITLE__", html.escape(title))
+        .replace("__INTERACTIVE__", "true" if interactive else "false")
+        .replace("__FIELDS__", json.dumps(FIELDS))
+    )

@@ -52,13 +52,23 @@ class ViewerServer:
     Port 0 takes any free port; :attr:`url` says which. A port that cannot be had raises OSError (Werkzeug would exit).
     """
 
-    def __init__(self, board: Board, *, host: str = "127.0.0.1", port: int = 0, title: str = "visualenv", interactive: bool = True) -> None:
+    def __init__(
+        self,
+        board: Board,
+        *,
+        host: str = "127.0.0.1",
+        port: int = 0,
+        title: str = "visualenv",
+        interactive: bool = True,
+    ) -> None:
         self.board = board
         self.title = title
         self.interactive = interactive
         listener = _listen(host, port)
         try:
-            self._server: BaseWSGIServer = make_server(host, port, self._wsgi, threaded=True, request_handler=_QuietHandler, fd=listener.fileno())
+            self._server: BaseWSGIServer = make_server(
+                host, port, self._wsgi, threaded=True, request_handler=_QuietHandler, fd=listener.fileno()
+            )
         finally:
             listener.close()  # the server holds its own duplicate of the socket
         self._thread: threading.Thread | None = None
@@ -70,7 +80,9 @@ class ViewerServer:
         return f"http://{shown}:{self._server.port}/"
 
     def start(self) -> "ViewerServer":
-        self._thread = threading.Thread(target=self._server.serve_forever, kwargs={"poll_interval": 0.2}, name="visualenv-viewer", daemon=True)
+        self._thread = threading.Thread(
+            target=self._server.serve_forever, kwargs={"poll_interval": 0.2}, name="visualenv-viewer", daemon=True
+        )
         self._thread.start()
         return self
 
@@ -107,9 +119,11 @@ class ViewerServer:
         if path == "/state":
             return _json(state_document(self.board.latest()))
         if path.startswith("/picture/"):
-            picture = self.board.latest().pictures.get(path[len("/picture/"):])
+            picture = self.board.latest().pictures.get(path[len("/picture/") :])
             if picture is None:
-                raise NotFound(f"no picture {path[len('/picture/'):]!r}: the pictures are {sorted(self.board.latest().pictures)}")
+                raise NotFound(
+                    f"no picture {path[len('/picture/') :]!r}: the pictures are {sorted(self.board.latest().pictures)}"
+                )
             return Response(png(picture), mimetype="image/png", headers=_NO_STORE)
         raise NotFound(f"no page {path}")
 
@@ -171,8 +185,10 @@ def check_input(message: Any) -> dict[str, Any]:
 
 def state_document(snapshot: Snapshot) -> dict[str, Any]:
     """`GET /state`: the values, and each picture's kind and size."""
-    pictures = {name: {"kind": p.kind, "width": p.pixels.shape[1], "height": p.pixels.shape[0], "version": p.version}
-                for name, p in snapshot.pictures.items()}
+    pictures = {
+        name: {"kind": p.kind, "width": p.pixels.shape[1], "height": p.pixels.shape[0], "version": p.version}
+        for name, p in snapshot.pictures.items()
+    }
     return {"version": snapshot.version, "values": snapshot.values, "pictures": pictures}
 
 
@@ -182,8 +198,11 @@ def event_document(snapshot: Snapshot, sent: dict[str, int]) -> dict[str, Any]:
     for name, picture in snapshot.pictures.items():
         if sent.get(name) != picture.version:
             sent[name] = picture.version
-            changed[name] = {"src": "data:image/png;base64," + base64.b64encode(png(picture)).decode("ascii"),
-                             "width": picture.pixels.shape[1], "height": picture.pixels.shape[0]}
+            changed[name] = {
+                "src": "data:image/png;base64," + base64.b64encode(png(picture)).decode("ascii"),
+                "width": picture.pixels.shape[1],
+                "height": picture.pixels.shape[0],
+            }
     names = {name: p.kind for name, p in snapshot.pictures.items()}
     for gone in set(sent) - set(names):
         del sent[gone]
@@ -204,7 +223,9 @@ def _listen(host: str, port: int) -> socket.socket:
     family = select_address_family(host, port)
     listener = socket.socket(family, socket.SOCK_STREAM)
     try:
-        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)  # as http.server does: a port left in TIME_WAIT is free
+        listener.setsockopt(
+            socket.SOL_SOCKET, socket.SO_REUSEADDR, 1
+        )  # as http.server does: a port left in TIME_WAIT is free
         listener.bind(get_sockaddr(host, port, family))
         listener.listen(128)
     except BaseException:

@@ -79,8 +79,16 @@ def shown_path(path: str | Path) -> str:
 class Session:
     """One spec (or id) on the page: its env, the keys, the agent, the episode, and the files of a live edit."""
 
-    def __init__(self, path: Path, board: Board, *, agent: Agent | None = None, seed: int = 0, view: ViewOptions = DEFAULT_VIEW,
-                 speed: float = DEFAULT_SPEED) -> None:
+    def __init__(
+        self,
+        path: Path,
+        board: Board,
+        *,
+        agent: Agent | None = None,
+        seed: int = 0,
+        view: ViewOptions = DEFAULT_VIEW,
+        speed: float = DEFAULT_SPEED,
+    ) -> None:
         self.path = path
         self.board = board
         self.agent = agent
@@ -221,7 +229,9 @@ class Session:
                     index, value = controls.holds[down]
                     values[index] = value
             return np.array(values, dtype=np.float32)
-        key: str | None = self.taps.pop(0) if self.taps else next((k for k in reversed(self.held) if k in controls.keys), None)
+        key: str | None = (
+            self.taps.pop(0) if self.taps else next((k for k in reversed(self.held) if k in controls.keys), None)
+        )
         if key is None:
             return self.last_action if single else None
         return controls.keys[key]
@@ -334,7 +344,9 @@ class Session:
             self.watcher.watch([*self.watcher.paths, self.path])
             raise
         self.watcher.watch(named_files(loaded))
-        viewable = self.view.preset is not None and (loaded.spec.observation is not None or loaded.spec.render.view.camera is not None)
+        viewable = self.view.preset is not None and (
+            loaded.spec.observation is not None or loaded.spec.render.view.camera is not None
+        )
         if viewable:
             loaded = with_view(loaded, preset=self.view.preset, size=self.view.size)
         base = VisualEnv(loaded, render_mode="rgb_array" if viewable else None)
@@ -357,7 +369,9 @@ class Session:
     # -- the page -------------------------------------------------------------------------------------
 
     def _view_due(self) -> bool:
-        if not (self.view_stale and self.board.watched and self.base is not None and self.base.render_mode == "rgb_array"):
+        if not (
+            self.view_stale and self.board.watched and self.base is not None and self.base.render_mode == "rgb_array"
+        ):
             return False
         idle = self.paused or self.ended_at is not None or not self._has_action()
         return idle or self.pacer.due()
@@ -394,11 +408,24 @@ class Session:
         """What the page's tables, controls and status show."""
         info = self.info or {}
         values: dict[str, Any] = {
-            "title": self.title, "spec": shown_path(self.path), "mode": f"agent: {shown_path(self.agent.path)}" if self.agent else "you play: keys below",
-            "step": info.get("steps", 0), "episode": self.episode, "seed": self.seed, "reward": self.reward, "return": self.ret,
-            "outcome": info.get("outcome"), "success": info.get("is_success"), "action": self.action_text, "state": info.get("state", {}),
-            "paused": self.paused, "speed": self.speed, "status": self._status(), "error": self.spec_error or self.run_error,
-            "builds": self.builds, "controls": self.controls.page(self.sliders),
+            "title": self.title,
+            "spec": shown_path(self.path),
+            "mode": f"agent: {shown_path(self.agent.path)}" if self.agent else "you play: keys below",
+            "step": info.get("steps", 0),
+            "episode": self.episode,
+            "seed": self.seed,
+            "reward": self.reward,
+            "return": self.ret,
+            "outcome": info.get("outcome"),
+            "success": info.get("is_success"),
+            "action": self.action_text,
+            "state": info.get("state", {}),
+            "paused": self.paused,
+            "speed": self.speed,
+            "status": self._status(),
+            "error": self.spec_error or self.run_error,
+            "builds": self.builds,
+            "controls": self.controls.page(self.sliders),
         }
         return plain(values)
 

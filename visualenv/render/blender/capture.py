@@ -129,7 +129,7 @@ class Capture:
         out = np.empty((height, width, channels), dtype=np.uint8)
 
         def band(rows: slice) -> None:
-            out[height - rows.stop:height - rows.start] = rows_to_bytes(rows)[::-1]
+            out[height - rows.stop : height - rows.start] = rows_to_bytes(rows)[::-1]
 
         bands = min(self._threads, height, max(1, height * width // PIXELS_PER_THREAD))
         if bands == 1:
@@ -158,6 +158,7 @@ class Capture:
             luma += np.take(tables[2], levels[:, :, 2])
             luma *= np.float32(0.001)
             return luma.astype(np.uint8)[:, :, None]
+
         return self._convert(1, rows_to_bytes)
 
     def linear(self) -> np.ndarray:

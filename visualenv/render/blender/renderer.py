@@ -21,7 +21,15 @@ from visualenv.render.distractions import Distraction
 from visualenv.render.frames import Frames
 from visualenv.render.blender.runtime import settings as cfg
 from visualenv.render.blender.scene import user_file
-from visualenv.render.blender.look.materials import color_writer, depth_material, depth_world, make_material, see_through, texture_sets, world_writer
+from visualenv.render.blender.look.materials import (
+    color_writer,
+    depth_material,
+    depth_world,
+    make_material,
+    see_through,
+    texture_sets,
+    world_writer,
+)
 from visualenv.render.blender.runtime.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.look.distraction_scene import DistractionRig
@@ -29,7 +37,13 @@ from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene.mjcf import build_physics_objects, show_model_sky
 from visualenv.render.blender.look.mujoco import ambient, backdrop, light_scene, raw_images
 from visualenv.render.blender.scene.build import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
-from visualenv.render.blender.look.segmentation import SEGMENTATION_CONFIG, HiddenLights, assign_ids, segmentation_material, segmentation_world
+from visualenv.render.blender.look.segmentation import (
+    SEGMENTATION_CONFIG,
+    HiddenLights,
+    assign_ids,
+    segmentation_material,
+    segmentation_world,
+)
 from visualenv.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
 from visualenv.render.plan import CameraObject
 
@@ -86,24 +100,39 @@ class BlenderRenderer(Renderer):
             raise ValueError("readback 'memory' needs the Cycles engine; use 'file' or 'auto'")
         can_capture = readback != "file" and install_capture()
         if readback == "memory" and not can_capture:
-            raise ValueError("readback 'memory' needs Blender's Cycles add-on, which this bpy lacks; use 'file' or 'auto'")
+            raise ValueError(
+                "readback 'memory' needs Blender's Cycles add-on, which this bpy lacks; use 'file' or 'auto'"
+            )
         self._capture = Capture() if can_capture else None
         self._active_capture: Capture | None = None  # the capture armed for the next render (None: read the file)
         cfg.engine_warnings(self.obs_config, self.device)
         self._output = OutputFile()
         tracker = DataTracker()
         try:
-            built = build_scene(plan.scene, base_dir=plan.base_dir, source=plan.source, prefix=f"visualenv{next(_instances)}")
-            self._poses = None if plan.physics is None else build_physics_objects(
-                plan.physics, built, base_dir=plan.base_dir, source=plan.source, material=plan.scene.default_material,
-                add_light=not plan.physics.lights and not any(o.type == "LIGHT" for o in built.objects.values()))
+            built = build_scene(
+                plan.scene, base_dir=plan.base_dir, source=plan.source, prefix=f"visualenv{next(_instances)}"
+            )
+            self._poses = (
+                None
+                if plan.physics is None
+                else build_physics_objects(
+                    plan.physics,
+                    built,
+                    base_dir=plan.base_dir,
+                    source=plan.source,
+                    material=plan.scene.default_material,
+                    add_light=not plan.physics.lights and not any(o.type == "LIGHT" for o in built.objects.values()),
+                )
+            )
             if plan.physics is not None and plan.scene.world is None and not plan.scene.file:  # the spec's world wins
                 show_model_sky(plan.physics, built.scene.world)
             #: colours written as they are (physics.look: mujoco, as MuJoCo's renderer writes them), not through sRGB
             self._raw_colors = plan.physics is not None and plan.physics.look == "mujoco"
             if self._raw_colors and plan.physics is not None:
                 backdrop(built.scene.world)
-                light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))  # the spec's own objects as geoms
+                light_scene(
+                    built.scene, plan.physics.headlight, ambient(plan.physics)
+                )  # the spec's own objects as geoms
             self._check_names(built)
             self._setup(built, settings.threads)
         except BaseException:
@@ -131,8 +160,14 @@ class BlenderRenderer(Renderer):
             if target.object not in types:
                 if target.object not in missing:
                     missing.add(target.object)
-                    problems.append(plan.source.diagnostic(("actors", target.object), f"no object '{target.object}' in the scene"
-                                                           + did_you_mean(target.object, types).replace("names:", "objects:"), key=True))
+                    problems.append(
+                        plan.source.diagnostic(
+                            ("actors", target.object),
+                            f"no object '{target.object}' in the scene"
+                            + did_you_mean(target.object, types).replace("names:", "objects:"),
+                            key=True,
+                        )
+                    )
                 continue
             problem = type_problem(target.property, target.object, types[target.object])
             if problem:
@@ -162,8 +197,19 @@ class BlenderRenderer(Renderer):
         r.use_file_extension = False
         r.filepath = self._output.path
         self._views = [
-            View(key, built.objects[v.camera], v.resolution[0], v.resolution[1], v.color, (float(v.depth_range[0]), float(v.depth_range[1])),
-                  cfg.depth_config(self.obs_config) if v.color == "depth" else SEGMENTATION_CONFIG if v.color == "segmentation" else self.obs_config)
+            View(
+                key,
+                built.objects[v.camera],
+                v.resolution[0],
+                v.resolution[1],
+                v.color,
+                (float(v.depth_range[0]), float(v.depth_range[1])),
+                cfg.depth_config(self.obs_config)
+                if v.color == "depth"
+                else SEGMENTATION_CONFIG
+                if v.color == "segmentation"
+                else self.obs_config,
+            )
             for key, v in plan.views.items()
         ]
         #: configs of observation renders: they keep Cycles' persistent data (a view's config renders afresh)
@@ -175,15 +221,19 @@ class BlenderRenderer(Renderer):
             self._view = View("view", built.objects[view_camera], w, h, "rgb", (0.0, 1.0), self.view_config)
         self._overrides: dict[str, tuple[Any, Any]] = {}  # material and world override by render mode
         if any(v.color == "depth" for v in self._views):
-            mat, self._set_depth_range, self._set_depth_forward = depth_material(f"{scene.name}-depth", lambda d: d, along_ray=self.DEPTH_ALONG_RAY)
+            mat, self._set_depth_range, self._set_depth_forward = depth_material(
+                f"{scene.name}-depth", lambda d: d, along_ray=self.DEPTH_ALONG_RAY
+            )
             self._overrides["depth"] = (mat, depth_world(f"{scene.name}-depth-world", lambda d: d))
         #: segmentation id of each label or unlabelled object name (empty without a segmentation camera)
         self.segmentation_ids: dict[str, int] = {}
         self._lights = HiddenLights(scene)
         if any(v.color == "segmentation" for v in self._views):
             self.segmentation_ids = assign_ids(built, plan)
-            self._overrides["segmentation"] = (segmentation_material(f"{scene.name}-segmentation", lambda d: d),
-                                               segmentation_world(f"{scene.name}-segmentation-world", lambda d: d))
+            self._overrides["segmentation"] = (
+                segmentation_material(f"{scene.name}-segmentation", lambda d: d),
+                segmentation_world(f"{scene.name}-segmentation-world", lambda d: d),
+            )
         # what the scene is set to now (only changes are written)
         self._camera: Any = None
         self._resolution: tuple[int, int] | None = None
@@ -237,16 +287,26 @@ class BlenderRenderer(Renderer):
         self._size = start
         # aimed objects to re-aim after the setters ran: those that move, or whose parents move, or whose target does
         aimed = set(targets) | {t.object for t in plan.bindings if t.property == "look_at"}
-        moved = {objects[t.object].as_pointer() for t in plan.bindings if BINDABLES[t.property].moves and not is_world(t.object, objects)}
-        self._aimed = [(objects[name], name) for name in sorted(aimed) if any(o.as_pointer() in moved for o in with_ancestors(objects[name]))]
+        moved = {
+            objects[t.object].as_pointer()
+            for t in plan.bindings
+            if BINDABLES[t.property].moves and not is_world(t.object, objects)
+        }
+        self._aimed = [
+            (objects[name], name)
+            for name in sorted(aimed)
+            if any(o.as_pointer() in moved for o in with_ancestors(objects[name]))
+        ]
         self._targets = targets
         return setters
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Callable[[tuple], None]:
         """The function that writes a binding's values into the scene (a closure: no lookups per render)."""
         if prop == "look_at":
+
             def set_look_at(v: tuple) -> None:
                 targets[name] = v  # aimed in apply(), once every location is set
+
             return set_look_at
         if prop == "color":
             return self._color_setter(name, obj)
@@ -259,8 +319,18 @@ class BlenderRenderer(Renderer):
         material = slot.material
         if material is not None and material.as_pointer() in self._owned:
             return material
-        copy = material.copy() if material is not None else make_material(
-            f"{mesh_obj.name}-bound", self.plan.scene.default_material, base_dir=self.plan.base_dir, source=self.plan.source, path=(), track=lambda d: d)
+        copy = (
+            material.copy()
+            if material is not None
+            else make_material(
+                f"{mesh_obj.name}-bound",
+                self.plan.scene.default_material,
+                base_dir=self.plan.base_dir,
+                source=self.plan.source,
+                path=(),
+                track=lambda d: d,
+            )
+        )
         slot.link = "OBJECT"
         slot.material = copy
         self._owned.add(copy.as_pointer())
@@ -277,9 +347,16 @@ class BlenderRenderer(Renderer):
                 for node, images in texture_sets(self._own_material(mesh_obj, slot)):
                     choosers.append((node, images))
         if not choosers:
-            raise SpecError([self.plan.source.diagnostic(("actors", name, "texture"),
-                f"'texture' picks one file of an image texture set, but no material of '{name}' has one: "
-                "give it material: {texture: {type: image, image: [a.png, b.png, ...]}}", key=True)])
+            raise SpecError(
+                [
+                    self.plan.source.diagnostic(
+                        ("actors", name, "texture"),
+                        f"'texture' picks one file of an image texture set, but no material of '{name}' has one: "
+                        "give it material: {texture: {type: image, image: [a.png, b.png, ...]}}",
+                        key=True,
+                    )
+                ]
+            )
 
         def set_texture(v: tuple) -> None:
             k = math.floor(v[0])
@@ -287,6 +364,7 @@ class BlenderRenderer(Renderer):
                 image = images[k % len(images)]
                 if node.image is not image:
                     node.image = image
+
         return set_texture
 
     def _color_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
@@ -296,12 +374,14 @@ class BlenderRenderer(Renderer):
 
             def set_light_color(v: tuple) -> None:
                 data.color = v[:3]
+
             return set_light_color
         writers = self._own_color_writers(name, obj)
 
         def set_color(v: tuple) -> None:
             for write in writers:
                 write(v)
+
         return set_color
 
     def _own_color_writers(self, name: str, obj: Any) -> list[Callable[[Sequence[float]], None]]:
@@ -315,8 +395,15 @@ class BlenderRenderer(Renderer):
         """
         meshes = [obj] if obj.type == "MESH" else [c for c in obj.children_recursive if c.type == "MESH"]
         if not meshes:
-            raise SpecError([self.plan.source.diagnostic(("actors", name, "color"),
-                f"a bound colour sets the materials of '{name}' and the meshes under it, but it has none", key=True)])
+            raise SpecError(
+                [
+                    self.plan.source.diagnostic(
+                        ("actors", name, "color"),
+                        f"a bound colour sets the materials of '{name}' and the meshes under it, but it has none",
+                        key=True,
+                    )
+                ]
+            )
         out, unreachable = [], []
         for mesh_obj in meshes:
             if len(mesh_obj.material_slots) == 0:
@@ -330,9 +417,15 @@ class BlenderRenderer(Renderer):
                 else:
                     out.append(write)
         if unreachable:
-            raise SpecError([self.plan.source.diagnostic(("actors", name, "color"),
-                f"a bound colour sets a Principled BSDF's base colour, but material {', '.join(unreachable)} has none: "
-                "give it a Principled BSDF in Blender, or bind another property")])
+            raise SpecError(
+                [
+                    self.plan.source.diagnostic(
+                        ("actors", name, "color"),
+                        f"a bound colour sets a Principled BSDF's base colour, but material {', '.join(unreachable)} has none: "
+                        "give it a Principled BSDF in Blender, or bind another property",
+                    )
+                ]
+            )
         return out
 
     # -- rendering ----------------------------------------------------------------------------------
@@ -359,7 +452,9 @@ class BlenderRenderer(Renderer):
         """The high-resolution view of the one env of `frames`, ``(1, H, W, 3)``."""
         self._check_open()
         if self._view is None:
-            raise RenderError("the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')")
+            raise RenderError(
+                "the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')"
+            )
         self._take(frames)
         return self._render(self._view)[None]
 
@@ -378,8 +473,11 @@ class BlenderRenderer(Renderer):
         """Draw `distraction` in the next renders: observation cameras moved, colours shifted (:mod:`distractions`)."""
         if self._rig is None:
             tracker = DataTracker()
-            self._rig = DistractionRig(self._scene, [v.camera for v in self._views],
-                                       backdrop=distraction.background > 0 or distraction.color_shift > 0)
+            self._rig = DistractionRig(
+                self._scene,
+                [v.camera for v in self._views],
+                backdrop=distraction.background > 0 or distraction.color_shift > 0,
+            )
             self._ids.extend(tracker.new())
             if self._rig.backdrop is not None:
                 self._add_backdrop(self._rig.backdrop)
@@ -417,7 +515,11 @@ class BlenderRenderer(Renderer):
             if forward != self._depth_forward:
                 self._set_depth_forward(forward)
                 self._depth_forward = forward
-        capture = self._capture.arm(view.width, view.height) if self._capture is not None and view.config.engine == "cycles" else None
+        capture = (
+            self._capture.arm(view.width, view.height)
+            if self._capture is not None and view.config.engine == "cycles"
+            else None
+        )
         self._active_capture = capture
         profile = self.profile
         if profile is None:
@@ -518,8 +620,14 @@ class BlenderRenderer(Renderer):
             self._capture.close()
 
 
-def write_bindings(values: tuple, last: tuple | None, size: int, setters: list[tuple[int, int, Callable[[tuple], None]]],
-                   aimed: list[tuple[Any, str]], targets: dict[str, Any]) -> None:
+def write_bindings(
+    values: tuple,
+    last: tuple | None,
+    size: int,
+    setters: list[tuple[int, int, Callable[[tuple], None]]],
+    aimed: list[tuple[Any, str]],
+    targets: dict[str, Any],
+) -> None:
     """Write the binding values that differ from `last` (all of them when it is None), then re-aim the aimed objects."""
     if len(values) != size:
         raise RenderError(f"expected {size} binding values, got {len(values)}")
@@ -539,18 +647,21 @@ def is_world(name: str, objects: Any) -> bool:
 def _set_location(obj: Any) -> Callable[[tuple], None]:
     def set_location(v: tuple) -> None:
         obj.location = v
+
     return set_location
 
 
 def _set_rotation(obj: Any) -> Callable[[tuple], None]:
     def set_rotation(v: tuple) -> None:
         obj.rotation_euler = v
+
     return set_rotation
 
 
 def _set_scale(obj: Any) -> Callable[[tuple], None]:
     def set_scale(v: tuple) -> None:
         obj.scale = v
+
     return set_scale
 
 
@@ -562,6 +673,7 @@ def _set_visible(obj: Any) -> Callable[[tuple], None]:
         hide = not v[0]
         for o in shown:
             o.hide_render = hide
+
     return set_visible
 
 
@@ -570,6 +682,7 @@ def _set_strength(obj: Any) -> Callable[[tuple], None]:
 
     def set_strength(v: tuple) -> None:
         data.energy = v[0]
+
     return set_strength
 
 
@@ -578,6 +691,7 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 
     def set_lens(v: tuple) -> None:
         data.lens = v[0]
+
     return set_lens
 
 
@@ -586,6 +700,10 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 SETTERS_WITH_STATE = ("look_at", "color", "texture")
 #: the setter maker of each bindable property that needs only the object
 SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
-    "location": _set_location, "rotation": _set_rotation, "scale": _set_scale,
-    "visible": _set_visible, "strength": _set_strength, "lens": _set_lens,
+    "location": _set_location,
+    "rotation": _set_rotation,
+    "scale": _set_scale,
+    "visible": _set_visible,
+    "strength": _set_strength,
+    "lens": _set_lens,
 }

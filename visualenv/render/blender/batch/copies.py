@@ -48,8 +48,16 @@ def copy_spacing(scene: Any, reach: float) -> float:
     return float(reach + 2 * size + 10.0)
 
 
-def make_copy(k: int, built: BuiltScene, originals: list[Any], places: dict[int, Matrix], offset: Vector, *,
-              removed: set[int], own_lights: set[int]) -> Copy:
+def make_copy(
+    k: int,
+    built: BuiltScene,
+    originals: list[Any],
+    places: dict[int, Matrix],
+    offset: Vector,
+    *,
+    removed: set[int],
+    own_lights: set[int],
+) -> Copy:
     """Copy k: linked duplicates of the originals (copy 0 is the originals) under an anchor at `offset`, k's grid place.
 
     An object whose parent is not copied with it hangs from the anchor at its own world place (`places`).
@@ -131,10 +139,14 @@ def warn_shared_lights(copied: list[Any], num_envs: int) -> None:
         return
     lamps = sorted(o.name for o in copied if is_local_light(o))
     if lamps:
-        warnings.warn(f"visualenv: a batch of {num_envs} envs shares light {lamps[0]!r} of every env in Cycles' light tree "
-                      f"(light linking tells at most {MAX_LINKED_ENVS} envs apart), so its tiles are lit otherwise than each "
-                      f"env alone; keep at most {MAX_LINKED_ENVS} envs per batch (make_vec(..., batched=True, workers=K) "
-                      "splits them into K batches)", RuntimeWarning, stacklevel=3)
+        warnings.warn(
+            f"visualenv: a batch of {num_envs} envs shares light {lamps[0]!r} of every env in Cycles' light tree "
+            f"(light linking tells at most {MAX_LINKED_ENVS} envs apart), so its tiles are lit otherwise than each "
+            f"env alone; keep at most {MAX_LINKED_ENVS} envs per batch (make_vec(..., batched=True, workers=K) "
+            "splits them into K batches)",
+            RuntimeWarning,
+            stacklevel=3,
+        )
 
 
 def aim_copy(copy: Copy) -> None:
@@ -156,7 +168,9 @@ def one_colour(world: Any) -> bool:
     """Whether a world lights in one colour from every direction: no texture node (an image or a procedural sky) in
     its shader, but a model's skybox (seen by camera rays only)."""
     tree = getattr(world, "node_tree", None) if world is not None else None
-    return tree is None or not any(node.bl_idname.startswith("ShaderNodeTex") and node.name != SKYBOX for node in tree.nodes)
+    return tree is None or not any(
+        node.bl_idname.startswith("ShaderNodeTex") and node.name != SKYBOX for node in tree.nodes
+    )
 
 
 def is_sun(obj: Any) -> bool:
@@ -176,6 +190,7 @@ def hidden(obj: Any) -> bool:
 
 def remap_references(obj: Any, mapping: dict[int, Any]) -> None:
     """Point a duplicate's parent, constraint targets and modifier objects at the duplicates of its own copy."""
+
     def swap(value: Any) -> Any:
         return mapping.get(value.as_pointer(), value) if value is not None else None
 

@@ -25,7 +25,13 @@ from typing import Any, Callable
 
 import numpy as np
 
-from visualenv.render.blender.look.distraction_scene import distracted_materials, make_backdrops, orbit, shift_by_attribute, write_backdrops
+from visualenv.render.blender.look.distraction_scene import (
+    distracted_materials,
+    make_backdrops,
+    orbit,
+    shift_by_attribute,
+    write_backdrops,
+)
 from visualenv.render.blender.batch.env_attributes import EnvAttributes, shift_name
 from visualenv.render.distractions import Distraction, color_shifts
 from visualenv.render.plan import Distractions

@@ -38,16 +38,24 @@ def env_attribute(nodes: Any, name: str) -> Any:
 
 def read_per_env(obj: Any) -> list[str]:
     """The per-env attributes the materials of `obj` read."""
-    names = {node.attribute_name for slot in obj.material_slots if slot.material is not None and slot.material.node_tree
-             for node in slot.material.node_tree.nodes
-             if node.bl_idname == "ShaderNodeAttribute" and node.attribute_name.startswith(PREFIX)}
+    names = {
+        node.attribute_name
+        for slot in obj.material_slots
+        if slot.material is not None and slot.material.node_tree
+        for node in slot.material.node_tree.nodes
+        if node.bl_idname == "ShaderNodeAttribute" and node.attribute_name.startswith(PREFIX)
+    }
     return sorted(names)
 
 
 def turn_to_env_cameras(scene: Any) -> bool:
     """Every material of `scene` turned on to each env's camera (:func:`turn_to_env_camera`); whether any turned."""
-    materials = {slot.material for obj in scene.objects for slot in obj.material_slots
-                 if slot.material is not None and slot.material.node_tree is not None}
+    materials = {
+        slot.material
+        for obj in scene.objects
+        for slot in obj.material_slots
+        if slot.material is not None and slot.material.node_tree is not None
+    }
     return any([turn_to_env_camera(material) for material in materials])
 
 
@@ -87,13 +95,24 @@ class EnvAttributes:
     def of_copies(cls, copies: Sequence[Any], originals: Sequence[Any], instances: Any) -> EnvAttributes:
         """For a batch's copies (:class:`~visualenv.render.blender.batch.copies.Copy`; copy 0's objects are `originals`, those
         that are not instances; another's, those in its anchor's collection) and its instances."""
-        return cls([list(originals)] + [[o for o in copy.anchor.users_collection[0].objects if o != copy.anchor]
-                                        if copy.anchor is not None else [] for copy in copies[1:]], instances)
+        return cls(
+            [list(originals)]
+            + [
+                [o for o in copy.anchor.users_collection[0].objects if o != copy.anchor]
+                if copy.anchor is not None
+                else []
+                for copy in copies[1:]
+            ],
+            instances,
+        )
 
     def write(self, values: Mapping[str, np.ndarray]) -> None:
         """Each env's numbers, ``(N, 3)`` by attribute name; those that changed since the last write are written."""
-        changed = {name: array for name, array in values.items()
-                   if name not in self._last or not np.array_equal(self._last[name], array)}
+        changed = {
+            name: array
+            for name, array in values.items()
+            if name not in self._last or not np.array_equal(self._last[name], array)
+        }
         if not changed:
             return
         if self._instances is not None:
@@ -103,8 +122,12 @@ class EnvAttributes:
             self._instances.write_env_attributes(rgba)
         for k, own in enumerate(self._objects):
             for obj, names in own:
-                written = [name for name in names if name in changed and (name not in self._last or
-                                                                            not np.array_equal(self._last[name][k], changed[name][k]))]
+                written = [
+                    name
+                    for name in names
+                    if name in changed
+                    and (name not in self._last or not np.array_equal(self._last[name][k], changed[name][k]))
+                ]
                 for name in written:
                     obj[name] = tuple(float(v) for v in changed[name][k])
                 if written:

@@ -24,24 +24,56 @@ REALIZED_TRIANGLES = 250_000
 
 
 #: what Cycles reads from an instance's own object, given to the object that holds the realized mesh
-RAY_SETTINGS = ("visible_camera", "visible_diffuse", "visible_glossy", "visible_transmission", "visible_volume_scatter",
-                "visible_shadow", "is_shadow_catcher", "is_holdout", "pass_index", "color", "lightgroup",
-                "shadow_terminator_shading_offset", "shadow_terminator_geometry_offset")
+RAY_SETTINGS = (
+    "visible_camera",
+    "visible_diffuse",
+    "visible_glossy",
+    "visible_transmission",
+    "visible_volume_scatter",
+    "visible_shadow",
+    "is_shadow_catcher",
+    "is_holdout",
+    "pass_index",
+    "color",
+    "lightgroup",
+    "shadow_terminator_shading_offset",
+    "shadow_terminator_geometry_offset",
+)
 
 
 CYCLES_SETTINGS = ("is_caustics_caster", "is_caustics_receiver", "ao_distance")
 
 
 #: shader nodes that read the object itself (its place, index, instancer or particles): a realized mesh would differ
-PLACEMENT_NODES = frozenset({"ShaderNodeObjectInfo", "ShaderNodeParticleInfo", "ShaderNodeHairInfo", "ShaderNodePointInfo",
-                             "ShaderNodeScript", "ShaderNodeDisplacement", "ShaderNodeVectorDisplacement",
-                             "ShaderNodeTexPointDensity"})
+PLACEMENT_NODES = frozenset(
+    {
+        "ShaderNodeObjectInfo",
+        "ShaderNodeParticleInfo",
+        "ShaderNodeHairInfo",
+        "ShaderNodePointInfo",
+        "ShaderNodeScript",
+        "ShaderNodeDisplacement",
+        "ShaderNodeVectorDisplacement",
+        "ShaderNodeTexPointDensity",
+    }
+)
 
 
 #: textures whose unlinked vector is the generated coordinates (an Image texture's is the UV map: the same once realized)
-GENERATED_BY_DEFAULT = frozenset({"ShaderNodeTexBrick", "ShaderNodeTexChecker", "ShaderNodeTexGabor", "ShaderNodeTexGradient",
-                                  "ShaderNodeTexMagic", "ShaderNodeTexNoise", "ShaderNodeTexVoronoi", "ShaderNodeTexWave",
-                                  "ShaderNodeTexWhiteNoise", "ShaderNodeTexEnvironment"})
+GENERATED_BY_DEFAULT = frozenset(
+    {
+        "ShaderNodeTexBrick",
+        "ShaderNodeTexChecker",
+        "ShaderNodeTexGabor",
+        "ShaderNodeTexGradient",
+        "ShaderNodeTexMagic",
+        "ShaderNodeTexNoise",
+        "ShaderNodeTexVoronoi",
+        "ShaderNodeTexWave",
+        "ShaderNodeTexWhiteNoise",
+        "ShaderNodeTexEnvironment",
+    }
+)
 
 
 def static_groups(meshes: Sequence[Any]) -> dict[tuple, list[Any]]:
@@ -49,7 +81,9 @@ def static_groups(meshes: Sequence[Any]) -> dict[tuple, list[Any]]:
     index, ...) are the same; only groups of two or more (one alone gains nothing)."""
     groups: dict[tuple, list[Any]] = {}
     for obj in meshes:
-        key = tuple(_setting(getattr(obj, s)) for s in RAY_SETTINGS) + tuple(_setting(getattr(obj.cycles, s)) for s in CYCLES_SETTINGS)
+        key = tuple(_setting(getattr(obj, s)) for s in RAY_SETTINGS) + tuple(
+            _setting(getattr(obj.cycles, s)) for s in CYCLES_SETTINGS
+        )
         groups.setdefault(key, []).append(obj)
     return {key: members for key, members in groups.items() if len(members) > 1}
 
@@ -97,7 +131,9 @@ def _triangles(mesh: Any) -> int:
 
 #: per shader node kind, whether such a node reads its object's placement (see :func:`reads_placement`)
 _PLACEMENT_READERS: dict[str, Callable[[Any], bool]] = {
-    "ShaderNodeTexCoord": lambda n: n.from_instancer or any(n.outputs[o].is_linked for o in ("Generated", "Object", "Normal")),
+    "ShaderNodeTexCoord": lambda n: (
+        n.from_instancer or any(n.outputs[o].is_linked for o in ("Generated", "Object", "Normal"))
+    ),
     "ShaderNodeAttribute": lambda n: n.attribute_type in ("OBJECT", "INSTANCER"),
     "ShaderNodeUVMap": lambda n: n.from_instancer,
     "ShaderNodeNormalMap": lambda n: n.space not in ("TANGENT", "WORLD"),
@@ -114,7 +150,9 @@ _PLACEMENT_READERS: dict[str, Callable[[Any], bool]] = {
 def reads_placement(tree: Any) -> bool:
     """Whether a shader node tree reads where its object is (object, generated or instancer coordinates, object
     info, object space), which differs between an instance and a realized copy; node groups are searched too."""
-    return tree is not None and any(_PLACEMENT_READERS.get(node.bl_idname, lambda n: False)(node) for node in tree.nodes)
+    return tree is not None and any(
+        _PLACEMENT_READERS.get(node.bl_idname, lambda n: False)(node) for node in tree.nodes
+    )
 
 
 def instancer_node_group(name: str, obj: Any, selected: bool, realized: bool = False) -> Any:
@@ -126,7 +164,9 @@ def instancer_node_group(name: str, obj: Any, selected: bool, realized: bool = F
     info = nodes.new("GeometryNodeObjectInfo")
     info.transform_space = "ORIGINAL"  # the mesh in its own space: the transform attribute is its whole world matrix
     info.inputs["Object"].default_value = obj
-    info.inputs["As Instance"].default_value = True  # an instance of the object: Cycles keeps its geometry between steps
+    info.inputs[
+        "As Instance"
+    ].default_value = True  # an instance of the object: Cycles keeps its geometry between steps
     on_points = nodes.new("GeometryNodeInstanceOnPoints")
     links.new(inputs.outputs[0], on_points.inputs["Points"])
     links.new(info.outputs["Geometry"], on_points.inputs["Instance"])

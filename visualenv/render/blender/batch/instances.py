@@ -91,17 +91,25 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
     An object in `posed` (a MuJoCo body's) takes its location and rotation from MuJoCo's poses, so nothing may bind
     them; a quaternion-rotated object (the MJCF geoms and bodies) is computable while nothing binds its rotation.
     """
-    kinds: tuple[str, ...] = ("MESH", "EMPTY", "CAMERA")  # the object itself may be a camera: its pose places its env's anchor
+    kinds: tuple[str, ...] = (
+        "MESH",
+        "EMPTY",
+        "CAMERA",
+    )  # the object itself may be a camera: its pose places its env's anchor
     while obj is not None:
         if obj.type not in kinds or obj.constraints or obj.parent_type != "OBJECT":
             return False
         props = bound.get(obj.as_pointer(), set())
-        if obj.rotation_mode not in ("XYZ", "QUATERNION") or (obj.rotation_mode == "QUATERNION" and "rotation" in props):
+        if obj.rotation_mode not in ("XYZ", "QUATERNION") or (
+            obj.rotation_mode == "QUATERNION" and "rotation" in props
+        ):
             return False
         if obj.as_pointer() in posed and props & {"location", "rotation"}:
             return False
         animation = obj.animation_data
-        if animation is not None and (animation.action is not None or len(animation.drivers) or len(animation.nla_tracks)):
+        if animation is not None and (
+            animation.action is not None or len(animation.drivers) or len(animation.nla_tracks)
+        ):
             return False
         if any(obj.delta_location) or any(obj.delta_rotation_euler) or tuple(obj.delta_scale) != (1.0, 1.0, 1.0):
             return False
@@ -111,8 +119,13 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
     return True
 
 
-def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects: dict[str, Any], aimed: Iterable[str],
-              posed: Collection[int] = ()) -> set[int]:
+def removable(
+    copied: Sequence[Any],
+    bindings: Iterable[BindingTarget],
+    objects: dict[str, Any],
+    aimed: Iterable[str],
+    posed: Collection[int] = (),
+) -> set[int]:
     """Pointers of the objects that need no copies, with only such objects (or objects never copied) under them:
     meshes and empties whose world matrices numpy computes (:func:`_computable`; the meshes are drawn as instances,
     moving or not: every object in the scene adds to Blender's update of a moved one), and cameras
@@ -129,8 +142,12 @@ def removable(copied: Sequence[Any], bindings: Iterable[BindingTarget], objects:
     def dynamic(obj: Any) -> bool:
         return any(o.as_pointer() in bound for o in with_ancestors(obj))
 
-    candidates = {o.as_pointer(): o for o in copied if _computable(o, bound, aimed_ptrs, posed)
-                  or (o.type == "CAMERA" and not dynamic(o) and o.as_pointer() not in aimed_ptrs)}
+    candidates = {
+        o.as_pointer(): o
+        for o in copied
+        if _computable(o, bound, aimed_ptrs, posed)
+        or (o.type == "CAMERA" and not dynamic(o) and o.as_pointer() not in aimed_ptrs)
+    }
     changed = True
     while changed:  # drop any candidate with a copied object under it that is not removable
         changed = False
@@ -153,9 +170,13 @@ class _Node:
     scale: np.ndarray
     slices: dict[str, slice] = field(default_factory=dict)  # property -> its values in the binding table
     body: int | None = None  # the MuJoCo body whose pose (a row of xpos and xquat) is its location and rotation
-    basis: np.ndarray | None = None  # its matrix_basis ``(1, 4, 4)`` where no binding moves it (a body's: until poses come)
+    basis: np.ndarray | None = (
+        None  # its matrix_basis ``(1, 4, 4)`` where no binding moves it (a body's: until poses come)
+    )
     static: bool = False  # no binding or pose moves it or its ancestors: its world matrix is computed once
-    world: np.ndarray | None = None  # a static node's world matrices, its anchor's place included (recomputed when anchors move)
+    world: np.ndarray | None = (
+        None  # a static node's world matrices, its anchor's place included (recomputed when anchors move)
+    )
 
 
 @dataclass
@@ -164,7 +185,9 @@ class _Instancer:
 
     node: int | None  # None: a static group's, posed at each env's anchor
     mesh: Any
-    visible: list[slice]  # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
+    visible: list[
+        slice
+    ]  # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
     selected: bool  # whether the points carry a visible attribute
     color: slice | None
     attributes: Sequence[str] = ()  # each env's own numbers (write_env_attributes)
@@ -175,9 +198,19 @@ class _Instancer:
 class InstancedCopies:
     """The batch's removable objects (:func:`removable`), drawn by one instancer per mesh; :meth:`write` poses every env."""
 
-    def __init__(self, collection: Any, anchor: Any, originals: Sequence[Any], bindings: Sequence[BindingTarget],
-                 objects: dict[str, Any], num_envs: int, bodies: Mapping[int, int] | None = None, *,
-                 realize_static: bool = False, env_attributes: Callable[[Any], Sequence[str]] = lambda obj: ()) -> None:
+    def __init__(
+        self,
+        collection: Any,
+        anchor: Any,
+        originals: Sequence[Any],
+        bindings: Sequence[BindingTarget],
+        objects: dict[str, Any],
+        num_envs: int,
+        bodies: Mapping[int, int] | None = None,
+        *,
+        realize_static: bool = False,
+        env_attributes: Callable[[Any], Sequence[str]] = lambda obj: (),
+    ) -> None:
         """`bodies`: the MuJoCo body index of each object (by pointer) that takes a body's pose (:meth:`write`'s `poses`).
         `realize_static`: whether the anchors stay where they are built, so static meshes may be realized.
         `env_attributes`: the attributes an original's materials read per env (:meth:`write_env_attributes`)."""
@@ -206,23 +239,39 @@ class InstancedCopies:
             slices = {prop: s for (n, prop), s in starts.items() if n == name and prop in COMPUTED}
             parent = index.get(o.parent.as_pointer()) if o.parent is not None else None
             body = bodies.get(o.as_pointer())
-            static = (not ({"location", "rotation", "scale"} & set(slices)) and body is None
-                      and (parent is None or self._nodes[parent].static))
+            static = (
+                not ({"location", "rotation", "scale"} & set(slices))
+                and body is None
+                and (parent is None or self._nodes[parent].static)
+            )
             rotation = o.rotation_quaternion if o.rotation_mode == "QUATERNION" else o.rotation_euler
             inverse = _matrix(o.matrix_parent_inverse) if parent is not None else None
-            node = _Node(o, parent, None if inverse is None or np.array_equal(inverse, np.eye(4)) else inverse,
-                         np.array(o.location), np.array(rotation), np.array(o.scale), slices, body=body, static=static)
+            node = _Node(
+                o,
+                parent,
+                None if inverse is None or np.array_equal(inverse, np.eye(4)) else inverse,
+                np.array(o.location),
+                np.array(rotation),
+                np.array(o.scale),
+                slices,
+                body=body,
+                static=static,
+            )
             if not {"location", "rotation", "scale"} & set(slices):
                 node.basis = _basis(node, np.zeros((1, self.size)), 1)
             self._nodes.append(node)
         self._posed = [i for i, node in enumerate(self._nodes) if node.body is not None]
         self._pose_columns = np.array([self._nodes[i].body for i in self._posed], dtype=int)
-        self._anchors: np.ndarray | None = None  # the anchors' world matrices the static nodes' world matrices were computed with
+        self._anchors: np.ndarray | None = (
+            None  # the anchors' world matrices the static nodes' world matrices were computed with
+        )
         #: whether any object takes a MuJoCo body's pose
         self.posed = bool(self._posed)
         self._env_attributes = env_attributes
         self._instancers: list[_Instancer] = []
-        groups = {} if realize_static else static_groups([o for o in originals if o.type == "MESH" and self._groupable(o)])
+        groups = (
+            {} if realize_static else static_groups([o for o in originals if o.type == "MESH" and self._groupable(o)])
+        )
         grouped = {o.as_pointer() for members in groups.values() for o in members}
         #: every static group's members' names, one list per group (one instance per env draws each group)
         self.groups = [[o.name for o in members] for members in groups.values()]
@@ -235,7 +284,9 @@ class InstancedCopies:
             if obj.type != "CAMERA":
                 obj.hide_render = True  # its instances draw it, env 0's among them
 
-    def _instancer(self, collection: Any, obj: Any, node: int | None, anchor: Any, group_attributes: Sequence[str] = ()) -> _Instancer:
+    def _instancer(
+        self, collection: Any, obj: Any, node: int | None, anchor: Any, group_attributes: Sequence[str] = ()
+    ) -> _Instancer:
         """A mesh of N points under a Geometry Nodes modifier that instances `obj` on each, posed by its transform attribute
         (`node` None: a static group's object, posed at each env's anchor, its members' `group_attributes` on its points)."""
         chain = list(with_ancestors(obj, anchor)) if node is not None else []
@@ -251,7 +302,9 @@ class InstancedCopies:
         mesh = bpy.data.meshes.new(f"{obj.name}-instances")
         mesh.vertices.add(self.num_envs)
         mesh.attributes.new(TRANSFORM, "FLOAT4X4", "POINT")
-        selected = bool(visible) or (obj.hide_render and node is not None)  # a visible binding overrides how the original was set
+        selected = bool(visible) or (
+            obj.hide_render and node is not None
+        )  # a visible binding overrides how the original was set
         if selected:
             mesh.attributes.new(VISIBLE, "BOOLEAN", "POINT")
         if color is not None:
@@ -264,8 +317,15 @@ class InstancedCopies:
             mesh.attributes.new(name, "FLOAT_COLOR", "POINT")
         holder = bpy.data.objects.new(f"{obj.name}-instances", mesh)
         collection.objects.link(holder)
-        realized = (node is not None and self._realize_static and self._nodes[node].static and not selected and color is None
-                    and not attributes and realizable(obj, self.num_envs))
+        realized = (
+            node is not None
+            and self._realize_static
+            and self._nodes[node].static
+            and not selected
+            and color is None
+            and not attributes
+            and realizable(obj, self.num_envs)
+        )
         if realized:  # Cycles reads these from an instance's object, and from the holder of a realized mesh
             for name in RAY_SETTINGS:
                 setattr(holder, name, getattr(obj, name))
@@ -279,8 +339,12 @@ class InstancedCopies:
         """Whether a static mesh may join its env's other static meshes in one mesh in the anchor's space (a static
         group): nothing moves, hides or colours it, and a merged mesh draws it with the same pixels (:func:`realizable`)."""
         chain = [self._nodes[self._index[o.as_pointer()]] for o in with_ancestors(obj) if o.as_pointer() in self._index]
-        return (chain[0].static and not obj.hide_render and not any({"visible", "color"} & set(node.slices) for node in chain)
-                and realizable(obj, 1))
+        return (
+            chain[0].static
+            and not obj.hide_render
+            and not any({"visible", "color"} & set(node.slices) for node in chain)
+            and realizable(obj, 1)
+        )
 
     def _group_instancer(self, collection: Any, name: str, members: Sequence[Any], anchor: Any) -> _Instancer:
         """One object whose mesh joins `members` in the anchor's space (realized once by Geometry Nodes), drawn once per
@@ -307,7 +371,9 @@ class InstancedCopies:
         attributes = list(dict.fromkeys(a for o in members for a in self._env_attributes(o)))
         return self._instancer(collection, merged, None, anchor, attributes)
 
-    def write(self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> None:
+    def write(
+        self, values: np.ndarray, offsets: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> None:
         """Pose every env's instances: `values` the binding table ``(N, size)``, `offsets` each env's anchor, a
         translation ``(N, 3)`` or a whole matrix ``(N, 4, 4)``, `poses` every env's MuJoCo body poses, ``xpos``
         ``(N, nbody, 3)`` and ``xquat`` ``(N, nbody, 4)`` (None: the bodies stay where they were built).
@@ -328,7 +394,9 @@ class InstancedCopies:
                 continue
             basis = self._node_basis(i, bases, values)
             # the anchor's place included (rounding with it)
-            if node.parent is None and anchors.ndim == 2:  # an anchor that only translates: the basis shifted, to the bit
+            if (
+                node.parent is None and anchors.ndim == 2
+            ):  # an anchor that only translates: the basis shifted, to the bit
                 world = np.repeat(basis, n, axis=0) if len(basis) < n else basis.copy()
                 world[:, :3, 3] += anchors
             else:
@@ -339,7 +407,9 @@ class InstancedCopies:
         at_anchors = anchors if anchors.ndim == 3 else _translations(anchors)
         for inst in self._instancers:
             world = worlds[inst.node] if inst.node is not None else at_anchors
-            changed = _write(inst, TRANSFORM, np.ascontiguousarray(world.transpose(0, 2, 1)))  # Blender's matrices are column-major
+            changed = _write(
+                inst, TRANSFORM, np.ascontiguousarray(world.transpose(0, 2, 1))
+            )  # Blender's matrices are column-major
             if inst.selected:
                 shown = np.full(n, bool(inst.visible))
                 for part in inst.visible:
@@ -353,8 +423,9 @@ class InstancedCopies:
             if changed:
                 inst.mesh.update_tag()  # the depsgraph evaluates its modifier again
 
-
-    def local_matrices(self, obj: Any, values: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
+    def local_matrices(
+        self, obj: Any, values: np.ndarray, poses: tuple[np.ndarray, np.ndarray] | None = None
+    ) -> np.ndarray:
         """Each env's world matrix of a removed object (a moving camera) in its copy, its anchor left out: ``(N, 4, 4)``
         float32, composed as :meth:`write` composes it (`values` and `poses` as there)."""
         n = self.num_envs
@@ -368,7 +439,11 @@ class InstancedCopies:
         for i in reversed(chain):  # from the node under the anchor down to the object
             basis = self._node_basis(i, bases, values)
             # under the anchor, which is left out: the basis itself
-            world = np.broadcast_to(basis, (n, 4, 4)).copy() if world is None else _child_world(world, self._nodes[i], basis)
+            world = (
+                np.broadcast_to(basis, (n, 4, 4)).copy()
+                if world is None
+                else _child_world(world, self._nodes[i], basis)
+            )
         assert world is not None
         return world
 
@@ -390,7 +465,9 @@ class InstancedCopies:
         locations = poses[0][:, self._pose_columns].astype(np.float32)
         for j, i in enumerate(self._posed):
             basis = np.zeros((n, 4, 4), dtype=np.float32)
-            basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(np.float32)  # rotation @ scale, as Blender's
+            basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(
+                np.float32
+            )  # rotation @ scale, as Blender's
             basis[:, :3, 3] = locations[:, j]
             basis[:, 3, 3] = 1.0
             bases[i] = basis
@@ -437,6 +514,7 @@ def _matrix(m: Any) -> np.ndarray:
 def _basis(node: _Node, values: np.ndarray, n: int) -> np.ndarray:
     """Each env's ``matrix_basis`` of the node, ``(N, 4, 4)``, from its fixed properties and its bindings' values
     (float32, as Blender keeps an object's properties), composed as Blender composes it (:func:`basis_matrices`)."""
+
     def column(prop: str, fixed: np.ndarray) -> np.ndarray:
         part = node.slices.get(prop)
         if part is None:
@@ -446,5 +524,3 @@ def _basis(node: _Node, values: np.ndarray, n: int) -> np.ndarray:
     # quaternion mode: nothing binds its rotation (_computable)
     rotation = node.rotation[None] if node.rotation.size == 4 else column("rotation", node.rotation)
     return basis_matrices(column("location", node.location), rotation, column("scale", node.scale))
-
-

@@ -49,21 +49,49 @@ from visualenv.errors import RenderError
 from visualenv.render.base import DEFAULT_OPTIONS, RenderPlan, RendererOptions
 from visualenv.render.distractions import Distraction
 from visualenv.render.frames import Frames, Poses
-from visualenv.render.batch_limits import (MAX_LINKED_ENVS, MAX_TURNING_ENVS, TURNS, UNFOLLOWED, check_turning, engine_message, sun_error,
-                                           sun_world_error, turning_error, world_error)
+from visualenv.render.batch_limits import (
+    MAX_LINKED_ENVS,
+    MAX_TURNING_ENVS,
+    TURNS,
+    UNFOLLOWED,
+    check_turning,
+    engine_message,
+    sun_error,
+    sun_world_error,
+    turning_error,
+    world_error,
+)
 from visualenv.render.blender.batch.calls import MAX_IMAGE_SIDE, alone_limit, envs_per_call
 from visualenv.render.blender.batch.distraction_draws import BatchDistractions
 from visualenv.render.blender.look.distraction_scene import focus_distance
 from visualenv.render.blender.batch.env_attributes import CAMERA_TURN, EnvAttributes, read_per_env, turn_to_env_cameras
 from visualenv.render.blender.batch.instances import InstancedCopies, removable
-from visualenv.render.blender.batch.copies import (Copy, aim_copy, copy_spacing, grid_offset, hidden, is_sun, linked_local_lights, make_copy,
-                                             one_colour, warn_shared_lights)
+from visualenv.render.blender.batch.copies import (
+    Copy,
+    aim_copy,
+    copy_spacing,
+    grid_offset,
+    hidden,
+    is_sun,
+    linked_local_lights,
+    make_copy,
+    one_colour,
+    warn_shared_lights,
+)
 from visualenv.render.blender.renderer import BlenderRenderer, View, is_world, write_bindings
-from visualenv.render.blender.batch.tiles_camera import (TURNING_NAME, grid_shape, make_tiles_camera, rotation_of, tile,
-                                                   tiles_text, unit_columns)
+from visualenv.render.blender.batch.tiles_camera import (
+    TURNING_NAME,
+    grid_shape,
+    make_tiles_camera,
+    rotation_of,
+    tile,
+    tiles_text,
+    unit_columns,
+)
 from visualenv.render.blender.scene.build import BuiltScene, with_ancestors
 from visualenv.bindables import BINDABLES
 from visualenv.render.plan import CameraObject
+
 
 class BatchedBlenderRenderer(BlenderRenderer):
     """Renders `num_envs` copies of a plan's scene in one Blender scene, one Cycles call per observation camera.
@@ -76,7 +104,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
     #: the Camera Data node measures depth from the custom camera's pose (copy 0's); a ray starts at its own copy's camera
     DEPTH_ALONG_RAY = True
 
-    def __init__(self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1, instanced: bool = True) -> None:
+    def __init__(
+        self, plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1, instanced: bool = True
+    ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, int) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
         #: whether moving meshes may be drawn as instances (:mod:`instances`); False copies every object (the path before)
@@ -93,8 +123,12 @@ class BatchedBlenderRenderer(BlenderRenderer):
     # -- construction -------------------------------------------------------------------------------
 
     def _setup(self, built: BuiltScene, threads: int) -> None:
-        self._threads = threads or len(os.sched_getaffinity(0))  # Cycles' render threads (0: every core this process may use)
-        self._removed: set[int] = set()  # objects drawn as instances rather than copied (none while the base class compiles)
+        self._threads = threads or len(
+            os.sched_getaffinity(0)
+        )  # Cycles' render threads (0: every core this process may use)
+        self._removed: set[int] = (
+            set()
+        )  # objects drawn as instances rather than copied (none while the base class compiles)
         super()._setup(built, threads)
         settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
         self._distracting = BatchDistractions(settings, built.scene, self.n) if settings is not None else None
@@ -107,7 +141,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._refuse_turning_cameras()
         scene = built.scene
         #: whether a MuJoCo look's headlight is turned to each env's camera (a turning observation camera: env_attributes)
-        self._turned_headlights = any(self._turns(v.camera) for v in self.plan.views.values()) and turn_to_env_cameras(scene)
+        self._turned_headlights = any(self._turns(v.camera) for v in self.plan.views.values()) and turn_to_env_cameras(
+            scene
+        )
         self._layer.update()  # matrix_world of every object, read below
         reach = max((self._objects[v.camera].data.clip_end for v in self.plan.views.values()), default=100.0)
         backdrops = self._distracting is not None and self._distracting.backdropped  # each env's within its far clip
@@ -115,50 +151,78 @@ class BatchedBlenderRenderer(BlenderRenderer):
         self._cols = self._grid_columns()
         # suns are directional: one serves every copy, unless bound to the state: then each copy has its own, lighting
         # only that copy's objects (Cycles' light linking)
-        self._own_suns = {built.objects[t.object].as_pointer() for t in self.plan.bindings
-                          if t.object in built.objects and is_sun(built.objects[t.object])}
+        self._own_suns = {
+            built.objects[t.object].as_pointer()
+            for t in self.plan.bindings
+            if t.object in built.objects and is_sun(built.objects[t.object])
+        }
         copied = [o for o in scene.objects if (not is_sun(o) or o.as_pointer() in self._own_suns) and not hidden(o)]
         #: the lights that light only their own copy (light linking): bound suns, and every copied local light where
         #: Cycles can tell the copies apart (:func:`~copies.linked_local_lights`)
         self._own_lights = self._own_suns | linked_local_lights(copied, self.n)
         warn_shared_lights(copied, self.n)
         if self._own_suns and self.n > MAX_LINKED_ENVS:  # a .blend file's sun (the spec's were refused at build)
-            name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
+            name = next(
+                t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object])
+            )
             raise sun_error(self.plan, name, self.n)
-        if self._own_suns and self.n > 1 and not one_colour(scene.world):  # a .blend file's world (the spec's: at build)
-            name = next(t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object]))
+        if (
+            self._own_suns and self.n > 1 and not one_colour(scene.world)
+        ):  # a .blend file's world (the spec's: at build)
+            name = next(
+                t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object])
+            )
             raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._removed = self._removable(copied)
-        self._copy_poses: list[tuple[int, Any]] | None = None  # the pose writers of the copies (None: no poses handed yet)
+        self._copy_poses: list[tuple[int, Any]] | None = (
+            None  # the pose writers of the copies (None: no poses handed yet)
+        )
         self._body_poses: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))  # every env's xpos and xquat
-        self._copies = [make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_lights=self._own_lights)
-                        for k in range(self.n)]
+        self._copies = [
+            make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_lights=self._own_lights)
+            for k in range(self.n)
+        ]
         for copy in self._copies:
             self._objects, self._last = copy.objects, None
             copy.setters = [s for s in self._compile_bindings() if s[2] is not _instanced]
             copy.aimed, copy.targets = self._aimed, self._targets
         self._objects = built.objects
-        self._per_copy = bool(self._copies[0].setters or self._copies[0].aimed)  # whether any binding is written per copy
-        self._grid = np.array([tuple(self._offset(k)) for k in range(self.n)], dtype=np.float32)  # the copies' grid places
+        self._per_copy = bool(
+            self._copies[0].setters or self._copies[0].aimed
+        )  # whether any binding is written per copy
+        self._grid = np.array(
+            [tuple(self._offset(k)) for k in range(self.n)], dtype=np.float32
+        )  # the copies' grid places
         self._offsets = self._grid.astype(np.float64)  # each copy's anchor, as its instances see it
         self._instances = self._instance(copied)
         #: the anchors that carry an object drawn as itself, by env: only they follow a moving camera (the others
         #: hold nothing, or copy 0's originals that instances draw)
-        self._carrying = [(k, copy.anchor) for k, copy in enumerate(self._copies) if copy.anchor is not None
-                          and any(o.as_pointer() not in self._removed for o in copy.anchor.children_recursive)]
+        self._carrying = [
+            (k, copy.anchor)
+            for k, copy in enumerate(self._copies)
+            if copy.anchor is not None
+            and any(o.as_pointer() not in self._removed for o in copy.anchor.children_recursive)
+        ]
         self._table = np.zeros((self.n, self._instances.size if self._instances is not None else 0))
         self._tiled_views = [self._tiled_view(view) for view in self._views]
         #: what each env's shaders read of their own (its colour shifts, its camera's turn)
-        self._env_values = EnvAttributes.of_copies(self._copies, [o for o in copied if o.as_pointer() not in self._removed], self._instances)
+        self._env_values = EnvAttributes.of_copies(
+            self._copies, [o for o in copied if o.as_pointer() not in self._removed], self._instances
+        )
         if self._distracting is not None:  # its backdrop about the place the first camera's rays start from
             self._distracting.attach(self._env_values)
             if self._distracting.backdropped:
                 centres = self._grid + np.array(tuple(self._tiled_views[0][1]), dtype=np.float32)
-                self._add_backdrop(self._distracting.make_backdrops(self._copies[0].anchor.users_collection[0], centres,
-                                                                    self._views[0].camera.data.clip_end))
+                self._add_backdrop(
+                    self._distracting.make_backdrops(
+                        self._copies[0].anchor.users_collection[0], centres, self._views[0].camera.data.clip_end
+                    )
+                )
         self._tiled_view_camera: tuple[View, Any, bool] | None = None  # the view camera's, built at the first view
-        self._alone: dict[int, View] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
+        self._alone: dict[
+            int, View
+        ] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
         #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
         self.shader_updates = 0
         self._anchors_moved = False
@@ -170,8 +234,11 @@ class BatchedBlenderRenderer(BlenderRenderer):
         physics, poses = self.plan.physics, self._poses
         if physics is None or poses is None:
             return {}
-        return {camera.as_pointer(): (i, info.turns) for i, (info, camera) in enumerate(zip(physics.cameras, poses.cameras))
-                if info.moves and self._objects.get(info.name) == camera}
+        return {
+            camera.as_pointer(): (i, info.turns)
+            for i, (info, camera) in enumerate(zip(physics.cameras, poses.cameras))
+            if info.moves and self._objects.get(info.name) == camera
+        }
 
     def _removable(self, copied: list[Any]) -> set[int]:
         """The objects to draw as instances (:func:`instances.removable`): none without instancing, or with a light of each
@@ -179,7 +246,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         instanced too: the instancers take every env's body poses at once (:meth:`_pose_envs`)."""
         if not self.instanced or self._own_lights:
             return set()
-        return removable(copied, self.plan.bindings, self._objects, {name for _, name in self._aimed}, self._posed_bodies())
+        return removable(
+            copied, self.plan.bindings, self._objects, {name for _, name in self._aimed}, self._posed_bodies()
+        )
 
     def _posed_bodies(self) -> dict[int, int]:
         """The MuJoCo body index of each object (by pointer) that takes a moving body's pose."""
@@ -192,9 +261,20 @@ class BatchedBlenderRenderer(BlenderRenderer):
             return None
         anchor = self._copies[0].anchor
         cameras = [view.camera for view in self._views] + ([self._view.camera] if self._view is not None else [])
-        anchored = not any(self._camera_moves(camera) for camera in cameras)  # anchors that stay put: static meshes realized
-        return InstancedCopies(anchor.users_collection[0], anchor, removed, self.plan.bindings, self._objects, self.n,
-                               self._posed_bodies(), realize_static=anchored, env_attributes=read_per_env)
+        anchored = not any(
+            self._camera_moves(camera) for camera in cameras
+        )  # anchors that stay put: static meshes realized
+        return InstancedCopies(
+            anchor.users_collection[0],
+            anchor,
+            removed,
+            self.plan.bindings,
+            self._objects,
+            self.n,
+            self._posed_bodies(),
+            realize_static=anchored,
+            env_attributes=read_per_env,
+        )
 
     def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Any:
         """No setter for an object drawn as instances: its instances are posed from numpy (:meth:`_write_instances`)."""
@@ -235,13 +315,19 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """Whether the state turns this camera (a rotation or look_at bound on it or an ancestor, or it is aimed and moves;
         a model camera that hangs on a moving body or aims at one): its tiles shader then turns each env's rays (:meth:`_aim_rays`)."""
         objects = self._objects
-        if self._tracked.get(objects[camera_name].as_pointer(), (0, False))[1] or objects[camera_name].as_pointer() in self._orbiting:
+        if (
+            self._tracked.get(objects[camera_name].as_pointer(), (0, False))[1]
+            or objects[camera_name].as_pointer() in self._orbiting
+        ):
             return True  # a model camera on a moving body, or aimed at one; an observation camera a distraction orbits
         names = {obj.as_pointer(): name for name, obj in objects.items()}
         spec = self.plan.scene.objects.get(camera_name)
         aimed = isinstance(spec, CameraObject) and spec.look_at is not None
-        props = {t.property for t in self.plan.bindings
-                 if t.object in {names.get(o.as_pointer(), "") for o in with_ancestors(objects[camera_name])}}
+        props = {
+            t.property
+            for t in self.plan.bindings
+            if t.object in {names.get(o.as_pointer(), "") for o in with_ancestors(objects[camera_name])}
+        }
         return bool(props & set(TURNS) or (aimed and props & {"location"}))
 
     def _grid_columns(self) -> int:
@@ -256,8 +342,16 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _tiled_view(self, view: View) -> tuple[View, Any, bool]:
         """The custom camera that renders `view` for every env, and whether its camera moves with the state."""
         name = f"{self._scene.name}-{view.key}-tiles"
-        camera = make_tiles_camera(self._scene, name, view.camera, self._shader_text(view.camera), view.width, view.height,
-                                   self._spacing, self._cols)
+        camera = make_tiles_camera(
+            self._scene,
+            name,
+            view.camera,
+            self._shader_text(view.camera),
+            view.width,
+            view.height,
+            self._spacing,
+            self._cols,
+        )
         self._own(camera, camera.data)
         tiled = View(view.key, camera, view.width, view.height, view.color, view.depth_range, view.config)
         return tiled, view.camera.matrix_world.normalized().translation.copy(), self._camera_moves(view.camera)
@@ -284,12 +378,15 @@ class BatchedBlenderRenderer(BlenderRenderer):
         if len(values) != self.n:
             raise ValueError(f"expected binding values for {self.n} envs, got {len(values)}")
         chosen = None if envs is None else [int(i) for i in envs]
-        if chosen is not None and (not chosen or any(b <= a for a, b in zip(chosen, chosen[1:]))
-                                   or not 0 <= chosen[0] <= chosen[-1] < self.n):
+        if chosen is not None and (
+            not chosen or any(b <= a for a, b in zip(chosen, chosen[1:])) or not 0 <= chosen[0] <= chosen[-1] < self.n
+        ):
             raise ValueError(f"envs must be ascending indices below {self.n}, got {chosen}")
         self._take_envs(frames)
         self._write_copies(values, chosen)
-        alone = chosen is not None and len(chosen) < alone_limit(self.n, self.device, self._threads)  # else every tile is cheaper
+        alone = chosen is not None and len(chosen) < alone_limit(
+            self.n, self.device, self._threads
+        )  # else every tile is cheaper
         images = {}
         for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
             self._place_copies(reference, source.camera if moving else None)
@@ -310,16 +407,22 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """
         self._check_open()
         if self._view is None:
-            raise RenderError("the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')")
+            raise RenderError(
+                "the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')"
+            )
         if self._tiled_view_camera is None:
             camera_name = self.plan.view_camera
             why = self._turning(camera_name) if camera_name is not None else None
             if why:
-                raise RenderError(f"the view camera '{camera_name}' cannot be batched ({why}): a batch renders "
-                                  "every env through one custom camera with one lens; record a view with one env (visualenv.make)")
+                raise RenderError(
+                    f"the view camera '{camera_name}' cannot be batched ({why}): a batch renders "
+                    "every env through one custom camera with one lens; record a view with one env (visualenv.make)"
+                )
             if camera_name is not None and self._turns(camera_name) and self.n > MAX_TURNING_ENVS:
-                raise RenderError(f"the view camera '{camera_name}' turns with the state: a batch's tiles shader turns the rays "
-                                  f"of at most {MAX_TURNING_ENVS} envs, not {self.n}; record a view with one env (visualenv.make)")
+                raise RenderError(
+                    f"the view camera '{camera_name}' turns with the state: a batch's tiles shader turns the rays "
+                    f"of at most {MAX_TURNING_ENVS} envs, not {self.n}; record a view with one env (visualenv.make)"
+                )
             self._tiled_view_camera = self._tiled_view(self._view)
         if len(frames.values) != self.n:
             raise ValueError(f"expected binding values for {self.n} envs, got {len(frames.values)}")
@@ -355,8 +458,10 @@ class BatchedBlenderRenderer(BlenderRenderer):
             self._body_poses = (np.empty((self.n, nbody, 3)), np.empty((self.n, nbody, 4)))
             # copy 0 holds the originals: all but the instanced bodies; another copy: its duplicates (lights, bodies left as copies)
             originals = {obj.as_pointer() for obj in self._copies[0].objects.values()}
-            writers = [self._poses.for_objects(copy.objects).without(originals if k else self._removed, keep_cameras=not k)
-                       for k, copy in enumerate(self._copies)]
+            writers = [
+                self._poses.for_objects(copy.objects).without(originals if k else self._removed, keep_cameras=not k)
+                for k, copy in enumerate(self._copies)
+            ]
             self._copy_poses = [(k, writer) for k, writer in enumerate(writers) if not writer.empty]
         if self._instances is not None and self._instances.posed:
             for parts, out in zip(([p[0] for p in poses], [p[1] for p in poses]), self._body_poses):  # one C loop each
@@ -391,7 +496,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         """Pose every env's instances from the last binding table, at their copies' anchors (moved by :meth:`_place_copies`)."""
         if self._instances is not None:
             start = time.perf_counter()
-            self._instances.write(self._table, self._offsets, self._body_poses if self._copy_poses is not None else None)
+            self._instances.write(
+                self._table, self._offsets, self._body_poses if self._copy_poses is not None else None
+            )
             if self.profile is not None:
                 self.profile.add("write", time.perf_counter() - start)
 
@@ -423,15 +530,21 @@ class BatchedBlenderRenderer(BlenderRenderer):
         per_call = envs_per_call(self.n, view.width, view.height)
         rows = per_call // self._cols
         turned = view.camera.as_pointer() in self._rays  # its rotations are indexed by env: shown by parameters (first)
-        if (per_call < self.n and rows >= 1 and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE
-                and not turned):
+        if (
+            per_call < self.n
+            and rows >= 1
+            and max(self._cols * view.width, rows * view.height) <= MAX_IMAGE_SIDE
+            and not turned
+        ):
             return self._render_rows(view, rows)
         parts = []
         for first in range(0, self.n, per_call):
             count = min(per_call, self.n - first)
             cols, rows = grid_shape(count)
             self._set_shown(view.camera, first, count, cols)
-            big = View(view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
+            big = View(
+                view.key, view.camera, cols * view.width, rows * view.height, view.color, view.depth_range, view.config
+            )
             parts.append(tile(self._render(big), count, view.height, view.width))
         return parts[0] if len(parts) == 1 else np.concatenate(parts)
 
@@ -440,7 +553,15 @@ class BatchedBlenderRenderer(BlenderRenderer):
         count = rows * self._cols
         self._set_shown(view.camera, 0, count, self._cols)
         base = view.camera.matrix_world.copy()
-        big = View(view.key, view.camera, self._cols * view.width, rows * view.height, view.color, view.depth_range, view.config)
+        big = View(
+            view.key,
+            view.camera,
+            self._cols * view.width,
+            rows * view.height,
+            view.color,
+            view.depth_range,
+            view.config,
+        )
         parts = []
         try:
             for p, first in enumerate(range(0, self.n, count)):
@@ -546,7 +667,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
         cameras = self._camera_poses(camera)[:, :3, 3].astype(np.float32)
-        places = (self._grid + np.array(tuple(reference), dtype=np.float32)) - cameras  # in float32, as mathutils' vectors add
+        places = (
+            self._grid + np.array(tuple(reference), dtype=np.float32)
+        ) - cameras  # in float32, as mathutils' vectors add
         for k, anchor in self._carrying:
             anchor.location = places[k]
         self._offsets[:] = places
@@ -559,7 +682,9 @@ class BatchedBlenderRenderer(BlenderRenderer):
         tracked = self._tracked.get(camera.as_pointer())
         if tracked is not None and self._camera_rows:
             places = np.array([r[0][tracked[0]] for r in self._camera_rows], dtype=np.float64)
-            rotations = np.array([np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3) for r in self._camera_rows])
+            rotations = np.array(
+                [np.asarray(r[1][tracked[0]], dtype=np.float64).reshape(3, 3) for r in self._camera_rows]
+            )
         elif tracked is not None:  # no poses handed yet: where the model puts it at qpos0
             places = np.tile(tuple(camera.matrix_basis.translation), (self.n, 1))
             rotations = np.tile(rotation_of(camera.matrix_world), (self.n, 1, 1))
@@ -572,17 +697,36 @@ class BatchedBlenderRenderer(BlenderRenderer):
             on_anchor = camera.parent == self._copies[0].anchor  # its location is its place in the copy
             if not on_anchor:
                 self._layer.update()  # the camera's place depends on its parents: evaluate them (once for all copies)
-            places = np.array([tuple(copy.objects[name].location if on_anchor else
-                                     (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation)
-                               for copy in self._copies], dtype=np.float64)
+            places = np.array(
+                [
+                    tuple(
+                        copy.objects[name].location
+                        if on_anchor
+                        else (copy.anchor.matrix_world.inverted() @ copy.objects[name].matrix_world).translation
+                    )
+                    for copy in self._copies
+                ],
+                dtype=np.float64,
+            )
             rotations = np.array([rotation_of(self._camera_pose(copy, name)) for copy in self._copies])
         poses = np.zeros((self.n, 4, 4))
         poses[:, :3, :3], poses[:, :3, 3], poses[:, 3, 3] = rotations, places, 1.0
         if camera.as_pointer() not in self._orbiting:
             return poses
         assert self._distracting is not None
-        return np.array(self._distracting.orbited(camera.as_pointer(), poses, lambda k: focus_distance(
-            self._scene, Matrix(poses[k].tolist()), camera.data.clip_start, Vector(self._offsets[k]), self._posed_for_cast)))
+        return np.array(
+            self._distracting.orbited(
+                camera.as_pointer(),
+                poses,
+                lambda k: focus_distance(
+                    self._scene,
+                    Matrix(poses[k].tolist()),
+                    camera.data.clip_start,
+                    Vector(self._offsets[k]),
+                    self._posed_for_cast,
+                ),
+            )
+        )
 
     def _posed_for_cast(self) -> None:
         """Every env's instances posed, as the next render draws them, for a ray cast."""

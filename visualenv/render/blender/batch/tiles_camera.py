@@ -64,8 +64,13 @@ _TURN = """        int i = 4 * clamp(env, 0, @LAST@);
 """
 
 #: the tiles shader of a camera that does not turn
-TILES_OSL = (_TILES_TEMPLATE.replace("@NAME@", "visualenv_tiles").replace("@TURNED@", "")
-             .replace("@ROTATIONS@", "").replace("@TABLE@", "").replace("@TURN@", ""))
+TILES_OSL = (
+    _TILES_TEMPLATE.replace("@NAME@", "visualenv_tiles")
+    .replace("@TURNED@", "")
+    .replace("@ROTATIONS@", "")
+    .replace("@TABLE@", "")
+    .replace("@TURN@", "")
+)
 
 TURNING_NAME = "visualenv_tiles_turning"
 
@@ -78,9 +83,13 @@ def turning_source(num_envs: int) -> str:
     results/benchmarks/batched-suns-and-cameras.md)."""
     names = [f"r{k}_{i}" for k in range(num_envs) for i in range(4)]
     rotations = "".join(f"    float r{k}_{i} = {1 if i == 0 else 0},\n" for k in range(num_envs) for i in range(4))
-    return (_TILES_TEMPLATE.replace("@NAME@", TURNING_NAME).replace("@TURNED@", " and turned by the env's own camera rotation")
-            .replace("@ROTATIONS@", rotations).replace("@TABLE@", f"    float R[{4 * num_envs}] = {{{', '.join(names)}}};\n")
-            .replace("@TURN@", _TURN.replace("@LAST@", str(num_envs - 1))))
+    return (
+        _TILES_TEMPLATE.replace("@NAME@", TURNING_NAME)
+        .replace("@TURNED@", " and turned by the env's own camera rotation")
+        .replace("@ROTATIONS@", rotations)
+        .replace("@TABLE@", f"    float R[{4 * num_envs}] = {{{', '.join(names)}}};\n")
+        .replace("@TURN@", _TURN.replace("@LAST@", str(num_envs - 1)))
+    )
 
 
 def tiles_text(turning: int = 0) -> Any:
@@ -103,10 +112,14 @@ def compile_tiles_camera(camera: Any, scene: Any) -> None:
             return
         except RuntimeError as exc:
             error = str(exc)
-    raise RuntimeError("Cycles could not compile the batch's custom camera shader: " + "; ".join(output.lines or [error]))
+    raise RuntimeError(
+        "Cycles could not compile the batch's custom camera shader: " + "; ".join(output.lines or [error])
+    )
 
 
-def make_tiles_camera(scene: Any, name: str, source: Any, shader: Any, width: int, height: int, spacing: float, cols: int) -> Any:
+def make_tiles_camera(
+    scene: Any, name: str, source: Any, shader: Any, width: int, height: int, spacing: float, cols: int
+) -> Any:
     """A custom camera in `scene` at `source`'s pose, with its lens and clipping, showing every env's tile of a
     `width` x `height` view through `shader`, for copies `spacing` apart in `cols` columns."""
     data = bpy.data.cameras.new(name)
@@ -118,7 +131,9 @@ def make_tiles_camera(scene: Any, name: str, source: Any, shader: Any, width: in
     scene.collection.objects.link(camera)
     pose = source.matrix_world.normalized()
     camera.matrix_world = pose
-    if scene.render.engine != "CYCLES":  # Blender compiles a camera shader for the context scene's engine (a batch's is Cycles)
+    if (
+        scene.render.engine != "CYCLES"
+    ):  # Blender compiles a camera shader for the context scene's engine (a batch's is Cycles)
         scene.render.engine = "CYCLES"
     compile_tiles_camera(camera, scene)
     params = data.cycles_custom
@@ -127,8 +142,21 @@ def make_tiles_camera(scene: Any, name: str, source: Any, shader: Any, width: in
     to_camera = Matrix.Diagonal((1.0, 1.0, -1.0)) @ pose.to_3x3().inverted()
     a = to_camera @ Vector((spacing, 0.0, 0.0))
     b = to_camera @ Vector((0.0, spacing, 0.0))
-    for key, value in dict(cols=cols, grid=cols, ortho=int(ortho), half_w=half_w, half_h=half_h, shift_x=shift_x,
-                           shift_y=shift_y, ax=a.x, ay=a.y, az=a.z, bx=b.x, by=b.y, bz=b.z).items():
+    for key, value in dict(
+        cols=cols,
+        grid=cols,
+        ortho=int(ortho),
+        half_w=half_w,
+        half_h=half_h,
+        shift_x=shift_x,
+        shift_y=shift_y,
+        ax=a.x,
+        ay=a.y,
+        az=a.z,
+        bx=b.x,
+        by=b.y,
+        bz=b.z,
+    ).items():
         params[key] = value
     return camera
 

@@ -39,8 +39,12 @@ TAKEN_SUFFIX = re.compile(r"\.\d{3,}$")
 BACKDROP = "visualenv_backdrop"
 #: the backdrop's attributes, three numbers each: the sky's shift, the background's two colours, and its pattern's
 #: scale, time (its fourth coordinate) and opacity
-SKY_SHIFT, FIRST, SECOND, PATTERN = ("visualenv_sky_shift", "visualenv_background_first", "visualenv_background_second",
-                                     "visualenv_background_pattern")
+SKY_SHIFT, FIRST, SECOND, PATTERN = (
+    "visualenv_sky_shift",
+    "visualenv_background_first",
+    "visualenv_background_second",
+    "visualenv_background_pattern",
+)
 #: the backdrop's vertices lie this share of the camera's far clip away, its faces at least 99.89 % of that (an
 #: icosphere of BACKDROP_SUBDIVISIONS, 5,120 faces): what lies in the last 0.2 % before the far clip is seen through it
 BACKDROP_REACH, BACKDROP_SUBDIVISIONS = 0.999, 5
@@ -74,7 +78,9 @@ class DistractionRig:
         self.backdrop = None
         if backdrop:
             first = next(iter(self.children.values()))
-            self.backdrop = make_backdrops(scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end)
+            self.backdrop = make_backdrops(
+                scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end
+            )
             self.backdrop.parent = first
             self.backdrop.matrix_parent_inverse = Matrix.Identity(4)
 
@@ -120,14 +126,23 @@ def distracted_materials(scene: Any) -> list[Any]:
     """Every Principled material of the scene's objects (one a colour binding writes), in the order their shifts are
     drawn (:func:`~visualenv.render.distractions.color_shifts`): by name without the ``.001`` Blender adds to a name
     taken (a second env in the process has them), so each env of a spec shifts its materials alike."""
-    materials = {slot.material.name: slot.material for obj in scene.objects for slot in obj.material_slots
-                 if slot.material is not None and slot.material.node_tree is not None}
+    materials = {
+        slot.material.name: slot.material
+        for obj in scene.objects
+        for slot in obj.material_slots
+        if slot.material is not None and slot.material.node_tree is not None
+    }
     ordered = [materials[name] for name in sorted(materials, key=lambda taken: TAKEN_SUFFIX.sub("", taken))]
     return [material for material in ordered if color_sockets(material) is not None]
 
 
-def focus_distance(scene: Any, pose: Matrix, clip_start: float, offset: Vector | None = None,
-                   before_cast: Callable[[], object] = lambda: None) -> float:
+def focus_distance(
+    scene: Any,
+    pose: Matrix,
+    clip_start: float,
+    offset: Vector | None = None,
+    before_cast: Callable[[], object] = lambda: None,
+) -> float:
     """How far ahead of a camera at `pose` (in its env's own frame; `offset`: where that frame stands in the scene) its
     orbit's centre lies: the point of its view axis nearest the env's origin (where a model stands, or the body a
     tracking camera keeps in view), else the first surface along the axis (`before_cast` readies the scene for the
@@ -213,10 +228,12 @@ def write_backdrops(holder: Any, distractions: Sequence[Distraction], sky_shifts
     given, ``(n, 3)``: the last row of its colour shifts): the shift, the background's colours, and its pattern's
     scale, time and opacity (0: no background)."""
     shown = [background(d) for d in distractions]
-    numbers = {SKY_SHIFT: np.asarray(sky_shifts),
-               FIRST: np.array([b.first if b else (0.0, 0.0, 0.0) for b in shown]),
-               SECOND: np.array([b.second if b else (0.0, 0.0, 0.0) for b in shown]),
-               PATTERN: np.array([(b.scale, b.time, b.opacity) if b else (1.0, 0.0, 0.0) for b in shown])}
+    numbers = {
+        SKY_SHIFT: np.asarray(sky_shifts),
+        FIRST: np.array([b.first if b else (0.0, 0.0, 0.0) for b in shown]),
+        SECOND: np.array([b.second if b else (0.0, 0.0, 0.0) for b in shown]),
+        PATTERN: np.array([(b.scale, b.time, b.opacity) if b else (1.0, 0.0, 0.0) for b in shown]),
+    }
     for key, values in numbers.items():
         rgba = np.ones((len(values), 4), dtype=np.float32)
         rgba[:, :3] = values
@@ -261,8 +278,10 @@ def backdrop_material(name: str) -> Any:
     links.new(pattern.outputs["Y"], noise.inputs["W"])
     blend, glow = mix_node(nodes, "MIX"), mix_node(nodes, "MIX")
     links.new(noise.outputs["Fac"], blend.inputs["Factor"])
-    for node, first, second in ((blend, env_attribute(nodes, FIRST), env_attribute(nodes, SECOND)),
-                                (glow, env_attribute(nodes, SKY_SHIFT), blend)):
+    for node, first, second in (
+        (blend, env_attribute(nodes, FIRST), env_attribute(nodes, SECOND)),
+        (glow, env_attribute(nodes, SKY_SHIFT), blend),
+    ):
         a, b = [sock for sock in node.inputs if sock.type == "RGBA"]
         links.new(first.outputs["Color"], a)
         links.new(next(sock for sock in second.outputs if sock.type == "RGBA"), b)

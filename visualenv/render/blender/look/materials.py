@@ -31,7 +31,9 @@ def rgba(color: Sequence[float]) -> tuple[float, float, float, float]:
 
 
 def _principled(material: Any) -> Any:
-    return next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None) if material.node_tree else None
+    return (
+        next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None) if material.node_tree else None
+    )
 
 
 def ensure_node_tree(mat: Any) -> None:
@@ -41,7 +43,13 @@ def ensure_node_tree(mat: Any) -> None:
 
 
 def make_material(
-    name: str, spec: Material, *, base_dir: Path, source: SourceMap, path: tuple, track: Callable[[Any], Any],
+    name: str,
+    spec: Material,
+    *,
+    base_dir: Path,
+    source: SourceMap,
+    path: tuple,
+    track: Callable[[Any], Any],
 ) -> Any:
     """A new material for `spec`; `path` locates the material in the spec (for errors)."""
     mat = track(bpy.data.materials.new(name))
@@ -69,28 +77,51 @@ def make_material(
     return mat
 
 
-def _texture(mat: Any, bsdf: Any, material: Material, tex: Texture, *, base_dir: Path, source: SourceMap, path: tuple, track: Callable[[Any], Any]) -> None:
+def _texture(
+    mat: Any,
+    bsdf: Any,
+    material: Material,
+    tex: Texture,
+    *,
+    base_dir: Path,
+    source: SourceMap,
+    path: tuple,
+    track: Callable[[Any], Any],
+) -> None:
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     coords = nodes.new("ShaderNodeTexCoord")
     if tex.type == "image":
         files = list(tex.image) if isinstance(tex.image, tuple) else [str(tex.image)]
-        where = [path + ("image", i) for i in range(len(files))] if isinstance(tex.image, tuple) else [path + ("image",)]
+        where = (
+            [path + ("image", i) for i in range(len(files))] if isinstance(tex.image, tuple) else [path + ("image",)]
+        )
         images = [_load_image(base_dir / f, source, at, track) for f, at in zip(files, where)]
         node = nodes.new("ShaderNodeTexImage")
         node.image = images[0]
         if isinstance(tex.image, tuple):
-            node[TEXTURE_SET] = "\n".join(image.name for image in images)  # the names Blender gave them (a taken name gets .001)
+            node[TEXTURE_SET] = "\n".join(
+                image.name for image in images
+            )  # the names Blender gave them (a taken name gets .001)
         links.new(coords.outputs["UV"], node.inputs["Vector"])
         node["visualenv_needs_uv"] = True
         links.new(node.outputs["Color"], bsdf.inputs["Base Color"])
         return
-    kinds = {"noise": "ShaderNodeTexNoise", "voronoi": "ShaderNodeTexVoronoi", "checker": "ShaderNodeTexChecker", "wave": "ShaderNodeTexWave"}
+    kinds = {
+        "noise": "ShaderNodeTexNoise",
+        "voronoi": "ShaderNodeTexVoronoi",
+        "checker": "ShaderNodeTexChecker",
+        "wave": "ShaderNodeTexWave",
+    }
     node = nodes.new(kinds[tex.type])
     links.new(coords.outputs["Object"], node.inputs["Vector"])
     node.inputs["Scale"].default_value = tex.scale
     if "Detail" in node.inputs:
         node.inputs["Detail"].default_value = tex.detail
-    first, second = (rgba(tex.colors[0]), rgba(tex.colors[1])) if tex.colors else (rgba(material.color), rgba([0.35 * v for v in material.color[:3]]))
+    first, second = (
+        (rgba(tex.colors[0]), rgba(tex.colors[1]))
+        if tex.colors
+        else (rgba(material.color), rgba([0.35 * v for v in material.color[:3]]))
+    )
     if tex.type == "checker":
         node.inputs["Color1"].default_value = first
         node.inputs["Color2"].default_value = second
@@ -116,13 +147,29 @@ def _load_image(path: Path, source: SourceMap, where: tuple, track: Callable[[An
     """An image Blender reads, or a located error: a missing file, a folder, a file Blender cannot decode (`what`: 'image', 'sky image')."""
     file = path.resolve()
     if not file.is_file():
-        raise SpecError([source.diagnostic(where, (f"{what} file" if what == "image" else what) + " " + ("is a folder" if file.is_dir() else "not found") + f": {file}")])
+        raise SpecError(
+            [
+                source.diagnostic(
+                    where,
+                    (f"{what} file" if what == "image" else what)
+                    + " "
+                    + ("is a folder" if file.is_dir() else "not found")
+                    + f": {file}",
+                )
+            ]
+        )
     try:
         image = track(bpy.data.images.load(str(file), check_existing=False))
     except RuntimeError as exc:
         raise SpecError([source.diagnostic(where, f"cannot read {what} {file}: {exc}")]) from None
     if image.size[0] == 0:  # Blender loads lazily and keeps an empty image for a file it cannot decode
-        raise SpecError([source.diagnostic(where, f"cannot read {what} {file}: not an image format Blender reads (PNG, JPEG, EXR, HDR, ...)")])
+        raise SpecError(
+            [
+                source.diagnostic(
+                    where, f"cannot read {what} {file}: not an image format Blender reads (PNG, JPEG, EXR, HDR, ...)"
+                )
+            ]
+        )
     return image
 
 
@@ -130,8 +177,11 @@ def texture_sets(mat: Any) -> list[tuple[Any, list[Any]]]:
     """(image texture node, its images) for every texture set of `mat`."""
     if mat.node_tree is None:
         return []
-    return [(node, [bpy.data.images[name] for name in str(node[TEXTURE_SET]).split("\n")])
-            for node in mat.node_tree.nodes if node.type == "TEX_IMAGE" and TEXTURE_SET in node]
+    return [
+        (node, [bpy.data.images[name] for name in str(node[TEXTURE_SET]).split("\n")])
+        for node in mat.node_tree.nodes
+        if node.type == "TEX_IMAGE" and TEXTURE_SET in node
+    ]
 
 
 def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
@@ -255,8 +305,14 @@ def _tint_node(nodes: Any, name: str, tint: Any) -> tuple[Any, Any]:
     return texture, next(sock for sock in mix.outputs if sock.type == "RGBA")
 
 
-def make_world(name: str, spec: World, track: Callable[[Any], Any], *, base_dir: Path | None = None,
-               source: SourceMap | None = None) -> Any:
+def make_world(
+    name: str,
+    spec: World,
+    track: Callable[[Any], Any],
+    *,
+    base_dir: Path | None = None,
+    source: SourceMap | None = None,
+) -> Any:
     """A world with a uniform background, or an image sky: an environment map turned by a Mapping node and tinted.
 
     The image lights the scene and shows behind it (Cycles and EEVEE; Workbench shows the tint colour).
@@ -332,6 +388,7 @@ def world_writer(world: Any, prop: str) -> Callable[[Sequence[float]], None] | s
 
         def write_strength(v: Sequence[float]) -> None:
             socket.default_value = v[0]
+
         return write_strength
     if prop == "rotation":
         mapping = nodes.get(SKY_MAPPING)
@@ -341,6 +398,7 @@ def world_writer(world: Any, prop: str) -> Callable[[Sequence[float]], None] | s
 
         def write_rotation(v: Sequence[float]) -> None:
             rotation.default_value = v
+
         return write_rotation
     if prop == "color":
         mix = nodes.get(SKY_TINT)
@@ -350,6 +408,7 @@ def world_writer(world: Any, prop: str) -> Callable[[Sequence[float]], None] | s
             target.default_value = rgba(v)
             if mix is None:
                 world.color = tuple(v[:3])
+
         return write_color
     return f"the world takes 'strength', 'rotation' and 'color', not '{prop}'"
 
@@ -375,7 +434,9 @@ def depth_world(name: str, track: Callable[[Any], Any]) -> Any:
     return world
 
 
-def depth_material(name: str, track: Callable[[Any], Any], *, along_ray: bool = False) -> tuple[Any, Callable[[float, float], None], Callable[[Any], None]]:
+def depth_material(
+    name: str, track: Callable[[Any], Any], *, along_ray: bool = False
+) -> tuple[Any, Callable[[float, float], None], Callable[[Any], None]]:
     """An emission material of clamp((z - near) / (far - near)), a setter for near/far and one for the camera's forward axis.
 
     z is the camera's view Z depth. With `along_ray` it is computed from the camera
@@ -399,7 +460,7 @@ def depth_material(name: str, track: Callable[[Any], Any], *, along_ray: bool = 
     if along_ray:
         path, geometry = nodes.new("ShaderNodeLightPath"), nodes.new("ShaderNodeNewGeometry")
         forward = nodes.new("ShaderNodeVectorMath")
-        forward.operation = "DOT_PRODUCT"   # incoming points back to the camera: its dot with -forward is the cosine
+        forward.operation = "DOT_PRODUCT"  # incoming points back to the camera: its dot with -forward is the cosine
         depth = nodes.new("ShaderNodeMath")
         depth.operation = "MULTIPLY"
         links.new(geometry.outputs["Incoming"], forward.inputs[0])

@@ -47,7 +47,7 @@ UNLIT_AMBIENT = 0.3
 #: a Cycles sun of strength 1 lights a white diffuse surface facing it to 1/pi
 SUN_UNIT = math.pi
 #: a Cycles spot of 1 W whose shader cancels the fall-off lights a white diffuse surface facing it to 1/(4 pi^2)
-SPOT_UNIT = 4.0 * math.pi ** 2
+SPOT_UNIT = 4.0 * math.pi**2
 #: what Blender reads images as (bytes / 255 as they are) and writes colours as (no transform), in this look
 RAW_COLORSPACE = "Non-Color"
 #: the custom property of a material lit as MuJoCo lights a geom (:func:`light_material`)
@@ -64,8 +64,15 @@ def ambient(scene_data: PhysicsScene) -> tuple[float, float, float]:
     return tuple(sum(t[k] for t in terms) for k in range(3))  # type: ignore[return-value]
 
 
-def light_material(mat: Any, headlight: Headlight, ambient_rgb: tuple[float, float, float], *, emission: float = 0.0,
-                   specular: float = 0.5, shininess: float = 0.5) -> None:
+def light_material(
+    mat: Any,
+    headlight: Headlight,
+    ambient_rgb: tuple[float, float, float],
+    *,
+    emission: float = 0.0,
+    specular: float = 0.5,
+    shininess: float = 0.5,
+) -> None:
     """`mat` (a Principled material) lit as MuJoCo lights a geom of its material's `emission`, `specular` and
     `shininess` (MuJoCo's for a geom without a material by default): its diffuse lobe only (the model's lights), and
     emitting ``texture * min(colour * (emission + ambient + headlight diffuse * max(n.v, 0)) + headlight specular, 1)``
@@ -83,26 +90,34 @@ def light_material(mat: Any, headlight: Headlight, ambient_rgb: tuple[float, flo
     head_on = headlight.active
     geometry = nodes.new("ShaderNodeNewGeometry")
     normal = _to_camera(nodes, links, geometry.outputs["Normal"], "NORMAL")
-    toward = _math(nodes, links, "MULTIPLY", _z(nodes, links, normal), -1.0)  # n.l: Cycles' camera space looks along +Z, the headlight shines back
+    toward = _math(
+        nodes, links, "MULTIPLY", _z(nodes, links, normal), -1.0
+    )  # n.l: Cycles' camera space looks along +Z, the headlight shines back
     facing = _math(nodes, links, "MAXIMUM", toward, 0.0)
     diffuse = [v if head_on else 0.0 for v in headlight.diffuse]
     base = tuple(a + emission for a in ambient_rgb)
     light = _vector(nodes, links, "MULTIPLY_ADD", diffuse, facing, base)
     lit = _vector(nodes, links, "MULTIPLY", tinted, light)
     highlight_rgb = [s * specular if head_on else 0.0 for s in headlight.specular]
-    if max(highlight_rgb) > 0.0:  # Blinn-Phong with a local viewer: h between the light (the view axis) and the eye (Incoming)
+    if (
+        max(highlight_rgb) > 0.0
+    ):  # Blinn-Phong with a local viewer: h between the light (the view axis) and the eye (Incoming)
         eye = _to_camera(nodes, links, geometry.outputs["Incoming"], "VECTOR")
         half = _vector(nodes, links, "NORMALIZE", _vector(nodes, links, "ADD", eye, (0.0, 0.0, -1.0)))
         cosine = nodes.new("ShaderNodeVectorMath")
         cosine.operation = "DOT_PRODUCT"
         links.new(normal, cosine.inputs[0])
         links.new(half, cosine.inputs[1])
-        power = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", cosine.outputs["Value"], 0.0), 128.0 * shininess)
+        power = _math(
+            nodes, links, "POWER", _math(nodes, links, "MAXIMUM", cosine.outputs["Value"], 0.0), 128.0 * shininess
+        )
         lit_side = _math(nodes, links, "GREATER_THAN", toward, 0.0)  # OpenGL: no highlight on a side the light misses
         highlight = _vector(nodes, links, "MULTIPLY", _math(nodes, links, "MULTIPLY", power, lit_side), highlight_rgb)
         lit = _vector(nodes, links, "ADD", lit, _vector(nodes, links, "MULTIPLY", highlight, texel))
     lit = _vector(nodes, links, "MINIMUM", lit, texel)  # texture * min(x, 1) = min(texture * x, texture)
-    path = nodes.new("ShaderNodeLightPath")  # a ray Cycles sampled from another surface sees no emission: it lights nothing
+    path = nodes.new(
+        "ShaderNodeLightPath"
+    )  # a ray Cycles sampled from another surface sees no emission: it lights nothing
     links.new(_vector(nodes, links, "MULTIPLY", lit, path.outputs["Is Camera Ray"]), bsdf.inputs["Emission Color"])
     bsdf.inputs["Emission Strength"].default_value = 1.0
 
@@ -116,8 +131,15 @@ def light_scene(scene: Any, headlight: Headlight, ambient_rgb: tuple[float, floa
             if mat is None or mat.get(LIT) or mat.node_tree is None:
                 continue
             bsdf = next((n for n in mat.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
-            if bsdf is None or bsdf.inputs["Emission Color"].is_linked or bsdf.inputs["Emission Strength"].is_linked or (
-                    bsdf.inputs["Emission Strength"].default_value > 0 and max(bsdf.inputs["Emission Color"].default_value[:3]) > 0):
+            if (
+                bsdf is None
+                or bsdf.inputs["Emission Color"].is_linked
+                or bsdf.inputs["Emission Strength"].is_linked
+                or (
+                    bsdf.inputs["Emission Strength"].default_value > 0
+                    and max(bsdf.inputs["Emission Color"].default_value[:3]) > 0
+                )
+            ):
                 continue
             light_material(mat, headlight, ambient_rgb)
 
@@ -135,7 +157,9 @@ def light_data(light: LightInfo) -> Any:
     data.energy = SPOT_UNIT * strength
     data.shadow_soft_size = 0.0
     data.use_soft_falloff = False
-    data.spot_size = min(math.radians(2.0 * light.cutoff), math.pi)  # Cycles' widest cone; MuJoCo's cutoff is the half angle
+    data.spot_size = min(
+        math.radians(2.0 * light.cutoff), math.pi
+    )  # Cycles' widest cone; MuJoCo's cutoff is the half angle
     data.spot_blend = 0.0
     _spot_shader(data, light)
     return data
@@ -146,10 +170,14 @@ def _spot_shader(data: Any, light: LightInfo) -> None:
     data.use_nodes = True
     nodes, links = data.node_tree.nodes, data.node_tree.links
     emission = next(n for n in nodes if n.type == "EMISSION")
-    falloff = nodes.new("ShaderNodeLightFalloff")  # strength 1: Constant = d^2, Linear = d (each cancels that much fall-off)
+    falloff = nodes.new(
+        "ShaderNodeLightFalloff"
+    )  # strength 1: Constant = d^2, Linear = d (each cancels that much fall-off)
     falloff.inputs["Strength"].default_value = 1.0
     falloff.inputs["Smooth"].default_value = 0.0
-    coords = nodes.new("ShaderNodeTexCoord")  # a light's Normal: the direction of the ray leaving it, in its own frame (-Z: its axis)
+    coords = nodes.new(
+        "ShaderNodeTexCoord"
+    )  # a light's Normal: the direction of the ray leaving it, in its own frame (-Z: its axis)
     along = _math(nodes, links, "MULTIPLY", _z(nodes, links, coords.outputs["Normal"]), -1.0)
     cone = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", along, 0.0), light.exponent)
     a0, a1, a2 = light.attenuation
@@ -173,8 +201,12 @@ def backdrop(world: Any) -> None:
 
 def raw_images(scene: Any) -> None:
     """Every image the scene's materials and world read, read as numbers (its bytes / 255), as OpenGL reads a texture."""
-    trees = [slot.material.node_tree for obj in scene.objects for slot in obj.material_slots
-             if slot.material is not None and slot.material.node_tree is not None]
+    trees = [
+        slot.material.node_tree
+        for obj in scene.objects
+        for slot in obj.material_slots
+        if slot.material is not None and slot.material.node_tree is not None
+    ]
     if scene.world is not None and scene.world.node_tree is not None:
         trees.append(scene.world.node_tree)
     for tree in trees:

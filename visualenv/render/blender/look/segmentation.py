@@ -47,8 +47,12 @@ def assign_ids(built: BuiltScene, plan: RenderPlan) -> dict[str, int]:
     for name, spec in plan.scene.objects.items():
         if isinstance(spec, (PrimitiveObject, MeshObject)) and spec.label is not None:
             labels[name] = spec.label
-    physics = plan.physics  # a MuJoCo model's geoms and sites take their body's name: the parts of one rigid body share an id
-    bodies = {g.name: physics.body_names[g.body] for g in (*physics.geoms, *physics.sites)} if physics is not None else {}
+    physics = (
+        plan.physics
+    )  # a MuJoCo model's geoms and sites take their body's name: the parts of one rigid body share an id
+    bodies = (
+        {g.name: physics.body_names[g.body] for g in (*physics.geoms, *physics.sites)} if physics is not None else {}
+    )
     if physics is not None:  # each body's frame (an empty named 'body:<name>') stands for the body too
         bodies.update({f"body:{name}": name for name in physics.body_names})
     named = {obj.as_pointer() for obj in built.objects.values()}
@@ -62,8 +66,15 @@ def assign_ids(built: BuiltScene, plan: RenderPlan) -> dict[str, int]:
         for part in (obj, *(c for c in obj.children_recursive if c.as_pointer() not in named)):
             part.pass_index = ids[key]
     if len(ids) > MAX_ID:
-        raise SpecError([plan.source.diagnostic(("observation",), f"a segmentation observation holds ids 1 to {MAX_ID}, and the scene "
-                                                f"has {len(ids)} objects and labels that show: give objects that need not be told apart a shared 'label'")])
+        raise SpecError(
+            [
+                plan.source.diagnostic(
+                    ("observation",),
+                    f"a segmentation observation holds ids 1 to {MAX_ID}, and the scene "
+                    f"has {len(ids)} objects and labels that show: give objects that need not be told apart a shared 'label'",
+                )
+            ]
+        )
     return ids
 
 

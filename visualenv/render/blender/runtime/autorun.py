@@ -24,5 +24,7 @@ def turn_autorun_off() -> None:
     paths = bpy.context.preferences.filepaths
     paths.use_scripts_auto_execute = False  # its update also clears the run-time flag that drivers check
     if paths.use_scripts_auto_execute:
-        raise VisualEnvError("Blender's 'Auto Run Python Scripts' is still on after visualenv turned it off: "
-                             "visualenv reads no .blend file while scripts in it could run")
+        raise VisualEnvError(
+            "Blender's 'Auto Run Python Scripts' is still on after visualenv turned it off: "
+            "visualenv reads no .blend file while scripts in it could run"
+        )

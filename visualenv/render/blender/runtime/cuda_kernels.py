@@ -28,22 +28,38 @@ from visualenv.errors import ConfigError
 
 def find_ptxas(given: str | None = None) -> str:
     """The CUDA toolkit's ptxas: `given`, else on PATH, else under CUDA_HOME or /usr/local/cuda."""
-    candidates = [given] if given else [shutil.which("ptxas"),
-                                        *(str(Path(root) / "bin" / "ptxas") for root in (os.environ.get("CUDA_HOME"), "/usr/local/cuda") if root)]
+    candidates = (
+        [given]
+        if given
+        else [
+            shutil.which("ptxas"),
+            *(str(Path(root) / "bin" / "ptxas") for root in (os.environ.get("CUDA_HOME"), "/usr/local/cuda") if root),
+        ]
+    )
     for candidate in candidates:
         if candidate and Path(candidate).is_file() and os.access(candidate, os.X_OK):
             return candidate
-    where = f"{given} is not an executable file" if given else "not on PATH, nor in $CUDA_HOME/bin or /usr/local/cuda/bin"
-    raise ConfigError(f"compiling Cycles' kernels needs the CUDA toolkit's ptxas ({where}): install the toolkit "
-                      f"(its version no newer than the GPU driver supports) or name it with --ptxas")
+    where = (
+        f"{given} is not an executable file" if given else "not on PATH, nor in $CUDA_HOME/bin or /usr/local/cuda/bin"
+    )
+    raise ConfigError(
+        f"compiling Cycles' kernels needs the CUDA toolkit's ptxas ({where}): install the toolkit "
+        f"(its version no newer than the GPU driver supports) or name it with --ptxas"
+    )
 
 
 def source_ptx(arch: str, lib: Path) -> Path:
     """The PTX that compiles for `arch`: bpy's highest ``kernel_compute_XY`` not above it (the one Cycles would load)."""
     ptx = compat.source_ptx(arch, lib)
     if ptx is None:
-        found = sorted(int(m.group(1)) for p in lib.glob("kernel_compute_*.ptx.zst") if (m := re.fullmatch(r"kernel_compute_(\d+)\.ptx\.zst", p.name)))
-        raise ConfigError(f"bpy ships no PTX that compiles for {arch} in {lib} (has: {', '.join(f'compute_{n}' for n in found) or 'none'})")
+        found = sorted(
+            int(m.group(1))
+            for p in lib.glob("kernel_compute_*.ptx.zst")
+            if (m := re.fullmatch(r"kernel_compute_(\d+)\.ptx\.zst", p.name))
+        )
+        raise ConfigError(
+            f"bpy ships no PTX that compiles for {arch} in {lib} (has: {', '.join(f'compute_{n}' for n in found) or 'none'})"
+        )
     return ptx
 
 
@@ -69,9 +85,13 @@ def compile_cuda_kernels(arch: str, *, lib: Path | None = None, ptxas: str | Non
     with tempfile.TemporaryDirectory() as tmp:
         plain, cubin = Path(tmp) / "kernel.ptx", Path(tmp) / "kernel.cubin"
         plain.write_bytes(zstandard.ZstdDecompressor().decompressobj().decompress(ptx.read_bytes()))
-        done = subprocess.run([tool, f"-arch={arch}", "-O3", str(plain), "-o", str(cubin)], capture_output=True, text=True)
+        done = subprocess.run(
+            [tool, f"-arch={arch}", "-O3", str(plain), "-o", str(cubin)], capture_output=True, text=True
+        )
         if done.returncode != 0:
-            raise ConfigError(f"ptxas could not compile {ptx.name} for {arch}: {(done.stderr or done.stdout).strip()[-800:]}")
+            raise ConfigError(
+                f"ptxas could not compile {ptx.name} for {arch}: {(done.stderr or done.stdout).strip()[-800:]}"
+            )
         partial = target.parent / f".{target.name}.partial"
         try:
             target.parent.mkdir(parents=True, exist_ok=True)
@@ -79,5 +99,7 @@ def compile_cuda_kernels(arch: str, *, lib: Path | None = None, ptxas: str | Non
             partial.replace(target)
         except OSError as exc:
             partial.unlink(missing_ok=True)
-            raise ConfigError(f"cannot write {target}: {exc.strerror or exc} (set XDG_CACHE_HOME to a writable folder)") from None
+            raise ConfigError(
+                f"cannot write {target}: {exc.strerror or exc} (set XDG_CACHE_HOME to a writable folder)"
+            ) from None
     return target

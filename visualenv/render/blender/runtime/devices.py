@@ -33,7 +33,9 @@ class KernelFacts:
     """What decides whether the first GPU render compiles kernels (gathered by :func:`kernel_facts`)."""
 
     backend: str
-    shipped_archs: tuple[str, ...]  # CUDA architectures with a binary in bpy or compiled ahead (compile-kernels), e.g. 'sm_75'
+    shipped_archs: tuple[
+        str, ...
+    ]  # CUDA architectures with a binary in bpy or compiled ahead (compile-kernels), e.g. 'sm_75'
     gpu_archs: tuple[str, ...]  # this machine's NVIDIA GPUs (e.g. 'sm_90'); empty if unknown
     caches: tuple[tuple[str, bool], ...]  # (folder, whether it holds anything)
 
@@ -56,8 +58,10 @@ def compile_notice(facts: KernelFacts) -> str | None:
     if why is None:
         return None
     where = " and ".join(folder for folder, _ in facts.caches)
-    return (f"visualenv: Cycles compiles its {facts.backend} kernels for this GPU before the first frame ({why}): "
-            f"minutes, once per machine; the driver caches them in {where}. `visualenv info --warm-gpu` does it ahead of training.")
+    return (
+        f"visualenv: Cycles compiles its {facts.backend} kernels for this GPU before the first frame ({why}): "
+        f"minutes, once per machine; the driver caches them in {where}. `visualenv info --warm-gpu` does it ahead of training."
+    )
 
 
 def cycles_lib() -> Path | None:
@@ -79,8 +83,13 @@ def nvidia_archs() -> tuple[str, ...]:
     if shutil.which("nvidia-smi") is None:
         return ()
     try:
-        out = subprocess.run(["nvidia-smi", "--query-gpu=compute_cap", "--format=csv,noheader"], capture_output=True, text=True,
-                             timeout=20, check=True).stdout
+        out = subprocess.run(
+            ["nvidia-smi", "--query-gpu=compute_cap", "--format=csv,noheader"],
+            capture_output=True,
+            text=True,
+            timeout=20,
+            check=True,
+        ).stdout
     except (OSError, subprocess.SubprocessError):
         return ()
     return tuple(sorted({"sm_" + line.strip().replace(".", "") for line in out.splitlines() if line.strip()}))
@@ -89,7 +98,10 @@ def nvidia_archs() -> tuple[str, ...]:
 def kernel_caches() -> tuple[tuple[str, bool], ...]:
     """The driver's kernel caches (CUDA's ComputeCache, OptiX's cache) and whether each holds anything."""
     user = os.environ.get("USER") or ("root" if os.geteuid() == 0 else str(os.geteuid()))
-    folders = [os.environ.get("CUDA_CACHE_PATH") or str(Path.home() / ".nv" / "ComputeCache"), f"/var/tmp/OptixCache_{user}"]
+    folders = [
+        os.environ.get("CUDA_CACHE_PATH") or str(Path.home() / ".nv" / "ComputeCache"),
+        f"/var/tmp/OptixCache_{user}",
+    ]
     return tuple((folder, Path(folder).is_dir() and any(Path(folder).rglob("*"))) for folder in folders)
 
 
@@ -171,8 +183,13 @@ def gpu_context() -> dict[str, Any]:
     bpy.ops.render.render(scene=_tiny_scene("visualenv-probe", "BLENDER_WORKBENCH").name)
     renderer = gpu.platform.renderer_get()
     device = gpu.platform.device_type_get()
-    return {"renderer": renderer, "vendor": gpu.platform.vendor_get(), "backend": gpu.platform.backend_type_get(),
-            "device_type": device, "software": device == "SOFTWARE" or "llvmpipe" in renderer.lower()}
+    return {
+        "renderer": renderer,
+        "vendor": gpu.platform.vendor_get(),
+        "backend": gpu.platform.backend_type_get(),
+        "device_type": device,
+        "software": device == "SOFTWARE" or "llvmpipe" in renderer.lower(),
+    }
 
 
 def warm_gpu() -> dict[str, Any]:

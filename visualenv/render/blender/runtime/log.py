@@ -45,7 +45,11 @@ def blender_output() -> Iterator[BlenderOutput]:
     output = BlenderOutput()
     _flush_all()
     python_text = io.StringIO()  # add-ons print to sys.stdout/sys.stderr, which need not be descriptors 1 and 2
-    with tempfile.TemporaryFile() as tmp, contextlib.redirect_stdout(python_text), contextlib.redirect_stderr(python_text):
+    with (
+        tempfile.TemporaryFile() as tmp,
+        contextlib.redirect_stdout(python_text),
+        contextlib.redirect_stderr(python_text),
+    ):
         saved = os.dup(1), os.dup(2)
         os.dup2(tmp.fileno(), 1)
         os.dup2(tmp.fileno(), 2)

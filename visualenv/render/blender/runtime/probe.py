@@ -13,7 +13,15 @@ import sys
 from typing import Any
 
 from visualenv.render.blender.batch.tiles_camera import tiles_camera_check
-from visualenv.render.blender.runtime.devices import NVIDIA, cycles_devices, gpu_context, kernel_caches, kernel_facts, kernels_to_compile, warm_gpu
+from visualenv.render.blender.runtime.devices import (
+    NVIDIA,
+    cycles_devices,
+    gpu_context,
+    kernel_caches,
+    kernel_facts,
+    kernels_to_compile,
+    warm_gpu,
+)
 
 
 def probe(warm: bool = False) -> dict[str, Any]:
@@ -34,7 +42,11 @@ def probe(warm: bool = False) -> dict[str, Any]:
             report["warm_gpu"] = warm_gpu()  # prints its notice to stderr itself, before the long first frame
         except Exception as exc:  # noqa: BLE001
             report["warm_gpu"] = {"error": f"{type(exc).__name__}: {exc}"}
-    gpus = [b for b, names in report.get("cycles", {}).items() if b != "CPU" and names] if isinstance(report.get("cycles"), dict) else []
+    gpus = (
+        [b for b, names in report.get("cycles", {}).items() if b != "CPU" and names]
+        if isinstance(report.get("cycles"), dict)
+        else []
+    )
     report["kernels"] = {b: {"compile_first": kernels_to_compile(kernel_facts(b))} for b in gpus if b in NVIDIA}
     report["kernel_caches"] = {folder: filled for folder, filled in kernel_caches()}
     return report

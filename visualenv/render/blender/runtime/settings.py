@@ -87,7 +87,14 @@ def view_config(obs: EngineConfig, preset: str) -> EngineConfig:
     if preset == "fast":
         return obs
     q = PRESETS["quality"]
-    return EngineConfig(obs.engine, max(q["samples"], obs.samples), max(q["bounces"], obs.bounces), q["denoise"], q["filter"], q["filter_width"])
+    return EngineConfig(
+        obs.engine,
+        max(q["samples"], obs.samples),
+        max(q["bounces"], obs.bounces),
+        q["denoise"],
+        q["filter"],
+        q["filter_width"],
+    )
 
 
 # -- devices -----------------------------------------------------------------------------------------
@@ -122,7 +129,10 @@ def resolve_device(device: str) -> str:
         _compile_notice_once(backend)
         return "GPU"
     if device == "gpu":
-        _warn_once("gpu", "render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU")
+        _warn_once(
+            "gpu",
+            "render.device is 'gpu' but Blender found no CUDA/OptiX/HIP/Metal/oneAPI device: rendering on the CPU",
+        )
     else:
         log.info("render.device 'auto': no GPU found, rendering on the CPU")
     return "CPU"
@@ -159,7 +169,9 @@ def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "inde
     c.use_adaptive_sampling = False
     c.use_animated_seed = False
     c.seed = 0
-    if noise == "shared":  # every pixel draws the same random numbers: its value does not depend on its place in the image
+    if (
+        noise == "shared"
+    ):  # every pixel draws the same random numbers: its value does not depend on its place in the image
         c.sampling_pattern = "TABULATED_SOBOL"
         c.auto_scrambling_distance = False
         c.scrambling_distance = 0.0
@@ -207,6 +219,7 @@ def apply_config(scene: Any, config: EngineConfig, previous: EngineConfig | None
 
     `see_through`: the scene has surfaces with alpha below 1, which need passes of their own.
     """
+
     def changed(field: str) -> bool:
         return previous is None or getattr(previous, field) != getattr(config, field)
 
@@ -237,4 +250,7 @@ def _oidn_available() -> bool:
 def engine_warnings(config: EngineConfig, device: str) -> None:
     """Say once when a choice will be slow."""
     if config.engine == "eevee" and detect_gpu() is None:
-        _warn_once("eevee", "EEVEE without a GPU renders in software and takes seconds per frame: use engine 'cycles' (or 'workbench') for training")
+        _warn_once(
+            "eevee",
+            "EEVEE without a GPU renders in software and takes seconds per frame: use engine 'cycles' (or 'workbench') for training",
+        )

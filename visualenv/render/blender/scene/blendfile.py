@@ -43,8 +43,15 @@ class _Reader:
             env = dict(os.environ)
             root = str(Path(__file__).resolve().parents[3])  # the folder holding the visualenv package
             env["PYTHONPATH"] = os.pathsep.join(p for p in (root, env.get("PYTHONPATH")) if p)
-            self.proc = subprocess.Popen(self.command, stdin=subprocess.PIPE,
-                                         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True, encoding="utf-8", env=env)
+            self.proc = subprocess.Popen(
+                self.command,
+                stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE,
+                stderr=subprocess.DEVNULL,
+                text=True,
+                encoding="utf-8",
+                env=env,
+            )
         return self.proc
 
     def ask(self, path: str, timeout: float) -> dict[str, Any]:
@@ -72,8 +79,10 @@ class _Reader:
                 continue  # it went idle just as the request came: ask a new one
             named = code < 0 and -code in {s.value for s in signal.Signals}
             how = f"signal {signal.Signals(-code).name}" if named else f"exit status {code}"
-            raise BlendReadError(f"Blender crashed ({how}) while reading {path}: open it in Blender and save it again "
-                                 "(File > Save As), or use a file saved by another Blender version")
+            raise BlendReadError(
+                f"Blender crashed ({how}) while reading {path}: open it in Blender and save it again "
+                "(File > Save As), or use a file saved by another Blender version"
+            )
         raise AssertionError("unreachable")  # pragma: no cover
 
     def close(self) -> None:

@@ -33,15 +33,53 @@ from visualenv.errors import Diagnostic, SpecError, did_you_mean
 from visualenv.render.blender.runtime.log import blender_output, marked
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
 from visualenv.render.blender.look.materials import fix_uv_coordinates, make_material, make_world
-from visualenv.render.plan import CameraObject, EmptyObject, LightObject, MeshObject, PrimitiveObject, Scene, SceneObject
+from visualenv.render.plan import (
+    CameraObject,
+    EmptyObject,
+    LightObject,
+    MeshObject,
+    PrimitiveObject,
+    Scene,
+    SceneObject,
+)
 from visualenv.source_map import SourceMap
 
 #: bpy.data collections whose new datablocks a renderer owns
 ID_COLLECTIONS = (
-    "scenes", "objects", "meshes", "materials", "worlds", "cameras", "lights", "images", "collections",
-    "node_groups", "textures", "actions", "curves", "armatures", "lattices", "grease_pencils", "fonts",
-    "libraries", "lightprobes", "particles", "pointclouds", "volumes", "hair_curves", "speakers", "sounds",
-    "texts", "cache_files", "metaballs", "movieclips", "masks", "linestyles", "palettes", "paint_curves", "brushes",
+    "scenes",
+    "objects",
+    "meshes",
+    "materials",
+    "worlds",
+    "cameras",
+    "lights",
+    "images",
+    "collections",
+    "node_groups",
+    "textures",
+    "actions",
+    "curves",
+    "armatures",
+    "lattices",
+    "grease_pencils",
+    "fonts",
+    "libraries",
+    "lightprobes",
+    "particles",
+    "pointclouds",
+    "volumes",
+    "hair_curves",
+    "speakers",
+    "sounds",
+    "texts",
+    "cache_files",
+    "metaballs",
+    "movieclips",
+    "masks",
+    "linestyles",
+    "palettes",
+    "paint_curves",
+    "brushes",
 )
 MESH_IMPORTERS = {".obj": "obj", ".stl": "stl", ".ply": "ply", ".glb": "gltf", ".gltf": "gltf"}
 
@@ -81,8 +119,6 @@ def remove_ids(ids: list[Any]) -> None:
     if others:
         bpy.data.batch_remove(others)
     release_free_memory()  # what the scene's renders freed into the render threads' arenas
-
-
 
 
 @dataclass
@@ -127,14 +163,27 @@ def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str)
             continue
         parent = built.objects.get(obj_spec.parent)
         if parent is None:
-            problems.append(source.diagnostic(("scene", "objects", name, "parent"), f"no object '{obj_spec.parent}' in the scene" + did_you_mean(obj_spec.parent, built.objects).replace("names:", "objects:")))
+            problems.append(
+                source.diagnostic(
+                    ("scene", "objects", name, "parent"),
+                    f"no object '{obj_spec.parent}' in the scene"
+                    + did_you_mean(obj_spec.parent, built.objects).replace("names:", "objects:"),
+                )
+            )
             continue
         obj, chain = built.objects[name], [parent]
         while chain[-1] is not None and chain[-1] is not obj:
             chain.append(chain[-1].parent)
         if chain[-1] is obj:  # Blender would take the loop (or refuse only the object itself, with a TypeError)
-            loop = " -> ".join([name, *(o.name for o in chain[:-1]), name]) if parent is not obj else f"{name} -> {name}"
-            problems.append(source.diagnostic(("scene", "objects", name, "parent"), f"parents form a loop ({loop}): an object cannot be its own ancestor"))
+            loop = (
+                " -> ".join([name, *(o.name for o in chain[:-1]), name]) if parent is not obj else f"{name} -> {name}"
+            )
+            problems.append(
+                source.diagnostic(
+                    ("scene", "objects", name, "parent"),
+                    f"parents form a loop ({loop}): an object cannot be its own ancestor",
+                )
+            )
             continue
         obj.parent = parent
     if problems:
@@ -143,7 +192,9 @@ def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str)
         if isinstance(obj_spec, CameraObject) and obj_spec.look_at is not None:
             aim(built.objects[name], obj_spec.look_at)  # after parenting: the target is a world point
     if spec.world is not None or scene.world is None:
-        scene.world = make_world(f"{prefix}-world", spec.world or spec.default_world, _keep, base_dir=base_dir, source=source)
+        scene.world = make_world(
+            f"{prefix}-world", spec.world or spec.default_world, _keep, base_dir=base_dir, source=source
+        )
     return built
 
 
@@ -154,12 +205,16 @@ def _keep(datablock: Any) -> Any:
 # -- .blend files ------------------------------------------------------------------------------------
 
 
-def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str | None = None) -> tuple[Any, dict[str, Any]]:
+def load_blend(
+    file: str, *, base_dir: Path, source: SourceMap, scene_name: str | None = None
+) -> tuple[Any, dict[str, Any]]:
     """Append one scene of a .blend, `scene_name` or its only one (the current file stays as it is); name -> object by the file's names."""
     path = (base_dir / file).resolve()
     where = ("scene", "file")
     if not path.is_file():
-        raise SpecError([source.diagnostic(where, "scene file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")])
+        raise SpecError(
+            [source.diagnostic(where, "scene file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")]
+        )
     if not blendfile.is_blend_file(path):
         raise SpecError([source.diagnostic(where, f"not a Blender file: {path} (a .blend saved by Blender is needed)")])
     _check_readable(path, source)
@@ -175,16 +230,34 @@ def load_blend(file: str, *, base_dir: Path, source: SourceMap, scene_name: str 
     except (OSError, RuntimeError, ValueError) as exc:
         raise SpecError([source.diagnostic(where, f"cannot read {path} as a .blend file: {exc}")]) from None
     if scene_name is not None and scene_name not in scene_names:
-        raise SpecError([source.diagnostic(("scene", "file_scene"), f"{path} has no scene '{scene_name}'"
-                                           + did_you_mean(scene_name, scene_names).replace("names:", "scenes:"))])
+        raise SpecError(
+            [
+                source.diagnostic(
+                    ("scene", "file_scene"),
+                    f"{path} has no scene '{scene_name}'"
+                    + did_you_mean(scene_name, scene_names).replace("names:", "scenes:"),
+                )
+            ]
+        )
     if scene_name is None and len(scene_names) > 1:  # the file's order says nothing about which one was meant
-        raise SpecError([source.diagnostic(where, f"{path} has {len(scene_names)} scenes ({', '.join(scene_names)}): "
-                                           "choose one with scene.file_scene")])
+        raise SpecError(
+            [
+                source.diagnostic(
+                    where,
+                    f"{path} has {len(scene_names)} scenes ({', '.join(scene_names)}): "
+                    "choose one with scene.file_scene",
+                )
+            ]
+        )
     if not scene_names or not data_to.scenes or data_to.scenes[0] is None:
         raise SpecError([source.diagnostic(where, f"{path} has no scene")])
     scene = data_to.scenes[0]
     in_scene = {o.as_pointer() for o in scene.objects}
-    by_name = {name: obj for name, obj in zip(object_names, data_to.objects) if obj is not None and obj.as_pointer() in in_scene}
+    by_name = {
+        name: obj
+        for name, obj in zip(object_names, data_to.objects)
+        if obj is not None and obj.as_pointer() in in_scene
+    }
     return scene, by_name
 
 
@@ -201,13 +274,29 @@ def _check_readable(path: Path, source: SourceMap) -> None:
         raise SpecError([source.diagnostic(where, str(exc))]) from None
     missing = [lib for lib in info["libraries"] if not lib["found"]]
     if missing:
-        raise SpecError([source.diagnostic(where, f"linked library not found: {lib['path']} (resolved: {_resolve_blender_path(lib['path'], path)}), "
-                                           f"the source of {', '.join(lib['uses']) or 'no data'}: put it back, or make the data local in Blender "
-                                           "(Object > Relations > Make Local) and save") for lib in missing])
+        raise SpecError(
+            [
+                source.diagnostic(
+                    where,
+                    f"linked library not found: {lib['path']} (resolved: {_resolve_blender_path(lib['path'], path)}), "
+                    f"the source of {', '.join(lib['uses']) or 'no data'}: put it back, or make the data local in Blender "
+                    "(Object > Relations > Make Local) and save",
+                )
+                for lib in missing
+            ]
+        )
     for image in info["missing_images"]:
-        warnings.warn(str(source.diagnostic(where, f"image file not found: {image['path']} (image '{image['name']}' in {path.name}) "
-                                            "renders magenta: put the file back, or pack it in Blender (File > External Data > Pack Resources)")),
-                      RuntimeWarning, stacklevel=4)
+        warnings.warn(
+            str(
+                source.diagnostic(
+                    where,
+                    f"image file not found: {image['path']} (image '{image['name']}' in {path.name}) "
+                    "renders magenta: put the file back, or pack it in Blender (File > External Data > Pack Resources)",
+                )
+            ),
+            RuntimeWarning,
+            stacklevel=4,
+        )
 
 
 def _resolve_blender_path(blender_path: str, blend: Path) -> Path:
@@ -230,7 +319,9 @@ def _build_object(name: str, spec: SceneObject, built: BuiltScene, *, base_dir: 
         mesh = bpy.data.meshes.new(name)
         _primitive_mesh(mesh, spec, heights)
         obj = bpy.data.objects.new(name, mesh)
-        mat = make_material(name, spec.material, base_dir=base_dir, source=source, path=path + ("material",), track=_keep)
+        mat = make_material(
+            name, spec.material, base_dir=base_dir, source=source, path=path + ("material",), track=_keep
+        )
         mesh.materials.append(mat)
         fix_uv_coordinates(mat, mesh)
     elif isinstance(spec, MeshObject):
@@ -317,7 +408,16 @@ def _primitive_mesh(mesh: Any, spec: PrimitiveObject, heights: np.ndarray | None
         bmesh.ops.create_uvsphere(bm, u_segments=n, v_segments=max(3, n // 2), radius=spec.radius, calc_uvs=True)
     elif kind in ("cylinder", "cone"):
         top = spec.radius if kind == "cylinder" else 0.0
-        bmesh.ops.create_cone(bm, cap_ends=True, cap_tris=False, segments=n, radius1=spec.radius, radius2=top, depth=spec.depth, calc_uvs=True)
+        bmesh.ops.create_cone(
+            bm,
+            cap_ends=True,
+            cap_tris=False,
+            segments=n,
+            radius1=spec.radius,
+            radius2=top,
+            depth=spec.depth,
+            calc_uvs=True,
+        )
     elif kind == "disk":
         bmesh.ops.create_circle(bm, cap_ends=True, segments=n, radius=spec.radius, calc_uvs=True)
     elif kind == "torus":
@@ -386,13 +486,24 @@ def _import_mesh(name: str, spec: MeshObject, built: BuiltScene, *, base_dir: Pa
     path = (base_dir / spec.mesh).resolve()
     kind = MESH_IMPORTERS.get(path.suffix.lower())
     if kind is None:
-        raise SpecError([source.diagnostic(where, f"unsupported mesh format '{path.suffix}': use one of {', '.join(MESH_IMPORTERS)}")])
+        raise SpecError(
+            [
+                source.diagnostic(
+                    where, f"unsupported mesh format '{path.suffix}': use one of {', '.join(MESH_IMPORTERS)}"
+                )
+            ]
+        )
     if not path.is_file():
-        raise SpecError([source.diagnostic(where, "mesh file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")])
+        raise SpecError(
+            [source.diagnostic(where, "mesh file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")]
+        )
     scene = built.scene
     before = {o.as_pointer() for o in bpy.data.objects}
     importer: Callable[..., Any] = {
-        "obj": bpy.ops.wm.obj_import, "stl": bpy.ops.wm.stl_import, "ply": bpy.ops.wm.ply_import, "gltf": bpy.ops.import_scene.gltf,
+        "obj": bpy.ops.wm.obj_import,
+        "stl": bpy.ops.wm.stl_import,
+        "ply": bpy.ops.wm.ply_import,
+        "gltf": bpy.ops.import_scene.gltf,
     }[kind]
     layer = scene.view_layers[0]
     try:
@@ -417,7 +528,14 @@ def _import_mesh(name: str, spec: MeshObject, built: BuiltScene, *, base_dir: Pa
         for child in roots:
             child.parent = obj
     if spec.material is not None:
-        mat = make_material(name, spec.material, base_dir=base_dir, source=source, path=("scene", "objects", name, "material"), track=_keep)
+        mat = make_material(
+            name,
+            spec.material,
+            base_dir=base_dir,
+            source=source,
+            path=("scene", "objects", name, "material"),
+            track=_keep,
+        )
         for o in new:
             if o.type == "MESH":
                 o.data.materials.clear()

@@ -29,7 +29,9 @@ def _vec(v: Any) -> list[float]:
 
 def _bindable(mat: Any) -> bool:
     """Whether a bound colour reaches the render: the material has a Principled BSDF (see materials.color_writer)."""
-    return mat is not None and mat.node_tree is not None and any(n.type == "BSDF_PRINCIPLED" for n in mat.node_tree.nodes)
+    return (
+        mat is not None and mat.node_tree is not None and any(n.type == "BSDF_PRINCIPLED" for n in mat.node_tree.nodes)
+    )
 
 
 def _animated(obj: Any) -> list[str]:
@@ -42,7 +44,11 @@ def _animated(obj: Any) -> list[str]:
         paths = sorted({fc.data_path for fc in animated_fcurves(anim)})
         out += [f"{prefix}{p} (keyframes)" for p in paths]
         out += [f"{prefix}{p} (driver)" for p in sorted({fc.data_path for fc in anim.drivers})]
-    out += [f"{'/'.join(sorted(constraint_sets(c.type)))} (constraint '{c.name}', {c.type})" for c in obj.constraints if c.enabled]
+    out += [
+        f"{'/'.join(sorted(constraint_sets(c.type)))} (constraint '{c.name}', {c.type})"
+        for c in obj.constraints
+        if c.enabled
+    ]
     return out
 
 
@@ -59,10 +65,19 @@ def _overrides(scene: Any) -> list[str]:
     differs("output", r.image_settings.media_type, "IMAGE")
     differs("resolution percentage", r.resolution_percentage, 100)
     differs("pixel aspect", [round(r.pixel_aspect_x, 3), round(r.pixel_aspect_y, 3)], [1.0, 1.0])
-    for label, value in (("render border", r.use_border), ("film transparent", r.film_transparent), ("stereo/multiview", r.use_multiview),
-                         ("metadata stamp", r.use_stamp), ("freestyle", r.use_freestyle), ("motion blur", r.use_motion_blur),
-                         ("simplify", r.use_simplify), ("adaptive sampling", c.use_adaptive_sampling), ("denoising", c.use_denoising),
-                         ("view curves", vs.use_curve_mapping), ("white balance", vs.use_white_balance)):
+    for label, value in (
+        ("render border", r.use_border),
+        ("film transparent", r.film_transparent),
+        ("stereo/multiview", r.use_multiview),
+        ("metadata stamp", r.use_stamp),
+        ("freestyle", r.use_freestyle),
+        ("motion blur", r.use_motion_blur),
+        ("simplify", r.use_simplify),
+        ("adaptive sampling", c.use_adaptive_sampling),
+        ("denoising", c.use_denoising),
+        ("view curves", vs.use_curve_mapping),
+        ("white balance", vs.use_white_balance),
+    ):
         differs(label, value, False)
     differs("view transform", vs.view_transform, "Standard")
     differs("look", vs.look, "None")
@@ -85,19 +100,33 @@ def _overrides(scene: Any) -> list[str]:
 
 def describe(path: str) -> dict[str, Any]:
     turn_autorun_off()
-    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False, use_scripts=False)  # use_scripts=False: no registered text runs
+    bpy.ops.wm.open_mainfile(
+        filepath=path, load_ui=False, use_scripts=False
+    )  # use_scripts=False: no registered text runs
     scenes = []
     for scene in bpy.data.scenes:
         r = scene.render
-        scenes.append({
-            "name": scene.name, "camera": scene.camera.name if scene.camera else None, "objects": [o.name for o in scene.objects],
-            "engine": r.engine, "resolution": [r.resolution_x, r.resolution_y], "frame": scene.frame_current,
-            "overrides": _overrides(scene),
-        })
+        scenes.append(
+            {
+                "name": scene.name,
+                "camera": scene.camera.name if scene.camera else None,
+                "objects": [o.name for o in scene.objects],
+                "engine": r.engine,
+                "resolution": [r.resolution_x, r.resolution_y],
+                "frame": scene.frame_current,
+                "overrides": _overrides(scene),
+            }
+        )
     cameras, lights, meshes, empties, others = [], [], [], [], []
     for obj in bpy.data.objects:
-        entry: dict[str, Any] = {"name": obj.name, "location": _vec(obj.location), "parent": obj.parent.name if obj.parent else None,
-                                 "scenes": [s.name for s in obj.users_scene], "hide_render": obj.hide_render, "animated": _animated(obj)}
+        entry: dict[str, Any] = {
+            "name": obj.name,
+            "location": _vec(obj.location),
+            "parent": obj.parent.name if obj.parent else None,
+            "scenes": [s.name for s in obj.users_scene],
+            "hide_render": obj.hide_render,
+            "animated": _animated(obj),
+        }
         if obj.type == "CAMERA":
             cam = obj.data
             entry.update(type=cam.type, lens=round(cam.lens, 3), ortho_scale=round(cam.ortho_scale, 3))
@@ -106,22 +135,54 @@ def describe(path: str) -> dict[str, Any]:
             entry.update(type=obj.data.type, energy=round(obj.data.energy, 3))
             lights.append(entry)
         elif obj.type == "MESH":
-            entry.update(dimensions=_vec(obj.dimensions), modifiers=[m.type for m in obj.modifiers],
-                         materials=[{"name": s.material.name, "color_bindable": _bindable(s.material)} for s in obj.material_slots if s.material])
+            entry.update(
+                dimensions=_vec(obj.dimensions),
+                modifiers=[m.type for m in obj.modifiers],
+                materials=[
+                    {"name": s.material.name, "color_bindable": _bindable(s.material)}
+                    for s in obj.material_slots
+                    if s.material
+                ],
+            )
             meshes.append(entry)
         elif obj.type == "EMPTY":
             empties.append(entry)
         else:
             entry["type"] = obj.type
             others.append(entry)
-    libraries = [{"path": lib.filepath, "found": os.path.exists(bpy.path.abspath(lib.filepath)),
-                  "uses": sorted(i.name for coll in (bpy.data.objects, bpy.data.meshes, bpy.data.materials) for i in coll if i.library == lib)}
-                 for lib in bpy.data.libraries]
-    missing_images = [{"name": im.name, "path": im.filepath} for im in bpy.data.images
-                      if im.source in ("FILE", "SEQUENCE", "TILED") and im.packed_file is None and im.library is None
-                      and not os.path.exists(bpy.path.abspath(im.filepath))]
-    return {"file": path, "version": ".".join(str(v) for v in bpy.data.version), "scenes": scenes, "cameras": cameras, "lights": lights,
-            "meshes": meshes, "empties": empties, "other_objects": others, "libraries": libraries, "missing_images": missing_images}
+    libraries = [
+        {
+            "path": lib.filepath,
+            "found": os.path.exists(bpy.path.abspath(lib.filepath)),
+            "uses": sorted(
+                i.name
+                for coll in (bpy.data.objects, bpy.data.meshes, bpy.data.materials)
+                for i in coll
+                if i.library == lib
+            ),
+        }
+        for lib in bpy.data.libraries
+    ]
+    missing_images = [
+        {"name": im.name, "path": im.filepath}
+        for im in bpy.data.images
+        if im.source in ("FILE", "SEQUENCE", "TILED")
+        and im.packed_file is None
+        and im.library is None
+        and not os.path.exists(bpy.path.abspath(im.filepath))
+    ]
+    return {
+        "file": path,
+        "version": ".".join(str(v) for v in bpy.data.version),
+        "scenes": scenes,
+        "cameras": cameras,
+        "lights": lights,
+        "meshes": meshes,
+        "empties": empties,
+        "other_objects": others,
+        "libraries": libraries,
+        "missing_images": missing_images,
+    }
 
 
 def serve() -> None:

@@ -40,13 +40,21 @@ class PoseWriter:
     bodies: list[tuple[int, Any]]  # (body index, empty) of the moving bodies
     cameras: list[Any]  # camera objects by MuJoCo camera index
     lights: list[Any]  # light objects by MuJoCo light index (a light on a body, or tracking one, moves)
-    keys: tuple[list[str], list[str], list[str]] = ([], [], [])  # their names in BuiltScene.objects: bodies, cameras, lights
+    keys: tuple[list[str], list[str], list[str]] = (
+        [],
+        [],
+        [],
+    )  # their names in BuiltScene.objects: bodies, cameras, lights
 
     def for_objects(self, objects: dict[str, Any]) -> "PoseWriter":
         """The same writer for another copy of the scene (a batch's env k), its objects found by name."""
         bodies, cameras, lights = self.keys
-        return PoseWriter([(i, objects[key]) for (i, _), key in zip(self.bodies, bodies)], [objects[k] for k in cameras],
-                          [objects[k] for k in lights], self.keys)
+        return PoseWriter(
+            [(i, objects[key]) for (i, _), key in zip(self.bodies, bodies)],
+            [objects[k] for k in cameras],
+            [objects[k] for k in lights],
+            self.keys,
+        )
 
     def without(self, removed: set[int], keep_cameras: bool) -> "PoseWriter":
         """The same writer less the objects in `removed` (pointers: in a batch, objects drawn as instances, or the
@@ -54,17 +62,30 @@ class PoseWriter:
         bodies = [j for j, (_, e) in enumerate(self.bodies) if e.as_pointer() not in removed]
         cameras = [j for j, c in enumerate(self.cameras) if keep_cameras or c.as_pointer() not in removed]
         lights = [j for j, light in enumerate(self.lights) if light.as_pointer() not in removed]
-        keys = tuple([names[j] for j in kept] if names else [] for names, kept in zip(self.keys, (bodies, cameras, lights)))
-        return PoseWriter([self.bodies[j] for j in bodies], [self.cameras[j] for j in cameras], [self.lights[j] for j in lights],
-                          keys)  # type: ignore[arg-type]
+        keys = tuple(
+            [names[j] for j in kept] if names else [] for names, kept in zip(self.keys, (bodies, cameras, lights))
+        )
+        return PoseWriter(
+            [self.bodies[j] for j in bodies],
+            [self.cameras[j] for j in cameras],
+            [self.lights[j] for j in lights],
+            keys,  # type: ignore[arg-type]
+        )
 
     @property
     def empty(self) -> bool:
         """Whether it writes nothing."""
         return not (self.bodies or self.cameras or self.lights)
 
-    def write(self, xpos: np.ndarray, xquat: np.ndarray, cam_xpos: np.ndarray, cam_xmat: np.ndarray,
-              light_xpos: np.ndarray | None = None, light_xdir: np.ndarray | None = None) -> None:
+    def write(
+        self,
+        xpos: np.ndarray,
+        xquat: np.ndarray,
+        cam_xpos: np.ndarray,
+        cam_xmat: np.ndarray,
+        light_xpos: np.ndarray | None = None,
+        light_xdir: np.ndarray | None = None,
+    ) -> None:
         if self.bodies:
             rows = [i for i, _ in self.bodies]
             positions, quats = xpos[rows].tolist(), xquat[rows].tolist()
@@ -80,8 +101,9 @@ class PoseWriter:
                 light.rotation_quaternion = Vector(light_xdir[i].tolist()).to_track_quat("-Z", "Y")
 
 
-def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool,
-                          material: Material) -> PoseWriter:
+def build_physics_objects(
+    scene_data: PhysicsScene, built: Any, *, base_dir: Any, source: Any, add_light: bool, material: Material
+) -> PoseWriter:
     """Every drawable geom, light and camera of the model in `built`'s collection (names added to built.objects).
 
     An object the spec declares (or its .blend holds) under a body's name stands for
@@ -103,7 +125,9 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
             obj.location = scene_data.body_pos[body].tolist()
             obj.rotation_quaternion = scene_data.body_quat[body].tolist()
             empties[body] = obj
-            built.objects.setdefault(f"body:{scene_data.body_names[body]}", obj)  # a batch finds each copy's empty by this name
+            built.objects.setdefault(
+                f"body:{scene_data.body_names[body]}", obj
+            )  # a batch finds each copy's empty by this name
         return empties[body]
 
     for body in own:
@@ -114,9 +138,17 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
     for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
         if geom.body in own:
             continue
-        obj = _geom_object(geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material)
+        obj = _geom_object(
+            geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material
+        )
         if lighting is not None:
-            light_material(obj.data.materials[0], *lighting, emission=geom.emission, specular=geom.specular, shininess=geom.shininess)
+            light_material(
+                obj.data.materials[0],
+                *lighting,
+                emission=geom.emission,
+                specular=geom.specular,
+                shininess=geom.shininess,
+            )
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
         built.objects.setdefault(geom.name, obj)
@@ -130,7 +162,9 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         obj.rotation_quaternion = Vector(light.direction).to_track_quat("-Z", "Y")
         built.objects.setdefault(light.name, obj)
         lights.append(obj)
-    if add_light and not as_mujoco:  # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
+    if (
+        add_light and not as_mujoco
+    ):  # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
         sun = bpy.data.objects.new("mujoco-headlight", bpy.data.lights.new("mujoco-headlight", "SUN"))
         sun.data.energy = 3.0
         sun.rotation_euler = (0.6, 0.0, 0.3)
@@ -143,13 +177,19 @@ def build_physics_objects(scene_data: PhysicsScene, built: Any, *, base_dir: Any
         cam.clip_start, cam.clip_end = 0.01, 100.0
         obj = bpy.data.objects.new(cam_info.name, cam)
         obj.rotation_mode = "QUATERNION"
-        obj.location = cam_info.pos  # MuJoCo's pose at qpos0: a batch's tiles camera takes a fixed camera's pose when built
+        obj.location = (
+            cam_info.pos
+        )  # MuJoCo's pose at qpos0: a batch's tiles camera takes a fixed camera's pose when built
         obj.rotation_quaternion = cam_info.quat
         collection.objects.link(obj)
         built.objects.setdefault(cam_info.name, obj)
         cameras.append(obj)
     moving = [(int(b), empties[int(b)]) for b in scene_data.moving if int(b) in empties]
-    keys = ([f"body:{scene_data.body_names[b]}" for b, _ in moving], [c.name for c in scene_data.cameras], [light.name for light in scene_data.lights])
+    keys = (
+        [f"body:{scene_data.body_names[b]}" for b, _ in moving],
+        [c.name for c in scene_data.cameras],
+        [light.name for light in scene_data.lights],
+    )
     return PoseWriter(moving, cameras, lights, keys)
 
 
@@ -198,7 +238,9 @@ def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list
     (texcoords.py; none without a texture), and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped).
     `split_caps`: a cylinder's flat ends get vertices of their own, so that its smooth side's normals point straight out."""
     size = geom.size
-    caps: list[tuple[list[Any], float]] = []  # a capsule's end spheres and their centres: MuJoCo textures each about its centre
+    caps: list[
+        tuple[list[Any], float]
+    ] = []  # a capsule's end spheres and their centres: MuJoCo textures each about its centre
     made: list[int] = []
     if geom.kind == "plane":
         bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=1.0)
@@ -207,7 +249,9 @@ def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list
         bmesh.ops.create_cube(bm, size=2.0)
         bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)
     elif geom.kind in ("sphere", "ellipsoid"):
-        bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=1.0 if geom.kind == "ellipsoid" else size[0])
+        bmesh.ops.create_uvsphere(
+            bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=1.0 if geom.kind == "ellipsoid" else size[0]
+        )
         if geom.kind == "ellipsoid":
             bmesh.ops.scale(bm, vec=Vector(size), verts=bm.verts)
     elif geom.kind in ("cylinder", "capsule"):
@@ -216,8 +260,13 @@ def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list
             bmesh.ops.split_edges(bm, edges=[e for e in bm.edges if any(len(f.verts) > 4 for f in e.link_faces)])
         if geom.kind == "capsule":  # a cylinder and two spheres: the overlap does not show
             for z in (-size[1], size[1]):
-                made_sphere = bmesh.ops.create_uvsphere(bm, u_segments=SEGMENTS, v_segments=SEGMENTS // 2, radius=size[0],
-                                                        matrix=Matrix.Translation((0, 0, z)))
+                made_sphere = bmesh.ops.create_uvsphere(
+                    bm,
+                    u_segments=SEGMENTS,
+                    v_segments=SEGMENTS // 2,
+                    radius=size[0],
+                    matrix=Matrix.Translation((0, 0, z)),
+                )
                 caps.append((made_sphere["verts"], z))
     elif geom.kind == "mesh" and geom.vertices is not None and geom.faces is not None:
         verts = [bm.verts.new(v) for v in geom.vertices.tolist()]
@@ -233,7 +282,9 @@ def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list
     if geom.kind == "mesh" and geom.vertices is not None:  # made in this order, at the geom's own coordinates
         points = np.asarray(geom.vertices, dtype=np.float64).reshape(-1, 3)
     else:
-        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(geom.unit) + np.array(geom.texorigin)
+        points = np.array([v.co[:] for v in bm.verts], dtype=np.float64).reshape(-1, 3) / np.array(
+            geom.unit
+        ) + np.array(geom.texorigin)
     for sphere, z in caps:  # MuJoCo's caps are unit hemispheres about their own centres, scaled by the radius
         rows = [v.index for v in sphere]
         points[rows] = (np.array([v.co[:] for v in sphere]) - (0.0, 0.0, z)) / size[0]
@@ -246,7 +297,9 @@ def _uv_map(mesh: Any, geom: GeomShape, points: np.ndarray, made: list[int]) -> 
     mesh.loops.foreach_get("vertex_index", loop_vertex)
     starts = np.empty(len(mesh.polygons), dtype=np.int64)
     mesh.polygons.foreach_get("loop_start", starts)
-    if geom.texcoords is not None and geom.texture_type == "2d" and len(made) == len(starts):  # a mesh's own UVs, matched corner by corner
+    if (
+        geom.texcoords is not None and geom.texture_type == "2d" and len(made) == len(starts)
+    ):  # a mesh's own UVs, matched corner by corner
         faces, uvs = geom.faces[made], geom.texcoords[made]  # type: ignore[index]
         corner = np.argmax(faces[np.repeat(np.arange(len(made)), 3)] == loop_vertex[:, None], axis=1)
         uv = uvs[np.repeat(np.arange(len(made)), 3), corner]
@@ -260,7 +313,9 @@ def _uv_map(mesh: Any, geom: GeomShape, points: np.ndarray, made: list[int]) -> 
     layer.data.foreach_set("uv", uv.astype(np.float32).reshape(-1))
 
 
-def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any], split_caps: bool, material: Material) -> Any:
+def _geom_object(
+    geom: GeomShape, *, base_dir: Any, source: Any, images: dict[int, Any], split_caps: bool, material: Material
+) -> Any:
     """The geom's mesh object and material. `split_caps`: a cylinder's (or capsule's) side is smoothed apart from its flat
     ends, its normals straight out as MuJoCo's (smoothed with them, the side's normals tilt up to 45 degrees toward the
     ends; kept so in physics.look 'physical', whose frames a shipped agent was trained on)."""
@@ -269,13 +324,19 @@ def _geom_object(geom: GeomShape, *, base_dir: Any, source: Any, images: dict[in
     points, made = _shape(bm, geom, split_caps)
     for face in bm.faces:
         face.smooth = geom.kind in ("sphere", "ellipsoid", "capsule", "cylinder")
-    if geom.kind in ("sphere", "ellipsoid", "capsule"):  # made by create_uvsphere (a mesh keeps MuJoCo's face order: _uv_map reads it)
+    if geom.kind in (
+        "sphere",
+        "ellipsoid",
+        "capsule",
+    ):  # made by create_uvsphere (a mesh keeps MuJoCo's face order: _uv_map reads it)
         sort_faces(bm)
     bm.to_mesh(mesh)
     bm.free()
     obj = bpy.data.objects.new(geom.name, mesh)
     material = replace(material, color=tuple(float(v) for v in geom.rgba), roughness=0.6)
-    mat = make_material(f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d)
+    mat = make_material(
+        f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d
+    )
     if geom.texture is not None:  # MuJoCo multiplies the texture by the geom's colour
         _uv_map(mesh, geom, points, made)
         tint_image(mat, _texture_image(geom, images), repeat=geom.texture_type == "2d")
