@@ -9,6 +9,7 @@ import click
 import numpy as np
 
 from visualenv.cli.group import (
+    shown_option,
     ALGORITHMS,
     MODEL_HELP,
     RANDOM,
@@ -38,9 +39,9 @@ def _video_path(value: str | None) -> str | None:
 @click.argument("spec")
 @click.option("--model", "model_path", help=MODEL_HELP.format("") + "  [default: random actions]")
 @trust_pickle_option
-@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
-@click.option("--episodes", default=3, show_default=True, type=click.IntRange(min=1))
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
+@shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS))
+@shown_option("--episodes", default=3, type=click.IntRange(min=1))
+@shown_option("--seed", default=0, type=click.IntRange(min=0))
 @click.option(
     "--record",
     type=click.Path(dir_okay=False),
@@ -313,41 +314,27 @@ def _write_results(results: dict, model_path: str, spec: str) -> Path:
     "model_path",
     help="an agent plays: a trained model (as `play` takes), or 'pretrained': the shipped agent; default: you play with the keys",
 )
-@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
+@shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS))
 @click.option(
     "--port",
     type=click.IntRange(0, 65535),
     default=None,
     help="[default: 8765, or any free port where it is taken; 0: any free port]",
 )
-@click.option(
-    "--host",
-    default="127.0.0.1",
-    show_default=True,
-    help="the address to serve on (another than this machine's own: a warning)",
+@shown_option(
+    "--host", default="127.0.0.1", help="the address to serve on (another than this machine's own: a warning)"
 )
-@click.option(
-    "--seed",
-    default=0,
-    show_default=True,
-    type=click.IntRange(min=0),
-    help="seed of the first episode (the next ones count up)",
+@shown_option(
+    "--seed", default=0, type=click.IntRange(min=0), help="seed of the first episode (the next ones count up)"
 )
-@click.option(
+@shown_option(
     "--view",
     "view_preset",
-    type=click.Choice(["fast", "quality", "off"]),
     default="fast",
-    show_default=True,
+    type=click.Choice(["fast", "quality", "off"]),
     help="the high-resolution view's preset",
 )
-@click.option(
-    "--view-size",
-    type=click.IntRange(16, 4096),
-    default=320,
-    show_default=True,
-    help="longer side of the view in pixels",
-)
+@shown_option("--view-size", default=320, type=click.IntRange(16, 4096), help="longer side of the view in pixels")
 @trust_pickle_option
 @friendly
 def view(
@@ -382,9 +369,7 @@ def view(
 @click.argument("model", type=click.Path(exists=True))
 @click.argument("out", type=click.Path(dir_okay=False))
 @trust_pickle_option
-@click.option(
-    "--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True, help="the algorithm of an SB3 .zip"
-)
+@shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS), help="the algorithm of an SB3 .zip")
 @click.option("--float32", "full", is_flag=True, help="keep float32 weights (default: float16, half the size)")
 @friendly
 def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: bool) -> None:

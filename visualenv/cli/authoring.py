@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from visualenv.cli.group import friendly, main
+from visualenv.cli.group import shown_option, friendly, main
 from visualenv.errors import SpecError, VisualEnvError
 
 
@@ -43,16 +43,10 @@ def schema() -> None:
 
 @main.command()
 @click.argument("spec", type=click.Path(dir_okay=False))
-@click.option(
-    "-o",
-    "--out",
-    "out_dir",
-    default="build",
-    show_default=True,
-    type=click.Path(file_okay=False),
-    help="parent folder of the build",
+@shown_option(
+    "-o", "--out", "out_dir", default="build", type=click.Path(file_okay=False), help="parent folder of the build"
 )
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0), help="seed of the previewed reset")
+@shown_option("--seed", default=0, type=click.IntRange(min=0), help="seed of the previewed reset")
 @click.option("--device", type=click.Choice(["cpu", "gpu", "auto"]), default=None, help="override render.device")
 @click.option("--quiet", is_flag=True, help="do not print the observation preview")
 @friendly
@@ -142,9 +136,9 @@ def _blend_path(blend: str) -> Path:
 
 @main.command()
 @click.argument("spec", type=click.Path())
-@click.option("-o", "--out", "out_dir", default="frames", show_default=True, type=click.Path(file_okay=False))
-@click.option("--steps", default=20, show_default=True, type=click.IntRange(min=1), help="steps of the random episode")
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(min=0))
+@shown_option("-o", "--out", "out_dir", default="frames", type=click.Path(file_okay=False))
+@shown_option("--steps", default=20, type=click.IntRange(min=1), help="steps of the random episode")
+@shown_option("--seed", default=0, type=click.IntRange(min=0))
 @friendly
 def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
     """Save a few frames (observation beside the high-res view) of a random episode."""

@@ -33,6 +33,11 @@ MODEL_HELP = (
 )
 
 
+def shown_option(*decls: str, default: Any, type: Any = None, help: str | None = None) -> Callable[..., Any]:
+    """An option whose default its help shows (``show_default=True``), as most of the commands' options are."""
+    return click.option(*decls, default=default, show_default=True, type=type, help=help)
+
+
 trust_pickle_option = click.option(
     "--trust-pickle",
     is_flag=True,

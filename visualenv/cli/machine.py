@@ -9,7 +9,7 @@ from typing import Any
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import check_writable, friendly, main, worker_counts
+from visualenv.cli.group import shown_option, check_writable, friendly, main, worker_counts
 from visualenv.render.base import READBACKS
 
 
@@ -47,9 +47,7 @@ def _bench_batched(
 
 @main.command()
 @click.argument("specs", nargs=-1, required=True)
-@click.option(
-    "--steps", default=500, show_default=True, type=click.IntRange(min=1), help="measured env steps (after a warm-up)"
-)
+@shown_option("--steps", default=500, type=click.IntRange(min=1), help="measured env steps (after a warm-up)")
 @click.option(
     "--workers",
     default="2",
@@ -61,14 +59,13 @@ def _bench_batched(
 @click.option(
     "--threads", type=click.IntRange(min=1), default=None, help="render threads of the single env (default: all cores)"
 )
-@click.option(
+@shown_option(
     "--readback",
-    type=click.Choice(READBACKS),
     default="auto",
-    show_default=True,
+    type=click.Choice(READBACKS),
     help="how pixels leave Blender (file: the BMP path, for before/after comparisons)",
 )
-@click.option("--pin/--no-pin", default=True, show_default=True, help="confine each parallel worker to its own cores")
+@shown_option("--pin/--no-pin", default=True, help="confine each parallel worker to its own cores")
 @click.option(
     "--soak",
     "soak_steps",
@@ -83,11 +80,10 @@ def _bench_batched(
     callback=lambda ctx, param, value: value and worker_counts(value, "--batched"),
     help="batch sizes such as 1,16,64: N envs in one Blender against the per-process vector env (one worker per core)",
 )
-@click.option(
+@shown_option(
     "--autoreset",
-    type=click.Choice(["next_step", "same_step"]),
     default="next_step",
-    show_default=True,
+    type=click.Choice(["next_step", "same_step"]),
     help="with --batched: when an ended env is reset (same_step: as SB3's VecEnvs and train --batched do)",
 )
 @click.option(
@@ -220,20 +216,8 @@ def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> N
 
 @main.command("bench-rllib")
 @click.argument("spec")
-@click.option(
-    "--envs",
-    default=2,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="envs on each side (RLlib: one runner each)",
-)
-@click.option(
-    "--steps",
-    default=200,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="measured steps per env (after a warm-up)",
-)
+@shown_option("--envs", default=2, type=click.IntRange(min=1), help="envs on each side (RLlib: one runner each)")
+@shown_option("--steps", default=200, type=click.IntRange(min=1), help="measured steps per env (after a warm-up)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @friendly
 def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:

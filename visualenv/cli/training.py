@@ -10,7 +10,7 @@ from typing import Any, Sequence
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import ALGORITHMS, friendly, main
+from visualenv.cli.group import shown_option, ALGORITHMS, friendly, main
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
 from visualenv.train.distill import DistillConfig
@@ -25,32 +25,21 @@ def _parse_value(text: str) -> Any:
 
 @main.command()
 @click.argument("spec")
-@click.option("--algo", type=click.Choice(ALGORITHMS), default="ppo", show_default=True)
+@shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS))
 @click.option(
     "--steps", type=click.IntRange(min=1), default=None, help="total env steps  [default: 200000, or the resumed run's]"
 )
-@click.option(
-    "--envs", default=2, show_default=True, type=click.IntRange(min=1), help="parallel envs, one Blender process each"
-)
-@click.option(
-    "--frame-stack",
-    default=4,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="frames per observation (1: no stacking)",
-)
-@click.option(
-    "--eval-every", default=10_000, show_default=True, type=click.IntRange(min=1), help="env steps between evaluations"
-)
-@click.option("--eval-episodes", default=10, show_default=True, type=click.IntRange(min=1))
-@click.option(
+@shown_option("--envs", default=2, type=click.IntRange(min=1), help="parallel envs, one Blender process each")
+@shown_option("--frame-stack", default=4, type=click.IntRange(min=1), help="frames per observation (1: no stacking)")
+@shown_option("--eval-every", default=10000, type=click.IntRange(min=1), help="env steps between evaluations")
+@shown_option("--eval-episodes", default=10, type=click.IntRange(min=1))
+@shown_option(
     "--final-episodes",
     default=100,
-    show_default=True,
     type=click.IntRange(min=1),
     help="episodes of the best model's final evaluation, on seeds that neither training nor selection uses",
 )
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31 - 1))
+@shown_option("--seed", default=0, type=click.IntRange(0, 2**31 - 1))
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option(
     "--set",
@@ -62,7 +51,7 @@ def _parse_value(text: str) -> Any:
 @click.option(
     "--config", "config_file", type=click.Path(exists=True, dir_okay=False), help="YAML file of hyperparameters"
 )
-@click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@shown_option("-o", "--out", "out_root", default="runs", type=click.Path(file_okay=False))
 @click.option(
     "--resume",
     "resume_dir",
@@ -70,10 +59,9 @@ def _parse_value(text: str) -> Any:
     help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)",
 )
 @click.option("--no-progress", is_flag=True)
-@click.option(
+@shown_option(
     "--pin/--no-pin",
     default=True,
-    show_default=True,
     help="confine each training env's process (sb3) or EnvRunner (rllib, a free core of its node) to its own cores",
 )
 @click.option(
@@ -103,23 +91,14 @@ def _parse_value(text: str) -> Any:
     default=None,
     help="sb3: where the training envs render (default: the spec's render.device)",
 )
-@click.option(
+@shown_option(
     "--backend",
-    type=click.Choice(["sb3", "rllib"]),
     default="sb3",
-    show_default=True,
+    type=click.Choice(["sb3", "rllib"]),
     help="sb3: Stable-Baselines3 on this machine; rllib: Ray RLlib PPO, on a Ray cluster (the [ray] extra)",
 )
-@click.option(
-    "--env-runners",
-    default=2,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="rllib: EnvRunner actors (one Blender each)",
-)
-@click.option(
-    "--envs-per-runner", default=1, show_default=True, type=click.IntRange(min=1), help="rllib: envs each runner steps"
-)
+@shown_option("--env-runners", default=2, type=click.IntRange(min=1), help="rllib: EnvRunner actors (one Blender each)")
+@shown_option("--envs-per-runner", default=1, type=click.IntRange(min=1), help="rllib: envs each runner steps")
 @click.option(
     "--address", default=None, help="rllib: the Ray cluster to join (HOST:PORT or 'auto'); default: start a local one"
 )
@@ -238,65 +217,47 @@ def train(
     default=None,
     help="start from this policy file of an earlier distillation of SPEC (it acts from the first round on)",
 )
-@click.option(
+@shown_option(
     "--rounds",
     default=DistillConfig.rounds,
-    show_default=True,
     type=click.IntRange(min=1),
     help="DAgger rounds; the teacher acts in the first, the student in the others",
 )
-@click.option(
-    "--episodes",
-    default=DistillConfig.episodes,
-    show_default=True,
-    type=click.IntRange(min=1),
-    help="episodes rolled out per round",
+@shown_option(
+    "--episodes", default=DistillConfig.episodes, type=click.IntRange(min=1), help="episodes rolled out per round"
 )
-@click.option(
+@shown_option(
     "--mixing",
     default=DistillConfig.mixing,
-    show_default=True,
     type=click.FloatRange(0, 1),
     help="the teacher acts a step of round r with probability MIXING ** r, else the student (DAgger's beta)",
 )
-@click.option(
+@shown_option(
     "--epochs",
     default=DistillConfig.epochs,
-    show_default=True,
     type=click.FloatRange(min=0, min_open=True),
     help="passes over all frames gathered so far, per round",
 )
-@click.option("--batch-size", default=DistillConfig.batch_size, show_default=True, type=click.IntRange(min=1))
-@click.option(
-    "--learning-rate",
-    default=DistillConfig.learning_rate,
-    show_default=True,
-    type=click.FloatRange(min=0, min_open=True),
+@shown_option("--batch-size", default=DistillConfig.batch_size, type=click.IntRange(min=1))
+@shown_option("--learning-rate", default=DistillConfig.learning_rate, type=click.FloatRange(min=0, min_open=True))
+@shown_option(
+    "--shift", default=DistillConfig.shift, type=click.IntRange(min=0), help="random shift of the frames in pixels"
 )
-@click.option(
-    "--shift",
-    default=DistillConfig.shift,
-    show_default=True,
-    type=click.IntRange(min=0),
-    help="random shift of the frames in pixels",
-)
-@click.option("--frame-stack", default=DistillConfig.frame_stack, show_default=True, type=click.IntRange(min=1))
-@click.option(
+@shown_option("--frame-stack", default=DistillConfig.frame_stack, type=click.IntRange(min=1))
+@shown_option(
     "--eval-episodes",
     default=DistillConfig.eval_episodes,
-    show_default=True,
     type=click.IntRange(min=1),
     help="episodes of each round's evaluation, which selects the best round",
 )
-@click.option(
+@shown_option(
     "--final-episodes",
     default=DistillConfig.final_eval_episodes,
-    show_default=True,
     type=click.IntRange(min=1),
     help="episodes of the best round's final evaluation, on seeds neither rounds nor selection use",
 )
-@click.option("--seed", default=0, show_default=True, type=click.IntRange(0, 2**31 - 1))
-@click.option("-o", "--out", "out_root", default="runs", show_default=True, type=click.Path(file_okay=False))
+@shown_option("--seed", default=0, type=click.IntRange(0, 2**31 - 1))
+@shown_option("-o", "--out", "out_root", default="runs", type=click.Path(file_okay=False))
 @click.option("--no-progress", is_flag=True)
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the final evaluation replays in `visualenv eval` on any CPU
