@@ -23,6 +23,10 @@ def _parse_value(text: str) -> Any:
         return text
 
 
+#: the options a resumed run keeps from its config, whatever its backend (either backend adds its own)
+FIXED_ON_RESUME = ("frame_stack", "eval_every", "eval_episodes", "final_episodes", "seed", "state_only", "out_root")
+
+
 @main.command()
 @click.argument("spec")
 @shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS))
@@ -153,20 +157,7 @@ def train(
     if resume_dir:
         _refuse_fixed_on_resume(
             ctx,
-            (
-                "algo",
-                "envs",
-                "batched",
-                "batch_workers",
-                "render_device",
-                "frame_stack",
-                "eval_every",
-                "eval_episodes",
-                "final_episodes",
-                "seed",
-                "state_only",
-                "out_root",
-            ),
+            ("algo", "envs", "batched", "batch_workers", "render_device", *FIXED_ON_RESUME),
             "only --steps, --set and --config change on --resume",
         )
         config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
@@ -426,18 +417,7 @@ def _train_rllib(
     if resume_dir:
         _refuse_fixed_on_resume(
             ctx,
-            (
-                "frame_stack",
-                "eval_every",
-                "eval_episodes",
-                "final_episodes",
-                "seed",
-                "state_only",
-                "out_root",
-                "env_runners",
-                "envs_per_runner",
-                "batched",
-            ),
+            (*FIXED_ON_RESUME, "env_runners", "envs_per_runner", "batched"),
             "only --steps, --set, --config and --address change on --resume",
         )
         config = _resumed(RLlibTrainConfig, resume_dir, steps, hyper, progress)

@@ -125,7 +125,7 @@ def entries(
         checked = c.expr(path, value, scope, expect=NUM if len(parts) == 1 else vec(len(parts)))
         if checked is None:
             continue
-        site = Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names)))
+        site = Site.of(path, checked)
         if len(parts) == 1:
             fb.assign(local(parts[0]), lower(checked.tree), site)
         else:

@@ -23,7 +23,7 @@ from typing import Any, Callable, Collection, Mapping
 
 from visualenv.errors import Diagnostic, ExpressionError, SpecError, did_you_mean, in_file_order
 from visualenv.expr import NUM, Checked, RandomSource, Type, check
-from visualenv.expr.codegen import FunctionBuilder, LineMap, Site, function_globals, local, lower, name, tuple_of
+from visualenv.expr.codegen import FunctionBuilder, LineMap, function_globals, local, name, tuple_of
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, bind_random
 from visualenv.compiler.actions import ActionsCompiler
 from visualenv.compiler.bindings import BindingsCompiler
@@ -144,6 +144,11 @@ class BatchFunctions:
 def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None) -> Program:
     """Resolve and check every expression in `loaded`; raise SpecError listing all problems."""
     return _Compiler(loaded, dict(params or {})).run()
+
+
+def _override_error(key: str, message: str) -> SpecError:
+    """A bad ``make(params=...)`` override, located at the options rather than a spec line."""
+    return SpecError([Diagnostic(OPTIONS_WHERE, None, None, f"params.{key}", message)])
 
 
 class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
@@ -328,11 +333,7 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             path = ("physics", "observe", i) if self.spec.physics.observe is not None else ("physics",)
             checked = self.expr(path, entry, scope, expect=NUM)
             if checked:
-                fb.assign(
-                    f"_o{i}",
-                    lower(checked.tree),
-                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
-                )
+                fb.assign_checked(f"_o{i}", path, checked)
                 values.append(name(f"_o{i}"))
         self.physics_reads(fb, "observe", start, self.used, set(state_names))
         self.plan.observe_size = len(values)
@@ -411,17 +412,7 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         params: dict[str, float | bool] = {}
         for key in self.overrides:
             if key not in self.spec.params:
-                raise SpecError(
-                    [
-                        Diagnostic(
-                            OPTIONS_WHERE,
-                            None,
-                            None,
-                            f"params.{key}",
-                            f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params),
-                        )
-                    ]
-                )
+                raise _override_error(key, f"unknown parameter override '{key}'" + did_you_mean(key, self.spec.params))
         raw = {**self.spec.params, **self.overrides}
         builtins = {
             "max_steps": float(self.spec.max_steps),
@@ -449,17 +440,7 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         A bad override stops compiling at once: the params that use it would only repeat the problem.
         """
         if key in self.overrides:
-            raise SpecError(
-                [
-                    Diagnostic(
-                        OPTIONS_WHERE,
-                        None,
-                        None,
-                        f"params.{key}",
-                        f"{message} (in the override {self.overrides[key]!r})",
-                    )
-                ]
-            )
+            raise _override_error(key, f"{message} (in the override {self.overrides[key]!r})")
         self.error(("params", key), message, column=column)
 
     def resolve_python_dynamics(self) -> Callable[..., Any] | None:

@@ -45,11 +45,7 @@ class StepCompiler:
             path = ("state", n, "init")
             checked = self.expr(path, self.spec.state[n].init, scope, expect=NUM)
             if checked:
-                fb.assign(
-                    local(n),
-                    lower(checked.tree),
-                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
-                )
+                fb.assign_checked(local(n), path, checked)
             scope[n] = NUM
         self.physics_reads(fb, "init", start, self.used, set(state_names))
         self.used |= before
@@ -116,11 +112,7 @@ class StepCompiler:
             path = ("dynamics", "let", n)
             checked = self.expr(path, value, scope, expect=NUM)
             if checked:
-                fb.assign(
-                    local(n),
-                    lower(checked.tree),
-                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
-                )
+                fb.assign_checked(local(n), path, checked)
             scope[n] = NUM
 
     def step_update(self, fb: FunctionBuilder, scope: dict[str, Type], commit: bool = True) -> None:
@@ -135,11 +127,7 @@ class StepCompiler:
             path = ("dynamics", "update", n)
             checked = self.expr(path, value, scope, expect=NUM)
             if checked:
-                fb.assign(
-                    "_new_" + n,
-                    lower(checked.tree),
-                    Site(".".join(map(str, path)), checked.text, tuple(sorted(checked.names))),
-                )
+                fb.assign_checked("_new_" + n, path, checked)
                 new_names.append(n)
         self.updated = [n for n in new_names if n in spec.state]
         if self.plan is not None:

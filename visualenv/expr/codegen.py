@@ -21,6 +21,7 @@ from dataclasses import dataclass, field
 from types import TracebackType
 from typing import Any, Callable, Mapping
 
+from visualenv.expr.checker import Checked
 from visualenv.expr.functions import FUNCTIONS
 
 VAR_PREFIX = "_v_"
@@ -89,6 +90,11 @@ class Site:
     text: str  # the expression text
     names: tuple[str, ...] = ()
 
+    @classmethod
+    def of(cls, path: tuple, checked: Checked) -> "Site":
+        """The site of a checked expression found at a spec path such as ``("dynamics", "let", "x")``."""
+        return cls(".".join(map(str, path)), checked.text, tuple(sorted(checked.names)))
+
 
 #: the line of the ``def``: statements without a site share it, so no site ever maps to it
 _DEF_LINE = 1
@@ -151,6 +157,10 @@ class FunctionBuilder:
     def assign(self, target: str, value: ast.expr, site: Site | None = None) -> None:
         stmt = ast.Assign([ast.Name(target, ast.Store())], value)
         self._add(stmt, site)
+
+    def assign_checked(self, target: str, path: tuple, checked: Checked) -> None:
+        """``target = <checked expression>``, its site the spec path it was written at."""
+        self.assign(target, lower(checked.tree), Site.of(path, checked))
 
     def unpack(self, targets: list[str], source: str) -> None:
         if not targets:

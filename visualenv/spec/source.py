@@ -97,6 +97,11 @@ class _TooLarge(Exception):
         self.node = node
 
 
+def _error_at(name: str, mark: Any, message: str) -> SpecError:
+    """A spec error at a YAML mark (0-based line and column) of file `name`."""
+    return SpecError([Diagnostic(name, mark.line + 1, mark.column + 1, "", message)])
+
+
 def _check_structure(text: str, name: str) -> bool:
     """Reject too-deep nesting and recursive aliases before composing (the event parser does not recurse).
 
@@ -109,17 +114,8 @@ def _check_structure(text: str, name: str) -> bool:
         if isinstance(event, yaml.CollectionStartEvent):
             depth += 1
             if depth > MAX_NESTING:
-                mark = event.start_mark
-                raise SpecError(
-                    [
-                        Diagnostic(
-                            name,
-                            mark.line + 1,
-                            mark.column + 1,
-                            "",
-                            f"nested too deeply (more than {MAX_NESTING} levels of mappings and lists)",
-                        )
-                    ]
+                raise _error_at(
+                    name, event.start_mark, f"nested too deeply (more than {MAX_NESTING} levels of mappings and lists)"
                 )
             open_anchors.append(event.anchor)
         elif isinstance(event, yaml.CollectionEndEvent):
@@ -128,18 +124,8 @@ def _check_structure(text: str, name: str) -> bool:
         elif isinstance(event, yaml.AliasEvent):
             aliases = True
             if event.anchor in open_anchors:
-                mark = event.start_mark
-                raise SpecError(
-                    [
-                        Diagnostic(
-                            name,
-                            mark.line + 1,
-                            mark.column + 1,
-                            "",
-                            f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor",
-                        )
-                    ]
-                )
+                message = f"recursive YAML alias: '*{event.anchor}' is used inside its own anchor"
+                raise _error_at(name, event.start_mark, message)
     return aliases
 
 
