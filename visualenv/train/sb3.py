@@ -175,29 +175,12 @@ def _make_envs(config: TrainConfig, spec_path: str, folder: RunFolder, resume: b
     from visualenv.env.sb3_vec import make_sb3_batched, make_sb3_vec
 
     frame_stack = config.frame_stack if config.render else 0
+    vec_options = dict(seed=config.seed, frame_stack=frame_stack, pin=config.pin, **_vec_kwargs(config))
+    vec_options.update(monitor_dir=str(folder.monitor), monitor_append=resume)
     if config.batched:
-        train_env = make_sb3_batched(
-            spec_path,
-            config.envs,
-            seed=config.seed,
-            frame_stack=frame_stack,
-            workers=config.workers,
-            pin=config.pin,
-            monitor_dir=str(folder.monitor),
-            monitor_append=resume,
-            **_vec_kwargs(config),
-        )
+        train_env = make_sb3_batched(spec_path, config.envs, workers=config.workers, **vec_options)
     else:
-        train_env = make_sb3_vec(
-            spec_path,
-            config.envs,
-            seed=config.seed,
-            frame_stack=frame_stack,
-            pin=config.pin,
-            monitor_dir=str(folder.monitor),
-            monitor_append=resume,
-            **_vec_kwargs(config),
-        )
+        train_env = make_sb3_vec(spec_path, config.envs, **vec_options)
     try:
         eval_env = make_eval_env(
             spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render

@@ -434,6 +434,16 @@ def depth_world(name: str, track: Callable[[Any], Any]) -> Any:
     return world
 
 
+def override_material(name: str, track: Callable[[Any], Any]) -> tuple[Any, Any, Any, Any]:
+    """A new material with nothing but its output node (for a render that overrides every material): the material,
+    its nodes, its links and the output."""
+    mat = track(bpy.data.materials.new(name))
+    ensure_node_tree(mat)
+    nodes, links = mat.node_tree.nodes, mat.node_tree.links
+    nodes.clear()
+    return mat, nodes, links, nodes.new("ShaderNodeOutputMaterial")
+
+
 def depth_material(
     name: str, track: Callable[[Any], Any], *, along_ray: bool = False
 ) -> tuple[Any, Callable[[float, float], None], Callable[[Any], None]]:
@@ -445,11 +455,7 @@ def depth_material(
     starts, which a batch's custom camera moves to each env's copy (the Camera
     Data node measures from the scene camera alone).
     """
-    mat = track(bpy.data.materials.new(name))
-    ensure_node_tree(mat)
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    nodes.clear()
-    out = nodes.new("ShaderNodeOutputMaterial")
+    mat, nodes, links, out = override_material(name, track)
     remap = nodes.new("ShaderNodeMapRange")
     remap.clamp = True
     remap.inputs["To Min"].default_value = 0.0

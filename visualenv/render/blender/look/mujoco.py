@@ -227,20 +227,21 @@ def _feed(links: Any, socket: Any, value: Any) -> None:
         socket.default_value = value
 
 
-def _math(nodes: Any, links: Any, operation: str, *inputs: Any) -> Any:
-    node = nodes.new("ShaderNodeMath")
+def _operation(nodes: Any, links: Any, kind: str, output: str, operation: str, inputs: tuple) -> Any:
+    """A math node of `kind` doing `operation` on `inputs` (sockets or numbers): its `output` socket."""
+    node = nodes.new(kind)
     node.operation = operation
     for socket, value in zip(node.inputs, inputs):
         _feed(links, socket, value)
-    return node.outputs["Value"]
+    return node.outputs[output]
+
+
+def _math(nodes: Any, links: Any, operation: str, *inputs: Any) -> Any:
+    return _operation(nodes, links, "ShaderNodeMath", "Value", operation, inputs)
 
 
 def _vector(nodes: Any, links: Any, operation: str, *inputs: Any) -> Any:
-    node = nodes.new("ShaderNodeVectorMath")
-    node.operation = operation
-    for socket, value in zip(node.inputs, inputs):
-        _feed(links, socket, value)
-    return node.outputs["Vector"]
+    return _operation(nodes, links, "ShaderNodeVectorMath", "Vector", operation, inputs)
 
 
 def _z(nodes: Any, links: Any, vector: Any) -> Any:

@@ -24,7 +24,7 @@ import bpy
 
 from visualenv.errors import SpecError
 from visualenv.render.base import RenderPlan
-from visualenv.render.blender.look.materials import ensure_node_tree, set_background
+from visualenv.render.blender.look.materials import override_material, set_background
 from visualenv.render.blender.scene.build import BuiltScene
 from visualenv.render.blender.runtime.settings import EngineConfig
 from visualenv.render.plan import MeshObject, PrimitiveObject
@@ -80,11 +80,7 @@ def assign_ids(built: BuiltScene, plan: RenderPlan) -> dict[str, int]:
 
 def segmentation_material(name: str, track: Callable[[Any], Any]) -> Any:
     """An emission material of ``pass_index / 255``: the override of a segmentation render."""
-    mat = track(bpy.data.materials.new(name))
-    ensure_node_tree(mat)
-    nodes, links = mat.node_tree.nodes, mat.node_tree.links
-    nodes.clear()
-    out = nodes.new("ShaderNodeOutputMaterial")
+    mat, nodes, links, out = override_material(name, track)
     info = nodes.new("ShaderNodeObjectInfo")
     scale = nodes.new("ShaderNodeMath")
     scale.operation = "DIVIDE"
