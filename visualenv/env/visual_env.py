@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import math
-import warnings
 from pathlib import Path
 from typing import Any, Mapping, SupportsFloat
 
@@ -12,16 +11,14 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from visualenv.compat.gymnasium import restore_space_generator, space_generator
 from visualenv.compiler.program import Program, compile_spec
 from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
 from visualenv.errors import SpecError, StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
 from visualenv.env.episode import EpisodeRules, step_limit
 from visualenv.env.human import HumanDisplay, open_human_display
+from visualenv.env.pickling import PicklingEnv
 from visualenv.physics.conventions import legacy_stream
-from visualenv.physics.model_fields import restore_fields, written_fields
-from visualenv.physics.simulation import integration_state
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer
 from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.frames import Frames
@@ -33,7 +30,7 @@ from visualenv.spec.options import distraction_settings
 RESET_OPTIONS = ("state",)
 
 
-class VisualEnv(gym.Env):
+class VisualEnv(PicklingEnv):
     """A Gymnasium env compiled from a visualenv spec.
 
     ## Observation space
@@ -80,7 +77,7 @@ class VisualEnv(gym.Env):
     A pickled env goes on with its episode: the copy's next steps are the original's
     (state, step count, random generators, MuJoCo's state; the scene is posed from
     the state). Where the episode cannot be carried over, the unpickled copy warns
-    and asks for ``reset()``.
+    and asks for ``reset()`` (:mod:`visualenv.env.pickling`).
 
     ## Render modes
     ``"rgb_array"``: ``render()`` returns the high-resolution view (``render.view``). ``"human"``: every reset and
@@ -541,97 +538,3 @@ class VisualEnv(gym.Env):
             values.update(zip(self.program.input_names, action))
         values["action"] = action
         return values
-
-    # -- pickling: rebuild from the spec in the receiving process, then carry the episode over -----------
-
-    def __getstate__(self) -> dict[str, Any]:
-        """The spec and options, the Gymnasium spec, and the episode in progress.
-
-        The episode is the state, step count, milestones and success, every random generator (the env's, the sensor
-        noise's, the action space's) and a physics spec's MuJoCo state (``mjSTATE_INTEGRATION``: what ``mj_step``
-        needs to go on bit for bit), with the model fields a reset writes (reacher's target). The renderer is not pickled: the copy builds its own on first render and poses
-        the scene from the carried state. A ``dynamics.python`` hook is imported again by name: state it keeps in
-        its own module is that module's in the receiving process.
-        """
-        episode = {
-            "state": self._state,
-            "steps": self._steps,
-            "fired": self._fired,
-            "done": self._done,
-            "success": self._success,
-            "np_random": self._np_random,
-            "np_random_seed": self._np_random_seed,
-            "sensor_rng": self._sensor_rng,
-            "action_space_rng": space_generator(self.action_space),
-            "last_obs": self._last_obs,
-            "legacy_random": self._legacy_random,
-            "physics": self._physics_state(),
-            "model": written_fields(self._sim.model) if self._sim is not None else None,
-            "distractions": self._distractions,
-        }
-        return {
-            "loaded": self.program.loaded,
-            "args": self._init_args,
-            "spec": self.spec,
-            "episode": episode if self._was_reset else None,
-        }
-
-    def __setstate__(self, data: dict[str, Any]) -> None:
-        self.__init__(data["loaded"], **data["args"])  # type: ignore[misc]
-        self.spec = data.get("spec")
-        episode = data.get("episode")
-        if episode is None:
-            return  # pickled before its first reset: so is the copy
-        try:
-            self._carry_over(episode)
-        except Exception as exc:  # noqa: BLE001 - whatever went wrong, the copy must not step a half-restored episode
-            self._was_reset = False
-            self._not_carried = f"the episode it was pickled in could not be carried over ({type(exc).__name__}: {exc})"
-            warnings.warn(
-                f"visualenv: {self.program.spec.id}: {self._not_carried}; call reset() to start a new one",
-                RuntimeWarning,
-                stacklevel=2,
-            )
-
-    def _carry_over(self, episode: dict[str, Any]) -> None:
-        """The episode of the pickled env, put in place (see :meth:`__getstate__`)."""
-        if (
-            episode.get("model") is not None and self._sim is not None
-        ):  # the model fields a reset wrote (reacher's target)
-            restore_fields(self._sim.model, episode["model"])
-        self._set_physics_state(episode["physics"])
-        self._state = tuple(episode["state"])
-        self._steps, self._fired, self._done, self._success = (
-            episode["steps"],
-            episode["fired"],
-            episode["done"],
-            episode["success"],
-        )
-        self._np_random, self._np_random_seed = episode["np_random"], episode["np_random_seed"]
-        self._legacy_random = episode.get("legacy_random")
-        self._random.generator = self._legacy_random if self._legacy_random is not None else self._np_random
-        self._sensor_rng = episode["sensor_rng"]
-        self._distractions = episode.get("distractions", self._distractions)
-        if episode["action_space_rng"] is not None:
-            restore_space_generator(self.action_space, episode["action_space_rng"])
-        self._last_obs = episode["last_obs"]
-        self._was_reset = True
-
-    def _physics_state(self) -> np.ndarray | None:
-        """MuJoCo's full integration state of a physics spec (None without physics)."""
-        return None if self._sim is None else integration_state(self._sim.data)
-
-    def _set_physics_state(self, state: np.ndarray | None) -> None:
-        """Put MuJoCo's integration state back, then ``mj_forward`` (the poses a render reads)."""
-        if (state is None) != (self._sim is None):
-            raise ValueError("the pickled env and its copy disagree on physics")
-        if self._sim is None or state is None:
-            return
-        mujoco, model = self._sim.mujoco, self._sim.model
-        signature = mujoco.mjtState.mjSTATE_INTEGRATION
-        if state.shape != (mujoco.mj_stateSize(model, signature),):
-            raise ValueError(
-                f"MuJoCo's state has {state.size} values, this MuJoCo ({mujoco.__version__}) expects {mujoco.mj_stateSize(model, signature)}"
-            )
-        mujoco.mj_setState(model, self._sim.data, state, signature)
-        mujoco.mj_forward(model, self._sim.data)
