@@ -273,7 +273,7 @@ def test_engines_and_cameras_a_batch_cannot_render_are_refused(tmp_path):
 
 def test_several_cameras_give_a_dict_of_tiles_per_camera(tmp_path):
     """A Dict observation (grayscale 64x64 and RGB 40x40 here): one render call per camera, each key's tiles the env's own."""
-    from tests.test_train_play import multi_camera_cartpole
+    from tests.train.test_train_play import multi_camera_cartpole
 
     obs, owns = after_steps(load_spec(multi_camera_cartpole(tmp_path, "[40, 40]")), seed=1, actions=[0, 1, 1])
     assert {k: v.shape for k, v in obs.items()} == {"front": (3, 64, 64, 1), "side": (3, 40, 40, 3)}

@@ -91,7 +91,7 @@ def digest(spec: str, seed: int, episodes: int = 3) -> str:
 
 
 def _child_digest(spec: Path, seed: int, hash_seed: str) -> str:
-    code = f"import sys; sys.path.insert(0, {str(ROOT)!r}); from tests.test_determinism import digest; print(digest({str(spec)!r}, {seed}))"
+    code = f"import sys; sys.path.insert(0, {str(ROOT)!r}); from tests.env.test_determinism import digest; print(digest({str(spec)!r}, {seed}))"
     env = {**os.environ, "PYTHONHASHSEED": hash_seed}
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, timeout=120, cwd=ROOT)
     assert out.returncode == 0, out.stderr

@@ -186,7 +186,7 @@ def test_a_computed_camera_that_turns_or_hangs_on_a_moving_parent_renders_each_e
     camera per env), each tile agrees with the env's own render (noise='shared') on >= 98 % of pixels within 8 levels."""
     from pathlib import Path
 
-    from tests.test_batched import after_steps, agreement
+    from tests.env.test_batch import after_steps, agreement
 
     goalie = (Path(__file__).parents[2] / "specs" / "goalie.yaml").read_text()
     turning = goalie.replace(
