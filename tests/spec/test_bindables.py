@@ -42,6 +42,6 @@ def test_type_and_camera_problems_name_what_was_expected():
 
 @pytest.mark.blender
 def test_the_blender_backend_has_a_setter_for_every_bindable_property():
-    from visualenv.render.blender.renderer import SETTERS, SETTERS_WITH_STATE
+    from visualenv.render.blender.binding_setters import SETTERS, SETTERS_WITH_STATE
 
     assert set(SETTERS) | set(SETTERS_WITH_STATE) == set(BINDABLES)

@@ -3,6 +3,7 @@
 Modules and packages, one job each:
 
 * :mod:`.renderer`: :class:`BlenderRenderer`, the :class:`~visualenv.render.base.Renderer` of one env (N = 1)
+* :mod:`.binding_setters`: how each bound property is written into the scene (the renderers' setters)
 * :mod:`.capture`, :mod:`.readback`: rendered pixels to numpy (in memory, or through a file)
 * :mod:`.scene`: building the scene (primitives, a user's .blend, MJCF models)
 * :mod:`.look`: materials, the world, MuJoCo's look, distractions, segmentation

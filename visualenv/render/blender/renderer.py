@@ -4,10 +4,9 @@ from __future__ import annotations
 
 import contextlib
 import itertools
-import math
 import time
 from dataclasses import dataclass, replace
-from typing import Any, Callable, Sequence
+from typing import Any, Sequence
 
 import bpy
 import numpy as np
@@ -21,22 +20,15 @@ from visualenv.render.distractions import Distraction
 from visualenv.render.frames import Frames
 from visualenv.render.blender.runtime import settings as cfg
 from visualenv.render.blender.scene import user_file
-from visualenv.render.blender.look.materials import (
-    color_writer,
-    depth_material,
-    depth_world,
-    make_material,
-    see_through,
-    texture_sets,
-    world_writer,
-)
+from visualenv.render.blender.binding_setters import BindingSetters, is_world, write_bindings
+from visualenv.render.blender.look.materials import depth_material, depth_world, see_through, world_writer
 from visualenv.render.blender.runtime.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.look.distraction_scene import DistractionRig
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene.mjcf import build_physics_objects, show_model_sky
 from visualenv.render.blender.look.mujoco import ambient, backdrop, light_scene, raw_images
-from visualenv.render.blender.scene.build import BuiltScene, DataTracker, aim, build_scene, remove_ids, with_ancestors
+from visualenv.render.blender.scene.build import BuiltScene, DataTracker, build_scene, remove_ids
 from visualenv.render.blender.look.segmentation import (
     SEGMENTATION_CONFIG,
     HiddenLights,
@@ -44,8 +36,7 @@ from visualenv.render.blender.look.segmentation import (
     segmentation_material,
     segmentation_world,
 )
-from visualenv.bindables import BINDABLES, WORLD_ACTOR, camera_problem, type_problem
-from visualenv.render.plan import CameraObject
+from visualenv.bindables import camera_problem, type_problem
 
 _instances = itertools.count()
 
@@ -63,14 +54,14 @@ class View:
     config: cfg.EngineConfig
 
 
-class BlenderRenderer(Renderer):
+class BlenderRenderer(BindingSetters, Renderer):
     """Renders a :class:`RenderPlan` with Blender's ``bpy`` module, in this process.
 
     The renderer owns one Blender scene (a new one, or the first scene of
     ``scene.file`` appended from the .blend) holding every declared object, so
     several renderers in one process do not interfere. Before each render the
     binding values are written to the objects, skipping those that did not
-    change since the last render.
+    change since the last render (:mod:`binding_setters`).
 
     Observations are ``(H, W, C)`` uint8 arrays, row 0 at the top: ``rgb``
     (C=3, sRGB through Blender's 'Standard' view transform), ``grayscale``
@@ -264,170 +255,6 @@ class BlenderRenderer(Renderer):
         user_file.include_collections_of(self._layer, [*(built.objects[n] for n in bound), *cameras])
         user_file.stop_simulations(built.scene)
 
-    def _compile_bindings(self) -> list[tuple[int, int, Callable[[tuple], None]]]:
-        """One setter per binding target, with the slice of the values it reads."""
-        plan, objects = self.plan, self._objects
-        targets: dict[str, Any] = {}  # look-at point of each aimed object
-        for name, spec in plan.scene.objects.items():
-            if isinstance(spec, CameraObject) and spec.look_at is not None:
-                targets[name] = tuple(spec.look_at)
-        setters: list[tuple[int, int, Callable[[tuple], None]]] = []
-        self._owned: set[int] = set()  # materials copied for this pass's objects
-        start = 0
-        for target in plan.bindings:
-            if is_world(target.object, objects):
-                setter = world_writer(self._scene.world, target.property)
-                assert not isinstance(setter, str), setter  # _check_names said why
-                setters.append((start, start + target.size, setter))
-                start += target.size
-                continue
-            obj = objects[target.object]
-            setters.append((start, start + target.size, self._setter(target.object, obj, target.property, targets)))
-            start += target.size
-        self._size = start
-        # aimed objects to re-aim after the setters ran: those that move, or whose parents move, or whose target does
-        aimed = set(targets) | {t.object for t in plan.bindings if t.property == "look_at"}
-        moved = {
-            objects[t.object].as_pointer()
-            for t in plan.bindings
-            if BINDABLES[t.property].moves and not is_world(t.object, objects)
-        }
-        self._aimed = [
-            (objects[name], name)
-            for name in sorted(aimed)
-            if any(o.as_pointer() in moved for o in with_ancestors(objects[name]))
-        ]
-        self._targets = targets
-        return setters
-
-    def _setter(self, name: str, obj: Any, prop: str, targets: dict[str, Any]) -> Callable[[tuple], None]:
-        """The function that writes a binding's values into the scene (a closure: no lookups per render)."""
-        if prop == "look_at":
-
-            def set_look_at(v: tuple) -> None:
-                targets[name] = v  # aimed in apply(), once every location is set
-
-            return set_look_at
-        if prop == "color":
-            return self._color_setter(name, obj)
-        if prop == "texture":
-            return self._texture_setter(name, obj)
-        return SETTERS[prop](obj)
-
-    def _own_material(self, mesh_obj: Any, slot: Any) -> Any:
-        """The object's own copy of the slot's material, made once per binding pass (a colour and a texture share it)."""
-        material = slot.material
-        if material is not None and material.as_pointer() in self._owned:
-            return material
-        copy = (
-            material.copy()
-            if material is not None
-            else make_material(
-                f"{mesh_obj.name}-bound",
-                self.plan.scene.default_material,
-                base_dir=self.plan.base_dir,
-                source=self.plan.source,
-                path=(),
-                track=lambda d: d,
-            )
-        )
-        slot.link = "OBJECT"
-        slot.material = copy
-        self._owned.add(copy.as_pointer())
-        return copy
-
-    def _texture_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
-        """Picks the image of each texture set in the object's own copies of its materials: ``int(floor(v)) % len(set)``."""
-        meshes = [obj] if obj.type == "MESH" else [c for c in obj.children_recursive if c.type == "MESH"]
-        choosers = []
-        for mesh_obj in meshes:
-            for slot in mesh_obj.material_slots:
-                if slot.material is None or not texture_sets(slot.material):
-                    continue
-                for node, images in texture_sets(self._own_material(mesh_obj, slot)):
-                    choosers.append((node, images))
-        if not choosers:
-            raise SpecError(
-                [
-                    self.plan.source.diagnostic(
-                        ("actors", name, "texture"),
-                        f"'texture' picks one file of an image texture set, but no material of '{name}' has one: "
-                        "give it material: {texture: {type: image, image: [a.png, b.png, ...]}}",
-                        key=True,
-                    )
-                ]
-            )
-
-        def set_texture(v: tuple) -> None:
-            k = math.floor(v[0])
-            for node, images in choosers:
-                image = images[k % len(images)]
-                if node.image is not image:
-                    node.image = image
-
-        return set_texture
-
-    def _color_setter(self, name: str, obj: Any) -> Callable[[tuple], None]:
-        """A light's colour, or the colour of the object's own copies of its materials."""
-        if obj.type == "LIGHT":
-            data = obj.data
-
-            def set_light_color(v: tuple) -> None:
-                data.color = v[:3]
-
-            return set_light_color
-        writers = self._own_color_writers(name, obj)
-
-        def set_color(v: tuple) -> None:
-            for write in writers:
-                write(v)
-
-        return set_color
-
-    def _own_color_writers(self, name: str, obj: Any) -> list[Callable[[Sequence[float]], None]]:
-        """Writers of a bound colour into per-object copies of the materials of `obj` (and of its mesh children).
-
-        Copies, so that the colour stays on this object.
-
-        A textured copy gets a tint node for the colour to write; a material
-        the colour cannot reach in a render (no Principled BSDF, as a .blend
-        may have) is a spec error rather than a binding that silently does nothing.
-        """
-        meshes = [obj] if obj.type == "MESH" else [c for c in obj.children_recursive if c.type == "MESH"]
-        if not meshes:
-            raise SpecError(
-                [
-                    self.plan.source.diagnostic(
-                        ("actors", name, "color"),
-                        f"a bound colour sets the materials of '{name}' and the meshes under it, but it has none",
-                        key=True,
-                    )
-                ]
-            )
-        out, unreachable = [], []
-        for mesh_obj in meshes:
-            if len(mesh_obj.material_slots) == 0:
-                mesh_obj.data.materials.append(None)
-            for slot in mesh_obj.material_slots:
-                original = slot.material
-                copy = self._own_material(mesh_obj, slot)
-                write = color_writer(copy)
-                if write is None:
-                    unreachable.append(f"'{original.name}' of '{mesh_obj.name}'")
-                else:
-                    out.append(write)
-        if unreachable:
-            raise SpecError(
-                [
-                    self.plan.source.diagnostic(
-                        ("actors", name, "color"),
-                        f"a bound colour sets a Principled BSDF's base colour, but material {', '.join(unreachable)} has none: "
-                        "give it a Principled BSDF in Blender, or bind another property",
-                    )
-                ]
-            )
-        return out
-
     # -- rendering ----------------------------------------------------------------------------------
 
     def apply(self, values: Sequence[Any]) -> None:
@@ -618,92 +445,3 @@ class BlenderRenderer(Renderer):
         self._output.close()
         if self._capture is not None:
             self._capture.close()
-
-
-def write_bindings(
-    values: tuple,
-    last: tuple | None,
-    size: int,
-    setters: list[tuple[int, int, Callable[[tuple], None]]],
-    aimed: list[tuple[Any, str]],
-    targets: dict[str, Any],
-) -> None:
-    """Write the binding values that differ from `last` (all of them when it is None), then re-aim the aimed objects."""
-    if len(values) != size:
-        raise RenderError(f"expected {size} binding values, got {len(values)}")
-    for start, end, setter in setters:
-        part = values[start:end]
-        if last is None or part != last[start:end]:
-            setter(part)
-    for obj, name in aimed:
-        aim(obj, targets[name])
-
-
-def is_world(name: str, objects: Any) -> bool:
-    """Whether an actor of this name binds the world: it is called World and no object is."""
-    return name == WORLD_ACTOR and name not in objects
-
-
-def _set_location(obj: Any) -> Callable[[tuple], None]:
-    def set_location(v: tuple) -> None:
-        obj.location = v
-
-    return set_location
-
-
-def _set_rotation(obj: Any) -> Callable[[tuple], None]:
-    def set_rotation(v: tuple) -> None:
-        obj.rotation_euler = v
-
-    return set_rotation
-
-
-def _set_scale(obj: Any) -> Callable[[tuple], None]:
-    def set_scale(v: tuple) -> None:
-        obj.scale = v
-
-    return set_scale
-
-
-def _set_visible(obj: Any) -> Callable[[tuple], None]:
-    # an empty shows nothing itself: its visibility is that of everything under it
-    shown = [obj, *obj.children_recursive] if obj.type == "EMPTY" else [obj]
-
-    def set_visible(v: tuple) -> None:
-        hide = not v[0]
-        for o in shown:
-            o.hide_render = hide
-
-    return set_visible
-
-
-def _set_strength(obj: Any) -> Callable[[tuple], None]:
-    data = obj.data
-
-    def set_strength(v: tuple) -> None:
-        data.energy = v[0]
-
-    return set_strength
-
-
-def _set_lens(obj: Any) -> Callable[[tuple], None]:
-    data = obj.data
-
-    def set_lens(v: tuple) -> None:
-        data.lens = v[0]
-
-    return set_lens
-
-
-#: setters of the bindable properties that need only the object; look_at and color need the renderer's state
-#: (BlenderRenderer._setter). Together they cover visualenv.bindables.BINDABLES (tests/spec/test_bindables.py checks).
-SETTERS_WITH_STATE = ("look_at", "color", "texture")
-#: the setter maker of each bindable property that needs only the object
-SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
-    "location": _set_location,
-    "rotation": _set_rotation,
-    "scale": _set_scale,
-    "visible": _set_visible,
-    "strength": _set_strength,
-    "lens": _set_lens,
-}
