@@ -3,7 +3,9 @@
 The dynamics of all envs step at once as numpy columns (the program's
 vectorised step, :mod:`visualenv.compiler.batch_step`), and one Cycles call per
 camera renders every env's observation as a tile of one image
-(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`).
+(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`). This module is the step; what the envs
+show (observations, the binding table, the human grid) is
+:class:`~visualenv.env.batch_observations.BatchObservations`'s.
 
 Env i of a batch reset with seed s is env ``visualenv.make`` reset with seed
 s + i: each env keeps its own random generator (a state-only
@@ -28,7 +30,6 @@ from __future__ import annotations
 
 import os
 import time
-from dataclasses import replace
 from typing import Any, Mapping
 
 import gymnasium as gym
@@ -38,17 +39,17 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.render_plan import checked_options, distractions_plan, observation_space, to_plan, views_plan
+from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
 from visualenv.compiler.batch_functions import float_errors
+from visualenv.env.batch_observations import BatchObservations
 from visualenv.env.episode import EpisodeRules, step_limit
-from visualenv.env.human import HumanDisplay, grid, open_human_display
+from visualenv.env.human import HumanDisplay
 from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import SpecError, StepError
-from visualenv.render.base import RenderPlan, Renderer, RendererOptions, load_backend
+from visualenv.render.base import RendererOptions
 from visualenv.render.batch_limits import check_batchable
-from visualenv.render.distractions import Distraction, EpisodeDistractions
-from visualenv.render.frames import Frames
+from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.profile import Profile
 from visualenv.render.sensor import sensor_models
 from visualenv.spec.loader import LoadedSpec, load_spec
@@ -58,7 +59,7 @@ from visualenv.spec.options import distraction_settings
 BATCH_BACKEND = "visualenv.render.blender.batch.renderer:BatchedBlenderRenderer"
 
 
-class BatchedVectorEnv(gym.vector.VectorEnv):
+class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
     """`num_envs` copies of a spec's env, stepped together in this process.
 
     Spaces are those of ``visualenv.make(spec)`` batched: observations
@@ -319,18 +320,6 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             self._renderer.close()
             self._renderer = None
 
-    def _show(self, obs: Any) -> None:
-        """render_mode="human": the observations as a grid (one per camera), and env 0's step, on the display."""
-        if self._display is None:
-            self._display = open_human_display()
-        pictures = {key: grid(frames) for key, frames in obs.items()} if isinstance(obs, dict) else grid(obs)
-        values = {
-            "envs": self.num_envs,
-            "steps": int(self._steps[0]),
-            "state": {n: float(v) for n, v in zip(self.program.state_names, self._state[:, 0])},
-        }
-        self._display.show(self.program.spec.id, pictures, values)
-
     # -- the step -----------------------------------------------------------------------------------
 
     def _repeat(
@@ -479,123 +468,6 @@ class BatchedVectorEnv(gym.vector.VectorEnv):
             if ((array < 0) | (array >= self.program.discrete)).any():
                 raise ValueError(f"actions {actions!r} out of range: the action space is {self.action_space}")
         return array
-
-    # -- observations and info ----------------------------------------------------------------------
-
-    @property
-    def renderer(self) -> Renderer:
-        """The batch renderer, built on first use."""
-        if self._renderer is None:
-            self._renderer = load_backend(self._backend)(
-                self._render_plan(), self._renderer_options, num_envs=self.num_envs
-            )
-        return self._renderer
-
-    def _render_plan(self) -> RenderPlan:
-        """The program's render plan with the options' overrides and the distractions the envs will draw."""
-        return replace(
-            self.program.render_plan().with_options(self._renderer_options),
-            distractions=distractions_plan(self.distractions),
-        )
-
-    @property
-    def segmentation_ids(self) -> dict[str, int]:
-        """Id of each label (or unlabelled object name) in segmentation observations, the same in every env; builds the renderer."""
-        if not self.uses_camera:
-            return {}
-        return dict(getattr(self.renderer, "segmentation_ids", {}))
-
-    def _frames(self, envs: np.ndarray | None = None) -> Frames:
-        """Every env's state to draw: the binding table, a physics spec's MuJoCo poses, each env's distraction."""
-        distractions = [d.current or Distraction() for d in self._distractions] if self._distractions else None
-        poses = None
-        if self.program.physics is not None:
-            plan = self.program.physics
-            sources = self._physics.pose_sources() if self._physics is not None else [lane.data for lane in self._lanes]
-            if (
-                self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources
-            ):  # live views, made once (moved geoms: copies)
-                self._pose_arrays = [plan.poses(source) for source in sources]
-                self._pose_sources = sources
-            poses = self._pose_arrays
-        start = time.perf_counter()
-        table = self.binding_table()
-        if self.profile is not None:
-            self.profile.add("bind", time.perf_counter() - start)
-        return Frames(table, poses, distractions, None if envs is None else [int(i) for i in envs])
-
-    def _observe(self, envs: np.ndarray | None = None) -> Any:
-        """Every env's observation, or those of `envs` (ascending indices) only."""
-        if not self.uses_camera and self.program.physics is not None:  # each env's MuJoCo data (float64, Gymnasium's)
-            return self._physics_observations(envs)
-        if not self.uses_camera:
-            observed = self._state[self.program.observed].T.astype(np.float32)
-            return observed if envs is None else observed[envs]
-        obs = self.renderer.render(self._frames(envs))
-        if self._sensors:
-            obs = self._through_sensors(obs, envs)
-        return obs
-
-    def _physics_observations(self, envs: np.ndarray | None) -> np.ndarray:
-        """A physics spec's state-only observations: the batch's columns, or each lane's own where they are not finite (or not vectorised)."""
-        n = self.num_envs
-        rows = range(n) if envs is None else [int(i) for i in envs]
-        observe = self._batch.observe
-        if observe is None:
-            return np.stack([self._lane_at(i).physics_observation() for i in rows])
-        with float_errors() as errors:
-            columns = observe(tuple(self._state), self._steps)
-        table = np.ascontiguousarray(
-            np.array([np.broadcast_to(np.asarray(c, dtype=np.float64), (n,)) for c in columns])
-            .reshape(len(columns), n)
-            .T
-        )
-        for i in range(n) if errors else np.flatnonzero(~np.isfinite(table).all(axis=1)):
-            table[i] = self._lane_at(int(i)).physics_observation()  # the same values, or the lane's own error
-        return table if envs is None else table[list(rows)]
-
-    def _through_sensors(self, obs: Any, envs: np.ndarray | None) -> Any:
-        """Each env's frames through the sensor models, drawn from its lane's generator (as env i alone would draw them)."""
-        rows = range(self.num_envs) if envs is None else [int(i) for i in envs]
-        if isinstance(obs, dict):
-            out = {key: value.copy() for key, value in obs.items()}
-            for row, i in enumerate(rows):
-                noisy = self._lanes[i].apply_sensors({key: value[row] for key, value in obs.items()}, self._sensors)
-                for key in out:
-                    out[key][row] = noisy[key]
-            return out
-        out = obs.copy()
-        for row, i in enumerate(rows):
-            out[row] = self._lanes[i].apply_sensors(obs[row], self._sensors)
-        return out
-
-    def binding_values(self) -> list[tuple]:
-        """Every env's actor binding values (program.bindings order)."""
-        return list(map(tuple, self.binding_table().tolist()))
-
-    def binding_table(self) -> np.ndarray:
-        """Every env's actor binding values as one array, ``(N, values)``: what the renderer takes (no tuple per env)."""
-        bind = self._batch.bind
-        n = self.num_envs
-        if bind is None:
-            return np.array([self._lane_bindings(i) for i in range(n)], dtype=np.float64).reshape(n, -1)
-        with float_errors() as errors:
-            values = bind(tuple(self._state), self._steps)
-        table = (
-            np.array([np.broadcast_to(np.asarray(v, dtype=np.float64), (n,)) for v in values])
-            .reshape(len(values), n)
-            .T.copy()
-        )
-        for i in range(n) if errors else np.flatnonzero(~np.isfinite(table).all(axis=1)):
-            table[i] = self._lane_bindings(int(i))  # the same values, or the located fault
-        return table
-
-    def _lane_bindings(self, i: int) -> tuple:
-        """Env i's binding values computed by its lane, as one env computes them; a fault names env i."""
-        try:
-            return self._lane_at(i).binding_values()
-        except StepError as err:
-            raise err.in_env(i) from None
 
     def _info(self, mask: np.ndarray) -> dict[str, Any]:
         return self.rules.batch_info(
