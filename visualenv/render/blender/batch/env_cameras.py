@@ -25,7 +25,7 @@ from visualenv.render.blender.batch.env_attributes import CAMERA_TURN, EnvAttrib
 from visualenv.render.blender.batch.instances import InstancedCopies
 from visualenv.render.blender.batch.tiles_camera import TURNING_NAME, rotation_of, tiles_text, unit_columns
 from visualenv.render.blender.look.distraction_scene import focus_distance
-from visualenv.render.blender.renderer import is_world
+from visualenv.render.blender.binding_setters import is_world
 from visualenv.render.blender.scene.build import with_ancestors
 from visualenv.render.blender.scene.mjcf import PoseWriter
 from visualenv.render.plan import CameraObject, RenderPlan
