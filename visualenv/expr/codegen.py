@@ -19,9 +19,8 @@ import ast
 import copy
 from dataclasses import dataclass, field
 from types import TracebackType
-from typing import Any, Callable, Mapping
+from typing import Any, Callable, Mapping, Protocol
 
-from visualenv.expr.checker import Checked
 from visualenv.expr.functions import FUNCTIONS
 
 VAR_PREFIX = "_v_"
@@ -80,6 +79,14 @@ def evaluate_constant(tree: ast.expr) -> Any:
     """Evaluate a tree of constants and pure function calls (constant folding)."""
     code = compile(ast.fix_missing_locations(ast.Expression(lower(tree))), "<constant>", "eval")
     return eval(code, function_globals())  # noqa: S307 - a checked tree of constants, not text
+
+
+class Checked(Protocol):
+    """What code generation reads of a checked expression (:class:`visualenv.expr.checker.Checked`)."""
+
+    text: str
+    tree: ast.expr
+    names: set[str]
 
 
 @dataclass
