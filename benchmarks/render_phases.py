@@ -105,7 +105,7 @@ def drawn_instances(renderer: Any) -> int:
     # copy 0's anchor also holds the originals its instancers draw, hidden: not synced
     copied = sum(sum(o.as_pointer() not in renderer._removed for o in copy.anchor.children_recursive) + 1
                  for copy in renderer._copies if copy.anchor is not None)
-    return renderer.num_envs * sum(not inst.realized for inst in instancers) + copied
+    return renderer.n * sum(not inst.realized for inst in instancers) + copied
 
 
 def main() -> None:

@@ -255,7 +255,7 @@ def test_a_batched_runner_steps_its_envs_in_one_blender_scene(tmp_path):
                     sum(len(e) for e in r.sample(num_timesteps=30, random_actions=True)),
                     type(r.env.unwrapped).__name__,
                     r.env.observation_space.shape,
-                    r.env.unwrapped.renderer.num_envs,
+                    r.env.unwrapped.renderer.n,
                 ),
                 local_env_runner=False,
             )

@@ -346,7 +346,7 @@ def make_world(
     return world
 
 
-#: the world's node that shows a model's skybox to camera rays only (batched.py: it lights nothing)
+#: the world's node that shows a model's skybox to camera rays only (the batch renderer: it lights nothing)
 SKYBOX = "visualenv-skybox"
 
 

@@ -133,7 +133,7 @@ def build_physics_objects(
     for body in own:
         empty_of(body)
     images: dict[int, Any] = {}  # by MuJoCo texture: geoms sharing a texture share its image
-    as_mujoco = scene_data.look == "mujoco"  # lit as MuJoCo's renderer lights it (mujoco_look.py)
+    as_mujoco = scene_data.look == "mujoco"  # lit as MuJoCo's renderer lights it (look/mujoco.py)
     lighting = (scene_data.headlight, ambient(scene_data)) if as_mujoco else None
     for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
         if geom.body in own:
