@@ -14,6 +14,7 @@ from visualenv.cli.group import shown_option, ALGORITHMS, friendly, main
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
 from visualenv.train.distill import DistillConfig
+from visualenv.train.run_folder import MAX_TRAIN_SEED
 
 
 def _parse_value(text: str) -> Any:
@@ -43,7 +44,7 @@ FIXED_ON_RESUME = ("frame_stack", "eval_every", "eval_episodes", "final_episodes
     type=click.IntRange(min=1),
     help="episodes of the best model's final evaluation, on seeds that neither training nor selection uses",
 )
-@shown_option("--seed", default=0, type=click.IntRange(0, 2**31 - 1))
+@shown_option("--seed", default=0, type=click.IntRange(0, MAX_TRAIN_SEED))
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option(
     "--set",
@@ -247,7 +248,7 @@ def train(
     type=click.IntRange(min=1),
     help="episodes of the best round's final evaluation, on seeds neither rounds nor selection use",
 )
-@shown_option("--seed", default=0, type=click.IntRange(0, 2**31 - 1))
+@shown_option("--seed", default=0, type=click.IntRange(0, MAX_TRAIN_SEED))
 @shown_option("-o", "--out", "out_root", default="runs", type=click.Path(file_okay=False))
 @click.option("--no-progress", is_flag=True)
 @friendly

@@ -24,7 +24,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from visualenv.compat.glibc import apply_policy
-from visualenv.env.batch import BATCH_OPTIONS
+from visualenv.env.batch import BATCH_OPTIONS, make_batched
 from visualenv.env.cores import Share, confine, render_threads, worker_cores
 from visualenv.errors import StepError, VisualEnvError, WorkerError
 
@@ -299,8 +299,6 @@ def _worker(pipe: Any, target: str, size: int, options: dict[str, Any], share: S
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C reaches the process group; the parent decides how to stop
     batch: Any = None
     try:
-        from visualenv.env.batch import make_batched
-
         batch = make_batched(target, size, **options)
         pipe.send(
             (
