@@ -65,9 +65,8 @@ class SourceMap:
         column = pos.column if pos else None
         if pos and column_offset is not None and pos.text_offset is not None and tuple(path) in self.values:
             column = pos.column + pos.text_offset + column_offset
-        elif (
-            pos and column_offset is not None and pos.places and tuple(path) in self.values
-        ):  # a multi-line value: its own line
+        # a multi-line value: its own line
+        elif pos and column_offset is not None and pos.places and tuple(path) in self.values:
             line, column = pos.places[min(max(column_offset, 0), len(pos.places) - 1)]
         return Diagnostic(self.file, line, column, format_path(path), self._with_comma_hint(tuple(path), message))
 

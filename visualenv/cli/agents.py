@@ -265,9 +265,8 @@ def eval_command(
             if matches
             else f"differs from {what}: " + "; ".join(wrong[:5])
         )
-        if (
-            other_machine
-        ):  # a chaotic episode grows last-digit differences: the episodes are a new sample of the agent's
+        # a chaotic episode grows last-digit differences: the episodes are a new sample of the agent's
+        if other_machine:
             sample = sample_differences(results, recorded.results)
         if sample is not None and not matches:
             click.echo(

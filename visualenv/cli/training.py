@@ -411,9 +411,8 @@ def _train_rllib(
 
     import logging
 
-    logging.getLogger("ray.rllib").setLevel(
-        logging.ERROR
-    )  # RLlib's notes on its own API changes are not the user's business
+    # RLlib's notes on its own API changes are not the user's business
+    logging.getLogger("ray.rllib").setLevel(logging.ERROR)
     params = ctx.params
     if resume_dir:
         _refuse_fixed_on_resume(
@@ -441,9 +440,8 @@ def _train_rllib(
         if params["batched"]:
             config = dataclasses.replace(config, envs_per_runner=params["batched"], batched=True)
     check_address(address)
-    algorithm_config(
-        config
-    )  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
+    # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
+    algorithm_config(config)
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(

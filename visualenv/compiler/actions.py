@@ -24,9 +24,8 @@ class ActionsCompiler:
 
     def resolve_actions(self) -> tuple[list[str], int | None, list[tuple[float, float]]]:
         actions = self.spec.actions
-        if (
-            actions is None
-        ):  # a physics spec's default: one Box dimension per actuator, in its ctrlrange (Gymnasium's action space)
+        # a physics spec's default: one Box dimension per actuator, in its ctrlrange (Gymnasium's action space)
+        if actions is None:
             assert self.plan is not None
             model = self.plan.model
             names = [f"ctrl_{a}" for a in model.actuator_names()]

@@ -93,9 +93,8 @@ class _Expressions(ast.NodeTransformer):
     def visit_BinOp(self, node: ast.BinOp) -> ast.AST:
         left, right = self.visit(node.left), self.visit(node.right)
         constant = isinstance(right, ast.Constant) and isinstance(right.value, (int, float)) and right.value != 0
-        if (
-            type(node.op) in OPERATORS and not constant
-        ):  # a division: by zero, Python raises (noted), numpy gives a number
+        # a division: by zero, Python raises (noted), numpy gives a number
+        if type(node.op) in OPERATORS and not constant:
             return _call(f"_v{type(node.op).__name__}", [left, right])
         return ast.BinOp(left, node.op, right)
 

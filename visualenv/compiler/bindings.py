@@ -52,10 +52,11 @@ class BindingsCompiler:
         fb = FunctionBuilder("bind", ["_state", "_steps"])
         fb.unpack([local(n) for n in state_names], "_state")
         fb.assign(local("steps"), name("_steps"))
+        # a physics spec's names too: a camera can follow a body
         scope: dict[str, Type] = {
             **self.pnames,
             **{n: NUM for n in state_names},
-        }  # a physics spec's names too: a camera can follow a body
+        }
         scope["steps"] = NUM
         targets: list[BindingTarget] = []
         values: list[ast.expr] = []
@@ -106,9 +107,8 @@ class BindingsCompiler:
         if self.plan is not None and (
             why := phys.model_object_problem(self.plan, obj_name, prop, set(self.spec.scene.objects))
         ):
-            self.error(
-                path, why, key=True
-            )  # MuJoCo poses the model's objects: a pose binding would leave the physics behind
+            # MuJoCo poses the model's objects: a pose binding would leave the physics behind
+            self.error(path, why, key=True)
             return
         if obj is None and obj_name in self.physics_objects():
             problem = type_problem(prop, obj_name, self.physics_objects()[obj_name])
@@ -149,9 +149,8 @@ class BindingsCompiler:
         if spec.observation is None or spec.scene.file is not None:
             return
         types = {n: object_type(o) for n, o in spec.scene.objects.items()}
-        types.update(
-            {n: t for n, t in self.physics_objects().items() if n not in types}
-        )  # the model's cameras, by their MuJoCo names
+        # the model's cameras, by their MuJoCo names
+        types.update({n: t for n, t in self.physics_objects().items() if n not in types})
         for path, camera in spec.camera_uses():
             problem = camera_problem(camera, types)
             if problem:

@@ -54,9 +54,8 @@ class PhysicsPlan:
     redraw_targets: list[str] = field(default_factory=list)  # what each try of the redraw writes, in order
     redraw_attempts: int = 0
     settle: tuple[int, float | None] | None = None  # the reset's settling steps and the time set after them
-    posed_geoms: tuple[
-        int, ...
-    ] = ()  # geoms whose model position the reset writes: drawn posed from geom_xpos/geom_xmat
+    # geoms whose model position the reset writes: drawn posed from geom_xpos/geom_xmat
+    posed_geoms: tuple[int, ...] = ()
 
     @property
     def dt(self) -> float:

@@ -59,9 +59,8 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
     assert c.plan is not None and c.spec.physics is not None
     plan, section = c.plan, c.spec.physics.reset
     table = plan.model.names.values
-    writable = phys.settable(plan.model) | {
-        n for n, (array, _) in table.items() if is_writable(array)
-    }  # joints, mocap, model fields
+    # joints, mocap, model fields
+    writable = phys.settable(plan.model) | {n for n, (array, _) in table.items() if is_writable(array)}
     scope: dict[str, Type] = dict(c.pnames)
     start, before = len(fb.body), set(c.used)
     c.used = set()

@@ -72,9 +72,8 @@ class StepCompiler:
             self.python_call(fb, state_names, input_names)
         else:
             self.step_update(fb, scope, commit=self.plan is None)
-        if (
-            self.plan is not None
-        ):  # the model's values before the step, for let and update; then the step; then the values after it
+        # the model's values before the step, for let and update; then the step; then the values after it
+        if self.plan is not None:
             self.physics_reads(fb, "before", start, self.used, set(state_names) | set(input_names))
             fb.add(
                 phys.advance_statement(self.plan),
@@ -120,9 +119,8 @@ class StepCompiler:
         spec = self.spec
         new_names = []
         for n, value in spec.dynamics.update.items():
-            if (
-                n not in spec.state and n not in self.pnames
-            ):  # a mocap pose (check_names refused the rest) is set in the MuJoCo step
+            # a mocap pose (check_names refused the rest) is set in the MuJoCo step
+            if n not in spec.state and n not in self.pnames:
                 continue
             path = ("dynamics", "update", n)
             checked = self.expr(path, value, scope, expect=NUM)

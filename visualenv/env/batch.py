@@ -169,9 +169,10 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         self.max_episode_steps = -(-step_limit_ // self.action_repeat)
         #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
         self.rules = EpisodeRules(program, step_limit_, observes_state=not self.uses_camera and program.physics is None)
+        # the batch repeats
         self._lanes = [
             VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)
-        ]  # the batch repeats
+        ]
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
@@ -282,9 +283,8 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             obs = self._observe()
         info = self._info(np.ones(n, dtype=bool))
         if final is not None:
-            info["final_obs"] = np.empty(
-                n, dtype=object
-            )  # one object per env, even when every env ended (np.array would stack them)
+            # one object per env, even when every env ended (np.array would stack them)
+            info["final_obs"] = np.empty(n, dtype=object)
             for i in np.flatnonzero(done):
                 info["final_obs"][i] = _select(final[0], int(i))
             info["_final_obs"] = done

@@ -83,9 +83,8 @@ class BatchObservations:
         if self.program.physics is not None:
             plan = self.program.physics
             sources = self._physics.pose_sources() if self._physics is not None else [lane.data for lane in self._lanes]
-            if (
-                self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources
-            ):  # live views, made once (moved geoms: copies)
+            # live views, made once (moved geoms: copies)
+            if self._pose_arrays is None or plan.posed_geoms or sources is not self._pose_sources:
                 self._pose_arrays = [plan.poses(source) for source in sources]
                 self._pose_sources = sources
             poses = self._pose_arrays

@@ -51,9 +51,8 @@ class SB3Batch(VecEnv):
         self.batch.close()
 
     def get_attr(self, attr_name: str, indices: Any = None) -> list[Any]:
-        if not hasattr(
-            self.batch, "lanes"
-        ):  # batches in worker processes (MultiBatchVectorEnv): their lanes answer there
+        # batches in worker processes (MultiBatchVectorEnv): their lanes answer there
+        if not hasattr(self.batch, "lanes"):
             values = self.batch.get_attr(attr_name)
             return [values[i] for i in vec_env_indices(self, indices)]
         return [getattr(self.batch.lanes[i], attr_name) for i in vec_env_indices(self, indices)]

@@ -70,9 +70,8 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
                 f"render_mode must be one of {self.metadata['render_modes']} with workers, got {self.render_mode!r} "
                 "(render_mode='human' shows one batch: leave workers out)"
             )
-        self._check_spec(
-            str(target), max(self.sizes), kwargs
-        )  # a bad spec is reported here, located, before any worker starts
+        # a bad spec is reported here, located, before any worker starts
+        self._check_spec(str(target), max(self.sizes), kwargs)
         self._pipes: list[Any] = []
         self.processes: list[Any] = []
         self._closed_workers = False  # from here on, close() stops the workers
@@ -81,9 +80,8 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         try:
             for w, (size, share) in enumerate(zip(self.sizes, shares)):
                 options = dict(kwargs)
-                if (
-                    options.get("render") is not False and "threads" not in options
-                ):  # its share's threads (state-only: none)
+                # its share's threads (state-only: none)
+                if options.get("render") is not False and "threads" not in options:
                     options["threads"] = render_threads(share, len(self.sizes), threads)
                 parent, child = context.Pipe()
                 process = context.Process(
@@ -230,9 +228,8 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         except _BROKEN:
             raise self._worker_error(call) from None
         if not ok:
-            if (
-                isinstance(value, StepError) and value.env is not None
-            ):  # env j of worker w's batch is env start + j of the whole
+            # env j of worker w's batch is env start + j of the whole
+            if isinstance(value, StepError) and value.env is not None:
                 raise value.in_env(self._slices[w].start + value.env) from None
             raise value
         return value

@@ -149,9 +149,8 @@ class EpisodeRules:
     def unfit(self, state: np.ndarray, reward: np.ndarray) -> np.ndarray:
         """The envs whose result (state as ``(variables, envs)``, reward) :meth:`check` refuses: their lanes step them, and fault."""
         bad = ~np.isfinite(reward)
-        if (
-            state.size and not np.abs(state).max() <= self._tightest
-        ):  # NaN, an infinity or a large value somewhere: whose?
+        # NaN, an infinity or a large value somewhere: whose?
+        if state.size and not np.abs(state).max() <= self._tightest:
             bad |= ~(np.abs(state) <= self._limits).all(axis=0)
         return bad
 

@@ -57,9 +57,8 @@ def make(
     (``env.spec.make(render_mode=...)``, as ``check_env`` does).
     """
     if max_episode_steps is None:
-        max_episode_steps = (
-            make_time_limit()
-        )  # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
+        # gymnasium.make's, when it is the caller (its TimeLimit truncates outside the env)
+        max_episode_steps = make_time_limit()
     check_make_options(
         render=render,
         render_mode=render_mode,

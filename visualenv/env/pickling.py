@@ -92,9 +92,8 @@ class PicklingEnv(gym.Env):
 
     def _carry_over(self, episode: dict[str, Any]) -> None:
         """The episode of the pickled env, put in place (see :meth:`__getstate__`)."""
-        if (
-            episode.get("model") is not None and self._sim is not None
-        ):  # the model fields a reset wrote (reacher's target)
+        # the model fields a reset wrote (reacher's target)
+        if episode.get("model") is not None and self._sim is not None:
             restore_fields(self._sim.model, episode["model"])
         self._set_physics_state(episode["physics"])
         self._state = tuple(episode["state"])

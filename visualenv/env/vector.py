@@ -45,9 +45,8 @@ def make_in_worker(
     wrapper_class: Callable[[gym.Env], gym.Env] | None = None,
 ) -> gym.Env:
     """One env made by :func:`visualenv.make`; in a worker process, confined to `cores` and deaf to Ctrl-C."""
-    if (
-        multiprocessing.parent_process() is not None
-    ):  # in a worker (Gymnasium also calls this in the parent, for the spaces)
+    # in a worker (Gymnasium also calls this in the parent, for the spaces)
+    if multiprocessing.parent_process() is not None:
         apply_policy()  # a process visualenv started: freed memory kept for the next render call
         if cores is not None:
             confine(cores)

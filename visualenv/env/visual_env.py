@@ -135,9 +135,8 @@ class VisualEnv(PicklingEnv):
         )
         #: episodes are truncated after this many step() calls: the spec's max_steps (over the action repeat), or Gymnasium's
         self.max_episode_steps: int = -(-self._step_limit // self.action_repeat)
-        if (
-            s.observation is None and not s.render.view.camera
-        ):  # no camera to render a view with: no render mode (check_env reads it)
+        # no camera to render a view with: no render mode (check_env reads it)
+        if s.observation is None and not s.render.view.camera:
             self.metadata = {**self.metadata, "render_modes": []}
             if render_mode is not None:
                 raise ValueError(

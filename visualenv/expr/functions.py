@@ -186,9 +186,8 @@ class RandomSource:
         return float(self.generator.integers(int(low), int(high), endpoint=True))
 
     def uniform_disk(self, radius: float) -> tuple[float, float]:
-        while (
-            True
-        ):  # the draws of Gymnasium's Reacher-v5 goal, exactly: uniform(-r, r, size=2) until its norm is below r
+        # the draws of Gymnasium's Reacher-v5 goal, exactly: uniform(-r, r, size=2) until its norm is below r
+        while True:
             point = self.generator.uniform(low=-radius, high=radius, size=2)
             if radius <= 0 or float(np.linalg.norm(point)) < radius:
                 return float(point[0]), float(point[1])

@@ -124,7 +124,6 @@ def tolerance_columns(
     alone, which raises the located fault.
     """
     lower, upper = bounds
-    with np.errstate(
-        all="ignore"
-    ):  # Python's float arithmetic overflowing to inf, as dm_control's numpy does, silently
+    # Python's float arithmetic overflowing to inf, as dm_control's numpy does, silently
+    with np.errstate(all="ignore"):
         return np.asarray(_ELEMENTWISE(x, lower, upper, margin, sigmoid, value_at_margin), dtype=np.float64)

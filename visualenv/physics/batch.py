@@ -93,9 +93,8 @@ class BatchSimulation:
         #: what each named read returned last, per env: a step replayed alone reads the same (:meth:`recorded`)
         self._last: dict[str, tuple[list[str], list[np.ndarray]]] = {}
         self._physics_step = first.physics_step  # the spec's convention's step (visualenv.physics.conventions)
-        self._extra = any(f in self.values for f in SCALARS) or bool(
-            self.touching
-        )  # copied by refresh(), not by the plain row copies
+        # copied by refresh(), not by the plain row copies
+        self._extra = any(f in self.values for f in SCALARS) or bool(self.touching)
         #: per env, what its step touches: model, data, MuJoCo's warning counters, its ctrl, its row of controls, its copies
         self._lanes = [
             (sim.model, sim.data, sim.data.warning.number, sim.data.ctrl, self._ctrl[i], self._copies[i])
@@ -228,9 +227,8 @@ class BatchSimulation:
             ctrl[:, self._ctrl_at] = np.column_stack(columns[:count])
         self.blown[:] = False
         active = self.active.tolist()
-        if (
-            self._movers is not None
-        ):  # an env whose mocap pose is not finite is not stepped: alone, it raises before its step
+        # an env whose mocap pose is not finite is not stepped: alone, it raises before its step
+        if self._movers is not None:
             self._moved[:] = np.column_stack(columns[count:])
             finite = np.isfinite(self._moved).all(axis=1)
             self.blown[[i for i in active if not finite[i]]] = True

@@ -68,9 +68,8 @@ class MujocoBatch:
         self._stage = int(
             mujoco.mjtStage.mjSTAGE_VEL if first.convention == "dm_control" else mujoco.mjtStage.mjSTAGE_NONE
         )
-        self._post = (
-            first.convention != "dm_control"
-        )  # Gymnasium's step ends with mj_rnePostConstraint: a synced lane does too
+        # Gymnasium's step ends with mj_rnePostConstraint: a synced lane does too
+        self._post = first.convention != "dm_control"
         #: the batch's (N, size) views of what each env's reads take (MjData fields: the state's, and what a step computed)
         self.outputs = {f: self.batch.bind(f).reshape(n, -1) for f in fields}
         self.ctrl = self.batch.bind("ctrl").reshape(n, -1)
@@ -83,9 +82,8 @@ class MujocoBatch:
             )
             for array in sorted({table[m][0] for m in moved})
         ]
-        self.warnings = (
-            self.batch.warning
-        )  # (N, warnings, (lastinfo, number)): each simulation's own counters, writable
+        # (N, warnings, (lastinfo, number)): each simulation's own counters, writable
+        self.warnings = self.batch.warning
         self._signature = mujoco.mjtState.mjSTATE_INTEGRATION
         #: whether env i's lane holds its whole MjData (after a reset or a sync); else the batch's MjData i is ahead of it
         self.current = np.ones(n, dtype=bool)

@@ -39,9 +39,8 @@ def step_function(convention: str, mujoco: Any) -> Step:
         step, step1, step2, rk4 = mujoco.mj_step, mujoco.mj_step1, mujoco.mj_step2, int(mujoco.mjtIntegrator.mjINT_RK4)
 
         def legacy_step(model: Any, data: Any, nstep: int) -> None:
-            if (
-                model.opt.integrator != rk4
-            ):  # mj_step1 ran after the last step (or the reset's forward): finish that step first
+            # mj_step1 ran after the last step (or the reset's forward): finish that step first
+            if model.opt.integrator != rk4:
                 step2(model, data)
                 if nstep > 1:
                     step(model, data, nstep=nstep - 1)

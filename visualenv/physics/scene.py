@@ -37,9 +37,8 @@ class GeomShape:
     name: str  # the geom's name, or geom<i>
     kind: str  # a value of GEOM_KINDS
     body: int
-    size: tuple[
-        float, float, float
-    ]  # MuJoCo's size (half extents, radius and half length...); a plane's: its half extents
+    # MuJoCo's size (half extents, radius and half length...); a plane's: its half extents
+    size: tuple[float, float, float]
     pos: tuple[float, float, float]  # in the body's frame
     quat: tuple[float, float, float, float]  # w, x, y, z, in the body's frame
     rgba: tuple[float, float, float, float]
@@ -50,11 +49,12 @@ class GeomShape:
     )
     texture_type: str = "2d"  # "2d", or "cube": six square faces stacked (h = 6 w), or one face for all six (h = w)
     texture_id: int = -1  # the MuJoCo texture's index (geoms that share one share its image)
+    # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
     texscale: tuple[float, float, float] = (
         1.0,
         1.0,
         1.0,
-    )  # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)
+    )
     unit: tuple[float, float, float] = (1.0, 1.0, 1.0)  # divides the geom's vertices into MuJoCo's object coordinates
     texcoords: np.ndarray | None = None  # mesh geoms with their own UVs: (m, 3, 2) Blender UVs per face corner
     #: added to a finite plane's vertices before its 2-D texture's mapping: MuJoCo 3.17's renderer lays the texture from
@@ -77,11 +77,12 @@ class LightInfo:
     ambient: tuple[float, float, float] = (0.0, 0.0, 0.0)
     castshadow: bool = True
     exponent: float = 10.0  # a spot's intensity falls as cos(angle from its axis) ** exponent
+    # a spot's intensity over (a0 + a1 d + a2 d^2), d its distance
     attenuation: tuple[float, float, float] = (
         1.0,
         0.0,
         0.0,
-    )  # a spot's intensity over (a0 + a1 d + a2 d^2), d its distance
+    )
 
 
 @dataclass(frozen=True)
@@ -99,17 +100,19 @@ class CameraInfo:
     name: str
     fovy: float  # vertical field of view (degrees)
     moves: bool = False  # it tracks a body, or hangs on one that moves
+    # world, at qpos0 (cam_xpos): where a camera that never moves stays
     pos: tuple[float, float, float] = (
         0.0,
         0.0,
         0.0,
-    )  # world, at qpos0 (cam_xpos): where a camera that never moves stays
+    )
+    # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
     quat: tuple[float, float, float, float] = (
         1.0,
         0.0,
         0.0,
         0.0,
-    )  # w, x, y, z of cam_xmat at qpos0 (looking down its -z, y up)
+    )
     #: its orientation changes (it hangs on a moving body, or aims at one); a track or trackcom camera keeps its own
     turns: bool = False
 

@@ -240,9 +240,8 @@ class Spec(StrictModel):
         description="required without physics; with it, default: one Box dimension per actuator (its ctrlrange)",
     )
     dynamics: Dynamics = Field(default_factory=Dynamics)
-    actors: dict[BlenderName, Actor] = Field(
-        default_factory=dict, description="scene objects bound to expressions"
-    )  # Actor is made from BINDABLES
+    # Actor is made from BINDABLES
+    actors: dict[BlenderName, Actor] = Field(default_factory=dict, description="scene objects bound to expressions")
     observation: Observation | None = Field(None, description="camera observation; without it the env is state-only")
     render: RenderSettings = Field(default_factory=RenderSettings)
     reward: Expr = Field(0.0, description="reward every step (outcome rewards are added)")
@@ -275,9 +274,8 @@ class Spec(StrictModel):
     @classmethod
     def _state_given(cls, value: Any, info: ValidationInfo) -> Any:
         """State is required and not empty, except beside physics (whose state is the model's)."""
-        if (
-            info.data.get("physics") is not None or "physics" not in info.data
-        ):  # physics given (or given and invalid: reported there)
+        # physics given (or given and invalid: reported there)
+        if info.data.get("physics") is not None or "physics" not in info.data:
             return {} if value is None else value
         if value is None:
             raise PydanticCustomError("missing", "Field required")

@@ -106,9 +106,8 @@ def check_make_options(**options: Any) -> None:
         (RenderSettings, render),
         (MakeOptions, tuple(MakeOptions.model_fields)),
     ]
-    if isinstance(
-        options.get("distractions"), Mapping
-    ):  # checked as the spec's section alone, not as either branch of the option
+    # checked as the spec's section alone, not as either branch of the option
+    if isinstance(options.get("distractions"), Mapping):
         options["distractions"] = dict(options["distractions"])
         checks = [
             (RenderSettings, render),

@@ -348,9 +348,8 @@ def _event_value(event: yaml.ScalarEvent) -> Any:
 def _toml_top_level(text: str, keys: tuple[str, ...]) -> dict[str, Any]:
     try:
         data = tomllib.loads(text)
-    except (
-        tomllib.TOMLDecodeError
-    ) as exc:  # what precedes the error's line, which holds the top-level keys if it is below them
+    # what precedes the error's line, which holds the top-level keys if it is below them
+    except tomllib.TOMLDecodeError as exc:
         m = re.search(r"\(at line (\d+)", str(exc))
         try:
             data = tomllib.loads("\n".join(text.splitlines()[: int(m.group(1)) - 1])) if m else {}

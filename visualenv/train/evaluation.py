@@ -34,9 +34,8 @@ from visualenv.train.run_folder import RESULT_KEYS, RunFolder, legacy_eval_seed,
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
 SELECTION_BAND, FINAL_BAND, FRESH_BAND = 1, 2, 3
-FRESH_SEED = (
-    FRESH_BAND * SEED_BAND
-)  # `eval` of a model without a run: no run trains, selects or reports on these episodes
+# `eval` of a model without a run: no run trains, selects or reports on these episodes
+FRESH_SEED = FRESH_BAND * SEED_BAND
 FINAL_EPISODES = 100  # the final evaluation's episodes by default
 CONFIDENCE = 0.95
 Z_95 = 1.959963984540054  # standard normal quantile of 0.975
@@ -295,9 +294,8 @@ def evaluate_model(
     space = model.observation_space
     render = recorded.render if recorded else not (isinstance(space, spaces.Box) and len(space.shape) == 1)
     spec_path = str(resolve(spec))
-    probe = stacked_like(
-        VisualEnv(load_spec(spec_path), render=render), model, str(model_path)
-    )  # refuses a model of another env
+    # refuses a model of another env
+    probe = stacked_like(VisualEnv(load_spec(spec_path), render=render), model, str(model_path))
     probe.close()
     frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
     vec_env = make_eval_env(

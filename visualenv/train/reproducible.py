@@ -142,9 +142,8 @@ def unlike(recorded: dict[str, Any] | None, here: dict[str, Any]) -> list[str]:
 
 
 def _difference(key: str, there: Any, here: Any) -> str:
-    if (
-        key == "cpu_features" and isinstance(there, str) and isinstance(here, str)
-    ):  # long lists: the flags one side lacks
+    # long lists: the flags one side lacks
+    if key == "cpu_features" and isinstance(there, str) and isinstance(here, str):
         a, b = set(there.split()), set(here.split())
         return f"cpu_features {' '.join(sorted(a - b)) or '-'} there only, {' '.join(sorted(b - a)) or '-'} here only"
     return f"{key} {there} there, {here} here"

@@ -332,9 +332,8 @@ def _restore(algo: Any, run_dir: Path) -> int:
         return 0
     try:
         algo.restore_from_path(str(earlier.resolve()))
-    except (
-        Exception
-    ) as exc:  # RLlib raises whatever torch or its unpickling met; a model of another shape is the usual one
+    # RLlib raises whatever torch or its unpickling met; a model of another shape is the usual one
+    except Exception as exc:
         detail = " ".join(str(exc).split())[:300]
         raise ConfigError(
             f"cannot resume {run_dir}: its checkpoint does not fit this run's model (saved by another version of "

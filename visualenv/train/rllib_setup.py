@@ -35,14 +35,14 @@ from visualenv.compat.ray import DEPRECATION_LOGGER, local_cluster_addresses
 from visualenv.errors import ConfigError, did_you_mean
 
 ENV_PREFIX = "visualenv-rllib:"
-MODULE_DIR = (
-    Path("learner_group") / "learner" / "rl_module" / "default_policy"
-)  # the RLModule inside an Algorithm checkpoint
+# the RLModule inside an Algorithm checkpoint
+MODULE_DIR = Path("learner_group") / "learner" / "rl_module" / "default_policy"
+# the paper's (and SB3's NatureCNN) conv stack
 NATURE_FILTERS: list[list[Any]] = [
     [32, 8, 4, "valid"],
     [64, 4, 2, "valid"],
     [64, 3, 1, "valid"],
-]  # the paper's (and SB3's NatureCNN) conv stack
+]
 FEATURES = 512  # NatureCNN's features: the one dense layer both heads read
 
 

@@ -223,9 +223,8 @@ def _listen(host: str, port: int) -> socket.socket:
     family = select_address_family(host, port)
     listener = socket.socket(family, socket.SOCK_STREAM)
     try:
-        listener.setsockopt(
-            socket.SOL_SOCKET, socket.SO_REUSEADDR, 1
-        )  # as http.server does: a port left in TIME_WAIT is free
+        # as http.server does: a port left in TIME_WAIT is free
+        listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         listener.bind(get_sockaddr(host, port, family))
         listener.listen(128)
     except BaseException:

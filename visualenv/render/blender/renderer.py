@@ -121,9 +121,8 @@ class BlenderRenderer(BindingSetters, Renderer):
             self._raw_colors = plan.physics is not None and plan.physics.look == "mujoco"
             if self._raw_colors and plan.physics is not None:
                 backdrop(built.scene.world)
-                light_scene(
-                    built.scene, plan.physics.headlight, ambient(plan.physics)
-                )  # the spec's own objects as geoms
+                # the spec's own objects as geoms
+                light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))
             self._check_names(built)
             self._setup(built, settings.threads)
         except BaseException:

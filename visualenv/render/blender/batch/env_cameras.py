@@ -199,9 +199,8 @@ class EnvCameras:
     def _follow(self, camera: Any, reference: Vector) -> None:
         """Shift each copy so that its (translated) camera stands where the custom camera expects it."""
         cameras = self._camera_poses(camera)[:, :3, 3].astype(np.float32)
-        places = (
-            self._grid + np.array(tuple(reference), dtype=np.float32)
-        ) - cameras  # in float32, as mathutils' vectors add
+        # in float32, as mathutils' vectors add
+        places = (self._grid + np.array(tuple(reference), dtype=np.float32)) - cameras
         for k, anchor in self._carrying:
             anchor.location = places[k]
         self._offsets[:] = places

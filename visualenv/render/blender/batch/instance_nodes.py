@@ -164,9 +164,8 @@ def instancer_node_group(name: str, obj: Any, selected: bool, realized: bool = F
     info = nodes.new("GeometryNodeObjectInfo")
     info.transform_space = "ORIGINAL"  # the mesh in its own space: the transform attribute is its whole world matrix
     info.inputs["Object"].default_value = obj
-    info.inputs[
-        "As Instance"
-    ].default_value = True  # an instance of the object: Cycles keeps its geometry between steps
+    # an instance of the object: Cycles keeps its geometry between steps
+    info.inputs["As Instance"].default_value = True
     on_points = nodes.new("GeometryNodeInstanceOnPoints")
     links.new(inputs.outputs[0], on_points.inputs["Points"])
     links.new(info.outputs["Geometry"], on_points.inputs["Instance"])

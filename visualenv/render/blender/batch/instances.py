@@ -91,11 +91,12 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
     An object in `posed` (a MuJoCo body's) takes its location and rotation from MuJoCo's poses, so nothing may bind
     them; a quaternion-rotated object (the MJCF geoms and bodies) is computable while nothing binds its rotation.
     """
+    # the object itself may be a camera: its pose places its env's anchor
     kinds: tuple[str, ...] = (
         "MESH",
         "EMPTY",
         "CAMERA",
-    )  # the object itself may be a camera: its pose places its env's anchor
+    )
     while obj is not None:
         if obj.type not in kinds or obj.constraints or obj.parent_type != "OBJECT":
             return False
@@ -185,9 +186,8 @@ class _Instancer:
 
     node: int | None  # None: a static group's, posed at each env's anchor
     mesh: Any
-    visible: list[
-        slice
-    ]  # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
+    # visible bindings that hide it: its own and its empty ancestors' (none: the original was hidden)
+    visible: list[slice]
     selected: bool  # whether the points carry a visible attribute
     color: slice | None
     attributes: Sequence[str] = ()  # each env's own numbers (write_env_attributes)
@@ -302,9 +302,8 @@ class InstancedCopies:
         mesh = bpy.data.meshes.new(f"{obj.name}-instances")
         mesh.vertices.add(self.num_envs)
         mesh.attributes.new(TRANSFORM, "FLOAT4X4", "POINT")
-        selected = bool(visible) or (
-            obj.hide_render and node is not None
-        )  # a visible binding overrides how the original was set
+        # a visible binding overrides how the original was set
+        selected = bool(visible) or (obj.hide_render and node is not None)
         if selected:
             mesh.attributes.new(VISIBLE, "BOOLEAN", "POINT")
         if color is not None:
@@ -394,9 +393,8 @@ class InstancedCopies:
                 continue
             basis = self._node_basis(i, bases, values)
             # the anchor's place included (rounding with it)
-            if (
-                node.parent is None and anchors.ndim == 2
-            ):  # an anchor that only translates: the basis shifted, to the bit
+            # an anchor that only translates: the basis shifted, to the bit
+            if node.parent is None and anchors.ndim == 2:
                 world = np.repeat(basis, n, axis=0) if len(basis) < n else basis.copy()
                 world[:, :3, 3] += anchors
             else:
@@ -407,9 +405,8 @@ class InstancedCopies:
         at_anchors = anchors if anchors.ndim == 3 else _translations(anchors)
         for inst in self._instancers:
             world = worlds[inst.node] if inst.node is not None else at_anchors
-            changed = _write(
-                inst, TRANSFORM, np.ascontiguousarray(world.transpose(0, 2, 1))
-            )  # Blender's matrices are column-major
+            # Blender's matrices are column-major
+            changed = _write(inst, TRANSFORM, np.ascontiguousarray(world.transpose(0, 2, 1)))
             if inst.selected:
                 shown = np.full(n, bool(inst.visible))
                 for part in inst.visible:
@@ -465,9 +462,8 @@ class InstancedCopies:
         locations = poses[0][:, self._pose_columns].astype(np.float32)
         for j, i in enumerate(self._posed):
             basis = np.zeros((n, 4, 4), dtype=np.float32)
-            basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(
-                np.float32
-            )  # rotation @ scale, as Blender's
+            # rotation @ scale, as Blender's
+            basis[:, :3, :3] = rotations[:, j] * self._nodes[i].scale.astype(np.float32)
             basis[:, :3, 3] = locations[:, j]
             basis[:, 3, 3] = 1.0
             bases[i] = basis

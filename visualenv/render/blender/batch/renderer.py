@@ -105,12 +105,10 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
     # -- construction -------------------------------------------------------------------------------
 
     def _setup(self, built: BuiltScene, threads: int) -> None:
-        self._threads = threads or len(
-            os.sched_getaffinity(0)
-        )  # Cycles' render threads (0: every core this process may use)
-        self._removed: set[int] = (
-            set()
-        )  # objects drawn as instances rather than copied (none while the base class compiles)
+        # Cycles' render threads (0: every core this process may use)
+        self._threads = threads or len(os.sched_getaffinity(0))
+        # objects drawn as instances rather than copied (none while the base class compiles)
+        self._removed: set[int] = set()
         super()._setup(built, threads)
         settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
         self._distracting = BatchDistractions(settings, built.scene, self.n) if settings is not None else None
@@ -148,9 +146,8 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
                 t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object])
             )
             raise sun_error(self.plan, name, self.n)
-        if (
-            self._own_suns and self.n > 1 and not one_colour(scene.world)
-        ):  # a .blend file's world (the spec's: at build)
+        # a .blend file's world (the spec's: at build)
+        if self._own_suns and self.n > 1 and not one_colour(scene.world):
             name = next(
                 t.object for t in self.plan.bindings if t.object in built.objects and is_sun(built.objects[t.object])
             )
@@ -170,12 +167,10 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
             copy.setters = [s for s in self._compile_bindings() if s[2] is not _instanced]
             copy.aimed, copy.targets = self._aimed, self._targets
         self._objects = built.objects
-        self._per_copy = bool(
-            self._copies[0].setters or self._copies[0].aimed
-        )  # whether any binding is written per copy
-        self._grid = np.array(
-            [tuple(self._offset(k)) for k in range(self.n)], dtype=np.float32
-        )  # the copies' grid places
+        # whether any binding is written per copy
+        self._per_copy = bool(self._copies[0].setters or self._copies[0].aimed)
+        # the copies' grid places
+        self._grid = np.array([tuple(self._offset(k)) for k in range(self.n)], dtype=np.float32)
         self._offsets = self._grid.astype(np.float64)  # each copy's anchor, as its instances see it
         self._instances = self._instance(copied)
         #: the anchors that carry an object drawn as itself, by env: only they follow a moving camera (the others
@@ -202,9 +197,8 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
                     )
                 )
         self._tiled_view_camera: tuple[View, Any, bool] | None = None  # the view camera's, built at the first view
-        self._alone: dict[
-            int, View
-        ] = {}  # per observation camera: the one-tile camera of _render_alone, built at first use
+        # per observation camera: the one-tile camera of _render_alone, built at first use
+        self._alone: dict[int, View] = {}
         #: how often a custom camera's shader parameters changed after construction (each makes Cycles compile it again)
         self.shader_updates = 0
         self._anchors_moved = False
@@ -232,9 +226,8 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
             return None
         anchor = self._copies[0].anchor
         cameras = [view.camera for view in self._views] + ([self._view.camera] if self._view is not None else [])
-        anchored = not any(
-            self._camera_moves(camera) for camera in cameras
-        )  # anchors that stay put: static meshes realized
+        # anchors that stay put: static meshes realized
+        anchored = not any(self._camera_moves(camera) for camera in cameras)
         return InstancedCopies(
             anchor.users_collection[0],
             anchor,
@@ -298,9 +291,8 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
             raise ValueError(f"envs must be ascending indices below {self.n}, got {chosen}")
         self._take_envs(frames)
         self._write_copies(values, chosen)
-        alone = chosen is not None and len(chosen) < alone_limit(
-            self.n, self.device, self._threads
-        )  # else every tile is cheaper
+        # else every tile is cheaper
+        alone = chosen is not None and len(chosen) < alone_limit(self.n, self.device, self._threads)
         images = {}
         for j, ((view, reference, moving), source) in enumerate(zip(self._tiled_views, self._views)):
             self._place_copies(reference, source.camera if moving else None)

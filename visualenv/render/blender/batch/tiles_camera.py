@@ -131,9 +131,8 @@ def make_tiles_camera(
     scene.collection.objects.link(camera)
     pose = source.matrix_world.normalized()
     camera.matrix_world = pose
-    if (
-        scene.render.engine != "CYCLES"
-    ):  # Blender compiles a camera shader for the context scene's engine (a batch's is Cycles)
+    # Blender compiles a camera shader for the context scene's engine (a batch's is Cycles)
+    if scene.render.engine != "CYCLES":
         scene.render.engine = "CYCLES"
     compile_tiles_camera(camera, scene)
     params = data.cycles_custom

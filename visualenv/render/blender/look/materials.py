@@ -99,9 +99,8 @@ def _texture(
         node = nodes.new("ShaderNodeTexImage")
         node.image = images[0]
         if isinstance(tex.image, tuple):
-            node[TEXTURE_SET] = "\n".join(
-                image.name for image in images
-            )  # the names Blender gave them (a taken name gets .001)
+            # the names Blender gave them (a taken name gets .001)
+            node[TEXTURE_SET] = "\n".join(image.name for image in images)
         links.new(coords.outputs["UV"], node.inputs["Vector"])
         node["visualenv_needs_uv"] = True
         links.new(node.outputs["Color"], bsdf.inputs["Base Color"])

@@ -90,18 +90,16 @@ def light_material(
     head_on = headlight.active
     geometry = nodes.new("ShaderNodeNewGeometry")
     normal = _to_camera(nodes, links, geometry.outputs["Normal"], "NORMAL")
-    toward = _math(
-        nodes, links, "MULTIPLY", _z(nodes, links, normal), -1.0
-    )  # n.l: Cycles' camera space looks along +Z, the headlight shines back
+    # n.l: Cycles' camera space looks along +Z, the headlight shines back
+    toward = _math(nodes, links, "MULTIPLY", _z(nodes, links, normal), -1.0)
     facing = _math(nodes, links, "MAXIMUM", toward, 0.0)
     diffuse = [v if head_on else 0.0 for v in headlight.diffuse]
     base = tuple(a + emission for a in ambient_rgb)
     light = _vector(nodes, links, "MULTIPLY_ADD", diffuse, facing, base)
     lit = _vector(nodes, links, "MULTIPLY", tinted, light)
     highlight_rgb = [s * specular if head_on else 0.0 for s in headlight.specular]
-    if (
-        max(highlight_rgb) > 0.0
-    ):  # Blinn-Phong with a local viewer: h between the light (the view axis) and the eye (Incoming)
+    # Blinn-Phong with a local viewer: h between the light (the view axis) and the eye (Incoming)
+    if max(highlight_rgb) > 0.0:
         eye = _to_camera(nodes, links, geometry.outputs["Incoming"], "VECTOR")
         half = _vector(nodes, links, "NORMALIZE", _vector(nodes, links, "ADD", eye, (0.0, 0.0, -1.0)))
         cosine = nodes.new("ShaderNodeVectorMath")
@@ -115,9 +113,8 @@ def light_material(
         highlight = _vector(nodes, links, "MULTIPLY", _math(nodes, links, "MULTIPLY", power, lit_side), highlight_rgb)
         lit = _vector(nodes, links, "ADD", lit, _vector(nodes, links, "MULTIPLY", highlight, texel))
     lit = _vector(nodes, links, "MINIMUM", lit, texel)  # texture * min(x, 1) = min(texture * x, texture)
-    path = nodes.new(
-        "ShaderNodeLightPath"
-    )  # a ray Cycles sampled from another surface sees no emission: it lights nothing
+    # a ray Cycles sampled from another surface sees no emission: it lights nothing
+    path = nodes.new("ShaderNodeLightPath")
     links.new(_vector(nodes, links, "MULTIPLY", lit, path.outputs["Is Camera Ray"]), bsdf.inputs["Emission Color"])
     bsdf.inputs["Emission Strength"].default_value = 1.0
 
@@ -157,9 +154,8 @@ def light_data(light: LightInfo) -> Any:
     data.energy = SPOT_UNIT * strength
     data.shadow_soft_size = 0.0
     data.use_soft_falloff = False
-    data.spot_size = min(
-        math.radians(2.0 * light.cutoff), math.pi
-    )  # Cycles' widest cone; MuJoCo's cutoff is the half angle
+    # Cycles' widest cone; MuJoCo's cutoff is the half angle
+    data.spot_size = min(math.radians(2.0 * light.cutoff), math.pi)
     data.spot_blend = 0.0
     _spot_shader(data, light)
     return data
@@ -170,14 +166,12 @@ def _spot_shader(data: Any, light: LightInfo) -> None:
     data.use_nodes = True
     nodes, links = data.node_tree.nodes, data.node_tree.links
     emission = next(n for n in nodes if n.type == "EMISSION")
-    falloff = nodes.new(
-        "ShaderNodeLightFalloff"
-    )  # strength 1: Constant = d^2, Linear = d (each cancels that much fall-off)
+    # strength 1: Constant = d^2, Linear = d (each cancels that much fall-off)
+    falloff = nodes.new("ShaderNodeLightFalloff")
     falloff.inputs["Strength"].default_value = 1.0
     falloff.inputs["Smooth"].default_value = 0.0
-    coords = nodes.new(
-        "ShaderNodeTexCoord"
-    )  # a light's Normal: the direction of the ray leaving it, in its own frame (-Z: its axis)
+    # a light's Normal: the direction of the ray leaving it, in its own frame (-Z: its axis)
+    coords = nodes.new("ShaderNodeTexCoord")
     along = _math(nodes, links, "MULTIPLY", _z(nodes, links, coords.outputs["Normal"]), -1.0)
     cone = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", along, 0.0), light.exponent)
     a0, a1, a2 = light.attenuation

@@ -47,9 +47,8 @@ def assign_ids(built: BuiltScene, plan: RenderPlan) -> dict[str, int]:
     for name, spec in plan.scene.objects.items():
         if isinstance(spec, (PrimitiveObject, MeshObject)) and spec.label is not None:
             labels[name] = spec.label
-    physics = (
-        plan.physics
-    )  # a MuJoCo model's geoms and sites take their body's name: the parts of one rigid body share an id
+    # a MuJoCo model's geoms and sites take their body's name: the parts of one rigid body share an id
+    physics = plan.physics
     bodies = (
         {g.name: physics.body_names[g.body] for g in (*physics.geoms, *physics.sites)} if physics is not None else {}
     )

@@ -33,9 +33,8 @@ class KernelFacts:
     """What decides whether the first GPU render compiles kernels (gathered by :func:`kernel_facts`)."""
 
     backend: str
-    shipped_archs: tuple[
-        str, ...
-    ]  # CUDA architectures with a binary in bpy or compiled ahead (compile-kernels), e.g. 'sm_75'
+    # CUDA architectures with a binary in bpy or compiled ahead (compile-kernels), e.g. 'sm_75'
+    shipped_archs: tuple[str, ...]
     gpu_archs: tuple[str, ...]  # this machine's NVIDIA GPUs (e.g. 'sm_90'); empty if unknown
     caches: tuple[tuple[str, bool], ...]  # (folder, whether it holds anything)
 

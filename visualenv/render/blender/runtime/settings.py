@@ -169,9 +169,8 @@ def configure_scene(scene: Any, *, device: str, threads: int, noise: str = "inde
     c.use_adaptive_sampling = False
     c.use_animated_seed = False
     c.seed = 0
-    if (
-        noise == "shared"
-    ):  # every pixel draws the same random numbers: its value does not depend on its place in the image
+    # every pixel draws the same random numbers: its value does not depend on its place in the image
+    if noise == "shared":
         c.sampling_pattern = "TABULATED_SOBOL"
         c.auto_scrambling_distance = False
         c.scrambling_distance = 0.0

@@ -100,9 +100,8 @@ def _overrides(scene: Any) -> list[str]:
 
 def describe(path: str) -> dict[str, Any]:
     turn_autorun_off()
-    bpy.ops.wm.open_mainfile(
-        filepath=path, load_ui=False, use_scripts=False
-    )  # use_scripts=False: no registered text runs
+    # use_scripts=False: no registered text runs
+    bpy.ops.wm.open_mainfile(filepath=path, load_ui=False, use_scripts=False)
     scenes = []
     for scene in bpy.data.scenes:
         r = scene.render

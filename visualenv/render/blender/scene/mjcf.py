@@ -40,11 +40,12 @@ class PoseWriter:
     bodies: list[tuple[int, Any]]  # (body index, empty) of the moving bodies
     cameras: list[Any]  # camera objects by MuJoCo camera index
     lights: list[Any]  # light objects by MuJoCo light index (a light on a body, or tracking one, moves)
+    # their names in BuiltScene.objects: bodies, cameras, lights
     keys: tuple[list[str], list[str], list[str]] = (
         [],
         [],
         [],
-    )  # their names in BuiltScene.objects: bodies, cameras, lights
+    )
 
     def for_objects(self, objects: dict[str, Any]) -> "PoseWriter":
         """The same writer for another copy of the scene (a batch's env k), its objects found by name."""
@@ -125,9 +126,8 @@ def build_physics_objects(
             obj.location = scene_data.body_pos[body].tolist()
             obj.rotation_quaternion = scene_data.body_quat[body].tolist()
             empties[body] = obj
-            built.objects.setdefault(
-                f"body:{scene_data.body_names[body]}", obj
-            )  # a batch finds each copy's empty by this name
+            # a batch finds each copy's empty by this name
+            built.objects.setdefault(f"body:{scene_data.body_names[body]}", obj)
         return empties[body]
 
     for body in own:
@@ -162,9 +162,8 @@ def build_physics_objects(
         obj.rotation_quaternion = Vector(light.direction).to_track_quat("-Z", "Y")
         built.objects.setdefault(light.name, obj)
         lights.append(obj)
-    if (
-        add_light and not as_mujoco
-    ):  # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
+    # MuJoCo lights a model without lights by its headlight; a sun from above and in front stands in
+    if add_light and not as_mujoco:
         sun = bpy.data.objects.new("mujoco-headlight", bpy.data.lights.new("mujoco-headlight", "SUN"))
         sun.data.energy = 3.0
         sun.rotation_euler = (0.6, 0.0, 0.3)
@@ -177,9 +176,8 @@ def build_physics_objects(
         cam.clip_start, cam.clip_end = 0.01, 100.0
         obj = bpy.data.objects.new(cam_info.name, cam)
         obj.rotation_mode = "QUATERNION"
-        obj.location = (
-            cam_info.pos
-        )  # MuJoCo's pose at qpos0: a batch's tiles camera takes a fixed camera's pose when built
+        # MuJoCo's pose at qpos0: a batch's tiles camera takes a fixed camera's pose when built
+        obj.location = cam_info.pos
         obj.rotation_quaternion = cam_info.quat
         collection.objects.link(obj)
         built.objects.setdefault(cam_info.name, obj)
@@ -238,9 +236,8 @@ def _shape(bm: Any, geom: GeomShape, split_caps: bool) -> tuple[np.ndarray, list
     (texcoords.py; none without a texture), and for a mesh the MuJoCo face of each polygon made (a duplicate face is skipped).
     `split_caps`: a cylinder's flat ends get vertices of their own, so that its smooth side's normals point straight out."""
     size = geom.size
-    caps: list[
-        tuple[list[Any], float]
-    ] = []  # a capsule's end spheres and their centres: MuJoCo textures each about its centre
+    # a capsule's end spheres and their centres: MuJoCo textures each about its centre
+    caps: list[tuple[list[Any], float]] = []
     made: list[int] = []
     if geom.kind == "plane":
         bmesh.ops.create_grid(bm, x_segments=1, y_segments=1, size=1.0)
@@ -297,9 +294,8 @@ def _uv_map(mesh: Any, geom: GeomShape, points: np.ndarray, made: list[int]) -> 
     mesh.loops.foreach_get("vertex_index", loop_vertex)
     starts = np.empty(len(mesh.polygons), dtype=np.int64)
     mesh.polygons.foreach_get("loop_start", starts)
-    if (
-        geom.texcoords is not None and geom.texture_type == "2d" and len(made) == len(starts)
-    ):  # a mesh's own UVs, matched corner by corner
+    # a mesh's own UVs, matched corner by corner
+    if geom.texcoords is not None and geom.texture_type == "2d" and len(made) == len(starts):
         faces, uvs = geom.faces[made], geom.texcoords[made]  # type: ignore[index]
         corner = np.argmax(faces[np.repeat(np.arange(len(made)), 3)] == loop_vertex[:, None], axis=1)
         uv = uvs[np.repeat(np.arange(len(made)), 3), corner]
@@ -324,11 +320,12 @@ def _geom_object(
     points, made = _shape(bm, geom, split_caps)
     for face in bm.faces:
         face.smooth = geom.kind in ("sphere", "ellipsoid", "capsule", "cylinder")
+    # made by create_uvsphere (a mesh keeps MuJoCo's face order: _uv_map reads it)
     if geom.kind in (
         "sphere",
         "ellipsoid",
         "capsule",
-    ):  # made by create_uvsphere (a mesh keeps MuJoCo's face order: _uv_map reads it)
+    ):
         sort_faces(bm)
     bm.to_mesh(mesh)
     bm.free()
