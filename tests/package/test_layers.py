@@ -24,6 +24,7 @@ LAYERS = {
     "visualenv.render": 2,
     "visualenv.compiler": 3,
     "visualenv.env": 4,
+    "visualenv.dmc": 4,  # dm_env's interface over the DMC ids
     "visualenv.train": 5,
     "visualenv.tools": 6,
     # the viewer steps envs and loads agents; render_mode="human" reaches it through a hook (visualenv.env.human)

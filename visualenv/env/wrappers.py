@@ -94,17 +94,21 @@ class FrameStack(gym.Wrapper):
     """Stack the last `depth` frames on the channel axis: (H, W, C) -> (H, W, C * depth).
 
     Oldest first: channels ``[0:C]`` are the frame from ``depth - 1`` steps ago,
-    the last ``C`` channels are the newest. Reset zeroes the older slots, as
+    the last ``C`` channels are the newest. By default reset zeroes the older slots, as
     SB3's ``VecFrameStack`` does, so an agent trained through SB3 sees at play
     time what it saw in training (a repeated first frame instead reads as a
-    still ball to the Goalie agent, which then misses).
+    still ball to the Goalie agent, which then misses). ``padding="first"`` repeats the
+    first frame instead, as Gymnasium's ``FrameStackObservation`` and DrQ-v2 do.
     """
 
-    def __init__(self, env: gym.Env, depth: int = 4):
+    def __init__(self, env: gym.Env, depth: int = 4, *, padding: str = "zeros"):
         super().__init__(env)
         if depth < 1:
             raise ValueError("depth must be at least 1")
+        if padding not in ("zeros", "first"):
+            raise ValueError(f"padding must be 'zeros' or 'first', got {padding!r}")
         self.depth = depth
+        self.padding = padding
         self.observation_space = _map_space(
             env.observation_space, lambda s: spaces.Box(0, 255, s.shape[:2] + (s.shape[2] * depth,), np.uint8)
         )
@@ -125,7 +129,7 @@ class FrameStack(gym.Wrapper):
         obs, info = self.env.reset(**kwargs)
         self._frames.clear()
         for _ in range(self.depth - 1):
-            self._frames.append(_zeros_like(obs))
+            self._frames.append(_zeros_like(obs) if self.padding == "zeros" else obs)
         self._frames.append(obs)
         return self._stacked(), info
 
