@@ -143,6 +143,7 @@ def test_processes_placed_by_others_claim_distinct_cores(tmp_path, monkeypatch):
         (("HIP", (), (), (("~/.nv/ComputeCache", False),)), None),
     ],
 )
+@pytest.mark.blender
 def test_the_first_gpu_render_says_when_it_compiles_kernels(facts, expected):
     devices = pytest.importorskip("visualenv.render.blender.runtime.devices", reason="the Blender backend needs bpy")
     kernel_facts = devices.KernelFacts(*facts)

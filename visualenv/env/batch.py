@@ -38,21 +38,20 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
-from visualenv.compiler.program import Program, compile_spec
-from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
+from visualenv.compiler.program import Program
+from visualenv.compiler.render_plan import checked_options, observation_space, to_plan
 from visualenv.compiler.batch_functions import float_errors
 from visualenv.env.batch_observations import BatchObservations
-from visualenv.env.episode import EpisodeRules, step_limit
+from visualenv.env.construction import camera_sensors, episode_length, program_for, uses_camera
+from visualenv.env.episode import EpisodeRules
 from visualenv.env.human import HumanDisplay
-from visualenv.env.registration import resolve
 from visualenv.env.visual_env import VisualEnv
-from visualenv.errors import SpecError, StepError
+from visualenv.errors import StepError
 from visualenv.render.base import RendererOptions
 from visualenv.render.batch_limits import check_batchable
 from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.profile import Profile
-from visualenv.render.sensor import sensor_models
-from visualenv.spec.loader import LoadedSpec, load_spec
+from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.options import distraction_settings
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
@@ -126,27 +125,11 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             raise ValueError(f"autoreset_mode must be one of {', '.join(modes)}, got {autoreset_mode!r}")
         self.autoreset_mode = modes[mode]
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
-        if isinstance(spec, Program) and not params:
-            program = spec
-        else:
-            loaded = (
-                spec.loaded
-                if isinstance(spec, Program)
-                else (spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec)))
-            )
-            program = compile_spec(loaded, params)
+        program = program_for(spec, params)
         self.program = program
         self.num_envs = n = int(num_envs)
         observation = program.spec.observation
-        if render and observation is None:
-            raise SpecError(
-                [
-                    program.loaded.source.diagnostic(
-                        (), "render=True needs an 'observation' section (a camera) in the spec"
-                    )
-                ]
-            )
-        self.uses_camera = observation is not None and render is not False
+        self.uses_camera = uses_camera(program, render)
         if render_mode == "human" and not self.uses_camera:
             raise ValueError(
                 "render_mode='human' shows a grid of the observations, and a state-only batch has none: "
@@ -155,18 +138,12 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         self._display: HumanDisplay | None = None  # render_mode="human": where the grid is shown, opened at first
         #: what each env's observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = distraction_settings(distractions, program.spec.distractions) if self.uses_camera else None
+        length = episode_length(program, max_episode_steps, action_repeat)
         #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
-        self.action_repeat = int(program.spec.action_repeat if action_repeat is None else action_repeat)
-        if self.action_repeat < 1:
-            raise ValueError(f"action_repeat must be an integer of at least 1, got {action_repeat!r}")
-        #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
-        step_limit_ = (
-            program.spec.max_steps
-            if max_episode_steps is None
-            else step_limit(program, max_episode_steps) * self.action_repeat
-        )
+        self.action_repeat = length.action_repeat
+        step_limit_ = length.step_limit
         #: episodes are truncated after this many step() calls
-        self.max_episode_steps = -(-step_limit_ // self.action_repeat)
+        self.max_episode_steps = length.max_episode_steps
         #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
         self.rules = EpisodeRules(program, step_limit_, observes_state=not self.uses_camera and program.physics is None)
         # the batch repeats
@@ -176,9 +153,8 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
-        self._pose_sources: list[Any] | None = (
-            None  # what the pose arrays view: each env's MjData, or MuJoCo's batch's rows
-        )
+        # what the pose arrays view: each env's MjData, or MuJoCo's batch's rows
+        self._pose_sources: list[Any] | None = None
         if program.physics is not None:
             physics = program.physics.batch([lane.simulation for lane in self._lanes])
             self._batch = program.batch_functions(physics)
@@ -197,14 +173,7 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         self.action_space = batch_space(single.action_space, n)
         self.single_observation_space = observation_space(observation) if self.uses_camera else single.observation_space  # type: ignore[arg-type]
         self.observation_space = batch_space(self.single_observation_space, n)
-        views = views_plan(observation) if self.uses_camera else {}
-        space = self.single_observation_space
-        shapes = (
-            {key: sub.shape for key, sub in space.spaces.items()}
-            if isinstance(space, gym.spaces.Dict)
-            else {key: space.shape for key in views}
-        )
-        self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
+        self._sensors = camera_sensors(observation, self.single_observation_space) if self.uses_camera else {}
         names = program.state_names
         self._state = np.zeros((len(names), n))
         self._steps = np.zeros(n, dtype=np.int64)

@@ -11,19 +11,20 @@ import numpy as np
 from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
-from visualenv.compiler.program import Program, compile_spec
+from visualenv.compiler.program import Program
 from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
-from visualenv.errors import SpecError, StepError, did_you_mean
+from visualenv.errors import StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
-from visualenv.env.episode import EpisodeRules, step_limit
+from visualenv.env.construction import camera_sensors, episode_length, program_for, uses_camera
+from visualenv.env.episode import EpisodeRules
 from visualenv.env.human import HumanDisplay, open_human_display
 from visualenv.env.pickling import PicklingEnv
 from visualenv.physics.conventions import legacy_stream
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer
 from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.frames import Frames
-from visualenv.render.sensor import SensorModel, sensor_generator, sensor_models
-from visualenv.spec.loader import LoadedSpec, load_spec
+from visualenv.render.sensor import SensorModel, sensor_generator
+from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.options import distraction_settings
 
 #: the keys reset(options=...) understands
@@ -106,15 +107,7 @@ class VisualEnv(PicklingEnv):
         distractions: float | str | Mapping[str, Any] | None = None,
     ) -> None:
         super().__init__()
-        if isinstance(spec, Program) and not params:
-            program = spec
-        else:
-            loaded = (
-                spec.loaded
-                if isinstance(spec, Program)
-                else (spec if isinstance(spec, LoadedSpec) else load_spec(spec))
-            )
-            program = compile_spec(loaded, params)
+        program = program_for(spec, params)
         self._init_args = {
             "render": render,
             "render_mode": render_mode,
@@ -127,14 +120,12 @@ class VisualEnv(PicklingEnv):
         }
         self.program = program
         s = program.spec
+        length = episode_length(program, max_episode_steps, action_repeat)
         #: the spec's steps per step() (dm_control's action repeat), each with the same action
-        self.action_repeat: int = s.action_repeat if action_repeat is None else int(action_repeat)
-        #: the spec's steps after which an episode is truncated: its max_steps, or Gymnasium's max_episode_steps step() calls
-        self._step_limit = (
-            s.max_steps if max_episode_steps is None else step_limit(program, max_episode_steps) * self.action_repeat
-        )
+        self.action_repeat: int = length.action_repeat
+        self._step_limit = length.step_limit
         #: episodes are truncated after this many step() calls: the spec's max_steps (over the action repeat), or Gymnasium's
-        self.max_episode_steps: int = -(-self._step_limit // self.action_repeat)
+        self.max_episode_steps: int = length.max_episode_steps
         # no camera to render a view with: no render mode (check_env reads it)
         if s.observation is None and not s.render.view.camera:
             self.metadata = {**self.metadata, "render_modes": []}
@@ -144,16 +135,8 @@ class VisualEnv(PicklingEnv):
                 )
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
             raise ValueError(f"render_mode must be one of {self.metadata['render_modes']}, got {render_mode!r}")
-        if render and s.observation is None:
-            raise SpecError(
-                [
-                    program.loaded.source.diagnostic(
-                        (), "render=True needs an 'observation' section (a camera) in the spec"
-                    )
-                ]
-            )
         self.render_mode = render_mode
-        self.uses_camera = s.observation is not None and render is not False
+        self.uses_camera = uses_camera(program, render)
         self._backend = backend
         self._renderer_options = checked_options(renderer_options)
         self._renderer: Renderer | None = None
@@ -189,25 +172,18 @@ class VisualEnv(PicklingEnv):
         else:
             lows, highs = zip(*program.continuous)
             self.action_space = spaces.Box(np.array(lows, np.float32), np.array(highs, np.float32), dtype=np.float32)
-        views = views_plan(s.observation)
-        #: a generator for sensor noise, seeded at reset from the env's seed (lanes of a batch keep one too)
-        self._has_sensor = any(view.sensor is not None for view in views.values())
-        self._sensor_rng: np.random.Generator | None = None
-        self._sensors: dict[str, SensorModel] = {}
         if self.uses_camera:
             self.observation_space = observation_space(s.observation)  # type: ignore[arg-type]
-            shapes = (
-                {key: space.shape for key, space in self.observation_space.spaces.items()}
-                if isinstance(self.observation_space, spaces.Dict)
-                else {next(iter(views)): self.observation_space.shape}
-            )
-            self._sensors = sensor_models(views, shapes)  # type: ignore[arg-type]
         elif program.physics is not None:  # Gymnasium's MuJoCo envs observe float64 vectors, unbounded
             self.observation_space = spaces.Box(-np.inf, np.inf, (program.physics.observe_size,), np.float64)
         else:
             n = len(program.observed)
             big = np.finfo(np.float32).max  # finite bounds: check_env warns about infinite ones
             self.observation_space = spaces.Box(-big, big, (n,), np.float32)
+        #: each camera's sensor noise, from a generator seeded at reset from the env's seed (lanes of a batch keep one too)
+        self._sensors = camera_sensors(s.observation, self.observation_space) if self.uses_camera else {}
+        self._has_sensor = any(view.sensor is not None for view in views_plan(s.observation).values())
+        self._sensor_rng: np.random.Generator | None = None
         self._observed = program.observed
         #: what the observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = distraction_settings(distractions, s.distractions)
