@@ -64,9 +64,8 @@ class Program:
     outcomes: list[OutcomeRule]
     bindings: list[BindingTarget]
     line_maps: dict[str, LineMap] = field(default_factory=dict)  # per generated function: its lines' spec sites
-    physics: "phys.PhysicsPlan | None" = (
-        None  # the MuJoCo model and what the generated code reads from it (docs/physics.md)
-    )
+    # the MuJoCo model and what the generated code reads from it (docs/physics.md)
+    physics: "phys.PhysicsPlan | None" = None
     _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
     _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
     _render_plan: RenderPlan | None = field(default=None, repr=False)

@@ -44,9 +44,8 @@ class GeomShape:
     rgba: tuple[float, float, float, float]
     vertices: np.ndarray | None = None  # mesh geoms: (n, 3) in the geom's frame
     faces: np.ndarray | None = None  # mesh geoms: (m, 3) vertex indices
-    texture: np.ndarray | None = (
-        None  # the material's texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
-    )
+    # the material's texture, (h, w, 4) floats in 0..1, bottom row first (Blender's order)
+    texture: np.ndarray | None = None
     texture_type: str = "2d"  # "2d", or "cube": six square faces stacked (h = 6 w), or one face for all six (h = w)
     texture_id: int = -1  # the MuJoCo texture's index (geoms that share one share its image)
     # MuJoCo's texgen scale (texcoords.py): 2d (x, y, -), cube (x, y, z)

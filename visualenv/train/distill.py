@@ -46,12 +46,10 @@ class DistillConfig:
     teacher: str  # a state-only policy file of the same spec (`visualenv train --state-only`)
     rounds: int = 8  # DAgger rounds; round 0 is the teacher's own unless a student is given
     episodes: int = 16  # episodes rolled out per round
-    mixing: float = (
-        0.5  # the teacher acts a step of round r with probability mixing ** r (DAgger's beta), else the student
-    )
-    student: str | None = (
-        None  # a policy file of an earlier distillation of the spec to start from (then mixing ** (r + 1))
-    )
+    # the teacher acts a step of round r with probability mixing ** r (DAgger's beta), else the student
+    mixing: float = 0.5
+    # a policy file of an earlier distillation of the spec to start from (then mixing ** (r + 1))
+    student: str | None = None
     epochs: float = 2.0  # passes over all frames gathered so far, per round
     batch_size: int = 128
     learning_rate: float = 3e-4

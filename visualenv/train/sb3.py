@@ -286,9 +286,8 @@ def _finish(
     return results
 
 
-NATURE_CNN_MIN_SIZE = (
-    36  # SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
-)
+# SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
+NATURE_CNN_MIN_SIZE = 36
 
 
 def check_cnn_input(loaded: Any, hyperparams: dict[str, Any]) -> None:

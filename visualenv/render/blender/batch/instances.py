@@ -171,13 +171,11 @@ class _Node:
     scale: np.ndarray
     slices: dict[str, slice] = field(default_factory=dict)  # property -> its values in the binding table
     body: int | None = None  # the MuJoCo body whose pose (a row of xpos and xquat) is its location and rotation
-    basis: np.ndarray | None = (
-        None  # its matrix_basis ``(1, 4, 4)`` where no binding moves it (a body's: until poses come)
-    )
+    # its matrix_basis ``(1, 4, 4)`` where no binding moves it (a body's: until poses come)
+    basis: np.ndarray | None = None
     static: bool = False  # no binding or pose moves it or its ancestors: its world matrix is computed once
-    world: np.ndarray | None = (
-        None  # a static node's world matrices, its anchor's place included (recomputed when anchors move)
-    )
+    # a static node's world matrices, its anchor's place included (recomputed when anchors move)
+    world: np.ndarray | None = None
 
 
 @dataclass
@@ -262,9 +260,8 @@ class InstancedCopies:
             self._nodes.append(node)
         self._posed = [i for i, node in enumerate(self._nodes) if node.body is not None]
         self._pose_columns = np.array([self._nodes[i].body for i in self._posed], dtype=int)
-        self._anchors: np.ndarray | None = (
-            None  # the anchors' world matrices the static nodes' world matrices were computed with
-        )
+        # the anchors' world matrices the static nodes' world matrices were computed with
+        self._anchors: np.ndarray | None = None
         #: whether any object takes a MuJoCo body's pose
         self.posed = bool(self._posed)
         self._env_attributes = env_attributes

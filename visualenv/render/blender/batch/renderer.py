@@ -154,9 +154,8 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
             raise sun_world_error(self.plan, name)
         places = {o.as_pointer(): o.matrix_world.copy() for o in copied}  # before copy 0 hangs under its anchor
         self._removed = self._removable(copied)
-        self._copy_poses: list[tuple[int, Any]] | None = (
-            None  # the pose writers of the copies (None: no poses handed yet)
-        )
+        # the pose writers of the copies (None: no poses handed yet)
+        self._copy_poses: list[tuple[int, Any]] | None = None
         self._body_poses: tuple[np.ndarray, np.ndarray] = (np.empty(0), np.empty(0))  # every env's xpos and xquat
         self._copies = [
             make_copy(k, built, copied, places, self._offset(k), removed=self._removed, own_lights=self._own_lights)
