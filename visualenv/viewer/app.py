@@ -10,7 +10,7 @@ from visualenv.env.registration import read_header, resolve
 from visualenv.errors import VisualEnvError
 from visualenv.train.model_files import load_model, pretrained_model
 from visualenv.viewer.board import Board
-from visualenv.viewer.server import ViewerServer, is_local
+from visualenv.viewer.server import ViewerServer, allow_open_files, is_local
 from visualenv.viewer.session import DEFAULT_VIEW, Agent, Session, ViewOptions
 
 #: `visualenv view`'s port when none is given (any free one where it is taken)
@@ -53,6 +53,7 @@ def serve(
     path = resolve(target)
     agent = load_agent(path, model, algo, trust_pickle=trust_pickle) if model else None
     board = Board()
+    allow_open_files()
     server = _server(board, host, port, path)
     session = Session(path, board, agent=agent, seed=seed, view=view)
     server.start()

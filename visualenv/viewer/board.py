@@ -20,6 +20,8 @@ import numpy as np
 OBSERVATION, VIEW = "observation", "view"
 #: at most this share of the stepping thread's time goes to rendering views while it runs (see :class:`ViewPacer`)
 VIEW_SHARE = 0.25
+#: inputs that may wait for the stepping thread; the server refuses more (503) until it takes them
+MAX_QUEUED_INPUTS = 256
 
 
 @dataclass(frozen=True)
@@ -49,7 +51,7 @@ class Board:
         self._watchers = 0
         self._closed = False
         #: inputs from the page (dicts checked by the server), read by the stepping thread
-        self.inputs: queue.Queue[dict[str, Any]] = queue.Queue()
+        self.inputs: queue.Queue[dict[str, Any]] = queue.Queue(maxsize=MAX_QUEUED_INPUTS)
 
     def publish(
         self,

@@ -10,7 +10,12 @@ Routes:
 * ``POST /input``: a key, pause, step, reset, speed or slider input as JSON (an interactive page only).
 
 Only ``application/json`` inputs are taken: a page of another site cannot send one without the browser asking this
-server first (a CORS preflight it does not answer), so it cannot drive the env.
+server first (a CORS preflight it does not answer), so it cannot drive the env. A page that rebinds its own name to
+this machine is refused by its ``Host`` and ``Origin`` (:mod:`visualenv.viewer.guard`), before any route runs.
+
+What a request can cost is bounded (docs/security.md): a connection that sends nothing for
+:data:`CONNECTION_TIMEOUT_S` is closed, a body over :data:`~visualenv.viewer.guard.MAX_BODY_BYTES` is refused unread, at most
+:data:`MAX_CONNECTIONS` are served at once, and a malformed request costs one log line, never a traceback.
 """
 
 from __future__ import annotations
@@ -18,31 +23,130 @@ from __future__ import annotations
 import base64
 import io
 import json
+import logging
 import math
+import queue
 import socket
+import sys
 import threading
 from typing import Any, Iterator
 
 from PIL import Image
-from werkzeug.exceptions import HTTPException, BadRequest, MethodNotAllowed, NotFound, UnsupportedMediaType
-from werkzeug.serving import BaseWSGIServer, WSGIRequestHandler, get_sockaddr, make_server, select_address_family
+from werkzeug.exceptions import (
+    BadRequest,
+    ClientDisconnected,
+    HTTPException,
+    MethodNotAllowed,
+    NotFound,
+    ServiceUnavailable,
+    UnsupportedMediaType,
+)
+from werkzeug.serving import ThreadedWSGIServer, WSGIRequestHandler, get_sockaddr, select_address_family
 from werkzeug.wrappers import Request, Response
 
 from visualenv.viewer.board import Board, Picture, Snapshot
+from visualenv.viewer.guard import LOOPBACK_NAMES, Guard, Refusal
 from visualenv.viewer.page import page_html
 
 #: seconds between keep-alive comments on an idle event stream (a closed page is noticed at the next one)
 KEEP_ALIVE_S = 5.0
 #: the inputs the page sends, and the fields each takes (name -> checker)
 INPUTS = ("key", "pause", "step", "reset", "speed", "slider")
-LOCAL_HOSTS = ("127.0.0.1", "localhost", "::1")
+#: seconds a connection may take to send its request (or to take a response) before it is closed
+CONNECTION_TIMEOUT_S = 5.0
+#: seconds an event stream may wait for the page to take its next message (a slow link sends pictures slowly)
+STREAM_TIMEOUT_S = 30.0
+#: connections served at once, each by a thread until it ends or times out; more are closed unanswered
+MAX_CONNECTIONS = 2048
+#: connections the listening socket holds before they are accepted
+LISTEN_BACKLOG = 1024
+
+#: where the viewer's one-line reports go: refused and malformed requests, errors (stderr where logging is not set up)
+log = logging.getLogger("visualenv.viewer")
 
 
-class _QuietHandler(WSGIRequestHandler):
-    """Werkzeug's handler without a log line per request (the page polls nothing, but streams and posts keys)."""
+class _Handler(WSGIRequestHandler):
+    """Werkzeug's handler with the viewer's gate: a timeout on the socket, the head checked by the server's
+    :class:`Guard` before anything else, one log line per refused or malformed request and no line per request."""
+
+    server: "_Server"
+
+    def setup(self) -> None:
+        super().setup()
+        self.connection.settimeout(CONNECTION_TIMEOUT_S)
+
+    def parse_request(self) -> bool:
+        if not super().parse_request():
+            return False  # a malformed head: http.server answered it (400, 431, ...) and logged one line
+        refusal = self.server.guard.check(self.path, self.headers)
+        if refusal is None:
+            return True
+        self._refuse(refusal)
+        return False
+
+    def handle_expect_100(self) -> bool:
+        return True  # Werkzeug sends the 100 Continue itself, once parse_request let the request in
+
+    def _refuse(self, refusal: Refusal) -> None:
+        """Answers `refusal` and closes the connection, its body (if any) unread."""
+        self.close_connection = True
+        self.log_error("refused %s %r: %s", self.command, self.path[:100], refusal.reason)
+        body = f"{refusal.reason}\n".encode()
+        self.send_response(refusal.status)
+        self.send_header("Content-Type", "text/plain; charset=utf-8")
+        self.send_header("X-Content-Type-Options", "nosniff")
+        self.send_header("Content-Length", str(len(body)))
+        self.send_header("Connection", "close")
+        self.end_headers()
+        if self.command != "HEAD":
+            self.wfile.write(body)
+
+    def connection_dropped(self, error: BaseException, environ: Any = None) -> None:
+        self.close_connection = True  # a stalled or gone client: its socket is not read again
 
     def log_request(self, code: int | str = "-", size: int | str = "-") -> None:
         pass
+
+    def log_error(self, format: str, *args: Any) -> None:
+        if format.startswith("Request timed out"):
+            return  # an idle or half-open connection, closed: a browser opens some it never uses
+        log.warning("visualenv viewer: %s: " + format, self.client_address[0], *args)
+
+
+class _Server(ThreadedWSGIServer):
+    """Werkzeug's threaded server with a :class:`Guard`, a cap on connections served at once, and one log line where
+    Werkzeug or socketserver would print a traceback."""
+
+    block_on_close = False  # stop() does not wait for half-open connections to time out
+
+    def __init__(self, host: str, port: int, app: Any, fd: int) -> None:
+        super().__init__(host, port, app, handler=_Handler, fd=fd)
+        self.guard = Guard(host, self.port)
+        self._slots = threading.BoundedSemaphore(MAX_CONNECTIONS)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        if not self._slots.acquire(blocking=False):
+            self.shutdown_request(request)
+            return
+        try:
+            super().process_request(request, client_address)
+        except BaseException:
+            self._slots.release()
+            raise
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._slots.release()
+
+    def handle_error(self, request: Any, client_address: Any) -> None:
+        error = sys.exc_info()[1]
+        log.warning("visualenv viewer: %s: %s: %s", client_address[0], type(error).__name__, error)
+
+    def log(self, type: str, message: str, *args: Any) -> None:
+        lines = (message % args if args else message).strip().splitlines() or [""]
+        log.warning("visualenv viewer: %s", lines[0] if len(lines) == 1 else f"{lines[0]} {lines[-1]}")
 
 
 class ViewerServer:
@@ -66,9 +170,7 @@ class ViewerServer:
         self.interactive = interactive
         listener = _listen(host, port)
         try:
-            self._server: BaseWSGIServer = make_server(
-                host, port, self._wsgi, threaded=True, request_handler=_QuietHandler, fd=listener.fileno()
-            )
+            self._server = _Server(host, port, self._wsgi, fd=listener.fileno())
         finally:
             listener.close()  # the server holds its own duplicate of the socket
         self._thread: threading.Thread | None = None
@@ -102,6 +204,11 @@ class ViewerServer:
             response = self._route(request)
         except HTTPException as exc:
             response = Response(exc.description or exc.name, status=exc.code, mimetype="text/plain")
+        except (ConnectionError, TimeoutError):
+            raise  # the client went, or stalled past the timeout: Werkzeug drops the connection without a word
+        except Exception as exc:  # noqa: BLE001 - one line on the terminal, not a traceback; the server goes on
+            log.warning("visualenv viewer: %s %s: %s: %s", request.method, request.path, type(exc).__name__, exc)
+            response = Response(f"{type(exc).__name__}: {exc}", status=500, mimetype="text/plain")
         return response(environ, start_response)
 
     def _route(self, request: Request) -> Response:
@@ -115,6 +222,9 @@ class ViewerServer:
         if path == "/":
             return Response(page_html(self.title, self.interactive), mimetype="text/html", headers=_NO_STORE)
         if path == "/events":
+            connection = request.environ.get("werkzeug.socket")
+            if connection is not None:
+                connection.settimeout(STREAM_TIMEOUT_S)
             return Response(self._events(), mimetype="text/event-stream", headers=_NO_STORE)
         if path == "/state":
             return _json(state_document(self.board.latest()))
@@ -132,11 +242,19 @@ class ViewerServer:
             raise NotFound("this page only watches (render_mode='human'): it takes no inputs")
         if request.mimetype != "application/json":
             raise UnsupportedMediaType("inputs are JSON (Content-Type: application/json)")
+        try:  # the guard let in a body of a few KiB at most, with its Content-Length
+            data = request.get_data(cache=False)
+        except ClientDisconnected:  # the body stopped short, or stalled past the timeout: dropped without a word
+            raise ConnectionAbortedError("the request's body did not come") from None
         try:
-            message = json.loads(request.get_data(cache=False, as_text=True) or "null")
-        except ValueError:
+            message = json.loads(data or b"null")
+        except (ValueError, RecursionError):
             raise BadRequest("not JSON") from None
-        self.board.inputs.put(check_input(message))
+        try:
+            self.board.inputs.put_nowait(check_input(message))
+        except queue.Full:
+            waiting = self.board.inputs.maxsize
+            raise ServiceUnavailable(f"{waiting} inputs wait for the env already: try again") from None
         return Response(status=204)
 
     def _events(self) -> Iterator[str]:
@@ -177,7 +295,7 @@ def check_input(message: Any) -> dict[str, Any]:
                 raise BadRequest("speed is in steps per second, above 0 and at most 1000")
             return {"type": kind, "value": float(value)}
         name = message.get("name")
-        if not isinstance(name, str) or not name:
+        if not isinstance(name, str) or not 0 < len(name) <= 100:
             raise BadRequest("a slider input names its input: {type: 'slider', name: ..., value: ...}")
         return {"type": kind, "name": name, "value": float(value)}
     return {"type": kind}
@@ -226,16 +344,32 @@ def _listen(host: str, port: int) -> socket.socket:
         # as http.server does: a port left in TIME_WAIT is free
         listener.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
         listener.bind(get_sockaddr(host, port, family))
-        listener.listen(128)
+        listener.listen(LISTEN_BACKLOG)
     except BaseException:
         listener.close()
         raise
     return listener
 
 
+def allow_open_files(wanted: int = 2 * MAX_CONNECTIONS + 256) -> None:
+    """Raises this process's soft limit of open files to `wanted`, within its hard limit: at a usual 1,024, a thousand
+    held connections would leave the server no descriptor to accept the page's next request with."""
+    try:
+        import resource
+    except ImportError:  # Windows: no such limit to raise
+        return
+    soft, hard = resource.getrlimit(resource.RLIMIT_NOFILE)
+    target = wanted if hard == resource.RLIM_INFINITY else min(wanted, hard)
+    if soft != resource.RLIM_INFINITY and soft < target:
+        try:
+            resource.setrlimit(resource.RLIMIT_NOFILE, (target, hard))
+        except (ValueError, OSError):
+            pass
+
+
 def is_local(host: str) -> bool:
     """Whether `host` serves this machine only."""
-    return host in LOCAL_HOSTS
+    return host in LOOPBACK_NAMES
 
 
 _NO_STORE = {"Cache-Control": "no-store"}

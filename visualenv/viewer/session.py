@@ -27,7 +27,7 @@ from visualenv.errors import SpecError, VisualEnvError
 from visualenv.spec.loader import load_spec
 from visualenv.train.model_files import stacked_like
 from visualenv.train.play import with_view
-from visualenv.viewer.board import VIEW, Board, ViewPacer, observation_pictures, plain
+from visualenv.viewer.board import MAX_QUEUED_INPUTS, VIEW, Board, ViewPacer, observation_pictures, plain
 from visualenv.viewer.controls import Controls, controls_for
 from visualenv.viewer.watch import FileWatcher, named_files
 
@@ -37,6 +37,8 @@ END_HOLD_S = 1.0
 WATCH_EVERY_S = 0.5
 #: steps per second at the start
 DEFAULT_SPEED = 10.0
+#: taps, and single steps asked for, that wait for their steps; more are dropped (a flood of keys is not a backlog)
+MAX_PENDING_STEPS = 32
 
 
 @dataclass(frozen=True)
@@ -69,11 +71,12 @@ def describe(exc: BaseException) -> str:
 
 
 def shown_path(path: str | Path) -> str:
-    """A path as the page shows it: relative to the working folder where it lies inside it."""
+    """A path as the page shows it: relative to the working folder where it lies inside it, else its name alone (the
+    page, and so `/state`, needs no more of where the user keeps their files)."""
     try:
         return str(Path(path).resolve().relative_to(Path.cwd()))
     except ValueError:
-        return str(path)
+        return Path(path).name
 
 
 class Session:
@@ -156,17 +159,25 @@ class Session:
     # -- inputs ---------------------------------------------------------------------------------------
 
     def take_inputs(self, timeout: float) -> None:
-        """Wait up to `timeout` seconds for the page's first input, then take every one that came."""
+        """Wait up to `timeout` seconds for the page's first input, then take every one that came.
+
+        Each input costs the loop a few operations, but a reset costs an episode's start: of the resets that came
+        together only the last runs, so that a flood of inputs never delays the pause that follows it.
+        """
         try:
-            message = self.board.inputs.get(timeout=timeout) if timeout > 0 else self.board.inputs.get_nowait()
+            first = self.board.inputs.get(timeout=timeout) if timeout > 0 else self.board.inputs.get_nowait()
         except queue.Empty:
             return
-        while True:
-            self.take(message)
+        messages = [first]
+        while len(messages) < MAX_QUEUED_INPUTS:
             try:
-                message = self.board.inputs.get_nowait()
+                messages.append(self.board.inputs.get_nowait())
             except queue.Empty:
                 break
+        last_reset = max((i for i, m in enumerate(messages) if m["type"] == "reset"), default=-1)
+        for i, message in enumerate(messages):
+            if message["type"] != "reset" or i == last_reset:
+                self.take(message)
         self.publish()
 
     def take(self, message: dict[str, Any]) -> None:
@@ -178,10 +189,11 @@ class Session:
         elif kind == "pause":
             self.paused = not self.paused
             self.taps.clear()
+            self.step_requests = 0
             self.next_step_at = now
         elif kind == "step":
             self.paused = True
-            self.step_requests += 1
+            self.step_requests = min(self.step_requests + 1, MAX_PENDING_STEPS)
         elif kind == "reset":
             self.step_requests = 0
             if self.env is not None:
@@ -208,7 +220,8 @@ class Session:
         if key in self.controls.keys and not self.paused:
             if not any(k in self.controls.keys for k in self.held):
                 self.next_step_at = now  # a fresh press steps at once; holding it repeats at the speed
-            self.taps.append(key)
+            if len(self.taps) < MAX_PENDING_STEPS:
+                self.taps.append(key)
         self.held.append(key)
 
     def _has_action(self) -> bool:
