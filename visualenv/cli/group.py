@@ -45,6 +45,13 @@ trust_pickle_option = click.option(
     "holds, so only for files you trust (docs/security.md)",
 )
 
+trust_code_option = click.option(
+    "--trust-code",
+    is_flag=True,
+    help="import the module a spec's dynamics.python names: importing it runs its code, so only for specs whose author "
+    "you trust (docs/security.md); a spec without dynamics.python needs no flag",
+)
+
 
 def friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Turn visualenv's own errors into messages and exit codes."""

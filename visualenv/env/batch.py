@@ -111,6 +111,7 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
         distractions: float | str | Mapping[str, Any] | None = None,
+        trust_code: bool = False,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
@@ -134,7 +135,10 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
                 if isinstance(spec, Program)
                 else (spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec)))
             )
-            program = compile_spec(loaded, params)
+            program = compile_spec(
+                loaded, params, trust_code=trust_code or isinstance(spec, Program) and spec.trust_code
+            )
+        program.check_code_consent()
         self.program = program
         self.num_envs = n = int(num_envs)
         observation = program.spec.observation
@@ -497,6 +501,7 @@ BATCH_OPTIONS = (
     "max_episode_steps",
     "action_repeat",
     "distractions",
+    "trust_code",
 )
 
 
