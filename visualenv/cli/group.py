@@ -53,6 +53,16 @@ trust_code_option = click.option(
 )
 
 
+def refuse_code_without_consent(spec: str, trust_code: bool) -> None:
+    """The consent error of a spec with ``dynamics.python`` given without --trust-code, raised before a command
+    starts processes or writes files (the envs it makes refuse too, later)."""
+    from visualenv.compiler.python_hook import refuse_untrusted_code
+    from visualenv.env.registration import resolve
+    from visualenv.spec.loader import load_spec
+
+    refuse_untrusted_code(load_spec(resolve(spec)), trust_code)
+
+
 def friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Turn visualenv's own errors into messages and exit codes."""
 

@@ -10,7 +10,14 @@ from typing import Any, Sequence
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import shown_option, ALGORITHMS, friendly, main, trust_code_option
+from visualenv.cli.group import (
+    shown_option,
+    ALGORITHMS,
+    friendly,
+    main,
+    refuse_code_without_consent,
+    trust_code_option,
+)
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
 from visualenv.train.distill import DistillConfig
@@ -141,7 +148,6 @@ def train(
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
     With --backend rllib the envs run in Ray RLlib EnvRunners, on this machine or a cluster (--address).
     """
-    from visualenv.compiler.python_hook import refuse_untrusted_code
     from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
     from visualenv.train.run_folder import new_run_dir
@@ -192,7 +198,7 @@ def train(
         if batched:
             config = dataclasses.replace(config, envs=batched, batched=True, workers=batch_workers)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
-    refuse_untrusted_code(load_spec(resolve(config.spec)), trust_code)  # so does a spec's code without consent
+    refuse_code_without_consent(config.spec, trust_code)  # so does a spec's code without consent
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(
@@ -413,7 +419,6 @@ def _train_rllib(
         from visualenv.train.rllib import RLlibTrainConfig, algorithm_config, train as run_training
     except ImportError as exc:
         raise click.UsageError(f"--backend rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
-    from visualenv.compiler.python_hook import refuse_untrusted_code
     from visualenv.env.registration import resolve
     from visualenv.train.rllib_setup import check_address
     from visualenv.spec.loader import load_spec
@@ -451,7 +456,7 @@ def _train_rllib(
         if params["batched"]:
             config = dataclasses.replace(config, envs_per_runner=params["batched"], batched=True)
     check_address(address)
-    refuse_untrusted_code(load_spec(resolve(config.spec)), trust_code)  # before a Ray cluster starts
+    refuse_code_without_consent(config.spec, trust_code)  # before a Ray cluster starts
     algorithm_config(
         config, trust_code
     )  # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
