@@ -123,3 +123,31 @@ def test_a_spec_without_python_dynamics_needs_no_consent():
     env = visualenv.make("VisualCartPole-v0", render=False)
     env.reset(seed=0)
     assert "trust_code" not in env.spec.kwargs
+
+
+def test_gymnasium_make_vec_takes_the_consent_as_an_env_option(probe, clean_registry):
+    (env_id,) = visualenv.register(probe.path)
+    for mode in ("vector_entry_point", "sync"):
+        refused(probe, lambda mode=mode: gym.make_vec(env_id, 2, vectorization_mode=mode))
+    vec = gym.make_vec(env_id, 2, vectorization_mode="vector_entry_point", trust_code=True)
+    vec.reset(seed=0)
+    assert list(vec.step(np.array([0, 1]))[4]["state"]["x"]) == [1.0, -1.0]
+
+
+def test_sb3_subprocess_workers_carry_the_consent(probe):
+    pytest.importorskip("stable_baselines3")
+    vec = visualenv.make_sb3_vec(str(probe.path), 2, render=False, frame_stack=1, trust_code=True)
+    try:
+        vec.reset()
+        assert vec.step(np.array([0, 1]))[0][:, 0].tolist() == [1.0, -1.0]  # each worker stepped the module's step
+    finally:
+        vec.close()
+
+
+@pytest.mark.parametrize("value", ["false", 1])
+def test_the_consent_is_true_or_false_not_any_truthy_value(probe, value):
+    with pytest.raises(SpecError, match="trust_code"):
+        visualenv.make(probe.path, trust_code=value)
+    with pytest.raises(TypeError, match="trust_code must be True or False"):
+        compile_spec(load_spec(probe.path), trust_code=value)
+    assert not probe.imported

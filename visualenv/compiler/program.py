@@ -155,6 +155,8 @@ def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None, *,
     A ``dynamics.python`` hook is imported (its module's code runs) only with `trust_code`; without it the reference's
     form is checked, nothing is imported, and making an env from the Program raises a SpecError saying so.
     """
+    if not isinstance(trust_code, bool):  # a consent is True, not any value that happens to be truthy ("false")
+        raise TypeError(f"trust_code must be True or False, got {trust_code!r}")
     return _Compiler(loaded, dict(params or {}), trust_code).run()
 
 

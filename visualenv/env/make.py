@@ -73,6 +73,7 @@ def make(
         max_episode_steps=max_episode_steps,
         action_repeat=action_repeat,
         distractions=distractions,
+        trust_code=trust_code,
     )
     options = checked_options(renderer_options)
     path = resolve(target)
