@@ -511,6 +511,7 @@ def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: An
 
     Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``,
     which passes the id's ``max_episode_steps`` (the spec's max_steps, or the one given to make_vec).
+    ``trust_code=True``: the spec's ``dynamics.python`` may be imported (docs/security.md).
     """
     own = {k: kwargs.pop(k) for k in BATCH_OPTIONS if k in kwargs}
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)
