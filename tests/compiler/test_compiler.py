@@ -270,13 +270,16 @@ def test_all_problems_are_reported_at_once():
 
 
 def test_python_dynamics_escape_hatch():
-    env = env_from("""
+    env = env_from(
+        """
         id: Hook-v0
         params: {gain: 3}
         state: {x: {init: 0}}
         actions: {discrete: [{push: 1}]}
         dynamics: {python: "tests.fixtures.dynamics_hook:drift"}
-    """)
+    """,
+        trust_code=True,
+    )
     env.reset(seed=0)
     assert env.step(0)[4]["state"]["x"] == 3.0
 
@@ -291,12 +294,15 @@ def test_python_dynamics_escape_hatch():
     ],
 )
 def test_python_dynamics_mistakes_are_located_faults(function, message):
-    env = env_from(f"""
+    env = env_from(
+        f"""
         id: Hook-v0
         state: {{x: {{init: 0}}}}
         actions: {{discrete: [{{push: 1}}]}}
         dynamics: {{python: "tests.fixtures.dynamics_hook:{function}"}}
-    """)
+    """,
+        trust_code=True,
+    )
     env.reset(seed=0)
     with pytest.raises(StepError) as info:
         env.step(0)
@@ -305,12 +311,15 @@ def test_python_dynamics_mistakes_are_located_faults(function, message):
 
 
 def test_python_dynamics_values_become_floats():
-    env = env_from("""
+    env = env_from(
+        """
         id: Hook-v0
         state: {x: {init: 0}}
         actions: {discrete: [{push: 1}]}
         dynamics: {python: "tests.fixtures.dynamics_hook:keeps_ints"}
-    """)
+    """,
+        trust_code=True,
+    )
     env.reset(seed=0)
     x = env.step(0)[4]["state"]["x"]
     assert x == 2.0 and type(x) is float

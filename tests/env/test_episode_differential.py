@@ -201,9 +201,10 @@ def differential(
 ) -> dict[str, int]:
     """Step a batch of N and N single envs with the same random actions; count what happened (episodes ended, faults).
     `repeat`: the action repeat of both (DeepMind Control's tasks default to theirs: compared with 1, and with it apart)."""
-    batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode, action_repeat=repeat)
+    # trust_code: the hook case imports the test's own module (tests/fixtures/dynamics_hook.py)
+    batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode, action_repeat=repeat, trust_code=True)
     actions = random_actions(batch.action_space, SEED, nan_rate)
-    singles = [VisualEnv(loaded, render=False, action_repeat=repeat) for _ in range(N)]
+    singles = [VisualEnv(loaded, render=False, action_repeat=repeat, trust_code=True) for _ in range(N)]
     names = batch.program.state_names
     counts = {"ended": 0, "errors": 0, "raised": 0}
     obs, info = batch.reset(seed=SEED)

@@ -17,6 +17,7 @@ from visualenv.cli.group import (
     friendly,
     main,
     model_file,
+    trust_code_option,
     trust_pickle_option,
 )
 from visualenv.compat.mkl import compatible_mode
@@ -58,6 +59,7 @@ def _video_path(value: str | None) -> str | None:
 @click.option(
     "--view-size", type=click.IntRange(16, 4096), default=None, help="longer side of the recorded view in pixels"
 )
+@trust_code_option
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def play(
@@ -70,6 +72,7 @@ def play(
     record: str | None,
     view_preset: str | None,
     view_size: int | None,
+    trust_code: bool,
 ) -> None:
     """Run episodes with a random or trained policy; print returns, lengths and success."""
     from visualenv.train.play import play as run_play
@@ -86,6 +89,7 @@ def play(
         view_preset=view_preset,
         view_size=view_size,
         trust_pickle=trust_pickle,
+        trust_code=trust_code,
     )
     for i, ep in enumerate(results):
         click.echo(
@@ -160,6 +164,7 @@ def _difficulty(value: str | None) -> float | None:
     is_flag=True,
     help="record this evaluation as the results.json beside the model (its run's other keys kept): how a shipped file's figures are made",
 )
+@trust_code_option
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the policy's products alike on every CPU
 def eval_command(
@@ -172,6 +177,7 @@ def eval_command(
     distractions: float | None,
     json_out: str | None,
     write_results: bool,
+    trust_code: bool,
 ) -> None:
     """Evaluate a trained model (or random actions) on SPEC: mean return, mean length and success rate of deterministic episodes, with 95 % intervals.
 
@@ -201,7 +207,7 @@ def eval_command(
             param_hint="--distractions",
         )
     if model_path == RANDOM:
-        results, recorded = evaluate_random(spec, episodes=episodes, seed=seed), None
+        results, recorded = evaluate_random(spec, episodes=episodes, seed=seed, trust_code=trust_code), None
         click.echo(
             f"uniform random actions (the baseline): {results['episodes']} episodes, the first reset with seed {results['eval_seed']}"
         )
@@ -215,6 +221,7 @@ def eval_command(
             seed=seed,
             trust_pickle=trust_pickle,
             distractions=distractions,
+            trust_code=trust_code,
         )
         click.echo(
             f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}"
@@ -336,6 +343,7 @@ def _write_results(results: dict, model_path: str, spec: str) -> Path:
 )
 @shown_option("--view-size", default=320, type=click.IntRange(16, 4096), help="longer side of the view in pixels")
 @trust_pickle_option
+@trust_code_option
 @friendly
 def view(
     spec: str,
@@ -347,6 +355,7 @@ def view(
     view_preset: str,
     view_size: int,
     trust_pickle: bool,
+    trust_code: bool,
 ) -> None:
     """Show SPEC live on a local web page: play it with the keys or watch an agent; saving the spec rebuilds it (docs/viewer.md)."""
     from visualenv.viewer.app import serve
@@ -362,6 +371,7 @@ def view(
         view=ViewOptions(None if view_preset == "off" else view_preset, view_size),
         echo=lambda line: click.echo(line, err=line.startswith("warning")),
         trust_pickle=trust_pickle,
+        trust_code=trust_code,
     )
 
 

@@ -8,7 +8,7 @@ from typing import Any
 
 import click
 
-from visualenv.cli.group import shown_option, friendly, main
+from visualenv.cli.group import shown_option, friendly, main, trust_code_option
 from visualenv.errors import SpecError, VisualEnvError
 
 
@@ -16,18 +16,27 @@ from visualenv.errors import SpecError, VisualEnvError
 @click.argument("specs", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @friendly
 def validate(specs: tuple[str, ...]) -> None:
-    """Check spec files (format, names, expressions); prints "ok" for each valid file."""
+    """Check spec files (format, names, expressions); prints "ok" for each valid file.
+
+    Nothing a spec names is imported: a dynamics.python reference is checked by its form only, and the line says so.
+    """
     from visualenv.compiler.program import compile_spec
     from visualenv.spec.loader import load_spec
 
     problems: list[Any] = []
     for path in specs:
         try:
-            compile_spec(load_spec(path))
+            target = compile_spec(load_spec(path)).spec.dynamics.python
         except SpecError as exc:
             problems.extend(exc.diagnostics)
             continue
-        click.echo("ok" if len(specs) == 1 else f"{path}: ok")
+        note = (
+            f" (dynamics.python '{target}' checked by its form only, not imported: making the env imports it, "
+            "which needs --trust-code)"
+            if target
+            else ""
+        )
+        click.echo(("ok" if len(specs) == 1 else f"{path}: ok") + note)
     if problems:
         raise SpecError(problems)
 
@@ -49,8 +58,9 @@ def schema() -> None:
 @shown_option("--seed", default=0, type=click.IntRange(min=0), help="seed of the previewed reset")
 @click.option("--device", type=click.Choice(["cpu", "gpu", "auto"]), default=None, help="override render.device")
 @click.option("--quiet", is_flag=True, help="do not print the observation preview")
+@trust_code_option
 @friendly
-def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -> None:
+def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool, trust_code: bool) -> None:
     """Validate and compile SPEC, build its Blender scene, render a preview.
 
     Writes build/<Id>/env.json (resolved spec, versions, hash), scene.blend
@@ -59,7 +69,7 @@ def build(spec: str, out_dir: str, seed: int, device: str | None, quiet: bool) -
     """
     from visualenv.tools.build import build_env
 
-    result = build_env(spec, out_dir, seed=seed, device=device)
+    result = build_env(spec, out_dir, seed=seed, device=device, trust_code=trust_code)
     click.echo(f"built {result.env_id} in {result.seconds:.1f} s -> {result.folder}/")
     for line in result.summary:
         click.echo("  " + line)
@@ -139,10 +149,11 @@ def _blend_path(blend: str) -> Path:
 @shown_option("-o", "--out", "out_dir", default="frames", type=click.Path(file_okay=False))
 @shown_option("--steps", default=20, type=click.IntRange(min=1), help="steps of the random episode")
 @shown_option("--seed", default=0, type=click.IntRange(min=0))
+@trust_code_option
 @friendly
-def preview(spec: str, out_dir: str, steps: int, seed: int) -> None:
+def preview(spec: str, out_dir: str, steps: int, seed: int, trust_code: bool) -> None:
     """Save a few frames (observation beside the high-res view) of a random episode."""
     from visualenv.tools.build import preview_frames
 
-    paths = preview_frames(spec, out_dir, steps=steps, seed=seed, progress=True)
+    paths = preview_frames(spec, out_dir, steps=steps, seed=seed, progress=True, trust_code=trust_code)
     click.echo(f"wrote {len(paths)} frames to {out_dir}/")

@@ -45,6 +45,23 @@ trust_pickle_option = click.option(
     "holds, so only for files you trust (docs/security.md)",
 )
 
+trust_code_option = click.option(
+    "--trust-code",
+    is_flag=True,
+    help="import the module a spec's dynamics.python names: importing it runs its code, so only for specs whose author "
+    "you trust (docs/security.md); a spec without dynamics.python needs no flag",
+)
+
+
+def refuse_code_without_consent(spec: str, trust_code: bool) -> None:
+    """The consent error of a spec with ``dynamics.python`` given without --trust-code, raised before a command
+    starts processes or writes files (the envs it makes refuse too, later)."""
+    from visualenv.compiler.python_hook import refuse_untrusted_code
+    from visualenv.env.registration import resolve
+    from visualenv.spec.loader import load_spec
+
+    refuse_untrusted_code(load_spec(resolve(spec)), trust_code)
+
 
 def friendly(fn: Callable[..., Any]) -> Callable[..., Any]:
     """Turn visualenv's own errors into messages and exit codes."""

@@ -9,7 +9,15 @@ from typing import Any
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import shown_option, check_writable, friendly, main, worker_counts
+from visualenv.cli.group import (
+    shown_option,
+    check_writable,
+    friendly,
+    main,
+    refuse_code_without_consent,
+    trust_code_option,
+    worker_counts,
+)
 from visualenv.render.base import READBACKS
 
 
@@ -22,6 +30,7 @@ def _bench_batched(
     results: list[Any],
     split: tuple[int, ...] | None = None,
     device: str | None = None,
+    trust_code: bool = False,
 ) -> None:
     """`bench --batched`: each batch size in a fresh process (or in K workers each, `split`), then the per-process
     vector env with one worker per usable core."""
@@ -36,9 +45,11 @@ def _bench_batched(
                 param_hint="--workers",
             )
     for spec in specs:
-        batches = bench_batched(spec, sizes, steps, autoreset=autoreset, workers=split or (None,), device=device)
+        batches = bench_batched(
+            spec, sizes, steps, autoreset=autoreset, workers=split or (None,), device=device, trust_code=trust_code
+        )
         workers = max(2, cores)
-        per_process = bench_parallel(spec, workers, steps, 0, 0.0, device=device)
+        per_process = bench_parallel(spec, workers, steps, 0, 0.0, device=device, trust_code=trust_code)
         click.echo(f"{spec}")
         for line in lines(batches, per_process):
             click.echo(line)
@@ -93,6 +104,7 @@ def _bench_batched(
     help="render on this device (default: the spec's render.device)",
 )
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@trust_code_option
 @friendly
 def bench(
     specs: tuple[str, ...],
@@ -106,6 +118,7 @@ def bench(
     autoreset: str,
     device: str | None,
     json_out: str | None,
+    trust_code: bool,
 ) -> None:
     """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
     import platform
@@ -117,6 +130,8 @@ def bench(
 
     if json_out:
         check_writable(json_out, "--json")
+    for spec in specs:
+        refuse_code_without_consent(spec, trust_code)
     cores = len(usable_cores())
     machine_cores = psutil.cpu_count() or cores
     click.echo(
@@ -131,7 +146,7 @@ def bench(
             if click.get_current_context().get_parameter_source("workers") is ParameterSource.COMMANDLINE
             else None
         )
-        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split, device)
+        _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split, device, trust_code)
     for spec in specs if not batch_sizes else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
         figures = bench_one(
@@ -144,6 +159,7 @@ def bench(
             pin=pin,
             scaling=scaling,
             device=device,
+            trust_code=trust_code,
         )
         for line in figures.lines():
             click.echo(line)
@@ -219,8 +235,9 @@ def compile_kernels(archs: tuple[str, ...], ptxas: str | None, force: bool) -> N
 @shown_option("--envs", default=2, type=click.IntRange(min=1), help="envs on each side (RLlib: one runner each)")
 @shown_option("--steps", default=200, type=click.IntRange(min=1), help="measured steps per env (after a warm-up)")
 @click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@trust_code_option
 @friendly
-def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:
+def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None, trust_code: bool) -> None:
     """Env steps/s through RLlib's EnvRunners vs SB3's SubprocVecEnv (same spec, same envs); memory per runner; time to first sample."""
     try:
         from visualenv.tools.bench_rllib import as_dict, bench_rllib as run_bench
@@ -229,7 +246,8 @@ def bench_rllib(spec: str, envs: int, steps: int, json_out: str | None) -> None:
     import logging
 
     logging.getLogger("ray.rllib").setLevel(logging.ERROR)
-    figures = run_bench(spec, envs=envs, steps=steps)
+    refuse_code_without_consent(spec, trust_code)
+    figures = run_bench(spec, envs=envs, steps=steps, trust_code=trust_code)
     for line in figures.lines():
         click.echo(line)
     if json_out:

@@ -10,7 +10,14 @@ from typing import Any, Sequence
 import click
 from click.core import ParameterSource
 
-from visualenv.cli.group import shown_option, ALGORITHMS, friendly, main
+from visualenv.cli.group import (
+    shown_option,
+    ALGORITHMS,
+    friendly,
+    main,
+    refuse_code_without_consent,
+    trust_code_option,
+)
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
 from visualenv.train.distill import DistillConfig
@@ -107,6 +114,7 @@ FIXED_ON_RESUME = ("frame_stack", "eval_every", "eval_episodes", "final_episodes
 @click.option(
     "--address", default=None, help="rllib: the Ray cluster to join (HOST:PORT or 'auto'); default: start a local one"
 )
+@trust_code_option
 @friendly
 def train(
     spec: str,
@@ -133,6 +141,7 @@ def train(
     batch_workers: int | None = None,
     torch_device: str | None = None,
     render_device: str | None = None,
+    trust_code: bool = False,
 ) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
@@ -153,7 +162,7 @@ def train(
             )
         hyper["device"] = torch_device
     if _chosen_backend(ctx, backend, resume_dir) == "rllib":
-        _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress)
+        _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress, trust_code)
         return
     if resume_dir:
         _refuse_fixed_on_resume(
@@ -189,9 +198,12 @@ def train(
         if batched:
             config = dataclasses.replace(config, envs=batched, batched=True, workers=batch_workers)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
+    refuse_code_without_consent(config.spec, trust_code)  # so does a spec's code without consent
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
-    results = run_training(config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None)
+    results = run_training(
+        config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None, trust_code=trust_code
+    )
     _report(results, run_dir)
 
 
@@ -251,6 +263,7 @@ def train(
 @shown_option("--seed", default=0, type=click.IntRange(0, MAX_TRAIN_SEED))
 @shown_option("-o", "--out", "out_root", default="runs", type=click.Path(file_okay=False))
 @click.option("--no-progress", is_flag=True)
+@trust_code_option
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the final evaluation replays in `visualenv eval` on any CPU
 def distill(
@@ -270,6 +283,7 @@ def distill(
     seed: int,
     out_root: str,
     no_progress: bool,
+    trust_code: bool,
 ) -> None:
     """Teach a pixel policy (CNN on stacked frames) to act as a state-only TEACHER of SPEC does (DAgger).
 
@@ -294,7 +308,7 @@ def distill(
         seed=seed,
         progress=not no_progress,
     )
-    _, results = run_distill(config, out_root, log=click.echo)
+    _, results = run_distill(config, out_root, log=click.echo, trust_code=trust_code)
     click.echo(
         f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
         f"length {results['mean_length']:.1f}; {results['frames']} frames in {results['wall_time_s']:.0f} s"
@@ -398,6 +412,7 @@ def _train_rllib(
     out_root: str,
     address: str | None,
     progress: bool,
+    trust_code: bool = False,
 ) -> None:
     """`train --backend rllib`: checked before a run folder exists, then visualenv.train.rllib.train."""
     try:
@@ -440,12 +455,18 @@ def _train_rllib(
         if params["batched"]:
             config = dataclasses.replace(config, envs_per_runner=params["batched"], batched=True)
     check_address(address)
+    refuse_code_without_consent(config.spec, trust_code)  # before a Ray cluster starts
     # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
-    algorithm_config(config)
+    algorithm_config(config, trust_code)
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(
-        config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None, address=address
+        config,
+        run_dir,
+        resume=bool(resume_dir),
+        changes=hyper if resume_dir else None,
+        address=address,
+        trust_code=trust_code,
     )
     _report(results, run_dir)
 

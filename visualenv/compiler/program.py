@@ -30,7 +30,7 @@ from visualenv.compiler.bindings import BindingsCompiler
 from visualenv.compiler.batch_step import vectorizable, vectorize
 from visualenv.compiler import physics as phys
 from visualenv.compiler.physics_reset import build_reset
-from visualenv.compiler.python_hook import checked_dynamics
+from visualenv.compiler.python_hook import checked_dynamics, reference_problem, refuse_untrusted_code
 from visualenv.compiler.step_functions import StepCompiler
 from visualenv.spec.options import WHERE as OPTIONS_WHERE
 from visualenv.compiler.render_plan import scene_plan, to_plan, views_plan
@@ -67,6 +67,8 @@ class Program:
     # the MuJoCo model and what the generated code reads from it (docs/physics.md)
     physics: "phys.PhysicsPlan | None" = None
     _builders: dict[str, FunctionBuilder] = field(default_factory=dict, repr=False)
+    #: compiled with the caller's consent to import the spec's ``dynamics.python`` (``compile_spec(trust_code=True)``)
+    trust_code: bool = False
     _python_dynamics: Callable[..., Any] | None = field(default=None, repr=False)
     _render_plan: RenderPlan | None = field(default=None, repr=False)
 
@@ -76,6 +78,7 @@ class Program:
 
     def functions(self, random: RandomSource, simulation: Any = None) -> "CompiledFunctions":
         """Fresh callables bound to `random` (one set per env), and to the env's `simulation` for a physics spec."""
+        self.check_code_consent()
         env = function_globals(bind_random(random))
         env["_python_dynamics"] = self._python_dynamics
         env["_random"] = random
@@ -85,6 +88,11 @@ class Program:
             self.physics.bind(env, simulation)
         built = {key: b.build(env) for key, b in self._builders.items()}
         return CompiledFunctions(built["init"], built["step"], built["bind"], built.get("observe"))
+
+    def check_code_consent(self) -> None:
+        """Raise the SpecError, located at ``dynamics.python``, of a spec whose Python hook was not imported: it was
+        compiled without ``trust_code=True``, and no env runs it (docs/security.md)."""
+        refuse_untrusted_code(self.loaded, self._python_dynamics is not None)
 
     def batch_functions(self, physics: Any = None) -> "BatchFunctions":
         """The step and bind functions of many envs at once, on numpy columns (None where one must stay per env).
@@ -140,9 +148,15 @@ class BatchFunctions:
     observe: Callable[[tuple, Any], tuple] | None = None  # a physics spec's state-only observation
 
 
-def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None) -> Program:
-    """Resolve and check every expression in `loaded`; raise SpecError listing all problems."""
-    return _Compiler(loaded, dict(params or {})).run()
+def compile_spec(loaded: LoadedSpec, params: Mapping[str, Any] | None = None, *, trust_code: bool = False) -> Program:
+    """Resolve and check every expression in `loaded`; raise SpecError listing all problems.
+
+    A ``dynamics.python`` hook is imported (its module's code runs) only with `trust_code`; without it the reference's
+    form is checked, nothing is imported, and making an env from the Program raises a SpecError saying so.
+    """
+    if not isinstance(trust_code, bool):  # a consent is True, not any value that happens to be truthy ("false")
+        raise TypeError(f"trust_code must be True or False, got {trust_code!r}")
+    return _Compiler(loaded, dict(params or {}), trust_code).run()
 
 
 def _override_error(key: str, message: str) -> SpecError:
@@ -151,8 +165,9 @@ def _override_error(key: str, message: str) -> SpecError:
 
 
 class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
-    def __init__(self, loaded: LoadedSpec, overrides: dict[str, Any]):
+    def __init__(self, loaded: LoadedSpec, overrides: dict[str, Any], trust_code: bool = False):
         self.loaded = loaded
+        self.trust_code = trust_code
         self.spec = loaded.spec
         self.smap = loaded.source
         self.overrides = overrides
@@ -229,6 +244,7 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             bindings,
             line_maps={k: b.line_map() for k, b in builders.items()},
             physics=self.plan,
+            trust_code=self.trust_code,
             _builders=builders,
             _python_dynamics=python_dynamics,
         )
@@ -443,11 +459,18 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         self.error(("params", key), message, column=column)
 
     def resolve_python_dynamics(self) -> Callable[..., Any] | None:
+        """The spec's Python hook: its reference checked by form, imported only with the caller's consent."""
         target = self.spec.dynamics.python
         if not target:
             return None
         if self.spec.dynamics.update or self.spec.dynamics.let:
             self.error(("dynamics", "python"), "'python' dynamics replace 'let' and 'update': give one or the other")
+        problem = reference_problem(target)
+        if problem is not None:
+            self.error(("dynamics", "python"), problem)
+            return None
+        if not self.trust_code:
+            return None  # not imported: Program.check_code_consent says why when an env is made
         module_name, func_name = target.split(":")
         try:
             module = importlib.import_module(module_name)

@@ -110,6 +110,7 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
         distractions: float | str | Mapping[str, Any] | None = None,
+        trust_code: bool = False,
     ) -> None:
         if isinstance(num_envs, bool) or not isinstance(num_envs, (int, np.integer)) or num_envs < 1:
             raise ValueError(f"num_envs must be an integer of at least 1, got {num_envs!r}")
@@ -125,7 +126,7 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             raise ValueError(f"autoreset_mode must be one of {', '.join(modes)}, got {autoreset_mode!r}")
         self.autoreset_mode = modes[mode]
         self.metadata = {**self.metadata, "autoreset_mode": self.autoreset_mode}
-        program = program_for(spec, params)
+        program = program_for(spec, params, trust_code)
         self.program = program
         self.num_envs = n = int(num_envs)
         observation = program.spec.observation
@@ -466,6 +467,7 @@ BATCH_OPTIONS = (
     "max_episode_steps",
     "action_repeat",
     "distractions",
+    "trust_code",
 )
 
 
@@ -475,6 +477,7 @@ def make_batched(target: str | os.PathLike[str], num_envs: int = 1, **kwargs: An
 
     Also the vector entry point of the registered ids: ``gymnasium.make_vec("visualenv/<Id>", N, vectorization_mode="vector_entry_point")``,
     which passes the id's ``max_episode_steps`` (the spec's max_steps, or the one given to make_vec).
+    ``trust_code=True``: the spec's ``dynamics.python`` may be imported (docs/security.md).
     """
     own = {k: kwargs.pop(k) for k in BATCH_OPTIONS if k in kwargs}
     return BatchedVectorEnv(target, num_envs, renderer_options=kwargs, **own)

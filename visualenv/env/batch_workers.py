@@ -115,7 +115,10 @@ class MultiBatchVectorEnv(gym.vector.VectorEnv):
         from visualenv.render.batch_limits import check_batchable
         from visualenv.spec.loader import load_spec
 
-        program = compile_spec(load_spec(resolve(target)), kwargs.get("params"))
+        program = compile_spec(
+            load_spec(resolve(target)), kwargs.get("params"), trust_code=bool(kwargs.get("trust_code"))
+        )
+        program.check_code_consent()  # the workers are given the consent (trust_code) with the other options
         if kwargs.get("render") is not False and program.spec.observation is not None:
             options = checked_options({k: v for k, v in kwargs.items() if k not in BATCH_OPTIONS})
             check_batchable(program.render_plan().with_options(options), size)

@@ -20,13 +20,19 @@ from visualenv.spec.loader import LoadedSpec, load_spec
 from visualenv.spec.view_models import Observation
 
 
-def program_for(spec: str | os.PathLike[str] | LoadedSpec | Program, params: Mapping[str, Any] | None) -> Program:
-    """The compiled program of a spec file, build folder, id, loaded spec or program, with `params` overridden."""
-    if isinstance(spec, Program) and not params:
-        return spec
+def program_for(
+    spec: str | os.PathLike[str] | LoadedSpec | Program, params: Mapping[str, Any] | None, trust_code: bool
+) -> Program:
+    """The compiled program of a spec file, build folder, id, loaded spec or program, with `params` overridden; its
+    ``dynamics.python`` imported only with `trust_code` (a Program compiled with consent carries it: docs/security.md).
+    """
     if isinstance(spec, Program):
-        return compile_spec(spec.loaded, params)
-    return compile_spec(spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec)), params)
+        program = spec if not params else compile_spec(spec.loaded, params, trust_code=trust_code or spec.trust_code)
+    else:
+        loaded = spec if isinstance(spec, LoadedSpec) else load_spec(resolve(spec))
+        program = compile_spec(loaded, params, trust_code=trust_code)
+    program.check_code_consent()
+    return program
 
 
 def uses_camera(program: Program, render: bool | None) -> bool:

@@ -29,6 +29,7 @@ def make(
     max_episode_steps: int | None = None,
     action_repeat: int | None = None,
     distractions: float | str | dict[str, Any] | None = None,
+    trust_code: bool = False,
     **renderer_options: Any,
 ) -> gym.Env:
     """Make an env from a spec path, a build folder (``build/<Id>``) or an id.
@@ -49,6 +50,8 @@ def make(
             [0, 1] (every kind, fixed per episode), a level of the Distracting Control Suite by name (``"easy"``,
             ``"medium"``, ``"hard"``: 0.1, 0.2, 0.3) or the spec's ``distractions`` section as a dict
             (docs/distractions.md); default: the spec's; 0: none.
+        trust_code: import the module a spec's ``dynamics.python`` names (its code runs): give it only for a spec
+            whose author you trust (docs/security.md); without it such a spec raises :class:`SpecError`.
         renderer_options: passed to the renderer (``device``, ``threads``, ``engine``, ``samples``, ``readback``).
 
     Every option is checked as the same value in a spec would be (``device="tpu"``,
@@ -69,6 +72,7 @@ def make(
         max_episode_steps=max_episode_steps,
         action_repeat=action_repeat,
         distractions=distractions,
+        trust_code=trust_code,
     )
     options = checked_options(renderer_options)
     path = resolve(target)
@@ -81,6 +85,7 @@ def make(
         max_episode_steps=max_episode_steps,
         action_repeat=action_repeat,
         distractions=distractions,
+        trust_code=trust_code,
     )
     given = {
         "render": render,
@@ -91,6 +96,7 @@ def make(
         "resize": resize,
         "action_repeat": action_repeat,
         "distractions": distractions,
+        "trust_code": trust_code or None,
         **renderer_options,
     }
     unwrapped.spec = EnvSpec(

@@ -33,6 +33,8 @@ BUNDLED_DIR = (Path(__file__).parents[1] / "specs").resolve()
 SPECS_PATH_VARIABLE = "VISUALENV_SPECS_PATH"
 #: ids given to register() in this process, with their files
 _REGISTERED: dict[str, Path] = {}
+#: ids given to register(..., trust_code=True): their ``dynamics.python`` is imported by gymnasium.make
+_TRUSTED: set[str] = set()
 
 
 def spec_dirs() -> list[Path]:
@@ -196,7 +198,9 @@ def resolve(target: str | os.PathLike[str]) -> Path:
 def _register_id(env_id: str, target: str, max_steps: int | None) -> str:
     """``visualenv/<env_id>`` in Gymnasium's registry (replaced quietly when it names the same thing)."""
     full = f"{NAMESPACE}/{env_id}"
-    kwargs = {"target": target}
+    kwargs: dict[str, object] = {"target": target}
+    if env_id in _TRUSTED:
+        kwargs["trust_code"] = True
     old = gym.registry.get(full)
     if old is not None and old.kwargs == kwargs and old.max_episode_steps == max_steps:
         return full
@@ -234,7 +238,7 @@ def register_bundled() -> list[str]:
     return ids
 
 
-def register(target: str | os.PathLike[str]) -> list[str]:
+def register(target: str | os.PathLike[str], *, trust_code: bool = False) -> list[str]:
     """Register a spec file, or every spec file in a folder, as ``visualenv/<Id>``; returns the registered ids.
 
     >>> visualenv.register("my_specs/")           # doctest: +SKIP
@@ -245,6 +249,10 @@ def register(target: str | os.PathLike[str]) -> list[str]:
     its ``max_steps`` becomes the id's ``max_episode_steps``. An id is then known to ``visualenv.make``
     and the CLI as well. Registering a file again is harmless; a second file with an id that is
     already known (bundled, in $VISUALENV_SPECS_PATH, or registered before) is a SpecError naming both files.
+
+    Registering reads the specs as data. A spec whose ``dynamics.python`` names a module is made by
+    ``gymnasium.make`` only if registered with ``trust_code=True`` (or made with ``trust_code=True``): importing the
+    module runs its code (docs/security.md).
     """
     path = Path(target)
     if path.is_dir():
@@ -277,5 +285,9 @@ def register(target: str | os.PathLike[str]) -> list[str]:
     ids = []
     for env_id, (file, max_steps) in specs.items():
         _REGISTERED[env_id] = file.resolve()
+        if trust_code:
+            _TRUSTED.add(env_id)
+        else:
+            _TRUSTED.discard(env_id)
         ids.append(_register_id(env_id, str(file.resolve()), max_steps))
     return ids

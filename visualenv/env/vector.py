@@ -161,6 +161,7 @@ def make_vec(
     autoreset_mode, render_mode and the renderer options; stack frames with SB3's VecFrameStack).
     With ``workers=K`` as well, K processes each hold a batch of about n / K envs, each confined to its
     share of the cores (:class:`~visualenv.env.batch_workers.MultiBatchVectorEnv`), still one vector env of `n` envs.
+    ``trust_code=True`` (the consent to import a spec's ``dynamics.python``) reaches every worker with the other kwargs.
     """
     if workers is not None and not batched:
         raise ValueError(

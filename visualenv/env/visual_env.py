@@ -85,6 +85,10 @@ class VisualEnv(PicklingEnv):
     step is shown live on the registered display (:mod:`visualenv.env.human`: the viewer's local web page, whose URL
     is printed once) and ``render()`` returns None, as Gymnasium specifies.
 
+    ## Python dynamics
+    A spec whose ``dynamics.python`` names a module is made only with ``trust_code=True``: importing the module runs
+    its code (docs/security.md). Without it, a :class:`~visualenv.errors.SpecError` located at that line says so.
+
     ## Renderer backend
     ``backend`` names the renderer class as ``module:attribute`` (default:
     Blender), loaded on first render; a test can plug in a fake renderer to
@@ -105,9 +109,10 @@ class VisualEnv(PicklingEnv):
         max_episode_steps: int | None = None,
         action_repeat: int | None = None,
         distractions: float | str | Mapping[str, Any] | None = None,
+        trust_code: bool = False,
     ) -> None:
         super().__init__()
-        program = program_for(spec, params)
+        program = program_for(spec, params, trust_code)
         self._init_args = {
             "render": render,
             "render_mode": render_mode,
@@ -117,6 +122,7 @@ class VisualEnv(PicklingEnv):
             "max_episode_steps": max_episode_steps,
             "action_repeat": action_repeat,
             "distractions": distractions,
+            "trust_code": trust_code,
         }
         self.program = program
         s = program.spec

@@ -54,6 +54,10 @@ class MakeOptions(StrictModel):
         "(easy 0.1, medium 0.2, hard 0.3) or the spec's distractions section as a dict; 0 turns the spec's off",
     )
 
+    trust_code: bool = Field(
+        False, description="import the module the spec's dynamics.python names (it runs code): the caller's consent"
+    )
+
     @field_validator("distractions", mode="before")
     @classmethod
     def _a_level_by_name(cls, value: Any) -> Any:

@@ -169,9 +169,10 @@ def blender_data_blocks() -> int:
     )
 
 
-def device_option(device: str | None) -> dict[str, Any]:
-    """The renderer option that renders on `device` ("cpu" or "gpu"), none to keep the spec's render.device."""
-    return {"device": device} if device else {}
+def device_option(device: str | None, trust_code: bool = False) -> dict[str, Any]:
+    """The renderer option that renders on `device` ("cpu" or "gpu"), none to keep the spec's render.device; with
+    `trust_code`, the consent to import the spec's ``dynamics.python`` (docs/security.md), which make() takes too."""
+    return ({"device": device} if device else {}) | ({"trust_code": True} if trust_code else {})
 
 
 def bench_one(
@@ -189,10 +190,11 @@ def bench_one(
     pin: bool = True,
     scaling: tuple[int, ...] = (),
     device: str | None = None,
+    trust_code: bool = False,
 ) -> Figures:
     from visualenv.env.make import make
 
-    options: dict[str, Any] = {"readback": readback, **device_option(device)}
+    options: dict[str, Any] = {"readback": readback, **device_option(device, trust_code)}
     if threads:
         options["threads"] = threads
     env = StepTimes(make(spec, **options))
@@ -232,10 +234,20 @@ def bench_one(
     env.close()
     if workers > 1:
         figures.parallel = bench_parallel(
-            spec, workers, steps, seed, figures.steps_per_s, readback=readback, pin=pin, device=device
+            spec,
+            workers,
+            steps,
+            seed,
+            figures.steps_per_s,
+            readback=readback,
+            pin=pin,
+            device=device,
+            trust_code=trust_code,
         )
     if scaling:
-        figures.scaling = bench_scaling(spec, scaling, steps, seed, readback=readback, pin=pin, device=device)
+        figures.scaling = bench_scaling(
+            spec, scaling, steps, seed, readback=readback, pin=pin, device=device, trust_code=trust_code
+        )
     return figures
 
 
@@ -248,6 +260,7 @@ def bench_scaling(
     readback: str = "auto",
     pin: bool = True,
     device: str | None = None,
+    trust_code: bool = False,
 ) -> list[dict[str, Any]]:
     """steps/s of n parallel workers for each n in `counts`, against n times one worker confined to one core.
 
@@ -256,11 +269,22 @@ def bench_scaling(
     from visualenv.env.cores import usable_cores
 
     one = bench_parallel(
-        spec, 1, steps, seed, 0.0, readback=readback, shares=[(usable_cores()[0],)], threads=1, device=device
+        spec,
+        1,
+        steps,
+        seed,
+        0.0,
+        readback=readback,
+        shares=[(usable_cores()[0],)],
+        threads=1,
+        device=device,
+        trust_code=trust_code,
     )
     rows = [one]
     for n in counts:
-        row = bench_parallel(spec, n, steps, seed, 0.0, readback=readback, pin=pin, device=device)
+        row = bench_parallel(
+            spec, n, steps, seed, 0.0, readback=readback, pin=pin, device=device, trust_code=trust_code
+        )
         row["vs_confined"] = row["steps_per_s"] / (n * one["steps_per_s"])
         rows.append(row)
     return rows
@@ -409,6 +433,7 @@ def bench_parallel(
     shares: list[tuple[int, ...] | None] | None = None,
     threads: int | None = None,
     device: str | None = None,
+    trust_code: bool = False,
 ) -> dict[str, Any]:
     """The single env's figures for `workers` envs stepped together (AsyncVectorEnv, one Blender process each).
 
@@ -418,7 +443,7 @@ def bench_parallel(
     from visualenv.env.vector import WorkerVectorEnv, env_factory, with_render_threads
 
     shares = shares or worker_cores(workers, pin)
-    options: dict[str, Any] = {"readback": readback, **device_option(device)}
+    options: dict[str, Any] = {"readback": readback, **device_option(device, trust_code)}
     vec: Any = WorkerVectorEnv(
         [
             env_factory(

@@ -37,6 +37,7 @@ def measure_batch(
     autoreset: str = "next_step",
     instanced: bool = True,
     device: str | None = None,
+    trust_code: bool = False,
 ) -> dict[str, Any]:
     """One batch of `n` envs: build, warm up, time `steps` steps (run it in a fresh process for its memory).
 
@@ -55,7 +56,14 @@ def measure_batch(
     before = process.memory_info().rss
     start = time.perf_counter()
     backend = BATCH_BACKEND if instanced else f"{__name__}:copied_renderer"
-    env = BatchedVectorEnv(spec, n, autoreset_mode=autoreset, renderer_options=device_option(device), backend=backend)
+    env = BatchedVectorEnv(
+        spec,
+        n,
+        autoreset_mode=autoreset,
+        renderer_options=device_option(device),
+        backend=backend,
+        trust_code=trust_code,
+    )
     env.reset(seed=seed)
     build_s = time.perf_counter() - start
     rng = np.random.default_rng(seed)
@@ -115,16 +123,25 @@ def copied_renderer(plan: Any, options: Any, *, num_envs: int) -> Any:
     return BatchedBlenderRenderer(plan, options, num_envs=num_envs, instanced=False)
 
 
-def _in_child(spec: str, n: int, steps: int, seed: int, autoreset: str, device: str | None, queue: Any) -> None:
+def _in_child(
+    spec: str, n: int, steps: int, seed: int, autoreset: str, device: str | None, queue: Any, trust_code: bool = False
+) -> None:
     apply_policy()  # a process visualenv started: freed memory kept for the next render call (visualenv.compat.glibc)
     try:
-        queue.put(measure_batch(spec, n, steps, seed, autoreset, device=device))
+        queue.put(measure_batch(spec, n, steps, seed, autoreset, device=device, trust_code=trust_code))
     except BaseException as exc:  # noqa: BLE001 - reported by the parent, which goes on with the next size
         queue.put({"envs": n, "error": f"{type(exc).__name__}: {exc}"})
 
 
 def measure_workers(
-    spec: str, n: int, workers: int, steps: int, seed: int = 0, autoreset: str = "next_step", device: str | None = None
+    spec: str,
+    n: int,
+    workers: int,
+    steps: int,
+    seed: int = 0,
+    autoreset: str = "next_step",
+    device: str | None = None,
+    trust_code: bool = False,
 ) -> dict[str, Any]:
     """`n` envs as `workers` batches in worker processes (MultiBatchVectorEnv): env-steps/s and the workers' memory.
 
@@ -136,7 +153,7 @@ def measure_workers(
     from visualenv.tools.bench import device_option
 
     start = time.perf_counter()
-    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset, **device_option(device))
+    env = MultiBatchVectorEnv(spec, n, workers, autoreset_mode=autoreset, **device_option(device, trust_code))
     try:
         env.reset(seed=seed)
         build_s = time.perf_counter() - start
@@ -182,6 +199,7 @@ def bench_batched(
     autoreset: str = "next_step",
     workers: tuple[int | None, ...] = (None,),
     device: str | None = None,
+    trust_code: bool = False,
 ) -> list[dict[str, Any]]:
     """Each batch size in its own fresh process (`workers` None), or split among K worker processes (each K of `workers`);
     a size that fails is reported, not raised."""
@@ -191,13 +209,13 @@ def bench_batched(
         for k in workers:
             if k is not None:
                 try:
-                    out.append(measure_workers(spec, n, k, max(1, steps // n), seed, autoreset, device))
+                    out.append(measure_workers(spec, n, k, max(1, steps // n), seed, autoreset, device, trust_code))
                 except Exception as exc:  # noqa: BLE001 - reported, and the next size goes on
                     out.append({"envs": n, "workers": k, "error": f"{type(exc).__name__}: {exc}"})
                 continue
             queue = context.Queue()
             child = context.Process(
-                target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, device, queue)
+                target=_in_child, args=(spec, n, max(1, steps // n), seed, autoreset, device, queue, trust_code)
             )
             child.start()
             out.append(_result_of(child, queue, n))

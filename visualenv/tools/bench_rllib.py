@@ -50,10 +50,13 @@ class RLlibFigures:
         ]
 
 
-def _sb3_steps_per_s(spec: str, envs: int, steps: int, warmup: int) -> tuple[float, list[float]]:
+def _sb3_steps_per_s(
+    spec: str, envs: int, steps: int, warmup: int, trust_code: bool = False
+) -> tuple[float, list[float]]:
     from visualenv.env.sb3_vec import make_sb3_vec
 
-    vec = make_sb3_vec(spec, envs, frame_stack=4)
+    options: dict[str, Any] = {"trust_code": True} if trust_code else {}
+    vec = make_sb3_vec(spec, envs, frame_stack=4, **options)
     try:
         vec.reset()
         rng = np.random.default_rng(0)
@@ -83,8 +86,9 @@ def _rllib_steps_per_s(runners: Any, steps: int, random_actions: bool) -> float:
     return sum(sampled) / (time.perf_counter() - start)
 
 
-def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20) -> RLlibFigures:
-    """RLlib first (its time to first sample counts from this process's start), then SB3."""
+def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20, trust_code: bool = False) -> RLlibFigures:
+    """RLlib first (its time to first sample counts from this process's start), then SB3. `trust_code`: the spec's
+    ``dynamics.python`` may be imported, in the runners and SB3's workers too (docs/security.md)."""
     import ray
 
     from visualenv.train.rllib_setup import ppo_config
@@ -99,7 +103,7 @@ def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20) ->
         logging_level=logging.ERROR,
     )
     try:
-        algo = ppo_config(spec, env_runners=envs, envs_per_runner=1).build_algo()
+        algo = ppo_config(spec, env_runners=envs, envs_per_runner=1, trust_code=trust_code).build_algo()
         try:
             runners = algo.env_runner_group
             runners.foreach_env_runner(
@@ -118,7 +122,7 @@ def bench_rllib(spec: str, envs: int = 2, steps: int = 200, warmup: int = 20) ->
             algo.stop()
     finally:
         ray.shutdown()
-    figures.sb3_steps_per_s, figures.sb3_worker_rss_mb = _sb3_steps_per_s(spec, envs, steps, warmup)
+    figures.sb3_steps_per_s, figures.sb3_worker_rss_mb = _sb3_steps_per_s(spec, envs, steps, warmup, trust_code)
     figures.ratio = figures.rllib_steps_per_s / figures.sb3_steps_per_s if figures.sb3_steps_per_s else 0.0
     return figures
 

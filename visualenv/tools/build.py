@@ -40,7 +40,12 @@ class BuildResult:
 
 
 def build_env(
-    spec: str | Path, out_dir: str | Path = "build", *, seed: int = 0, device: str | None = None
+    spec: str | Path,
+    out_dir: str | Path = "build",
+    *,
+    seed: int = 0,
+    device: str | None = None,
+    trust_code: bool = False,
 ) -> BuildResult:
     from visualenv.env import VisualEnv
     from visualenv.spec.loader import load_spec
@@ -49,8 +54,8 @@ def build_env(
     source = resolve(spec)
     loaded = load_spec(source)
     options: dict[str, Any] = {"device": device} if device else {}
+    env = VisualEnv(loaded, render_mode="rgb_array", renderer_options=options or None, trust_code=trust_code)
     out_root = make_dir(Path(out_dir))
-    env = VisualEnv(loaded, render_mode="rgb_array", renderer_options=options or None)
     final = out_root / loaded.spec.id
     tmp = Path(tempfile.mkdtemp(prefix=f".{loaded.spec.id}.", dir=out_root))
     try:
@@ -110,7 +115,13 @@ def _swap_in(tmp: Path, final: Path) -> None:
 
 
 def preview_frames(
-    spec: str | Path, out_dir: str | Path, *, steps: int = 20, seed: int = 0, progress: bool = False
+    spec: str | Path,
+    out_dir: str | Path,
+    *,
+    steps: int = 20,
+    seed: int = 0,
+    progress: bool = False,
+    trust_code: bool = False,
 ) -> list[Path]:
     """Frames of a random-action episode (observation beside the view), as PNGs; `progress` shows a bar on stderr
     (each frame is two renders, the high-resolution view a slow one)."""
@@ -118,8 +129,8 @@ def preview_frames(
     from visualenv.spec.loader import load_spec
 
     loaded = load_spec(resolve(spec))
+    env = VisualEnv(loaded, render_mode="rgb_array", trust_code=trust_code)
     out = make_dir(Path(out_dir))
-    env = VisualEnv(loaded, render_mode="rgb_array")
     paths = []
     bar = tqdm(total=steps + 1, desc="preview", unit="frame", disable=not progress, file=sys.stderr)
     try:

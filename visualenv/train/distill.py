@@ -62,10 +62,11 @@ class DistillConfig:
 
 
 def distill(
-    config: DistillConfig, out_root: str | Path, *, log: Callable[[str], None] = print
+    config: DistillConfig, out_root: str | Path, *, log: Callable[[str], None] = print, trust_code: bool = False
 ) -> tuple[Path, dict[str, Any]]:
     """Run DAgger rounds, keep the round that evaluates best, evaluate it on fresh seeds: the run folder made under
-    `out_root` once the teacher and the student are checked, and results.json's figures."""
+    `out_root` once the teacher and the student are checked, and results.json's figures. `trust_code`: the spec's
+    ``dynamics.python`` may be imported (docs/security.md)."""
     import torch
 
     from visualenv.env.registration import resolve
@@ -76,10 +77,12 @@ def distill(
     spec_path = str(resolve(config.spec))
     mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there
     teacher = load_model(config.teacher)
-    _check_teacher(teacher, spec_path)
+    _check_teacher(teacher, spec_path, trust_code)
     torch.manual_seed(config.seed)
-    rollouts = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack)
-    evaluator = make_eval_env(spec_path, seed=selection_seed(config.seed), frame_stack=config.frame_stack)
+    rollouts = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack, trust_code=trust_code)
+    evaluator = make_eval_env(
+        spec_path, seed=selection_seed(config.seed), frame_stack=config.frame_stack, trust_code=trust_code
+    )
     try:
         student = _student(rollouts, load_model(config.student) if config.student else None)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
@@ -95,7 +98,9 @@ def distill(
     finally:
         rollouts.close()
         evaluator.close()
-    final_env = make_eval_env(spec_path, seed=final_seed(config.seed), frame_stack=config.frame_stack)
+    final_env = make_eval_env(
+        spec_path, seed=final_seed(config.seed), frame_stack=config.frame_stack, trust_code=trust_code
+    )
     try:
         results = final_evaluation(
             load_model(best_path), final_env, config.final_eval_episodes, final_seed(config.seed)
@@ -179,12 +184,12 @@ def _record_run(folder: RunFolder, config: DistillConfig, spec_path: str) -> Non
     record_run(folder, {**asdict(config), "algo": "dagger", "render": True}, spec_path, backend="distill", extra=extra)
 
 
-def _check_teacher(teacher: Any, spec_path: str) -> None:
+def _check_teacher(teacher: Any, spec_path: str, trust_code: bool = False) -> None:
     """A teacher that cannot read this env's state, or acts in another action space, is a clear error before anything runs."""
     from visualenv.env import VisualEnv
     from visualenv.spec import load_spec
 
-    env = VisualEnv(load_spec(spec_path), render=False)
+    env = VisualEnv(load_spec(spec_path), render=False, trust_code=trust_code)
     try:
         state, actions = env.observation_space, env.action_space
     finally:

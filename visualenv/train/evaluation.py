@@ -91,11 +91,12 @@ def make_eval_env(
     render: bool = True,
     transpose: bool = True,
     distractions: float | str | None = None,
+    trust_code: bool = False,
 ) -> Any:
     """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.
 
     RLlib's policies take the images channels last (``transpose=False``). `distractions`: the env's difficulty
-    (docs/distractions.md), else the spec's.
+    (docs/distractions.md), else the spec's. `trust_code`: the spec's ``dynamics.python`` may be imported.
     """
     from stable_baselines3.common.vec_env import VecTransposeImage
 
@@ -104,6 +105,8 @@ def make_eval_env(
     options: dict[str, Any] = {} if render else {"render": False}
     if distractions is not None:
         options["distractions"] = distractions
+    if trust_code:
+        options["trust_code"] = True
     env = make_sb3_vec(spec_path, 1, seed=seed, frame_stack=frame_stack, threads=1, **options)
     return VecTransposeImage(env) if transpose and channels_last_images(env.observation_space) else env
 
@@ -250,12 +253,14 @@ class RandomPolicy:
         return np.array([self.action_space.sample()]), None
 
 
-def evaluate_random(spec: str, *, episodes: int | None = None, seed: int | None = None) -> dict[str, Any]:
+def evaluate_random(
+    spec: str, *, episodes: int | None = None, seed: int | None = None, trust_code: bool = False
+) -> dict[str, Any]:
     """`visualenv eval --model random`: uniform random actions on `episodes` episodes from a reset seeded `seed` (default :data:`FRESH_SEED`)."""
     from visualenv.env.registration import resolve
 
     seed = FRESH_SEED if seed is None else seed
-    vec_env = make_eval_env(str(resolve(spec)), seed=seed, frame_stack=1, render=False)
+    vec_env = make_eval_env(str(resolve(spec)), seed=seed, frame_stack=1, render=False, trust_code=trust_code)
     try:
         return final_evaluation(RandomPolicy(vec_env.action_space, seed), vec_env, episodes or FINAL_EPISODES, seed)
     finally:
@@ -271,6 +276,7 @@ def evaluate_model(
     seed: int | None = None,
     trust_pickle: bool = False,
     distractions: float | str | None = None,
+    trust_code: bool = False,
 ) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
 
@@ -278,6 +284,7 @@ def evaluate_model(
     else PPO, 100 episodes and :data:`FRESH_SEED`; the run's final evaluation is replayed when the
     seed is the run's. `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`).
     `distractions`: the observations distracted at this difficulty (the results say so in ``distractions``).
+    `trust_code`: the spec's ``dynamics.python`` may be imported (docs/security.md).
     """
     from gymnasium import spaces
 
@@ -295,7 +302,7 @@ def evaluate_model(
     render = recorded.render if recorded else not (isinstance(space, spaces.Box) and len(space.shape) == 1)
     spec_path = str(resolve(spec))
     # refuses a model of another env
-    probe = stacked_like(VisualEnv(load_spec(spec_path), render=render), model, str(model_path))
+    probe = stacked_like(VisualEnv(load_spec(spec_path), render=render, trust_code=trust_code), model, str(model_path))
     probe.close()
     frame_stack = recorded.frame_stack if recorded else (probe.depth if isinstance(probe, FrameStack) else 1)
     vec_env = make_eval_env(
@@ -305,6 +312,7 @@ def evaluate_model(
         render=render,
         transpose=not channels_last_images(space),
         distractions=distractions,
+        trust_code=trust_code,
     )
     try:
         results = final_evaluation(

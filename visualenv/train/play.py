@@ -68,15 +68,17 @@ def play(
     view_preset: str | None = None,
     view_size: int | None = None,
     trust_pickle: bool = False,
+    trust_code: bool = False,
 ) -> list[Episode]:
     """Play `episodes`; with `record`, save a GIF/MP4 of the view beside the agent's observation.
 
-    `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`)."""
+    `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`).
+    `trust_code`: the spec's ``dynamics.python`` module may be imported (docs/security.md)."""
     if record:
         check_recording(record)
     mkl.pin()  # before the model is built (its initialisation calls MKL): the actions eval's episodes had
     model = load_model(model_path, algo, trust_pickle=trust_pickle) if model_path else None
-    env = _play_env(spec, model, model_path, view_preset, view_size)
+    env = _play_env(spec, model, model_path, view_preset, view_size, trust_code)
     env.action_space.seed(seed)
     frames: list[np.ndarray] | None = [] if record else None
     try:
@@ -89,14 +91,21 @@ def play(
     return results
 
 
-def _play_env(spec: str, model: Any, model_path: str | None, view_preset: str | None, view_size: int | None) -> Any:
+def _play_env(
+    spec: str,
+    model: Any,
+    model_path: str | None,
+    view_preset: str | None,
+    view_size: int | None,
+    trust_code: bool = False,
+) -> Any:
     """The env with the recorded view's settings, its frames stacked as the model was trained."""
     from visualenv.env import VisualEnv
     from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
 
     loaded = with_view(load_spec(resolve(spec)), preset=view_preset, size=view_size)
-    env: Any = VisualEnv(loaded, render_mode="rgb_array")
+    env: Any = VisualEnv(loaded, render_mode="rgb_array", trust_code=trust_code)
     if model is None:
         return env
     try:

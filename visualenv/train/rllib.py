@@ -73,8 +73,11 @@ class RLlibTrainConfig:
     backend: str = BACKEND
 
 
-def algorithm_config(config: RLlibTrainConfig) -> Any:
-    """The PPOConfig of this run; checks the spec and the hyperparameters before anything starts."""
+def algorithm_config(config: RLlibTrainConfig, trust_code: bool = False) -> Any:
+    """The PPOConfig of this run; checks the spec and the hyperparameters before anything starts.
+
+    `trust_code`: the spec's ``dynamics.python`` may be imported (the caller's consent, not part of the run's config).
+    """
     from visualenv.train.rllib_setup import ppo_config
 
     return ppo_config(
@@ -87,6 +90,7 @@ def algorithm_config(config: RLlibTrainConfig) -> Any:
         hyperparams=config.hyperparams,
         pin=config.pin,
         batched=config.batched,
+        trust_code=trust_code,
     )
 
 
@@ -261,8 +265,11 @@ def train(
     resume: bool = False,
     changes: dict[str, Any] | None = None,
     address: str | None = None,
+    trust_code: bool = False,
 ) -> dict[str, Any]:
-    """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results."""
+    """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results.
+
+    `trust_code`: the spec's ``dynamics.python`` may be imported, in every EnvRunner too (docs/security.md)."""
     from visualenv.train.plots import training_plots
     from visualenv.env.registration import resolve
     from visualenv.train.model_files import load_model
@@ -271,13 +278,18 @@ def train(
     from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_record, selection_seed
 
     check_address(address)
-    algo_config = algorithm_config(config)
+    algo_config = algorithm_config(config, trust_code)
     run_dir.mkdir(parents=True, exist_ok=True)
     folder = RunFolder(run_dir)
     folder.logs.mkdir(exist_ok=True)
     frame_stack = config.frame_stack if config.render else 0
     eval_env = make_eval_env(
-        config.spec, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render, transpose=False
+        config.spec,
+        seed=selection_seed(config.seed),
+        frame_stack=frame_stack,
+        render=config.render,
+        transpose=False,
+        trust_code=trust_code,
     )
     stop = _StopRequest()
     cpus = max(len(usable_cores()), config.env_runners)  # a local cluster: one CPU per runner even on a small machine

@@ -81,7 +81,8 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
     ``render`` (False: the state vector, no Blender), ``threads`` (render threads), ``pin``
     (confine the runner's process to a core of its node that no other runner has claimed),
     ``batched`` with ``num_envs`` (RLlib adds it when it calls the vector entry point): the runner's
-    envs as one BatchedVectorEnv, frames stacked by :class:`VectorFrameStack`.
+    envs as one BatchedVectorEnv, frames stacked by :class:`VectorFrameStack`; ``trust_code``: the spec's
+    ``dynamics.python`` may be imported (the driver's consent, carried to every runner).
     """
     from visualenv.env.batch import BatchedVectorEnv
     from visualenv.env.cores import claim_core
@@ -91,14 +92,17 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
     if getattr(env_config, "worker_index", 0) > 0:  # a remote EnvRunner: a process Ray started for the run's envs
         apply_policy()  # freed memory kept for the next render call (visualenv.compat.glibc)
     spec, batched, n = env_config["spec"], env_config.get("batched", False), int(env_config.get("num_envs", 1))
+    trust = bool(env_config.get("trust_code", False))
     if not env_config.get("render", True):
-        return BatchedVectorEnv(spec, n, render=False) if batched else make(spec, render=False)
+        if batched:
+            return BatchedVectorEnv(spec, n, render=False, trust_code=trust)
+        return make(spec, render=False, trust_code=trust)
     threads, frame_stack = env_config.get("threads", 1), env_config.get("frame_stack", 4)
     if env_config.get("pin", True) and threads == 1:
         claim_core()  # before Blender starts, which sizes its thread pools to the cores it may use
     if not batched:
-        return ScaledImage(make(spec, frame_stack=frame_stack, threads=threads))
-    vec: gym.vector.VectorEnv = BatchedVectorEnv(spec, n, renderer_options={"threads": threads})
+        return ScaledImage(make(spec, frame_stack=frame_stack, threads=threads, trust_code=trust))
+    vec: gym.vector.VectorEnv = BatchedVectorEnv(spec, n, renderer_options={"threads": threads}, trust_code=trust)
     return ScaledImages(VectorFrameStack(vec, frame_stack) if frame_stack > 1 else vec)
 
 
@@ -168,11 +172,11 @@ def model_config(observation_space: spaces.Space) -> Any:
     return DefaultModelConfig(fcnet_hiddens=[64, 64], vf_share_layers=False)
 
 
-def check_observation(target: str, render: bool = True) -> spaces.Space:
+def check_observation(target: str, render: bool = True, trust_code: bool = False) -> spaces.Space:
     """The observation space the model will see (no Blender started); a Dict observation is refused."""
     from visualenv.env.make import make
 
-    env = make(target, render=render)
+    env = make(target, render=render, trust_code=trust_code)
     space = env.observation_space
     env.close()
     if isinstance(space, spaces.Dict):
@@ -241,11 +245,13 @@ def ppo_config(
     cpus_per_runner: int = 1,
     pin: bool = True,
     batched: bool = False,
+    trust_code: bool = False,
 ) -> Any:
     """A PPOConfig for `target`: `env_runners` remote EnvRunners of `envs_per_runner` envs each, restarted when they die.
 
     `batched`: each runner's envs are one BatchedVectorEnv (one Blender scene, one render call per step)
-    rather than a Gymnasium SyncVectorEnv of separate scenes.
+    rather than a Gymnasium SyncVectorEnv of separate scenes. `trust_code`: the spec's ``dynamics.python`` may be
+    imported, here and in every EnvRunner (docs/security.md).
 
     Every env renders with ``cpus_per_runner // envs_per_runner`` threads (at least one),
     so a runner uses the CPUs Ray reserves for it. Hyperparameters are ``PPOConfig.training``'s; the defaults
@@ -257,13 +263,19 @@ def ppo_config(
         raise ConfigError("--env-runners must be at least 1: the driver's own EnvRunner does not render")
     hyperparams = dict(hyperparams or {})
     check_hyperparameters(hyperparams)
-    space = check_observation(target, render)
+    space = check_observation(target, render, trust_code)
     if render:
         height, width, channels = space.shape or (0, 0, 0)
         space = spaces.Box(0.0, 1.0, (height, width, channels * max(1, frame_stack)), np.float32)
     threads = cpus_per_runner if batched else max(1, cpus_per_runner // envs_per_runner)
     name, env_config = register(
-        target, frame_stack=frame_stack, render=render, threads=threads, pin=pin, batched=batched
+        target,
+        frame_stack=frame_stack,
+        render=render,
+        threads=threads,
+        pin=pin,
+        batched=batched,
+        **({"trust_code": True} if trust_code else {}),
     )
     return (
         PPOConfig()

@@ -138,12 +138,19 @@ def _vec_kwargs(config: TrainConfig) -> dict[str, Any]:
 
 
 def train(
-    config: TrainConfig, run_dir: Path, *, resume: bool = False, changes: dict[str, Any] | None = None
+    config: TrainConfig,
+    run_dir: Path,
+    *,
+    resume: bool = False,
+    changes: dict[str, Any] | None = None,
+    trust_code: bool = False,
 ) -> dict[str, Any]:
     """Train, evaluate the best model, draw the plots; returns the final results.
 
     A resumed run continues from ``checkpoints/latest.zip``; `changes` are hyperparameters
     that differ from the saved model's from now on (recorded in config.json under ``resumes``).
+    `trust_code`: the spec's ``dynamics.python`` may be imported, in every env process (docs/security.md); it is the
+    caller's consent, never read from or written to the run folder.
     """
     from visualenv.env.registration import resolve
 
@@ -155,7 +162,7 @@ def train(
     record_run(folder, config, spec_path, backend="sb3", resume=resume, changes=changes)
     if resume:
         folder.keep_earlier_progress()
-    train_env, eval_env = _make_envs(config, spec_path, folder, resume)
+    train_env, eval_env = _make_envs(config, spec_path, folder, resume, trust_code)
     latest = folder.latest_zip
     started = time.perf_counter()
     stopper = _StopOnSignal()
@@ -170,20 +177,28 @@ def train(
     return _finish(model, config, eval_env, folder, wall=time.perf_counter() - started, stopped_early=stopper.requested)
 
 
-def _make_envs(config: TrainConfig, spec_path: str, folder: RunFolder, resume: bool) -> tuple[Any, Any]:
+def _make_envs(
+    config: TrainConfig, spec_path: str, folder: RunFolder, resume: bool, trust_code: bool = False
+) -> tuple[Any, Any]:
     """The training envs (subprocesses, one Blender each) and the evaluation env, which renders once now to fail early."""
     from visualenv.env.sb3_vec import make_sb3_batched, make_sb3_vec
 
     frame_stack = config.frame_stack if config.render else 0
     vec_options = dict(seed=config.seed, frame_stack=frame_stack, pin=config.pin, **_vec_kwargs(config))
     vec_options.update(monitor_dir=str(folder.monitor), monitor_append=resume)
+    if trust_code:  # given to each env's process with the other options
+        vec_options["trust_code"] = True
     if config.batched:
         train_env = make_sb3_batched(spec_path, config.envs, workers=config.workers, **vec_options)
     else:
         train_env = make_sb3_vec(spec_path, config.envs, **vec_options)
     try:
         eval_env = make_eval_env(
-            spec_path, seed=selection_seed(config.seed), frame_stack=frame_stack, render=config.render
+            spec_path,
+            seed=selection_seed(config.seed),
+            frame_stack=frame_stack,
+            render=config.render,
+            trust_code=trust_code,
         )
         eval_env.reset()  # render now: a broken eval env fails here, not after the first eval_every steps
     except BaseException:

@@ -44,18 +44,20 @@ def serve(
     view: ViewOptions = DEFAULT_VIEW,
     echo: Callable[[str], None] = print,
     trust_pickle: bool = False,
+    trust_code: bool = False,
 ) -> None:
     """Serve `target` (a spec file or an id) on ``http://host:port/`` until Ctrl-C, then stop cleanly.
 
     A spec or model that cannot be found, or a port that cannot be had, raises VisualEnvError before anything is
     served; a spec that does not build is served anyway, with its error on the page, so that saving a fix goes on.
+    `trust_code`: the spec's ``dynamics.python`` may be imported (docs/security.md).
     """
     path = resolve(target)
     agent = load_agent(path, model, algo, trust_pickle=trust_pickle) if model else None
     board = Board()
     allow_open_files()
     server = _server(board, host, port, path)
-    session = Session(path, board, agent=agent, seed=seed, view=view)
+    session = Session(path, board, agent=agent, seed=seed, view=view, trust_code=trust_code)
     server.start()
     try:
         echo(f"visualenv view: {server.url} (Ctrl-C stops)")

@@ -91,8 +91,10 @@ class Session:
         seed: int = 0,
         view: ViewOptions = DEFAULT_VIEW,
         speed: float = DEFAULT_SPEED,
+        trust_code: bool = False,
     ) -> None:
         self.path = path
+        self.trust_code = trust_code  # the spec's dynamics.python may be imported (docs/security.md)
         self.board = board
         self.agent = agent
         self.view = view
@@ -362,7 +364,7 @@ class Session:
         )
         if viewable:
             loaded = with_view(loaded, preset=self.view.preset, size=self.view.size)
-        base = VisualEnv(loaded, render_mode="rgb_array" if viewable else None)
+        base = VisualEnv(loaded, render_mode="rgb_array" if viewable else None, trust_code=self.trust_code)
         try:
             env = stacked_like(base, self.agent.model, self.agent.path) if self.agent is not None else base
             controls = controls_for(base.program)
