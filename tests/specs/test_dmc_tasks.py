@@ -42,6 +42,8 @@ TASKS = {
     "DMC-cartpole-swingup_sparse-v0": ("cartpole", "swingup_sparse", 2, "fixed"),
     "DMC-walker-stand-v0": ("walker", "stand", 2, "side"),
     "DMC-walker-run-v0": ("walker", "run", 2, "side"),
+    "DMC-pendulum-swingup-v0": ("pendulum", "swingup", 2, "fixed"),
+    "DMC-acrobot-swingup-v0": ("acrobot", "swingup", 2, "fixed"),
 }
 #: the ids added from DrQ-v2's benchmark (at its action repeat, 2), after PlaNet's six
 DRQ_V2 = list(TASKS)[5:]
@@ -224,24 +226,32 @@ def test_a_batch_steps_as_dm_control(ident: str) -> None:
     batch.close()
 
 
-@pytest.mark.parametrize("ident", ["DMC-cartpole-balance_sparse-v0", "DMC-cartpole-swingup_sparse-v0"])
-def test_a_sparse_cartpole_pays_where_dm_controls_pays(ident: str) -> None:
-    """Random actions rarely earn swingup_sparse anything: states set around its bounds (the cart within 0.25 m, the
-    pole within about 5.7 degrees) in both, then a step, pay 1 and 0 as dm_control's do."""
+#: the sparse tasks random actions rarely pay: qpos set around where they pay (cartpole: the cart within 0.25 m and the
+#: pole within about 5.7 degrees of upright; pendulum: the pole within 8 degrees), as (low, high) of each qpos
+AROUND_THE_BOUNDS = {
+    "DMC-cartpole-balance_sparse-v0": ([-0.4, -0.15], [0.4, 0.15]),
+    "DMC-cartpole-swingup_sparse-v0": ([-0.4, -0.15], [0.4, 0.15]),
+    "DMC-pendulum-swingup-v0": ([-0.3], [0.3]),
+}
+
+
+@pytest.mark.parametrize("ident", AROUND_THE_BOUNDS)
+def test_a_sparse_task_pays_where_dm_controls_pays(ident: str) -> None:
+    """States set around a sparse reward's bounds in both, then a step, pay 1 and 0 as dm_control's do."""
     ours = visualenv.make(ident, render=False, action_repeat=1)
     theirs = load(ident, 0)
     ours.reset(seed=0)
     theirs.reset()
     model, data = ours.unwrapped.model, ours.unwrapped.data
     paid = []
-    for cart, pole in np.random.default_rng(2).uniform([-0.4, -0.15], [0.4, 0.15], size=(60, 2)):
-        data.qpos[:] = cart, pole
+    for qpos in np.random.default_rng(2).uniform(*AROUND_THE_BOUNDS[ident], size=(60, model.nq)):
+        data.qpos[:] = qpos
         data.qvel[:] = 0.0
         mujoco.mj_forward(model, data)
         with theirs.physics.reset_context():
-            theirs.physics.data.qpos[:] = cart, pole
+            theirs.physics.data.qpos[:] = qpos
             theirs.physics.data.qvel[:] = 0.0
-        reward = ours.step(np.zeros(1))[1]
-        assert reward == theirs.step(np.zeros(1)).reward, (cart, pole)
+        reward = ours.step(np.zeros(model.nu))[1]
+        assert reward == theirs.step(np.zeros(model.nu)).reward, qpos
         paid.append(reward)
     assert set(paid) == {0.0, 1.0}
