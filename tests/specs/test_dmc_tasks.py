@@ -29,8 +29,8 @@ import visualenv  # noqa: E402
 from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.physics.simulation import integration_state  # noqa: E402
 
-#: id -> (dm_control's domain and task, the default action repeat, dm_control's camera 0): PlaNet's repeat for the
-#: first six DMC ids, DrQ-v2's (2) for those DrQ-v2's benchmark added
+#: id -> (dm_control's domain and task, the default action repeat, dm_control's camera 0): PlaNet's repeat for its
+#: tasks (the first five here; cartpole swingup is test_dmc_parity.py's), DrQ-v2's (2) for those DrQ-v2's list added
 TASKS = {
     "DMC-reacher-easy-v0": ("reacher", "easy", 4, "fixed"),
     "DMC-cheetah-run-v0": ("cheetah", "run", 4, "side"),
@@ -45,7 +45,7 @@ TASKS = {
     "DMC-pendulum-swingup-v0": ("pendulum", "swingup", 2, "fixed"),
     "DMC-acrobot-swingup-v0": ("acrobot", "swingup", 2, "fixed"),
 }
-#: the ids added from DrQ-v2's benchmark (at its action repeat, 2), after PlaNet's six
+#: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
 DRQ_V2 = list(TASKS)[5:]
 #: the tasks whose reward is dense: a run of random actions earns some, so comparing rewards compares numbers that vary
 DENSE = (
@@ -54,6 +54,7 @@ DENSE = (
     "DMC-cartpole-balance-v0",
     "DMC-walker-stand-v0",
     "DMC-walker-run-v0",
+    "DMC-acrobot-swingup-v0",
 )
 #: the model fields each task's reset writes (dm_control's initialize_episode), compared after every reset
 WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping",)}
