@@ -71,8 +71,9 @@ def test_each_cheetah_tile_is_its_own_env_seen_from_its_own_tracking_camera() ->
             env.close()
 
 
-def test_a_walker_batch_shows_each_env_as_it_is_alone() -> None:
-    ident = "DMC-walker-walk-v0"
+@pytest.mark.parametrize("ident", ["DMC-walker-walk-v0", "DMC-pendulum-swingup-v0"])
+def test_a_dmc_batch_shows_each_env_as_it_is_alone(ident: str) -> None:
+    """Walker's tracking camera; pendulum, one of the models DrQ-v2's tasks added (spot-lit, seen from above)."""
     batch = visualenv.make_vec(ident, 2, batched=True)
     alone = [visualenv.make(ident) for _ in range(2)]
     rng = np.random.default_rng(1)
@@ -80,7 +81,7 @@ def test_a_walker_batch_shows_each_env_as_it_is_alone() -> None:
         tiles, _ = batch.reset(seed=4)
         frames = [env.reset(seed=4 + k)[0] for k, env in enumerate(alone)]
         for _ in range(10):
-            actions = rng.uniform(-1, 1, (2, 6)).astype(np.float32)
+            actions = rng.uniform(-1, 1, (2, *batch.single_action_space.shape)).astype(np.float32)
             tiles, *_ = batch.step(actions)
             frames = [env.step(actions[k])[0] for k, env in enumerate(alone)]
         for k in range(2):

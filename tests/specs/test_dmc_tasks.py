@@ -1,4 +1,4 @@
-"""DeepMind Control, reproduced: reacher easy, cheetah run, finger spin, ball_in_cup catch and walker walk step as dm_control's.
+"""DeepMind Control, reproduced: the DMC ids but cartpole swingup (test_dmc_parity.py) step as dm_control's tasks.
 
 Against the installed dm_control (the ``dmc`` extra, which ``make setup`` installs), as
 tests/specs/test_dmc_parity.py does for cartpole: with the same seed (``reset(seed=s)`` and
@@ -29,14 +29,33 @@ import visualenv  # noqa: E402
 from visualenv.env.batch import BatchedVectorEnv  # noqa: E402
 from visualenv.physics.simulation import integration_state  # noqa: E402
 
-#: id -> (dm_control's domain and task, PlaNet's action repeat, dm_control's camera 0)
+#: id -> (dm_control's domain and task, the default action repeat, dm_control's camera 0): PlaNet's repeat for its
+#: tasks (the first five here; cartpole swingup is test_dmc_parity.py's), DrQ-v2's (2) for those DrQ-v2's list added
 TASKS = {
     "DMC-reacher-easy-v0": ("reacher", "easy", 4, "fixed"),
     "DMC-cheetah-run-v0": ("cheetah", "run", 4, "side"),
     "DMC-finger-spin-v0": ("finger", "spin", 2, "cam0"),
     "DMC-ball_in_cup-catch-v0": ("ball_in_cup", "catch", 4, "cam0"),
     "DMC-walker-walk-v0": ("walker", "walk", 2, "side"),
+    "DMC-cartpole-balance-v0": ("cartpole", "balance", 2, "fixed"),
+    "DMC-cartpole-balance_sparse-v0": ("cartpole", "balance_sparse", 2, "fixed"),
+    "DMC-cartpole-swingup_sparse-v0": ("cartpole", "swingup_sparse", 2, "fixed"),
+    "DMC-walker-stand-v0": ("walker", "stand", 2, "side"),
+    "DMC-walker-run-v0": ("walker", "run", 2, "side"),
+    "DMC-pendulum-swingup-v0": ("pendulum", "swingup", 2, "fixed"),
+    "DMC-acrobot-swingup-v0": ("acrobot", "swingup", 2, "fixed"),
 }
+#: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
+DRQ_V2 = list(TASKS)[5:]
+#: the tasks whose reward is dense: a run of random actions earns some, so comparing rewards compares numbers that vary
+DENSE = (
+    "DMC-cheetah-run-v0",
+    "DMC-walker-walk-v0",
+    "DMC-cartpole-balance-v0",
+    "DMC-walker-stand-v0",
+    "DMC-walker-run-v0",
+    "DMC-acrobot-swingup-v0",
+)
 #: the model fields each task's reset writes (dm_control's initialize_episode), compared after every reset
 WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping",)}
 
@@ -92,7 +111,7 @@ def test_the_task_equals_dm_control_over_two_episodes(ident: str, seed: int) -> 
             rewarded += reward
         obs, _ = ours.reset()  # no seed: both streams go on
         time_step = theirs.reset()
-    if TASKS[ident][0] in ("cheetah", "walker"):  # dense rewards: the comparison compared numbers that vary
+    if ident in DENSE:
         assert rewarded > 0
 
 
@@ -186,9 +205,10 @@ def test_a_pickled_reacher_carries_its_target() -> None:
         np.testing.assert_array_equal(a[0], b[0])
 
 
-@pytest.mark.parametrize("ident", ["DMC-reacher-easy-v0", "DMC-ball_in_cup-catch-v0", "DMC-cheetah-run-v0"])
+@pytest.mark.parametrize("ident", ["DMC-reacher-easy-v0", "DMC-ball_in_cup-catch-v0", "DMC-cheetah-run-v0", *DRQ_V2])
 def test_a_batch_steps_as_dm_control(ident: str) -> None:
-    """Each env of a state-only batch has its own target (reacher), reads the model's sizes (ball_in_cup) and settles (cheetah)."""
+    """Each env of a state-only batch has its own target (reacher), reads the model's sizes (ball_in_cup) and settles
+    (cheetah); each of the ids DrQ-v2's benchmark added draws its own reset and reward."""
     batch = BatchedVectorEnv(ident, 3, render=False, action_repeat=1)
     obs, _ = batch.reset(seed=11)
     theirs = [load(ident, 11 + i) for i in range(3)]
@@ -205,3 +225,34 @@ def test_a_batch_steps_as_dm_control(ident: str) -> None:
             np.testing.assert_allclose(batch.lanes[i].data.qpos, t.physics.data.qpos, rtol=0, atol=1e-9)
             np.testing.assert_allclose(obs[i], their_observation(time_step), rtol=0, atol=1e-9)
     batch.close()
+
+
+#: the sparse tasks random actions rarely pay: qpos set around where they pay (cartpole: the cart within 0.25 m and the
+#: pole within about 5.7 degrees of upright; pendulum: the pole within 8 degrees), as (low, high) of each qpos
+AROUND_THE_BOUNDS = {
+    "DMC-cartpole-balance_sparse-v0": ([-0.4, -0.15], [0.4, 0.15]),
+    "DMC-cartpole-swingup_sparse-v0": ([-0.4, -0.15], [0.4, 0.15]),
+    "DMC-pendulum-swingup-v0": ([-0.3], [0.3]),
+}
+
+
+@pytest.mark.parametrize("ident", AROUND_THE_BOUNDS)
+def test_a_sparse_task_pays_where_dm_controls_pays(ident: str) -> None:
+    """States set around a sparse reward's bounds in both, then a step, pay 1 and 0 as dm_control's do."""
+    ours = visualenv.make(ident, render=False, action_repeat=1)
+    theirs = load(ident, 0)
+    ours.reset(seed=0)
+    theirs.reset()
+    model, data = ours.unwrapped.model, ours.unwrapped.data
+    paid = []
+    for qpos in np.random.default_rng(2).uniform(*AROUND_THE_BOUNDS[ident], size=(60, model.nq)):
+        data.qpos[:] = qpos
+        data.qvel[:] = 0.0
+        mujoco.mj_forward(model, data)
+        with theirs.physics.reset_context():
+            theirs.physics.data.qpos[:] = qpos
+            theirs.physics.data.qvel[:] = 0.0
+        reward = ours.step(np.zeros(model.nu))[1]
+        assert reward == theirs.step(np.zeros(model.nu)).reward, qpos
+        paid.append(reward)
+    assert set(paid) == {0.0, 1.0}

@@ -44,6 +44,8 @@ MODELS = {
     "finger.xml": "dm_control.suite.finger",
     "ball_in_cup.xml": "dm_control.suite.ball_in_cup",
     "walker.xml": "dm_control.suite.walker",
+    "pendulum.xml": "dm_control.suite.pendulum",
+    "acrobot.xml": "dm_control.suite.acrobot",
 }
 COMMON = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
 RENAMED_CAMERA = ('<camera name="hand" ', '<camera name="hand_camera" ')
