@@ -501,11 +501,12 @@ def migrate(record: Any, results: Any = None, folder: RunFolder | None = None, *
     """
     older = isinstance(record, dict) and "format_version" not in record
     if record is not None:
-        record = _migrated_record(record, where)
+        record = _migrated_record(record, str(folder.config) if folder else where)  # an error names the file
     note = None
     if results is not None:
         results = check_results(
-            {k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict) else results, where
+            {k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict) else results,
+            str(folder.results) if folder else where,
         )
         if record is not None and "eval_seed" not in results:
             if not older:
