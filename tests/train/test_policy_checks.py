@@ -6,7 +6,9 @@ The hostile files are made here from a small real policy (tests/fixtures/policy_
 import json
 import math
 import resource
+import struct
 import time
+from pathlib import Path
 
 import pytest
 
@@ -27,6 +29,7 @@ from visualenv.train.policy_check import MAX_LIST, MAX_SPACE_ELEMENTS, PARAMETER
 from visualenv.train.policy_kinds import PolicyFileError
 
 torch = pytest.importorskip("torch")
+RESULTS = Path(__file__).resolve().parents[2] / "results"
 
 
 @pytest.fixture(scope="module")
@@ -41,6 +44,15 @@ def _no_bpy(monkeypatch):
 
 def _peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
+
+
+def _lying_header(weights):
+    """A safetensors header that claims a 15,000 x 15,000 tensor, with 64 bytes of data."""
+    header = json.dumps(
+        {"action_net.weight": {"dtype": "F32", "shape": [15000, 15000], "data_offsets": [0, 9 * 10**8]}}
+    )
+    weights.write_bytes(struct.pack("<Q", len(header)) + header.encode() + bytes(64))
+    return weights
 
 
 HOSTILE = {
@@ -80,6 +92,10 @@ HOSTILE = {
     "extra tensor": (
         lambda w: rewrite_weights(w, lambda t: {**t, "backdoor": torch.zeros(3)}),
         r"tensor 'backdoor' is not one of the network's",
+    ),
+    "a header that lies": (
+        lambda w: _lying_header(w),
+        r"policy.safetensors: not a safetensors file \(.*incomplete metadata",
     ),
     "not safetensors": (
         lambda w: w.write_bytes(b"\xff" * 64) and w,
@@ -160,3 +176,13 @@ def test_distill_refuses_a_pickle_with_what_it_takes(tmp_path):
     assert "`visualenv distill` takes policy files only" in text and "visualenv export-policy --trust-pickle" in text
     assert "pass --trust-pickle" not in text and "trust_pickle=True" not in text
     assert not (tmp_path / "runs").exists()
+
+
+@pytest.mark.parametrize("folder", sorted(p.name for p in RESULTS.glob("*") if (p / "policy.safetensors").is_file()))
+def test_every_shipped_agent_passes_the_checks(folder):
+    """Each shipped policy file (read only) fits the network its policy.json describes, within the limits."""
+    weights = RESULTS / folder / "policy.safetensors"
+    meta = json.loads(weights.with_suffix(".json").read_text())
+    if meta["backend"] == "rllib":
+        pytest.importorskip("ray.rllib")
+    assert load_model(weights).action_space is not None
