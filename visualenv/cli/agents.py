@@ -381,8 +381,9 @@ def view(
 @trust_pickle_option
 @shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS), help="the algorithm of an SB3 .zip")
 @click.option("--float32", "full", is_flag=True, help="keep float32 weights (default: float16, half the size)")
+@click.option("--force", is_flag=True, help="replace OUT.safetensors and OUT.json where they exist")
 @friendly
-def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: bool) -> None:
+def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: bool, force: bool) -> None:
     """Write the policy of a trained model as a policy file: OUT.safetensors (its weights) and OUT.json (what builds the
     network), without the optimizer's state; what the shipped agents in results/ are.
 
@@ -396,7 +397,7 @@ def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: boo
         raise click.BadParameter(
             f"expected a file ending in {WEIGHTS} (its .json is written beside it)", param_hint="OUT"
         )
-    path = write(model, out, algo=algo, half=not full, trust_pickle=trust_pickle)
+    path = write(model, out, algo=algo, half=not full, trust_pickle=trust_pickle, force=force)
     click.echo(
         f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights) and {path.with_suffix('.json').name}"
     )

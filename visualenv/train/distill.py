@@ -72,11 +72,11 @@ def distill(
     from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
     from visualenv.train.evaluation import final_evaluation, final_seed, make_eval_env, selection_seed
-    from visualenv.train.model_files import load_model, save_policy
+    from visualenv.train.model_files import load_model, load_policy_file, save_policy
 
     spec_path = str(resolve(config.spec))
     mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there
-    teacher = load_model(config.teacher)
+    teacher = load_policy_file(config.teacher, "distill")
     _check_teacher(teacher, spec_path, trust_code)
     torch.manual_seed(config.seed)
     rollouts = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack, trust_code=trust_code)
@@ -84,7 +84,7 @@ def distill(
         spec_path, seed=selection_seed(config.seed), frame_stack=config.frame_stack, trust_code=trust_code
     )
     try:
-        student = _student(rollouts, load_model(config.student) if config.student else None)
+        student = _student(rollouts, load_policy_file(config.student, "distill") if config.student else None)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
         folder = RunFolder(run_dir)
         log(f"run folder: {run_dir}")

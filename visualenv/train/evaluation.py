@@ -30,7 +30,7 @@ from visualenv.compat import mkl
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.train.model_files import load_model, stacked_like
 from visualenv.train.reproducible import machine_record, pinned_inference
-from visualenv.train.run_folder import RESULT_KEYS, RunFolder, legacy_eval_seed, read_run
+from visualenv.train.run_folder import RESULT_KEYS, legacy_eval_seed, load_evaluations, read_run
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
 SELECTION_BAND, FINAL_BAND, FRESH_BAND = 1, 2, 3
@@ -62,12 +62,10 @@ def seed_purpose(seed: int) -> str:
 
 def selection_record(run_dir: Path, seed: int) -> dict[str, Any] | None:
     """The periodic evaluation that picked the best model (the first with the highest mean return, as SB3's EvalCallback picks)."""
-    try:
-        with np.load(RunFolder(run_dir).evaluations) as saved:
-            timesteps, returns = saved["timesteps"], saved["results"]
-            successes = saved["successes"] if "successes" in saved.files else None
-    except (OSError, KeyError, ValueError):
+    saved = load_evaluations(run_dir) or {}
+    if "timesteps" not in saved or "results" not in saved:
         return None
+    timesteps, returns, successes = saved["timesteps"], saved["results"], saved.get("successes")
     if len(timesteps) == 0:
         return None
     best = int(np.argmax(returns.mean(axis=1)))

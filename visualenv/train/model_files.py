@@ -62,8 +62,18 @@ def load_model(model_path: str | Path, algo: str = "ppo", *, trust_pickle: bool 
         raise VisualEnvError(f"cannot load {path} as a {algo.upper()} model: {exc}") from None
 
 
-def pickle_refusal(path: Path) -> str:
-    """Why a file that is not a policy file is not loaded, and what to do about it."""
+def load_policy_file(model_path: str | Path, command: str) -> Any:
+    """A policy file, for `command`, which takes no pickle-based model (it has no --trust-pickle): any other file is
+    refused with the way to convert it once."""
+    path = Path(model_path)
+    if not is_policy_file(path):
+        raise PickleRefused(pickle_refusal(path, command=command))
+    return read_policy(path)
+
+
+def pickle_refusal(path: Path, command: str | None = None) -> str:
+    """Why a file that is not a policy file is not loaded, and what to do about it; for a `command` that takes policy
+    files only, the conversion alone."""
     kind = (
         "an RLlib checkpoint folder: a pickle-based file"
         if path.is_dir()
@@ -73,10 +83,15 @@ def pickle_refusal(path: Path) -> str:
         if path.suffix == ".zip"
         else f"not a policy file ({WEIGHTS} with its .json), so it would load as a pickle-based file"
     )
+    convert = f"`visualenv export-policy --trust-pickle {path} OUT{WEIGHTS}`, then use OUT{WEIGHTS} (docs/security.md)"
+    if command is not None:
+        return (
+            f"{path} is {kind}, and loading it can run any code it holds; `visualenv {command}` takes policy files "
+            f"only. If you trust where it came from, convert it once: {convert}"
+        )
     return (
         f"{path} is {kind}, and loading it can run any code it holds. If you trust where it came from, "
-        f"pass --trust-pickle (Python: trust_pickle=True), or convert it once: `visualenv export-policy --trust-pickle {path} "
-        f"OUT{WEIGHTS}`, then use OUT{WEIGHTS} (docs/security.md)"
+        f"pass --trust-pickle (Python: trust_pickle=True), or convert it once: {convert}"
     )
 
 
@@ -139,12 +154,31 @@ def save_rllib_module(module: Any, out: str | Path, *, half: bool = True, run_di
 
 
 def export_policy(
-    model_path: str | Path, out: str | Path, *, algo: str = "ppo", half: bool = True, trust_pickle: bool = False
+    model_path: str | Path,
+    out: str | Path,
+    *,
+    algo: str = "ppo",
+    half: bool = True,
+    trust_pickle: bool = False,
+    force: bool = False,
 ) -> Path:
     """`visualenv export-policy`: any model :func:`load_model` takes, as a policy file, with what the run beside it
-    records (its config.json); a policy file exported again keeps what it knew."""
+    records (its config.json); a policy file exported again keeps what it knew. An existing OUT pair is replaced only
+    with `force`; weights that are not finite are refused."""
+    from visualenv.train.policy_check import check_finite_module
+    from visualenv.train.policy_format import policy_files
+
     source = Path(model_path)
+    pair = policy_files(out)
+    existing = [p for p in pair or () if p.exists()]
+    if existing and not force:
+        raise VisualEnvError(
+            f"{' and '.join(map(str, existing))} already exist{'s' if len(existing) == 1 else ''}: "
+            "pass --force (Python: force=True) to replace them"
+        )
     model = load_model(source, algo, trust_pickle=trust_pickle)
+    module = model.module if hasattr(model, "module") else getattr(model, "policy", model)
+    check_finite_module(module, str(source))
     if hasattr(model, "module"):  # an RLlib policy
         weights = save_rllib_module(model, out, half=half, run_dir=source.parent)
     else:

@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from visualenv.train.policy_check import check_against, check_arguments, check_finite, check_space_size, on_meta
 from visualenv.train.policy_kinds import PolicyFileError, build_rllib_module, build_sb3_policy, rllib_kind, sb3_kind
 
 FORMAT, FORMAT_VERSION = "visualenv-policy", 1
@@ -260,41 +261,66 @@ def read_meta(path: str | Path) -> dict[str, Any]:
 
 def read_policy(path: str | Path) -> Any:
     """The policy that a policy file pair holds, in float32 on the CPU, ready to act: an SB3 policy, or an
-    RLlib module behind SB3's ``predict`` (:class:`visualenv.train.rllib_setup.RLlibPolicy`)."""
+    RLlib module behind SB3's ``predict`` (:class:`visualenv.train.rllib_setup.RLlibPolicy`).
+
+    The network policy.json describes is checked against the weights' header, and the weights to be finite, before
+    it is built (:mod:`visualenv.train.policy_check`)."""
     meta = read_meta(path)
     weights_path, meta_path = policy_files(path)  # type: ignore[misc]
-    observation_space = space_from_data(meta.get("observation_space"), "observation_space")
-    action_space = space_from_data(meta.get("action_space"), "action_space")
+    try:
+        for what in ("observation_space", "action_space"):
+            check_space_size(meta.get(what), what)
+        observation_space = space_from_data(meta.get("observation_space"), "observation_space")
+        action_space = space_from_data(meta.get("action_space"), "action_space")
+    except PolicyFileError as exc:
+        raise PolicyFileError(f"{meta_path}: {exc}") from None
     arguments = meta.get("arguments")
     if not isinstance(arguments, dict):
         raise PolicyFileError(f"{meta_path}: arguments: expected a mapping of the network's arguments")
     backend = meta.get("backend")
-    try:
-        if backend == "sb3":
-            policy = build_sb3_policy(meta.get("policy"), arguments, observation_space, action_space)
-            read_weights_into(policy, weights_path)
-            policy.set_training_mode(False)
-            return policy
-        if backend == "rllib":
-            return _rllib_policy(meta, arguments, observation_space, action_space, weights_path)
-    except PolicyFileError as exc:
-        raise PolicyFileError(f"{meta_path}: {exc}") from None
-    except (TypeError, ValueError, AssertionError) as exc:  # what SB3 and RLlib raise for arguments that do not fit
-        raise PolicyFileError(
-            f"{meta_path}: cannot build {meta.get('policy')} from its arguments: {type(exc).__name__}: {exc}"
-        ) from None
-    raise PolicyFileError(f"{meta_path}: backend {backend!r} is not sb3 or rllib")
+    if backend not in ("sb3", "rllib"):
+        raise PolicyFileError(f"{meta_path}: backend {backend!r} is not sb3 or rllib")
+    if backend == "sb3":
 
+        def build() -> Any:
+            return build_sb3_policy(meta.get("policy"), arguments, observation_space, action_space)
 
-def _rllib_policy(
-    meta: dict[str, Any], arguments: dict[str, Any], observation_space: Any, action_space: Any, weights_path: Path
-) -> Any:
-    try:
-        from visualenv.train.rllib_setup import RLlibPolicy, quiet_deprecations
-    except ImportError as exc:
-        raise PolicyFileError(f"an RLlib policy needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
-    with quiet_deprecations():
-        module = build_rllib_module(meta.get("policy"), arguments, observation_space, action_space)
+    else:
+        build = _rllib_builder(meta, arguments, observation_space, action_space)
+    check_against(_built(on_meta, build, meta, meta_path), weights_path, meta_path)
+    check_finite(weights_path)
+    module = _built(lambda make: make(), build, meta, meta_path)
     read_weights_into(module, weights_path)
+    if backend == "sb3":
+        module.set_training_mode(False)
+        return module
+    from visualenv.train.rllib_setup import RLlibPolicy
+
     module.eval()
     return RLlibPolicy(module)
+
+
+def _built(how: Any, build: Any, meta: dict[str, Any], meta_path: Path) -> Any:
+    """The network `build` makes, made `how` (on meta, or for real), its arguments checked first; what SB3 and RLlib
+    raise for arguments that do not fit is a PolicyFileError that names policy.json."""
+    try:
+        check_arguments(meta.get("arguments"))
+        return how(build)
+    except PolicyFileError as exc:
+        raise PolicyFileError(f"{meta_path}: {exc}") from None
+    except (TypeError, ValueError, AssertionError, RuntimeError, IndexError, KeyError, ZeroDivisionError) as exc:
+        detail = " ".join(f"{type(exc).__name__}: {exc}".split())[:400]
+        raise PolicyFileError(f"{meta_path}: cannot build {meta.get('policy')} from its arguments: {detail}") from None
+
+
+def _rllib_builder(meta: dict[str, Any], arguments: dict[str, Any], observation_space: Any, action_space: Any) -> Any:
+    try:
+        from visualenv.train.rllib_setup import quiet_deprecations
+    except ImportError as exc:
+        raise PolicyFileError(f"an RLlib policy needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
+
+    def build() -> Any:
+        with quiet_deprecations():
+            return build_rllib_module(meta.get("policy"), arguments, observation_space, action_space)
+
+    return build

@@ -28,10 +28,12 @@ or ``distill``), ``command``, ``config`` (the settings: :class:`~visualenv.train
 from __future__ import annotations
 
 import csv
+import itertools
 import json
 import math
 import shlex
 import sys
+import zipfile
 from dataclasses import asdict, dataclass, is_dataclass
 from datetime import datetime
 from pathlib import Path
@@ -48,6 +50,8 @@ BACKENDS = ("sb3", "rllib", "distill")
 MAX_TRAIN_SEED = 2**31 - 1  # `train --seed`: with up to 2**31 envs, training seeds stay below the selection band
 LEGACY_EVAL_OFFSET = 10_000  # runs before the seed bands picked and reported on one stream: the run's seed + this
 
+MAX_RESETS_BEFORE = 10_000  # resets `eval` replays before an older run's final evaluation (each renders a frame)
+MAX_EVALUATIONS_BYTES = 2**28  # evaluations.npz's arrays, their size read from its zip directory before decompressing
 LOGS, PROGRESS = "logs", "progress.csv"
 SHIPPED_POLICY = "policy" + WEIGHTS
 CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained
@@ -345,7 +349,7 @@ RESULT_RULES: dict[str, Rule] = {
     "mean_reward": Rule(float),
     "success_rate": Rule(float, 0, 1),
     "eval_seed": Rule(int, 0, 2**63 - 1),
-    "resets_before": Rule(int, 0, 10**9),
+    "resets_before": Rule(int, 0, MAX_RESETS_BEFORE),
     "steps": Rule(int, 0, 10**12),
     "model": Rule(str),
     "stopped_early": Rule(bool),
@@ -497,11 +501,12 @@ def migrate(record: Any, results: Any = None, folder: RunFolder | None = None, *
     """
     older = isinstance(record, dict) and "format_version" not in record
     if record is not None:
-        record = _migrated_record(record, where)
+        record = _migrated_record(record, str(folder.config) if folder else where)  # an error names the file
     note = None
     if results is not None:
         results = check_results(
-            {k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict) else results, where
+            {k: v for k, v in results.items() if k != "reevaluated"} if isinstance(results, dict) else results,
+            str(folder.results) if folder else where,
         )
         if record is not None and "eval_seed" not in results:
             if not older:
@@ -535,23 +540,39 @@ def _with_legacy_seed(
     config = record["config"]
     results = {**results, "eval_seed": legacy_eval_seed(config["seed"])}
     periodic = _periodic_evaluations_in_last_segment(folder) if folder and record["backend"] == "sb3" else None
-    if periodic is None:
-        return results, (
-            "results.json predates eval_seed: the periodic evaluations before its final one "
-            "(on the same env) cannot be counted, so its episodes differ"
+    resets = None if periodic is None else 1 + periodic * (config["eval_episodes"] + 1)
+    if resets is None or resets > MAX_RESETS_BEFORE:
+        why = (
+            "cannot be counted" if resets is None else f"are {resets:,} resets, more than {MAX_RESETS_BEFORE:,} replay"
         )
-    return {**results, "resets_before": 1 + periodic * (config["eval_episodes"] + 1)}, None
+        return results, (
+            f"results.json predates eval_seed: the periodic evaluations before its final one (on the same env) {why}, "
+            "so its episodes differ"
+        )
+    return {**results, "resets_before": resets}, None
+
+
+def load_evaluations(run: str | Path | RunFolder) -> dict[str, np.ndarray] | None:
+    """evaluations.npz's arrays; None where it is missing, unreadable or its arrays exceed MAX_EVALUATIONS_BYTES."""
+    path = _folder(run).evaluations
+    try:
+        with zipfile.ZipFile(path) as archive:
+            if sum(member.file_size for member in archive.infolist()) > MAX_EVALUATIONS_BYTES:
+                return None
+        with np.load(path) as saved:  # without pickles
+            return {name: saved[name] for name in saved.files}
+    except (OSError, ValueError, MemoryError, zipfile.BadZipFile):
+        return None
 
 
 def _periodic_evaluations_in_last_segment(folder: RunFolder) -> int | None:
     """Evaluations (evaluations.npz) since the last segment of the run started; None if its start is unknown."""
-    try:
-        with np.load(folder.evaluations) as saved:
-            timesteps = saved["timesteps"]
-    except (OSError, KeyError, ValueError):
-        timesteps = np.zeros(0)
+    timesteps = (load_evaluations(folder) or {}).get("timesteps", np.zeros(0))
     start = _last_segment_start(folder)
-    return None if start is None else int(np.sum(timesteps > start))
+    try:
+        return None if start is None else int(np.sum(np.asarray(timesteps, dtype=np.float64) > start))
+    except (TypeError, ValueError):  # an array that holds no step numbers
+        return None
 
 
 def _last_segment_start(folder: RunFolder) -> int | None:
@@ -564,7 +585,7 @@ def _last_segment_start(folder: RunFolder) -> int | None:
         with progress.open(newline="") as f:
             rows = [
                 (float(r["time/iterations"]), float(r["time/total_timesteps"]))
-                for r in csv.DictReader(f)
+                for r in itertools.islice(csv.DictReader(f), 1000)  # the first rows say where the segment started
                 if r.get("time/iterations") and r.get("time/total_timesteps")
             ]
     except (OSError, KeyError, ValueError, csv.Error):
