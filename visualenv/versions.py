@@ -10,16 +10,22 @@ import numpy as np
 __version__ = "0.1.0"
 
 
-def mujoco_version() -> str | None:
-    """The installed MuJoCo's version (an optional extra; read from its metadata, without importing it), or None."""
+def installed_version(package: str) -> str | None:
+    """An installed package's version, read from its metadata without importing it (bpy takes seconds), or None."""
     try:
-        return metadata.version("mujoco")
+        return metadata.version(package)
     except metadata.PackageNotFoundError:
         return None
 
 
+def mujoco_version() -> str | None:
+    """The installed MuJoCo's version (an optional extra), or None."""
+    return installed_version("mujoco")
+
+
 def versions() -> dict[str, str]:
-    """visualenv, Gymnasium, numpy, Python and (where installed) MuJoCo and (when bpy imports) Blender versions."""
+    """visualenv, Gymnasium, numpy, Python and (where installed) MuJoCo and Blender (bpy's, the same string as
+    ``bpy.app.version_string``) versions."""
     import gymnasium
 
     out = {
@@ -31,10 +37,7 @@ def versions() -> dict[str, str]:
     mujoco = mujoco_version()
     if mujoco is not None:
         out["mujoco"] = mujoco
-    try:
-        import bpy
-
-        out["blender"] = bpy.app.version_string
-    except ImportError:  # pragma: no cover - bpy is a dependency
-        pass
+    blender = installed_version("bpy")
+    if blender is not None:
+        out["blender"] = blender
     return out
