@@ -21,7 +21,9 @@ from visualenv.cli.group import (
     trust_pickle_option,
 )
 from visualenv.compat.mkl import compatible_mode
+from visualenv.env.registration import resolve
 from visualenv.errors import VisualEnvError
+from visualenv.spec.loader import load_spec
 
 
 def _video_path(value: str | None) -> str | None:
@@ -91,14 +93,13 @@ def play(
         trust_pickle=trust_pickle,
         trust_code=trust_code,
     )
+    succeeds = load_spec(resolve(spec)).spec.declares_success  # else every episode is 'no success': said nowhere
     for i, ep in enumerate(results):
-        click.echo(
-            f"episode {i}: return {ep.ret:.2f}, length {ep.length}, {'success' if ep.success else 'no success'} ({ep.outcome})"
-        )
+        success = (", success" if ep.success else ", no success") if succeeds else ""
+        click.echo(f"episode {i}: return {ep.ret:.2f}, length {ep.length}{success} ({ep.outcome})")
+    mean = f"mean return {np.mean([ep.ret for ep in results]):.2f}, mean length {np.mean([ep.length for ep in results]):.1f}"
     rate = sum(ep.success for ep in results) / len(results)
-    click.echo(
-        f"mean return {np.mean([ep.ret for ep in results]):.2f}, mean length {np.mean([ep.length for ep in results]):.1f}, success {100 * rate:.0f} %"
-    )
+    click.echo(mean + (f", success {100 * rate:.0f} %" if succeeds else ""))
     if record:
         click.echo(f"recorded {record}")
 
@@ -244,9 +245,10 @@ def eval_command(
         f"  mean return   {results['mean_reward']:8.2f}  95 % CI [{r_lo:.2f}, {r_hi:.2f}] (bootstrap), std {results['std_reward']:.2f}"
     )
     click.echo(f"  mean length   {results['mean_length']:8.2f}  95 % CI [{l_lo:.2f}, {l_hi:.2f}] (bootstrap)")
-    click.echo(
-        f"  success rate  {100 * results['success_rate']:6.0f} %  95 % CI [{100 * s_lo:.0f} %, {100 * s_hi:.0f} %] (Wilson)"
-    )
+    if load_spec(resolve(spec)).spec.declares_success:  # a spec without a success outcome has none to rate
+        click.echo(
+            f"  success rate  {100 * results['success_rate']:6.0f} %  95 % CI [{100 * s_lo:.0f} %, {100 * s_hi:.0f} %] (Wilson)"
+        )
     matches, comparison, sample = None, None, None
     if (
         recorded is not None

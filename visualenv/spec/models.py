@@ -293,6 +293,12 @@ class Spec(StrictModel):
             raise PydanticCustomError("missing", "Field required")
         return value
 
+    @property
+    def declares_success(self) -> bool:
+        """Whether an outcome (or milestone) marks a success: else ``info["is_success"]`` is always False, and a success
+        rate says nothing (DMC tasks declare none)."""
+        return any(outcome.success for outcome in self.outcomes.values())
+
     def camera_uses(self) -> list[tuple[tuple, str]]:
         """Every camera the spec names, with the path of the field that names it (for errors located in the file)."""
         uses: list[tuple[tuple, str]] = []
