@@ -222,25 +222,16 @@ class BindingSetters:
         return out
 
 
-def _set_location(obj: Any) -> Callable[[tuple], None]:
-    def set_location(v: tuple) -> None:
-        obj.location = v
+def _set_attribute(attribute: str) -> Callable[[Any], Callable[[tuple], None]]:
+    """The setter factory of a transform channel written as it is (``location``, ``rotation_euler``, ``scale``)."""
 
-    return set_location
+    def setter(obj: Any) -> Callable[[tuple], None]:
+        def set_value(v: tuple) -> None:
+            setattr(obj, attribute, v)
 
+        return set_value
 
-def _set_rotation(obj: Any) -> Callable[[tuple], None]:
-    def set_rotation(v: tuple) -> None:
-        obj.rotation_euler = v
-
-    return set_rotation
-
-
-def _set_scale(obj: Any) -> Callable[[tuple], None]:
-    def set_scale(v: tuple) -> None:
-        obj.scale = v
-
-    return set_scale
+    return setter
 
 
 def _set_visible(obj: Any) -> Callable[[tuple], None]:
@@ -278,9 +269,9 @@ def _set_lens(obj: Any) -> Callable[[tuple], None]:
 SETTERS_WITH_STATE = ("look_at", "color", "texture")
 #: the setter maker of each bindable property that needs only the object
 SETTERS: dict[str, Callable[[Any], Callable[[tuple], None]]] = {
-    "location": _set_location,
-    "rotation": _set_rotation,
-    "scale": _set_scale,
+    "location": _set_attribute("location"),
+    "rotation": _set_attribute("rotation_euler"),
+    "scale": _set_attribute("scale"),
     "visible": _set_visible,
     "strength": _set_strength,
     "lens": _set_lens,
