@@ -21,6 +21,7 @@ import numpy as np
 
 from visualenv.compat.mujoco import light_directional, texture_channels
 from visualenv.physics.model import PhysicsError, PhysicsModel, mujoco_module
+from visualenv.physics.tendons import TendonShape, catenary_length
 from visualenv.physics.texcoords import cube_to_equirect
 
 #: MuJoCo's geom types (mjtGeom) a renderer draws
@@ -133,6 +134,8 @@ class PhysicsScene:
     #: the visible sites, drawn as MuJoCo's viewer draws them (:func:`visible_sites`), each named ``site:<name>``
     sites: tuple[GeomShape, ...] = ()
     headlight: Headlight = Headlight()
+    #: the visible spatial tendons through sites (:func:`visible_tendons`)
+    tendons: tuple[TendonShape, ...] = ()
     #: how the renderer lights and colours the model (physics.look): "mujoco" as MuJoCo's OpenGL renderer, "physical" by Blender's lights
     look: str = "mujoco"
 
@@ -191,6 +194,7 @@ def physics_scene(physics: PhysicsModel, draw_sites: bool = True, look: str = "m
         sky,
         sites,
         headlight,
+        visible_tendons(physics),
         look,
     )
 
@@ -216,6 +220,48 @@ def _camera(model: Any, data: Any, i: int, name: str, moving: set[int]) -> Camer
 
 def _floats(values: Any) -> tuple[float, ...]:
     return tuple(float(v) for v in values)
+
+
+#: MuJoCo's wrap type (mjtWrap) of a path point that is a site
+WRAP_SITE = 3
+
+
+def visible_tendons(physics: PhysicsModel) -> tuple[TendonShape, ...]:
+    """The tendons MuJoCo's viewer draws by default (groups 0 to 2, not transparent, of a width), whose path runs
+    through sites alone: a tendon that wraps around a geom, or a fixed (joint) tendon, is not drawn yet."""
+    model, mujoco = physics.model, mujoco_module()
+    out = []
+    for i in range(model.ntendon):
+        start, count = int(model.tendon_adr[i]), int(model.tendon_num[i])
+        rgba = tuple(float(v) for v in model.tendon_rgba[i])
+        mat = int(model.tendon_matid[i])
+        if mat >= 0 and np.allclose(rgba, _DEFAULT_RGBA):
+            rgba = tuple(float(v) for v in model.mat_rgba[mat])
+        if (
+            int(model.tendon_group[i]) >= VISIBLE_GROUPS
+            or rgba[3] == 0.0
+            or float(model.tendon_width[i]) <= 0.0
+            or count < 2
+            or any(int(model.wrap_type[w]) != WRAP_SITE for w in range(start, start + count))
+        ):
+            continue
+        sites = [int(model.wrap_objid[w]) for w in range(start, start + count)]
+        emission, specular, shininess = _shading(model, mat)
+        out.append(
+            TendonShape(
+                f"tendon:{mujoco.mj_id2name(model, mujoco.mjtObj.mjOBJ_TENDON, i) or f'tendon{i}'}",
+                float(model.tendon_width[i]),
+                rgba,  # type: ignore[arg-type]
+                tuple((int(model.site_bodyid[s]), _floats(model.site_pos[s])) for s in sites),  # type: ignore[misc]
+                catenary_length(model, i),
+                _floats(model.opt.gravity),  # type: ignore[arg-type]
+                min(int(model.vis.quality.numslices) + 1, 100),
+                emission,
+                specular,
+                shininess,
+            )
+        )
+    return tuple(out)
 
 
 def visible_sites(physics: PhysicsModel) -> tuple[GeomShape, ...]:

@@ -80,6 +80,7 @@ from visualenv.render.blender.batch.instance_nodes import (
     static_groups,
 )
 from visualenv.render.blender.scene.build import with_ancestors
+from visualenv.render.blender.scene.mjcf import STRETCHED
 
 #: the bindable properties the instanced path computes; any other binding keeps its object a copy
 COMPUTED = frozenset({"location", "rotation", "scale", "visible", "color"})
@@ -98,7 +99,7 @@ def _computable(obj: Any, bound: dict[int, set[str]], aimed: set[int], posed: Co
         "CAMERA",
     )
     while obj is not None:
-        if obj.type not in kinds or obj.constraints or obj.parent_type != "OBJECT":
+        if obj.type not in kinds or obj.constraints or obj.parent_type != "OBJECT" or obj.get(STRETCHED):
             return False
         props = bound.get(obj.as_pointer(), set())
         if obj.rotation_mode not in ("XYZ", "QUATERNION") or (

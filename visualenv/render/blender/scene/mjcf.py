@@ -24,6 +24,7 @@ from mathutils import Matrix, Quaternion, Vector
 
 from visualenv.compat.blender import sort_faces
 from visualenv.physics.scene import GeomShape, LightInfo, PhysicsScene
+from visualenv.physics.tendons import TendonShape, tendon_path
 from visualenv.physics.texcoords import cube_uv, planar_uv
 from visualenv.render.blender.look.materials import make_material, show_skybox, tint_image, world_writer
 from visualenv.render.blender.look.mujoco import ambient, light_data, light_material
@@ -33,19 +34,22 @@ from visualenv.render.plan import Material
 SEGMENTS = 24
 
 
+#: a custom property of a tendon's segment: its scale follows the state, so a batch copies it (never an instance)
+STRETCHED = "visualenv_stretched"
+
+
 @dataclass
 class PoseWriter:
-    """Writes MuJoCo's poses into the objects: the moving bodies' empties and the model's cameras."""
+    """Writes MuJoCo's poses into the objects: the moving bodies' empties, the model's cameras and lights, and each
+    tendon segment's cylinder stretched between its two points."""
 
     bodies: list[tuple[int, Any]]  # (body index, empty) of the moving bodies
     cameras: list[Any]  # camera objects by MuJoCo camera index
     lights: list[Any]  # light objects by MuJoCo light index (a light on a body, or tracking one, moves)
+    #: each drawn tendon, the unit cylinders (along z, centred) of its segments stretched along its path, their names
+    tendons: list[tuple[TendonShape, list[Any], list[str]]]
     # their names in BuiltScene.objects: bodies, cameras, lights
-    keys: tuple[list[str], list[str], list[str]] = (
-        [],
-        [],
-        [],
-    )
+    keys: tuple[list[str], list[str], list[str]] = ([], [], [])
 
     def for_objects(self, objects: dict[str, Any]) -> "PoseWriter":
         """The same writer for another copy of the scene (a batch's env k), its objects found by name."""
@@ -54,6 +58,7 @@ class PoseWriter:
             [(i, objects[key]) for (i, _), key in zip(self.bodies, bodies)],
             [objects[k] for k in cameras],
             [objects[k] for k in lights],
+            [(tendon, [objects[k] for k in names], names) for tendon, _, names in self.tendons],
             self.keys,
         )
 
@@ -70,13 +75,14 @@ class PoseWriter:
             [self.bodies[j] for j in bodies],
             [self.cameras[j] for j in cameras],
             [self.lights[j] for j in lights],
+            [t for t in self.tendons if t[1][0].as_pointer() not in removed],  # its segments all copied, or all shared
             keys,  # type: ignore[arg-type]
         )
 
     @property
     def empty(self) -> bool:
         """Whether it writes nothing."""
-        return not (self.bodies or self.cameras or self.lights)
+        return not (self.bodies or self.cameras or self.lights or self.tendons)
 
     def write(
         self,
@@ -100,6 +106,28 @@ class PoseWriter:
             for i, light in enumerate(self.lights):
                 light.location = light_xpos[i].tolist()
                 light.rotation_quaternion = Vector(light_xdir[i].tolist()).to_track_quat("-Z", "Y")
+        for tendon, cylinders, _ in self.tendons:
+            draw_tendon(tendon, cylinders, xpos, xquat)
+
+
+def draw_tendon(tendon: TendonShape, cylinders: list[Any], xpos: np.ndarray, xquat: np.ndarray) -> None:
+    """The tendon's path from its sites' bodies' poses (:func:`~visualenv.physics.tendons.tendon_path`), a cylinder
+    stretched along each segment; the cylinders a shorter path leaves over are shrunk to nothing at its end."""
+    sites = np.array([xpos[body] + _rotated(xquat[body], offset) for body, offset in tendon.points], dtype=np.float64)
+    path = [Vector(p) for p in tendon_path(tendon, sites).tolist()]
+    for k, cylinder in enumerate(cylinders):
+        start, end = (path[k], path[k + 1]) if k + 1 < len(path) else (path[-1], path[-1])
+        axis = end - start
+        cylinder.location = (start + end) / 2
+        cylinder.rotation_quaternion = axis.to_track_quat("Z", "Y") if axis.length > 0 else Quaternion()
+        cylinder.scale = (1.0, 1.0, axis.length)
+
+
+def _rotated(quat: np.ndarray, offset: tuple[float, float, float]) -> np.ndarray:
+    """`offset` rotated by the unit quaternion w, x, y, z."""
+    w, u = float(quat[0]), np.asarray(quat[1:], dtype=np.float64)
+    v = np.asarray(offset, dtype=np.float64)
+    return v + 2 * w * np.cross(u, v) + 2 * np.cross(u, np.cross(u, v))
 
 
 def build_physics_objects(
@@ -152,6 +180,40 @@ def build_physics_objects(
         collection.objects.link(obj)
         obj.parent = empty_of(geom.body)
         built.objects.setdefault(geom.name, obj)
+    tendons = []
+    for tendon in scene_data.tendons:  # a unit cylinder per segment, stretched along its path at every write
+        cylinders, names = [], []
+        for k in range(tendon.segments):
+            shape = GeomShape(
+                f"{tendon.name}:{k}",
+                "cylinder",
+                0,
+                (tendon.width, 0.5, 0.0),
+                (0.0, 0.0, 0.0),
+                (1.0, 0.0, 0.0, 0.0),
+                tendon.rgba,
+                emission=tendon.emission,
+                specular=tendon.specular,
+                shininess=tendon.shininess,
+            )
+            obj = _geom_object(
+                shape, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material
+            )
+            if lighting is not None:
+                light_material(
+                    obj.data.materials[0],
+                    *lighting,
+                    emission=shape.emission,
+                    specular=shape.specular,
+                    shininess=shape.shininess,
+                )
+            obj[STRETCHED] = True
+            collection.objects.link(obj)
+            built.objects.setdefault(shape.name, obj)
+            cylinders.append(obj)
+            names.append(shape.name)
+        draw_tendon(tendon, cylinders, scene_data.body_pos, scene_data.body_quat)
+        tendons.append((tendon, cylinders, names))
     lights = []
     for light in scene_data.lights:
         data = light_data(light) if as_mujoco else _physical_light(light)
@@ -188,7 +250,7 @@ def build_physics_objects(
         [c.name for c in scene_data.cameras],
         [light.name for light in scene_data.lights],
     )
-    return PoseWriter(moving, cameras, lights, keys)
+    return PoseWriter(moving, cameras, lights, tendons, keys)
 
 
 def _physical_light(light: LightInfo) -> Any:
