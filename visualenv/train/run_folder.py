@@ -11,8 +11,9 @@ A run folder ``runs/<Id>/<timestamp>/`` (:func:`new_run_dir`) holds:
 * ``monitor/``         per-episode returns and lengths of SB3's training envs
 * ``best_model.safetensors``, ``final_model.safetensors`` (each with its ``.json``): the best and the last policy
                        as policy files, which ``eval`` and ``play`` load without unpickling
-* SB3: ``best_model.zip`` (EvalCallback's name), ``final_model.zip``, ``checkpoints/latest.zip`` (for ``--resume``);
-  RLlib: the checkpoint folders ``best_model/``, ``final_model/``, ``checkpoints/latest/``; all pickles
+* SB3: ``best_model.zip`` (EvalCallback's name), ``final_model.zip``: pickles; ``checkpoints/latest-state/``
+  (for ``--resume``: data, see :mod:`visualenv.train.checkpoints`); an older run's ``checkpoints/latest.zip`` (a pickle)
+* RLlib: the checkpoint folders ``best_model/``, ``final_model/``, ``checkpoints/latest/`` (for ``--resume``): pickles
 * ``plots/``           the paper's figures; distillation: ``rounds.csv``, one row per DAgger round
 
 A shipped agent's folder (``results/<Id>/``) keeps ``config.json``, ``results.json``, ``evaluations.npz``, the
@@ -21,7 +22,7 @@ plots and the logs beside them (no ``logs/``), and the best policy as ``policy.s
 config.json (format :data:`FORMAT_VERSION`) holds ``format`` and ``format_version``, ``backend`` (``sb3``, ``rllib``
 or ``distill``), ``command``, ``config`` (the settings: :class:`~visualenv.train.sb3.TrainConfig`,
 :class:`~visualenv.train.rllib.RLlibTrainConfig` or :class:`~visualenv.train.distill.DistillConfig` as a mapping),
-``versions``, ``spec_path``; ``resumes`` (each resume's command and changed hyperparameters); a distillation's
+``versions``, ``spec_path``, ``spec`` (the spec's id and sha256, which ``--resume`` checks); ``resumes`` (each resume's command and changed hyperparameters); a distillation's
 ``teacher`` and ``student`` (path and sha256). Reading checks the type and the bounds of every setting.
 """
 
@@ -55,6 +56,8 @@ MAX_EVALUATIONS_BYTES = 2**28  # evaluations.npz's arrays, their size read from 
 LOGS, PROGRESS = "logs", "progress.csv"
 SHIPPED_POLICY = "policy" + WEIGHTS
 CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained
+#: the files of an SB3 checkpoint folder (RunFolder.latest_state): weights and optimizer state, counters, replay buffer
+STATE_WEIGHTS, STATE_JSON, STATE_REPLAY = "weights.safetensors", "state.json", "replay_buffer.npz"
 
 
 class RunFolderError(ConfigError):
@@ -141,8 +144,13 @@ class RunFolder:
         return self.path / "final_model.zip"
 
     @property
+    def latest_state(self) -> Path:
+        """``checkpoints/latest-state/``: SB3's newest training state as data (:data:`STATE_WEIGHTS`, ...), for ``--resume``."""
+        return self.path / "checkpoints" / "latest-state"
+
+    @property
     def latest_zip(self) -> Path:
-        """``checkpoints/latest.zip``: SB3's newest model, for ``--resume``."""
+        """``checkpoints/latest.zip``: an older SB3 run's checkpoint, a pickle (``--resume`` reads it if trusted)."""
         return self.path / "checkpoints" / "latest.zip"
 
     @property
@@ -285,7 +293,7 @@ ADDED: dict[str, dict[str, Any]] = {
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
 RECORD_KEYS: dict[str, Rule] = {
     **dict.fromkeys(("command", "spec_path"), Rule(str)),
-    **dict.fromkeys(("config", "versions", "teacher", "student"), Rule(dict)),
+    **dict.fromkeys(("config", "versions", "teacher", "student", "spec"), Rule(dict)),
     "format": Rule(str, choices=(FORMAT,)),
     "format_version": Rule(int, 1, FORMAT_VERSION),
     "backend": Rule(str, choices=BACKENDS),
@@ -438,6 +446,7 @@ def record_run(
         record = read_config(folder)
         record["config"] = settings_now
         record.setdefault("resumes", []).append({"command": command, "hyperparams": dict(changes or {})})
+        record.setdefault("spec", spec_identity(spec_path))
     else:
         record = {
             "backend": backend,
@@ -445,9 +454,19 @@ def record_run(
             "config": settings_now,
             "versions": versions(),
             "spec_path": spec_path,
+            "spec": spec_identity(spec_path),
             **(extra or {}),
         }
     write_config(folder, record)
+
+
+def spec_identity(spec_path: str | Path) -> dict[str, str]:
+    """The id of the spec at `spec_path` and the sha256 of its file's bytes (as `visualenv build` records them)."""
+    import hashlib
+
+    from visualenv.spec.loader import load_spec
+
+    return {"id": load_spec(spec_path).spec.id, "sha256": hashlib.sha256(Path(spec_path).read_bytes()).hexdigest()}
 
 
 @dataclass
