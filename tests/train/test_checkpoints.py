@@ -174,6 +174,13 @@ def test_ppo_resumes_from_its_data_checkpoint(tmp_path):
     assert json.loads((latest / STATE_JSON).read_text())["counters"]["num_timesteps"] == 128
     config = json.loads((run / "config.json").read_text())
     assert config["spec"]["id"] == "VisualCartPole-v0" and len(config["spec"]["sha256"]) == 64 and config["resumes"]
+    # a run from before checkpoints were data: SB3's zip, resumed when trusted, which then saves data
+    shutil.rmtree(latest)
+    shutil.copy(run / "final_model.zip", RunFolder(run).latest_zip)
+    older = ["train", "VisualCartPole-v0", "--resume", str(run), "--steps", "192", "--no-progress", "--trust-pickle"]
+    trusted = CliRunner().invoke(main, older)
+    assert trusted.exit_code == 0, trusted.output
+    assert json.loads((latest / STATE_JSON).read_text())["counters"]["num_timesteps"] == 192
 
 
 @pytest.mark.blender
@@ -252,6 +259,12 @@ def test_a_pickled_checkpoint_is_refused_without_trust_pickle(run, tmp_path):
     assert not marker.exists() and untouched(run) == before
     load_from_zip_file(RunFolder(run).latest_zip)  # what SB3's load would have done: the file is hostile
     assert marker.exists()
+
+
+def test_trust_pickle_is_only_for_resuming(tmp_path):
+    result = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--trust-pickle", "--out", str(tmp_path)])
+    assert result.exit_code == 2 and "--trust-pickle: only with --resume" in result.output
+    assert not list(tmp_path.iterdir())
 
 
 def test_a_folder_without_a_checkpoint_or_of_another_spec_is_refused(run, tmp_path):
