@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import zipfile
 
 import gymnasium as gym
 import numpy as np
@@ -125,6 +126,12 @@ def test_a_checkpoint_that_does_not_fit_is_an_error(tmp_path):
     state_path.write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(CheckpointError, match="not JSON"):
         load_state(ppo(), folder.latest_state, "ppo")
+    state_path.write_text(json.dumps(state))
+    weights = folder.latest_state / STATE_WEIGHTS
+    with weights.open("r+b") as f:  # a file far larger than the model's state: refused from its size, not read
+        f.truncate(64 * 2**20)
+    with pytest.raises(CheckpointError, match="more than this run's model and optimizers hold"):
+        load_state(ppo(), folder.latest_state, "ppo")
 
 
 def test_a_replay_buffer_is_checked_from_its_headers_before_it_is_read(tmp_path):
@@ -143,6 +150,16 @@ def test_a_replay_buffer_is_checked_from_its_headers_before_it_is_read(tmp_path)
     arrays["rewards"] = np.array([[object()]] * 32, dtype=object)
     np.savez(replay, **arrays)
     with pytest.raises(CheckpointError, match="rewards: expected float32"):
+        load_state(sac(), folder.latest_state, "sac")
+    arrays["rewards"] = np.zeros((32, 1), dtype=np.float32)
+    np.savez(replay, **arrays, extra=np.zeros(3))
+    with pytest.raises(CheckpointError, match="extra.npy"):
+        load_state(sac(), folder.latest_state, "sac")
+    header = np.lib.format.header_data_from_array_1_0(np.zeros((32, 1), np.float32))
+    header["shape"] = (2**40, 1)  # a header that claims 4 TiB: refused before numpy allocates it
+    with zipfile.ZipFile(replay, "a") as archive, archive.open("huge.npy", "w") as f:
+        np.lib.format.write_array_header_1_0(f, header)
+    with pytest.raises(CheckpointError, match="huge.npy"):
         load_state(sac(), folder.latest_state, "sac")
 
 

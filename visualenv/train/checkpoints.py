@@ -217,7 +217,7 @@ def load_state(model: Any, checkpoint: Path, algorithm: str) -> None:
         raise CheckpointError(
             f"{checkpoint}: a checkpoint of {state.get('algorithm')!r}, and this run trains {algorithm}"
         )
-    tensors = _read_tensors(checkpoint / STATE_WEIGHTS)
+    tensors = _read_tensors(checkpoint / STATE_WEIGHTS, _most_bytes(model))
     where = checkpoint / STATE_WEIGHTS
     state_dicts, variables = state_names(model)
     optimizers = _mapping(state.get("optimizers"), f"{checkpoint / STATE_JSON}: optimizers")
@@ -268,11 +268,24 @@ def _read_state(path: Path) -> dict[str, Any]:
     return state
 
 
-def _read_tensors(path: Path) -> dict[str, Any]:
+def _most_bytes(model: Any) -> int:
+    """What the weights file of `model` can hold at most: its policy (target networks included), an optimizer's two
+    moments for each of its weights, a tensor or two besides; the file's size is checked against it before reading."""
+    policy = sum(p.numel() * p.element_size() for p in model.policy.state_dict().values())
+    return 4 * policy + 2**20
+
+
+def _read_tensors(path: Path, most: int) -> dict[str, Any]:
     from safetensors import SafetensorError
     from safetensors.torch import load_file
 
     try:
+        size = path.stat().st_size
+        if size > most:
+            raise CheckpointError(
+                f"{path}: {size / 2**20:.1f} MiB, more than this run's model and optimizers hold "
+                f"({most / 2**20:.1f} MiB at most): not a checkpoint of this run"
+            )
         return load_file(str(path))
     except (SafetensorError, OSError, ValueError) as exc:
         raise CheckpointError(f"{path}: not a safetensors file this checkpoint can use ({exc})") from None
@@ -420,9 +433,7 @@ def _load_replay(model: Any, record: Any, checkpoint: Path) -> None:
         )
     buffer.pos, buffer.full = pos, full
     targets = _replay_arrays(buffer)  # views of the new buffer's rows that the saved ones fill
-    headers = _npz_headers(path)
-    if sorted(headers) != sorted(targets):
-        raise CheckpointError(f"{path}: holds {sorted(headers)}, and this run's replay buffer {sorted(targets)}")
+    headers = _npz_headers(path, sorted(targets))
     for name, target in targets.items():
         if headers[name] != (target.shape, target.dtype):
             shape, dtype = headers[name]
@@ -434,8 +445,8 @@ def _load_replay(model: Any, record: Any, checkpoint: Path) -> None:
             target[...] = saved[name]
 
 
-def _npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
-    """Each array of an .npz by name: its shape and dtype, read from its header alone."""
+def _npz_headers(path: Path, names: list[str]) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
+    """Each array of an .npz that holds the arrays `names` and no other: its shape and dtype, from its header alone."""
     import zipfile
 
     from numpy.lib import format as npy
@@ -443,11 +454,14 @@ def _npz_headers(path: Path) -> dict[str, tuple[tuple[int, ...], np.dtype]]:
     headers = {}
     try:
         with zipfile.ZipFile(path) as archive:
-            for member in archive.namelist():
+            members = archive.namelist()
+            if sorted(members) != sorted(f"{name}.npy" for name in names):
+                raise CheckpointError(f"{path}: holds {sorted(members)[:8]}, and this run's replay buffer {names}")
+            for member in members:
                 with archive.open(member) as f:
                     version = npy.read_magic(f)
                     read = {(1, 0): npy.read_array_header_1_0, (2, 0): npy.read_array_header_2_0}.get(version)
-                    if read is None or not member.endswith(".npy"):
+                    if read is None:
                         raise ValueError(f"{member}: not a .npy of format 1.0 or 2.0")
                     shape, _, dtype = read(f)
                 headers[member.removesuffix(".npy")] = (tuple(shape), np.dtype(dtype))
