@@ -73,11 +73,11 @@ def test_the_state_round_trips_and_continues_as_sb3s_own_resume(tmp_path, make):
     trained.learn(64)
     folder = RunFolder(tmp_path)
     save_state(trained, folder, algorithm)
-    assert sorted(p.name for p in folder.latest_state.iterdir()) == sorted(
+    assert sorted(p.name for p in folder.latest_dir.iterdir()) == sorted(
         [STATE_JSON, STATE_WEIGHTS] + ([STATE_REPLAY] if algorithm == "sac" else [])
     )
     resumed = make()
-    load_state(resumed, folder.latest_state, algorithm)
+    load_state(resumed, folder.latest_dir, algorithm)
     same_state(trained, resumed)
     if algorithm == "sac":
         pos = trained.replay_buffer.pos
@@ -103,12 +103,12 @@ def test_a_checkpoint_that_does_not_fit_is_an_error(tmp_path):
     model = ppo()
     save_state(model, folder, "ppo")
     with pytest.raises(CheckpointError, match="a checkpoint of 'ppo', and this run trains a2c"):
-        load_state(model, folder.latest_state, "a2c")
+        load_state(model, folder.latest_dir, "a2c")
     with pytest.raises(
         CheckpointError, match=r"policy: mlp_extractor.policy_net.0.weight: expected torch.float32 \[32, 4\]"
     ):
-        load_state(ppo(policy_kwargs={"net_arch": [32, 32]}), folder.latest_state, "ppo")
-    state_path = folder.latest_state / STATE_JSON
+        load_state(ppo(policy_kwargs={"net_arch": [32, 32]}), folder.latest_dir, "ppo")
+    state_path = folder.latest_dir / STATE_JSON
     state = json.loads(state_path.read_text())
     for change, message in [
         ({"counters": {**state["counters"], "num_timesteps": -1}}, "counters.num_timesteps: expected a count"),
@@ -117,21 +117,21 @@ def test_a_checkpoint_that_does_not_fit_is_an_error(tmp_path):
     ]:
         state_path.write_text(json.dumps({**state, **change}))
         with pytest.raises(CheckpointError, match=message):
-            load_state(ppo(), folder.latest_state, "ppo")
+            load_state(ppo(), folder.latest_dir, "ppo")
     groups = json.loads(json.dumps(state["optimizers"]))
     groups["policy.optimizer"]["param_groups"][0]["betas"] = "0.9"
     state_path.write_text(json.dumps({**state, "optimizers": groups}))
     with pytest.raises(CheckpointError, match=r"param_groups\[0\].betas: expected a list of 2"):
-        load_state(ppo(), folder.latest_state, "ppo")
+        load_state(ppo(), folder.latest_dir, "ppo")
     state_path.write_text("[" * 100_000 + "]" * 100_000)
     with pytest.raises(CheckpointError, match="not JSON"):
-        load_state(ppo(), folder.latest_state, "ppo")
+        load_state(ppo(), folder.latest_dir, "ppo")
     state_path.write_text(json.dumps(state))
-    weights = folder.latest_state / STATE_WEIGHTS
+    weights = folder.latest_dir / STATE_WEIGHTS
     with weights.open("r+b") as f:  # a file far larger than the model's state: refused from its size, not read
         f.truncate(64 * 2**20)
     with pytest.raises(CheckpointError, match="more than this run's model and optimizers hold"):
-        load_state(ppo(), folder.latest_state, "ppo")
+        load_state(ppo(), folder.latest_dir, "ppo")
 
 
 def test_a_replay_buffer_is_checked_from_its_headers_before_it_is_read(tmp_path):
@@ -140,27 +140,27 @@ def test_a_replay_buffer_is_checked_from_its_headers_before_it_is_read(tmp_path)
     model = sac()
     model.learn(32)
     save_state(model, folder, "sac")
-    replay = folder.latest_state / STATE_REPLAY
+    replay = folder.latest_dir / STATE_REPLAY
     with np.load(replay) as saved:
         arrays = dict(saved)
     arrays["rewards"] = np.zeros((32, 1), dtype=np.float64)
     np.savez(replay, **arrays)
     with pytest.raises(CheckpointError, match=r"rewards: expected float32 \[32, 1\], got float64 \[32, 1\]"):
-        load_state(sac(), folder.latest_state, "sac")
+        load_state(sac(), folder.latest_dir, "sac")
     arrays["rewards"] = np.array([[object()]] * 32, dtype=object)
     np.savez(replay, **arrays)
     with pytest.raises(CheckpointError, match="rewards: expected float32"):
-        load_state(sac(), folder.latest_state, "sac")
+        load_state(sac(), folder.latest_dir, "sac")
     arrays["rewards"] = np.zeros((32, 1), dtype=np.float32)
     np.savez(replay, **arrays, extra=np.zeros(3))
     with pytest.raises(CheckpointError, match="extra.npy"):
-        load_state(sac(), folder.latest_state, "sac")
+        load_state(sac(), folder.latest_dir, "sac")
     header = np.lib.format.header_data_from_array_1_0(np.zeros((32, 1), np.float32))
     header["shape"] = (2**40, 1)  # a header that claims 4 TiB: refused before numpy allocates it
     with zipfile.ZipFile(replay, "a") as archive, archive.open("huge.npy", "w") as f:
         np.lib.format.write_array_header_1_0(f, header)
     with pytest.raises(CheckpointError, match="huge.npy"):
-        load_state(sac(), folder.latest_state, "sac")
+        load_state(sac(), folder.latest_dir, "sac")
 
 
 # -- the CLI -----------------------------------------------------------------------------------------------------------
@@ -178,7 +178,7 @@ def test_ppo_resumes_from_its_data_checkpoint(tmp_path):
     result = CliRunner().invoke(main, [*args, "--out", str(out)])
     assert result.exit_code == 0, result.output
     (run,) = (out / "VisualCartPole-v0").iterdir()
-    latest = RunFolder(run).latest_state
+    latest = RunFolder(run).latest_dir
     assert (latest / STATE_WEIGHTS).is_file() and not RunFolder(run).latest_zip.exists()
     state = json.loads((latest / STATE_JSON).read_text())
     assert state["counters"]["num_timesteps"] == 64 and state["algorithm"] == "ppo"
@@ -209,7 +209,7 @@ def test_sac_resumes_with_its_replay_buffer(tmp_path):
     result = CliRunner().invoke(main, args)
     assert result.exit_code == 0, result.output
     (run,) = (out / "LunarLanding-v0").iterdir()
-    latest = RunFolder(run).latest_state
+    latest = RunFolder(run).latest_dir
     with np.load(latest / STATE_REPLAY) as replay:
         assert replay["observations"].shape[:2] == (32, 2)  # 64 steps of 2 envs: 32 rows
     resumed = CliRunner().invoke(
@@ -226,7 +226,8 @@ def run(tmp_path):
     from dataclasses import asdict
 
     from visualenv.env.registration import resolve
-    from visualenv.train.run_folder import spec_identity, write_config, write_results
+    from visualenv.spec.loader import spec_identity
+    from visualenv.train.run_folder import write_config, write_results
     from visualenv.train.sb3 import TrainConfig
 
     folder = RunFolder(tmp_path / "run")
@@ -297,7 +298,7 @@ def test_a_folder_without_a_checkpoint_or_of_another_spec_is_refused(run, tmp_pa
     changed = CliRunner().invoke(main, ["train", str(edited), "--resume", str(run), "--no-progress"])
     assert changed.exit_code == 1 and "on another version of VisualCartPole-v0" in changed.output, changed.output
     assert untouched(run) == before
-    shutil.rmtree(RunFolder(run).latest_state.parent)
+    shutil.rmtree(RunFolder(run).latest_dir.parent)
     before = untouched(run)
     none = CliRunner().invoke(main, ["train", "VisualCartPole-v0", "--resume", str(run), "--no-progress"])
     assert none.exit_code == 1 and "has no checkpoint to resume from" in none.output, none.output

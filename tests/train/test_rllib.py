@@ -209,7 +209,8 @@ def test_an_rllib_checkpoint_resumes_only_with_trust_pickle(tmp_path):
 
     from visualenv.env.registration import resolve
     from visualenv.train.rllib import RLlibTrainConfig
-    from visualenv.train.run_folder import RunFolder, spec_identity, write_config
+    from visualenv.spec.loader import spec_identity
+    from visualenv.train.run_folder import RunFolder, write_config
 
     folder = RunFolder(tmp_path / "run")
     folder.path.mkdir()

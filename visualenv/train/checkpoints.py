@@ -1,7 +1,7 @@
 """What `visualenv train --resume` reads: an SB3 run's training state as data, and the checks made before any of it.
 
-``train`` saves the state of its model to ``checkpoints/latest-state/`` (:attr:`RunFolder.latest_state`), a folder
-swapped in whole, so a run killed while saving keeps the previous one:
+``train`` saves the state of its model to ``checkpoints/latest/`` (:attr:`RunFolder.latest_dir`, where an RLlib run
+keeps its own checkpoint), a folder swapped in whole, so a run killed while saving keeps the previous one:
 
 * ``weights.safetensors``: the tensors: the state dict of each torch object SB3's own ``save`` keeps, under its
   name (``policy/<key>``, a tensor the policy lists under several names once), each optimizer's per-parameter
@@ -36,15 +36,8 @@ from visualenv.compat.sb3 import episode_window, set_training_counters, state_na
 from visualenv.errors import ConfigError, VisualEnvError
 from visualenv.train.model_files import PickleRefused
 from visualenv.train.policy_format import weights_of
-from visualenv.train.run_folder import (
-    STATE_JSON,
-    STATE_REPLAY,
-    STATE_WEIGHTS,
-    RunFolder,
-    RunFolderError,
-    read_config,
-    spec_identity,
-)
+from visualenv.spec.loader import spec_identity
+from visualenv.train.run_folder import STATE_JSON, STATE_REPLAY, STATE_WEIGHTS, RunFolder, RunFolderError, read_config
 
 FORMAT = "visualenv-sb3-checkpoint"
 FORMAT_VERSION = 1
@@ -63,7 +56,7 @@ class CheckpointError(ConfigError):
 def sb3_checkpoint(folder: RunFolder) -> Path | None:
     """The SB3 run's newest checkpoint: its data folder (or the one it was replacing when a save was interrupted), else
     an older run's ``checkpoints/latest.zip``; None if it has neither."""
-    latest = folder.latest_state
+    latest = folder.latest_dir
     for path in (latest, latest.with_name(latest.name + ".old")):
         if (path / STATE_JSON).is_file():
             return path
@@ -78,10 +71,11 @@ def resume_checkpoint(
     Raises before anything is read or written."""
     check_resumed_spec(folder, spec_path)
     if checkpoint is None:
-        names = [folder.latest_state, folder.latest_zip] if backend == "sb3" else [folder.latest_dir]
+        names = [folder.latest_dir, folder.latest_zip] if backend == "sb3" else [folder.latest_dir]
+        looked = " nor ".join(str(p.relative_to(folder.path)) for p in names)
         raise RunFolderError(
-            f"{folder.path} has no checkpoint to resume from (no {' nor '.join(str(p.relative_to(folder.path)) for p in names)}); "
-            "nothing in it was changed. Start a new run instead"
+            f"{folder.path} has no checkpoint to resume from (no {looked}); nothing in it was changed. "
+            "Start a new run instead"
         )
     if not (backend == "sb3" and checkpoint.is_dir()) and not trust_pickle:
         kind = "an RLlib checkpoint folder" if checkpoint.is_dir() else "an SB3 model"
@@ -120,7 +114,7 @@ def check_resumed_spec(folder: RunFolder, spec_path: str | Path) -> None:
 
 
 def save_state(model: Any, folder: RunFolder, algorithm: str) -> Path:
-    """Write `model`'s training state to ``checkpoints/latest-state/`` (the module's docstring lists it)."""
+    """Write `model`'s training state to ``checkpoints/latest/`` (the module's docstring lists it)."""
     import torch
     from safetensors.torch import save_file
 
@@ -156,7 +150,7 @@ def save_state(model: Any, folder: RunFolder, algorithm: str) -> Path:
         "successes": [bool(s) for s in model.ep_success_buffer or []],
         "replay_buffer": None if buffer is None else {"pos": int(buffer.pos), "full": bool(buffer.full)},
     }
-    latest = folder.latest_state
+    latest = folder.latest_dir
     fresh, old = latest.with_name(latest.name + ".saving"), latest.with_name(latest.name + ".old")
     shutil.rmtree(fresh, ignore_errors=True)
     fresh.mkdir(parents=True)
@@ -178,7 +172,7 @@ def _plain(value: Any) -> Any:
 
 
 def _scalars(entry: dict[str, Any]) -> dict[str, Any]:
-    """An episode's record (Monitor's ``r``, ``l``, ``t`` and the like) with the values JSON holds: numbers, flags, text."""
+    """An episode's record (Monitor's ``r``, ``l``, ``t``...) with the values JSON holds: numbers, flags, text."""
     plain = {key: _plain(value) for key, value in entry.items()}
     return {key: value for key, value in plain.items() if isinstance(value, (bool, int, float, str))}
 
@@ -208,8 +202,8 @@ def _rows(buffer: Any, field: str) -> int:
 
 
 def load_state(model: Any, checkpoint: Path, algorithm: str) -> None:
-    """Load the training state in `checkpoint` (a folder :func:`save_state` wrote) into `model`, a new model of the run's
-    config; a checkpoint that does not fit it is a :class:`CheckpointError` naming what differs."""
+    """Load the training state in `checkpoint` (a folder :func:`save_state` wrote) into `model`, a new model of the
+    run's config; a checkpoint that does not fit it is a :class:`CheckpointError` naming what differs."""
     import torch
 
     state = _read_state(checkpoint / STATE_JSON)

@@ -23,7 +23,8 @@ from typing import Any
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.errors import VisualEnvError
 from visualenv.train.policy_format import WEIGHTS, is_policy_file, read_meta, read_policy, write_policy
-from visualenv.train.run_folder import RunFolder, RunFolderError, read_config, spec_identity
+from visualenv.spec.loader import spec_identity
+from visualenv.train.run_folder import RunFolder, RunFolderError, read_config
 
 #: the shipped agents live in the source checkout: results/<Id>/policy.safetensors with its policy.json
 RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"

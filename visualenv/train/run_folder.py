@@ -11,9 +11,8 @@ A run folder ``runs/<Id>/<timestamp>/`` (:func:`new_run_dir`) holds:
 * ``monitor/``         per-episode returns and lengths of SB3's training envs
 * ``best_model.safetensors``, ``final_model.safetensors`` (each with its ``.json``): the best and the last policy
                        as policy files, which ``eval`` and ``play`` load without unpickling
-* SB3: ``best_model.zip`` (EvalCallback's name), ``final_model.zip``: pickles; ``checkpoints/latest-state/``
-  (for ``--resume``: data, see :mod:`visualenv.train.checkpoints`); an older run's ``checkpoints/latest.zip`` (a pickle)
-* RLlib: the checkpoint folders ``best_model/``, ``final_model/``, ``checkpoints/latest/`` (for ``--resume``): pickles
+* SB3: ``best_model.zip``, ``final_model.zip`` (pickles), ``checkpoints/latest/`` (data, for ``--resume``: see
+  :mod:`visualenv.train.checkpoints`); RLlib: ``best_model/``, ``final_model/``, ``checkpoints/latest/`` (pickles)
 * ``plots/``           the paper's figures; distillation: ``rounds.csv``, one row per DAgger round
 
 A shipped agent's folder (``results/<Id>/``) keeps ``config.json``, ``results.json``, ``evaluations.npz``, the
@@ -22,7 +21,7 @@ plots and the logs beside them (no ``logs/``), and the best policy as ``policy.s
 config.json (format :data:`FORMAT_VERSION`) holds ``format`` and ``format_version``, ``backend`` (``sb3``, ``rllib``
 or ``distill``), ``command``, ``config`` (the settings: :class:`~visualenv.train.sb3.TrainConfig`,
 :class:`~visualenv.train.rllib.RLlibTrainConfig` or :class:`~visualenv.train.distill.DistillConfig` as a mapping),
-``versions``, ``spec_path``, ``spec`` (the spec's id and sha256, which ``--resume`` checks); ``resumes`` (each resume's command and changed hyperparameters); a distillation's
+``versions``, ``spec_path``, ``spec`` (id, sha256); ``resumes`` (each resume's command and changes); a distillation's
 ``teacher`` and ``student`` (path and sha256). Reading checks the type and the bounds of every setting.
 """
 
@@ -56,8 +55,7 @@ MAX_EVALUATIONS_BYTES = 2**28  # evaluations.npz's arrays, their size read from 
 LOGS, PROGRESS = "logs", "progress.csv"
 SHIPPED_POLICY = "policy" + WEIGHTS
 CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained
-#: the files of an SB3 checkpoint folder (RunFolder.latest_state): weights and optimizer state, counters, replay buffer
-STATE_WEIGHTS, STATE_JSON, STATE_REPLAY = "weights.safetensors", "state.json", "replay_buffer.npz"
+STATE_WEIGHTS, STATE_JSON, STATE_REPLAY = "weights.safetensors", "state.json", "replay_buffer.npz"  # SB3's checkpoint
 
 
 class RunFolderError(ConfigError):
@@ -144,11 +142,6 @@ class RunFolder:
         return self.path / "final_model.zip"
 
     @property
-    def latest_state(self) -> Path:
-        """``checkpoints/latest-state/``: SB3's newest training state as data (:data:`STATE_WEIGHTS`, ...), for ``--resume``."""
-        return self.path / "checkpoints" / "latest-state"
-
-    @property
     def latest_zip(self) -> Path:
         """``checkpoints/latest.zip``: an older SB3 run's checkpoint, a pickle (``--resume`` reads it if trusted)."""
         return self.path / "checkpoints" / "latest.zip"
@@ -165,7 +158,7 @@ class RunFolder:
 
     @property
     def latest_dir(self) -> Path:
-        """``checkpoints/latest/``: RLlib's newest checkpoint folder, for ``--resume``."""
+        """``checkpoints/latest/``: the newest checkpoint, for ``--resume`` (SB3's as data: STATE_JSON...; RLlib's)."""
         return self.path / "checkpoints" / "latest"
 
     def is_run(self) -> bool:
@@ -437,6 +430,7 @@ def record_run(
 ) -> None:
     """config.json of a new run (the command, `config`'s settings, the versions, `extra` keys); a resumed run's
     keeps its record, takes the settings now in force and appends the command and the changed hyperparameters."""
+    from visualenv.spec.loader import spec_identity
     from visualenv.versions import versions
 
     folder = _folder(run)
@@ -446,7 +440,6 @@ def record_run(
         record = read_config(folder)
         record["config"] = settings_now
         record.setdefault("resumes", []).append({"command": command, "hyperparams": dict(changes or {})})
-        record.setdefault("spec", spec_identity(spec_path))
     else:
         record = {
             "backend": backend,
@@ -454,19 +447,10 @@ def record_run(
             "config": settings_now,
             "versions": versions(),
             "spec_path": spec_path,
-            "spec": spec_identity(spec_path),
             **(extra or {}),
         }
+    record.setdefault("spec", spec_identity(spec_path))  # the spec's id and sha256, which --resume checks
     write_config(folder, record)
-
-
-def spec_identity(spec_path: str | Path) -> dict[str, str]:
-    """The id of the spec at `spec_path` and the sha256 of its file's bytes (as `visualenv build` records them)."""
-    import hashlib
-
-    from visualenv.spec.loader import load_spec
-
-    return {"id": load_spec(spec_path).spec.id, "sha256": hashlib.sha256(Path(spec_path).read_bytes()).hexdigest()}
 
 
 @dataclass
