@@ -41,3 +41,22 @@ def test_a_vec_envs_indices_read_as_sb3_reads_them():
         assert read == [[0, 1, 2], [1], [0, 2]]
     finally:
         venv.close()
+
+
+def test_an_algorithms_training_state_is_named_as_sb3_saves_it():
+    """What `train --resume` saves as data: the torch objects SB3's save keeps, the counters it restores, the window of
+    recent episodes."""
+    from stable_baselines3 import PPO, SAC
+
+    sac = SAC("MlpPolicy", gym.make("Pendulum-v1"), buffer_size=10, device="cpu")
+    assert compat.state_names(sac) == (
+        ["policy", "actor.optimizer", "critic.optimizer", "ent_coef_optimizer"],
+        ["log_ent_coef"],
+    )
+    ppo = PPO("MlpPolicy", gym.make("CartPole-v1"), n_steps=16, batch_size=16, device="cpu", stats_window_size=7)
+    assert compat.state_names(ppo) == (["policy", "policy.optimizer"], [])
+    counters = compat.training_counters(ppo)
+    assert counters == {"num_timesteps": 0, "_n_updates": 0, "_episode_num": 0, "_current_progress_remaining": 1.0}
+    compat.set_training_counters(ppo, {**counters, "num_timesteps": 5, "_n_updates": 2})
+    assert ppo.num_timesteps == 5 and compat.training_counters(ppo)["_n_updates"] == 2
+    assert compat.episode_window(ppo) == 7

@@ -202,6 +202,35 @@ def test_a_resumed_run_keeps_its_backend(tmp_path):
     assert result.exit_code == 2 and "was trained with --backend sb3; a resumed run keeps its backend" in result.output
 
 
+def test_an_rllib_checkpoint_resumes_only_with_trust_pickle(tmp_path):
+    """RLlib's checkpoint folders are pickles: --resume refuses one untrusted, and a run without one, before anything
+    starts or is written."""
+    from dataclasses import asdict
+
+    from visualenv.env.registration import resolve
+    from visualenv.train.rllib import RLlibTrainConfig
+    from visualenv.spec.loader import spec_identity
+    from visualenv.train.run_folder import RunFolder, write_config
+
+    folder = RunFolder(tmp_path / "run")
+    folder.path.mkdir()
+    spec = resolve("Goalie-v0")
+    config = asdict(RLlibTrainConfig("Goalie-v0", steps=128, progress=False))
+    record = {"backend": "rllib", "command": "visualenv train", "config": config, "versions": {}}
+    write_config(folder, {**record, "spec_path": str(spec), "spec": spec_identity(spec)})
+    before = folder.config.read_bytes()
+    none = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(folder.path), "--no-progress"])
+    assert none.exit_code == 1 and "has no checkpoint to resume from (no checkpoints/latest)" in none.output, (
+        none.output
+    )
+    folder.latest_dir.mkdir(parents=True)
+    (folder.latest_dir / "visualenv.json").write_text('{"steps": 64}')
+    refused = CliRunner().invoke(main, ["train", "Goalie-v0", "--resume", str(folder.path), "--no-progress"])
+    assert refused.exit_code == 1 and "is an RLlib checkpoint folder: a pickle-based file" in refused.output
+    assert "pass --trust-pickle" in refused.output and folder.config.read_bytes() == before
+    assert sorted(p.name for p in folder.path.iterdir()) == ["checkpoints", "config.json"]
+
+
 def test_runner_options_need_the_rllib_backend(tmp_path):
     result = CliRunner().invoke(main, ["train", "Goalie-v0", "--env-runners", "3", "--out", str(tmp_path / "runs")])
     assert result.exit_code == 2 and "--env-runners: only with --backend rllib" in result.output
@@ -406,8 +435,8 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
 
     stopped_at = results["steps"]
     resumed = CliRunner().invoke(
-        main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress"]
-    )
+        main, ["train", spec, "--resume", str(run), "--steps", str(stopped_at + 128), "--no-progress", "--trust-pickle"]
+    )  # an RLlib checkpoint is a pickle: resumed only when trusted
     assert resumed.exit_code == 0, resumed.output
     results = json.loads((run / "results.json").read_text())
     assert results["steps"] >= stopped_at + 128 and results["stopped_early"] is False

@@ -56,7 +56,8 @@ def test_train_writes_a_complete_run_folder(run_dir):
         "results.json",
         "best_model.zip",
         "final_model.zip",
-        "checkpoints/latest.zip",
+        "checkpoints/latest/weights.safetensors",  # the training state as data, for --resume
+        "checkpoints/latest/state.json",
         "best_model.safetensors",
         "best_model.json",
         "final_model.safetensors",

@@ -68,7 +68,14 @@ FIXED_ON_RESUME = ("frame_stack", "eval_every", "eval_episodes", "final_episodes
     "--resume",
     "resume_dir",
     type=click.Path(exists=True, file_okay=False),
-    help="continue a run folder from its latest checkpoint (--steps, --set and --config may change)",
+    help="continue a run folder of SPEC from its latest checkpoint (--steps, --set and --config may change)",
+)
+@click.option(
+    "--trust-pickle",
+    is_flag=True,
+    help="with --resume: also resume from a pickle-based checkpoint (an older SB3 run's checkpoints/latest.zip, an "
+    "RLlib run's checkpoint folder): unpickling runs whatever code it holds, so only for runs you trust "
+    "(docs/security.md)",
 )
 @click.option("--no-progress", is_flag=True)
 @shown_option(
@@ -131,6 +138,7 @@ def train(
     config_file: str | None,
     out_root: str,
     resume_dir: str | None,
+    trust_pickle: bool,
     no_progress: bool,
     pin: bool,
     batched: int | None,
@@ -161,6 +169,8 @@ def train(
                 f"the hyperparameters set device {hyper['device']!r} as well", param_hint="--device"
             )
         hyper["device"] = torch_device
+    if trust_pickle and not resume_dir:
+        raise click.UsageError("--trust-pickle: only with --resume (a new run unpickles nothing)")
     if _chosen_backend(ctx, backend, resume_dir) == "rllib":
         _train_rllib(ctx, spec, steps, hyper, resume_dir, out_root, address, not no_progress, trust_code)
         return
@@ -170,7 +180,7 @@ def train(
             ("algo", "envs", "batched", "batch_workers", "render_device", *FIXED_ON_RESUME),
             "only --steps, --set and --config change on --resume",
         )
-        config = _resumed(TrainConfig, resume_dir, steps, hyper, not no_progress)
+        config = _resumed(TrainConfig, spec, resume_dir, steps, hyper, not no_progress)
     else:
         config = TrainConfig(
             spec=spec,
@@ -202,7 +212,12 @@ def train(
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     results = run_training(
-        config, run_dir, resume=bool(resume_dir), changes=hyper if resume_dir else None, trust_code=trust_code
+        config,
+        run_dir,
+        resume=bool(resume_dir),
+        changes=hyper if resume_dir else None,
+        trust_code=trust_code,
+        trust_pickle=trust_pickle,
     )
     _report(results, run_dir)
 
@@ -383,11 +398,16 @@ def _refuse_fixed_on_resume(ctx: click.Context, names: Sequence[str], what_chang
         raise click.UsageError(f"{', '.join(fixed)}: a resumed run keeps its settings; {what_changes}")
 
 
-def _resumed(config_class: Any, resume_dir: str, steps: int | None, hyper: dict[str, Any], progress: bool) -> Any:
+def _resumed(
+    config_class: Any, spec: str, resume_dir: str, steps: int | None, hyper: dict[str, Any], progress: bool
+) -> Any:
+    """The run's configuration, carried on with SPEC (which training checks is the run's before anything is written)."""
     from visualenv.train.sb3 import resumed_config
 
     try:
-        return resumed_config(config_class, Path(resume_dir), steps=steps, hyperparams=hyper, progress=progress)
+        return resumed_config(
+            config_class, Path(resume_dir), steps=steps, hyperparams=hyper, progress=progress, spec=spec
+        )
     except ConfigError as exc:
         raise click.BadParameter(str(exc), param_hint="--resume") from None
 
@@ -435,7 +455,7 @@ def _train_rllib(
             (*FIXED_ON_RESUME, "env_runners", "envs_per_runner", "batched"),
             "only --steps, --set, --config and --address change on --resume",
         )
-        config = _resumed(RLlibTrainConfig, resume_dir, steps, hyper, progress)
+        config = _resumed(RLlibTrainConfig, spec, resume_dir, steps, hyper, progress)
     else:
         config = RLlibTrainConfig(
             spec=spec,
@@ -467,6 +487,7 @@ def _train_rllib(
         changes=hyper if resume_dir else None,
         address=address,
         trust_code=trust_code,
+        trust_pickle=params["trust_pickle"],
     )
     _report(results, run_dir)
 

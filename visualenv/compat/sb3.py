@@ -1,4 +1,5 @@
-"""Stable-Baselines3's protected methods visualenv calls: a policy's constructor arguments, a VecEnv's env indices.
+"""Stable-Baselines3's protected methods and attributes visualenv uses: a policy's constructor arguments, a VecEnv's env
+indices, an algorithm's training state.
 
 **A policy's constructor arguments** (:func:`constructor_parameters`): policy.json records what rebuilds a policy as
 data. SB3 keeps that record in ``BaseModel._get_constructor_parameters()``, which each policy class extends and which
@@ -8,10 +9,18 @@ data. SB3 keeps that record in ``BaseModel._get_constructor_parameters()``, whic
 ``env_method`` and ``env_is_wrapped`` (None: every env; an int: that env; else the envs listed), read as SB3's own
 VecEnvs read it, through ``VecEnv._get_indices``.
 
-Neither has a documented alternative, so both are called on every version; ``tests/compat/test_sb3.py`` fails when
+**An algorithm's training state** (:func:`state_names`, :func:`training_counters`, :func:`set_training_counters`,
+:func:`episode_window`): what ``train --resume`` saves as data where SB3's ``save`` pickles it. The torch objects are
+those ``BaseAlgorithm._get_torch_save_params()`` names (state dicts of the policy and the optimizers, and tensors
+such as SAC's ``log_ent_coef``); the counters are the attributes SB3's ``save`` keeps that a new model starts at 0
+(``num_timesteps``, ``_n_updates``, ``_episode_num``, DQN's ``_n_calls`` and ``exploration_rate``,
+``_current_progress_remaining``); ``_stats_window_size`` bounds the recent episodes' buffer.
+
+None has a documented alternative, so each is used on every version; ``tests/compat/test_sb3.py`` fails when
 Stable-Baselines3 moves: another version (read these methods in it, then add it to :data:`CHECKED`), or a method gone.
 
-Checked against Stable-Baselines3 2.3.0 to 2.8.0 (their source) and 2.9.2 (installed).
+Checked against Stable-Baselines3 2.3.0 to 2.8.0 (their source) and 2.9.2 (installed); the training state against
+2.9.2 alone.
 """
 
 from __future__ import annotations
@@ -38,3 +47,37 @@ def constructor_parameters(policy: Any) -> dict[str, Any]:
 def vec_env_indices(venv: Any, indices: Any) -> Iterable[int]:
     """The envs of `venv` (an SB3 VecEnv) that `indices` names: None every env, an int that env, else those listed."""
     return venv._get_indices(indices)
+
+
+#: the counters SB3's ``save`` keeps that a new model starts from 0 (or 1.0): those an algorithm has are carried
+COUNTERS = (
+    "num_timesteps",
+    "_n_updates",
+    "_episode_num",
+    "_n_calls",
+    "_current_progress_remaining",
+    "exploration_rate",
+)
+
+
+def state_names(model: Any) -> tuple[list[str], list[str]]:
+    """The torch state of an SB3 algorithm, as its ``save`` names it: the attributes whose state dicts it keeps
+    (``policy``, ``policy.optimizer``, SAC's ``actor.optimizer``, ...), and those that are tensors (``log_ent_coef``)."""
+    state_dicts, variables = model._get_torch_save_params()
+    return list(state_dicts), list(variables)
+
+
+def training_counters(model: Any) -> dict[str, int | float]:
+    """The counters of :data:`COUNTERS` that `model` has, as numbers."""
+    return {name: getattr(model, name) for name in COUNTERS if hasattr(model, name)}
+
+
+def set_training_counters(model: Any, counters: dict[str, int | float]) -> None:
+    """Set the counters :func:`training_counters` read (each one `model` has; the caller checked the names)."""
+    for name, value in counters.items():
+        setattr(model, name, value)
+
+
+def episode_window(model: Any) -> int:
+    """How many recent episodes SB3 keeps for its ``rollout/ep_rew_mean`` (``stats_window_size``)."""
+    return int(model._stats_window_size)

@@ -77,6 +77,13 @@ def load_spec(path: str | Path) -> LoadedSpec:
     return validate_data(data, smap, Path(path).resolve().parent)
 
 
+def spec_identity(path: str | Path) -> dict[str, str]:
+    """The spec file's id and the sha256 of its bytes: what a run or a policy file records of the spec it was made on."""
+    import hashlib
+
+    return {"id": load_spec(path).spec.id, "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
+
+
 def load_spec_text(text: str, name: str = "<string>.yaml", base_dir: str | Path = ".") -> LoadedSpec:
     """Validate spec text (YAML, or TOML when `name` ends in .toml)."""
     data, smap = load_toml_text(text, name) if name.endswith(".toml") else load_yaml_text(text, name)
@@ -417,4 +424,4 @@ def _strip(annotation: Any) -> Any:
     return annotation
 
 
-__all__ = ["LoadedSpec", "load_spec", "load_spec_text", "validate_data", "format_path"]
+__all__ = ["LoadedSpec", "load_spec", "load_spec_text", "spec_identity", "validate_data", "format_path"]

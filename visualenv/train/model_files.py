@@ -23,6 +23,7 @@ from typing import Any
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.errors import VisualEnvError
 from visualenv.train.policy_format import WEIGHTS, is_policy_file, read_meta, read_policy, write_policy
+from visualenv.spec.loader import spec_identity
 from visualenv.train.run_folder import RunFolder, RunFolderError, read_config
 
 #: the shipped agents live in the source checkout: results/<Id>/policy.safetensors with its policy.json
@@ -201,10 +202,7 @@ def _algorithm_name(model: Any) -> str | None:
 def run_record(run_dir: Path | None) -> dict[str, Any]:
     """What a run folder's config.json says of a policy it trained: the algorithm, the frame stack, the spec's id and
     the sha256 of its spec file (as `visualenv build` records it); None for what it does not say."""
-    import hashlib
-
     from visualenv.env.registration import resolve
-    from visualenv.spec.loader import load_spec
 
     record: dict[str, Any] = {"algorithm": None, "frame_stack": None, "spec": None}
     if run_dir is None or not RunFolder(run_dir).is_run():
@@ -216,11 +214,7 @@ def run_record(run_dir: Path | None) -> dict[str, Any]:
     record["algorithm"] = config["algo"]
     record["frame_stack"] = config["frame_stack"] if config["render"] else 0
     try:
-        source = resolve(str(config["spec"]))
-        record["spec"] = {
-            "id": load_spec(source).spec.id,
-            "sha256": hashlib.sha256(Path(source).read_bytes()).hexdigest(),
-        }
+        record["spec"] = spec_identity(resolve(str(config["spec"])))
     except (VisualEnvError, OSError):
         pass  # a spec that moved or no longer loads: the file says nothing of it rather than something wrong
     return record

@@ -3,7 +3,7 @@
 The run folder has the layout :mod:`visualenv.train.sb3` describes, with RLlib
 checkpoint folders in place of SB3's zip files: ``best_model/``,
 ``final_model/`` and ``checkpoints/latest/`` (each a full Algorithm checkpoint,
-pickles that ``--resume`` reads back from the run's own folder), and the policies of
+pickles, which ``--resume`` reads back only with ``--trust-pickle``), and the policies of
 the first two as policy files, ``best_model.safetensors`` and ``final_model.safetensors``
 (each with its ``.json``), which ``eval`` and ``play`` load without unpickling. ``logs/progress.csv`` uses SB3's
 column names, ``evaluations.npz`` EvalCallback's arrays, and the plots and
@@ -266,12 +266,16 @@ def train(
     changes: dict[str, Any] | None = None,
     address: str | None = None,
     trust_code: bool = False,
+    trust_pickle: bool = False,
 ) -> dict[str, Any]:
     """Train on the cluster at `address` (a local one if None), evaluate the best model, draw the plots; the final results.
 
-    `trust_code`: the spec's ``dynamics.python`` may be imported, in every EnvRunner too (docs/security.md)."""
+    `trust_code`: the spec's ``dynamics.python`` may be imported, in every EnvRunner too (docs/security.md). A resumed
+    run continues from its checkpoint folder, a pickle: only with `trust_pickle`, once the run is known to be one of
+    `config`'s spec."""
     from visualenv.train.plots import training_plots
     from visualenv.env.registration import resolve
+    from visualenv.train.checkpoints import resume_checkpoint
     from visualenv.train.model_files import load_model
     from visualenv.train.rllib_setup import check_address
     from visualenv.env.cores import usable_cores
@@ -279,8 +283,11 @@ def train(
 
     check_address(address)
     algo_config = algorithm_config(config, trust_code)
-    run_dir.mkdir(parents=True, exist_ok=True)
     folder = RunFolder(run_dir)
+    if resume:  # checked before anything in the folder is written
+        checkpoint = latest_checkpoint(run_dir)
+        resume_checkpoint(folder, resolve(config.spec), checkpoint, backend=BACKEND, trust_pickle=trust_pickle)
+    run_dir.mkdir(parents=True, exist_ok=True)
     folder.logs.mkdir(exist_ok=True)
     frame_stack = config.frame_stack if config.render else 0
     eval_env = make_eval_env(

@@ -11,8 +11,8 @@ A run folder ``runs/<Id>/<timestamp>/`` (:func:`new_run_dir`) holds:
 * ``monitor/``         per-episode returns and lengths of SB3's training envs
 * ``best_model.safetensors``, ``final_model.safetensors`` (each with its ``.json``): the best and the last policy
                        as policy files, which ``eval`` and ``play`` load without unpickling
-* SB3: ``best_model.zip`` (EvalCallback's name), ``final_model.zip``, ``checkpoints/latest.zip`` (for ``--resume``);
-  RLlib: the checkpoint folders ``best_model/``, ``final_model/``, ``checkpoints/latest/``; all pickles
+* SB3: ``best_model.zip``, ``final_model.zip`` (pickles), ``checkpoints/latest/`` (data, for ``--resume``: see
+  :mod:`visualenv.train.checkpoints`); RLlib: ``best_model/``, ``final_model/``, ``checkpoints/latest/`` (pickles)
 * ``plots/``           the paper's figures; distillation: ``rounds.csv``, one row per DAgger round
 
 A shipped agent's folder (``results/<Id>/``) keeps ``config.json``, ``results.json``, ``evaluations.npz``, the
@@ -21,7 +21,7 @@ plots and the logs beside them (no ``logs/``), and the best policy as ``policy.s
 config.json (format :data:`FORMAT_VERSION`) holds ``format`` and ``format_version``, ``backend`` (``sb3``, ``rllib``
 or ``distill``), ``command``, ``config`` (the settings: :class:`~visualenv.train.sb3.TrainConfig`,
 :class:`~visualenv.train.rllib.RLlibTrainConfig` or :class:`~visualenv.train.distill.DistillConfig` as a mapping),
-``versions``, ``spec_path``; ``resumes`` (each resume's command and changed hyperparameters); a distillation's
+``versions``, ``spec_path``, ``spec`` (id, sha256); ``resumes`` (each resume's command and changes); a distillation's
 ``teacher`` and ``student`` (path and sha256). Reading checks the type and the bounds of every setting.
 """
 
@@ -55,6 +55,7 @@ MAX_EVALUATIONS_BYTES = 2**28  # evaluations.npz's arrays, their size read from 
 LOGS, PROGRESS = "logs", "progress.csv"
 SHIPPED_POLICY = "policy" + WEIGHTS
 CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained
+STATE_WEIGHTS, STATE_JSON, STATE_REPLAY = "weights.safetensors", "state.json", "replay_buffer.npz"  # SB3's checkpoint
 
 
 class RunFolderError(ConfigError):
@@ -142,7 +143,7 @@ class RunFolder:
 
     @property
     def latest_zip(self) -> Path:
-        """``checkpoints/latest.zip``: SB3's newest model, for ``--resume``."""
+        """``checkpoints/latest.zip``: an older SB3 run's checkpoint, a pickle (``--resume`` reads it if trusted)."""
         return self.path / "checkpoints" / "latest.zip"
 
     @property
@@ -157,7 +158,7 @@ class RunFolder:
 
     @property
     def latest_dir(self) -> Path:
-        """``checkpoints/latest/``: RLlib's newest checkpoint folder, for ``--resume``."""
+        """``checkpoints/latest/``: the newest checkpoint, for ``--resume`` (SB3's as data: STATE_JSON...; RLlib's)."""
         return self.path / "checkpoints" / "latest"
 
     def is_run(self) -> bool:
@@ -285,7 +286,7 @@ ADDED: dict[str, dict[str, Any]] = {
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
 RECORD_KEYS: dict[str, Rule] = {
     **dict.fromkeys(("command", "spec_path"), Rule(str)),
-    **dict.fromkeys(("config", "versions", "teacher", "student"), Rule(dict)),
+    **dict.fromkeys(("config", "versions", "teacher", "student", "spec"), Rule(dict)),
     "format": Rule(str, choices=(FORMAT,)),
     "format_version": Rule(int, 1, FORMAT_VERSION),
     "backend": Rule(str, choices=BACKENDS),
@@ -429,6 +430,7 @@ def record_run(
 ) -> None:
     """config.json of a new run (the command, `config`'s settings, the versions, `extra` keys); a resumed run's
     keeps its record, takes the settings now in force and appends the command and the changed hyperparameters."""
+    from visualenv.spec.loader import spec_identity
     from visualenv.versions import versions
 
     folder = _folder(run)
@@ -447,6 +449,7 @@ def record_run(
             "spec_path": spec_path,
             **(extra or {}),
         }
+    record.setdefault("spec", spec_identity(spec_path))  # the spec's id and sha256, which --resume checks
     write_config(folder, record)
 
 

@@ -2,10 +2,9 @@
 
 A run folder ``runs/<Id>/<timestamp>/`` holds everything a run makes (:mod:`visualenv.train.run_folder` lists
 it): the command and settings, the logs, the periodic evaluations, the best and final models as SB3 zips and as
-policy files (float32 weights, which ``eval`` and ``play`` load without unpickling), ``checkpoints/latest.zip`` for
-``--resume`` (SB3's zip: a pickle, read back only from the run's own folder), the plots, and results.json: the best
-policy file's final evaluation on fresh seeds and the periodic evaluation that selected it
-(see :mod:`visualenv.train.evaluation`).
+policy files (float32 weights, which ``eval`` and ``play`` load without unpickling), the training state for
+``--resume`` as data (:mod:`visualenv.train.checkpoints`), the plots, and results.json: the best policy file's final
+evaluation on fresh seeds and the periodic evaluation that selected it (see :mod:`visualenv.train.evaluation`).
 
 Stopping a run early (Ctrl-C, or ``kill`` with SIGTERM) ends training at the next
 step and still saves, evaluates and plots what was learnt so far.
@@ -38,6 +37,7 @@ from visualenv.train.evaluation import (
     selection_record,
     selection_seed,
 )
+from visualenv.train.checkpoints import load_state, resume_checkpoint, save_state, sb3_checkpoint
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
 from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
 
@@ -111,10 +111,17 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
 
 
 def resumed_config(
-    config_class: Any, run_dir: Path, *, steps: int | None, hyperparams: dict[str, Any], progress: bool
+    config_class: Any,
+    run_dir: Path,
+    *,
+    steps: int | None,
+    hyperparams: dict[str, Any],
+    progress: bool,
+    spec: str | None = None,
 ) -> Any:
     """The configuration of the run in `run_dir`, carried on: its settings as saved, with the total steps (if given),
-    the changed hyperparameters and the progress display of this command. Used by both backends (`config_class`)."""
+    the changed hyperparameters and the progress display of this command, and `spec` (which training checks is the
+    run's) where given. Used by both backends (`config_class`)."""
     record = read_config(run_dir)
     if record["backend"] not in ("sb3", "rllib"):
         raise ConfigError(
@@ -124,6 +131,7 @@ def resumed_config(
     return config_class(
         **{
             **saved,
+            "spec": spec or saved["spec"],
             "steps": steps or saved["steps"],
             "hyperparams": {**saved["hyperparams"], **hyperparams},
             "progress": progress,
@@ -144,11 +152,13 @@ def train(
     resume: bool = False,
     changes: dict[str, Any] | None = None,
     trust_code: bool = False,
+    trust_pickle: bool = False,
 ) -> dict[str, Any]:
     """Train, evaluate the best model, draw the plots; returns the final results.
 
-    A resumed run continues from ``checkpoints/latest.zip``; `changes` are hyperparameters
-    that differ from the saved model's from now on (recorded in config.json under ``resumes``).
+    A resumed run continues from its checkpoint (an older run's pickled ``checkpoints/latest.zip`` only with
+    `trust_pickle`), once it is known to be a run of `config`'s spec; `changes` are hyperparameters that differ
+    from the saved model's from now on (recorded in config.json under ``resumes``).
     `trust_code`: the spec's ``dynamics.python`` may be imported, in every env process (docs/security.md); it is the
     caller's consent, never read from or written to the run folder.
     """
@@ -157,18 +167,21 @@ def train(
     spec_path = str(resolve(config.spec))
     changes = dict(changes or {})
     kwargs, changed_kwargs = check_config(config, changes)
-    run_dir.mkdir(parents=True, exist_ok=True)
     folder = RunFolder(run_dir)
+    checkpoint = None
+    if resume:  # checked before anything in the folder is written
+        found = sb3_checkpoint(folder)
+        checkpoint = resume_checkpoint(folder, spec_path, found, backend="sb3", trust_pickle=trust_pickle)
+    run_dir.mkdir(parents=True, exist_ok=True)
     record_run(folder, config, spec_path, backend="sb3", resume=resume, changes=changes)
     if resume:
         folder.keep_earlier_progress()
     train_env, eval_env = _make_envs(config, spec_path, folder, resume, trust_code)
-    latest = folder.latest_zip
     started = time.perf_counter()
     stopper = _StopOnSignal()
     try:
-        model = _make_model(config, train_env, latest if resume else None, kwargs, changed_kwargs)
-        _learn(model, config, eval_env, folder, latest, stopper, resume)
+        model = _make_model(config, train_env, checkpoint, kwargs, changed_kwargs)
+        _learn(model, config, eval_env, folder, stopper, resume)
     except BaseException:
         eval_env.close()
         raise
@@ -210,16 +223,23 @@ def _make_envs(
 def _make_model(
     config: TrainConfig, train_env: Any, checkpoint: Path | None, kwargs: dict[str, Any], changed_kwargs: dict[str, Any]
 ) -> Any:
-    """A new model, or the checkpoint's (a resumed run) with the changed hyperparameters set before it is built."""
+    """A new model; for a resumed run, with the checkpoint's state loaded into it (the run's hyperparameters, changes
+    included, build it), or an older run's trusted zip with the changed hyperparameters set before it is built."""
     algo = algorithm_class(config.algo)
-    if checkpoint is not None and checkpoint.exists():
-        return algo.load(checkpoint, env=train_env, **changed_kwargs)
+    if checkpoint is not None and not checkpoint.is_dir():
+        try:
+            return algo.load(checkpoint, env=train_env, **changed_kwargs)
+        except Exception as exc:  # SB3 raises whatever its unpickling met
+            raise ConfigError(f"cannot resume from {checkpoint}: {type(exc).__name__}: {exc}") from None
     try:
-        return algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
+        model = algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
     except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
         raise ConfigError(
             f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}"
         ) from None
+    if checkpoint is not None:
+        load_state(model, checkpoint, config.algo)
+    return model
 
 
 def _learn(
@@ -227,7 +247,6 @@ def _learn(
     config: TrainConfig,
     eval_env: Any,
     folder: RunFolder,
-    latest: Path,
     stopper: _StopOnSignal,
     resume: bool,
 ) -> None:
@@ -247,8 +266,9 @@ def _learn(
             deterministic=True,
             verbose=0,
             callback_after_eval=None if config.progress else _EvalLine(),
+            callback_on_new_best=_BestPolicy(folder, config.algo),
         ),
-        _LatestCheckpoint(latest, every=per_env),
+        _LatestCheckpoint(folder, config.algo, every=per_env),
         _PhaseThreads(),
         stopper,
     ]
@@ -263,7 +283,7 @@ def _learn(
             callback=CallbackList(callbacks),
             reset_num_timesteps=not resume,
         )
-    model.save(latest)
+    save_state(model, folder, config.algo)
     model.save(folder.final_zip)
     save_policy(model, folder.final_policy, half=False, algorithm=config.algo, run_dir=folder.path)
 
@@ -271,19 +291,11 @@ def _learn(
 def _finish(
     model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float, stopped_early: bool
 ) -> dict[str, Any]:
-    """The best model as a policy file, its final evaluation (closing the eval env), results.json and the plots."""
+    """The best policy file's final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
 
-    best, evaluated = folder.best_zip, folder.final_policy
+    evaluated = folder.best_policy if folder.best_policy.exists() else folder.final_policy
     try:
-        if best.exists():  # EvalCallback's zip, of this run's own folder: trusted, as --resume trusts its checkpoint
-            evaluated = save_policy(
-                load_model(best, config.algo, trust_pickle=True),
-                folder.best_policy,
-                half=False,
-                algorithm=config.algo,
-                run_dir=folder.path,
-            )
         results = final_evaluation(load_model(evaluated), eval_env, config.final_eval_episodes, final_seed(config.seed))
     finally:
         eval_env.close()
@@ -456,16 +468,29 @@ class _EvalLine(BaseCallback):
 
 
 class _LatestCheckpoint(BaseCallback):
-    """Overwrite one checkpoint file, so a killed run resumes from its last save."""
+    """Replace the one checkpoint (data, :func:`~visualenv.train.checkpoints.save_state`), so a killed run resumes from
+    its last save."""
 
-    def __init__(self, path: Path, every: int):
+    def __init__(self, folder: RunFolder, algorithm: str, every: int):
         super().__init__()
-        self.path, self.every = path, every
+        self.folder, self.algorithm, self.every = folder, algorithm, every
 
     def _on_step(self) -> bool:
         if self.n_calls % self.every == 0:
-            self.path.parent.mkdir(parents=True, exist_ok=True)
-            self.model.save(self.path)
+            save_state(self.model, self.folder, self.algorithm)
+        return True
+
+
+class _BestPolicy(BaseCallback):
+    """On each new best evaluation, the model as the best policy file too (beside EvalCallback's best_model.zip): the
+    final evaluation reads it, and no pickle."""
+
+    def __init__(self, folder: RunFolder, algorithm: str):
+        super().__init__()
+        self.folder, self.algorithm = folder, algorithm
+
+    def _on_step(self) -> bool:
+        save_policy(self.model, self.folder.best_policy, half=False, algorithm=self.algorithm, run_dir=self.folder.path)
         return True
 
 
