@@ -33,9 +33,10 @@ BACKGROUND_STEP = 0.05
 
 @dataclass(frozen=True)
 class Distraction:
-    """One episode's changes (or one step's, when dynamic). Angles in radians, in the camera's own frame: ``yaw``
-    about its up axis and ``pitch`` about its right axis orbit it about the point it looks at, ``roll`` turns it
-    about its view axis; ``zoom`` scales its distance to that point. ``color_shift`` is the largest change of a
+    """One episode's changes (or one step's, when dynamic). Angles in radians: ``yaw`` (the azimuth, about the world's
+    vertical) and ``pitch`` (the polar angle, about the horizontal axis across the view; positive lowers the camera)
+    orbit it about the point it looks at (:func:`orbit`), ``roll`` turns it about its view axis; ``zoom`` scales its
+    distance to that point. ``color_shift`` is the largest change of a
     colour channel; ``colors_seed`` draws each material's and the sky's shift (:func:`color_shifts`)."""
 
     yaw: float = 0.0
