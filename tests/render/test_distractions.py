@@ -89,18 +89,48 @@ def test_a_higher_difficulty_changes_the_pixels_more() -> None:
 
 def test_each_kind_changes_what_it_says(tmp_path: Path) -> None:
     """Colours alone keep every pixel on its object (the segmentation is the plain env's) and change the colours;
-    the camera alone moves the objects in the image; the background alone changes the sky's pixels only."""
+    the camera alone moves the objects in the image; the background alone (the floor kept opaque: its alpha is
+    checked below) changes the sky's pixels only."""
     spec = segmented_cartpole(tmp_path)
     (clean,) = first_frames(spec, [3])
     (colors,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "camera": False, "background": False})
     (camera,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "colors": False, "background": False})
-    (backdrop,) = first_frames(spec, [3], distractions={"difficulty": 0.3, "colors": False, "camera": False})
+    (backdrop,) = first_frames(
+        spec, [3], distractions={"difficulty": 0.3, "colors": False, "camera": False, "floor_alpha": 1.0}
+    )
     assert np.array_equal(colors["mask"], clean["mask"]) and mean_difference(colors["eye"], clean["eye"]) > 5
     assert (colors["mask"] != camera["mask"]).mean() > 0.05
     sky = clean["mask"][..., 0] == 0
     assert np.array_equal(backdrop["mask"], clean["mask"]) and sky.mean() > 0.2
     assert mean_difference(backdrop["eye"][sky], clean["eye"][sky]) > 10
     assert np.array_equal(backdrop["eye"][~sky], clean["eye"][~sky])  # the background lights nothing
+
+
+def test_the_floor_at_the_suites_alpha_lets_the_sky_through(tmp_path: Path) -> None:
+    """DMC cartpole's floor (its material 'grid') at the suite's alpha 0.3, under an opaque background (hard): its
+    pixels move from the opaque floor's toward the sky seen through it (alpha 0), on average 0.3 x floor + 0.7 x sky
+    in linear light (Cycles draws the transparency per sample: at the fast preset's one sample a pixel shows the
+    floor or the sky, dithered); nothing else changes."""
+    spec = segmented_cartpole(tmp_path)
+    floor_only = {"difficulty": 0.3, "camera": False, "colors": False, "background": True}
+    opaque, faded, through = (
+        first_frames(spec, [3], distractions={**floor_only, "floor_alpha": alpha})[0] for alpha in (1.0, 0.3, 0.0)
+    )
+    mask = opaque["mask"][..., 0]
+    floor = mask == mask[-1, mask.shape[1] // 2]  # the bottom of the level camera's view is floor
+    assert floor.mean() > 0.2 and np.array_equal(faded["mask"], opaque["mask"])
+    own, seen, sky = (linear(x["eye"][floor]).mean(axis=0) for x in (opaque, faded, through))
+    apart = np.abs(own - sky).max()
+    assert apart > 0.05  # the background seen through the floor differs from the floor
+    assert np.abs(seen - sky).max() < np.abs(own - sky).max() - 0.3 * apart  # toward the sky
+    assert np.abs(seen - (0.3 * own + 0.7 * sky)).max() < 0.1 * apart, (own, seen, sky)
+    assert np.array_equal(faded["eye"][~floor], opaque["eye"][~floor])
+
+
+def linear(pixels: np.ndarray) -> np.ndarray:
+    """8-bit sRGB as linear light in [0, 1]."""
+    x = pixels.astype(np.float64) / 255
+    return np.where(x <= 0.04045, x / 12.92, ((x + 0.055) / 1.055) ** 2.4)
 
 
 def test_a_seed_draws_the_same_distractions_and_dynamic_ones_drift(tmp_path: Path) -> None:

@@ -52,7 +52,7 @@ from visualenv.render.batch_limits import check_batchable
 from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.profile import Profile
 from visualenv.spec.loader import LoadedSpec
-from visualenv.spec.options import distraction_settings
+from visualenv.spec.options import distraction_settings, model_file
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
 BATCH_BACKEND = "visualenv.render.blender.batch.renderer:BatchedBlenderRenderer"
@@ -138,7 +138,11 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             )
         self._display: HumanDisplay | None = None  # render_mode="human": where the grid is shown, opened at first
         #: what each env's observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
-        self.distractions = distraction_settings(distractions, program.spec.distractions) if self.uses_camera else None
+        self.distractions = (
+            distraction_settings(distractions, program.spec.distractions, model_file(program.spec))
+            if self.uses_camera
+            else None
+        )
         length = episode_length(program, max_episode_steps, action_repeat)
         #: the spec's steps per step() (dm_control's action repeat), each with the same action: as one env's
         self.action_repeat = length.action_repeat

@@ -25,7 +25,7 @@ from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.frames import Frames
 from visualenv.render.sensor import SensorModel, sensor_generator
 from visualenv.spec.loader import LoadedSpec
-from visualenv.spec.options import distraction_settings
+from visualenv.spec.options import distraction_settings, model_file
 
 #: the keys reset(options=...) understands
 RESET_OPTIONS = ("state",)
@@ -192,7 +192,7 @@ class VisualEnv(PicklingEnv):
         self._sensor_rng: np.random.Generator | None = None
         self._observed = program.observed
         #: what the observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
-        self.distractions = distraction_settings(distractions, s.distractions)
+        self.distractions = distraction_settings(distractions, s.distractions, model_file(s))
         self._distractions = (
             EpisodeDistractions(to_plan(self.distractions))
             if self.distractions is not None and self.uses_camera

@@ -64,6 +64,7 @@ class GeomShape:
     emission: float = 0.0
     specular: float = 0.5
     shininess: float = 0.5
+    material: str = ""  # its MuJoCo material's name ("" without one): a floor's is 'grid' (distractions fade it)
 
 
 @dataclass(frozen=True)
@@ -321,6 +322,7 @@ def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarr
         vertices = np.array(model.mesh_vert[v0 : v0 + nv], dtype=np.float64)
         faces = np.array(model.mesh_face[f0 : f0 + nf], dtype=np.int64)
     emission, specular, shininess = _shading(model, mat)
+    material = (mujoco_module().mj_id2name(model, mujoco_module().mjtObj.mjOBJ_MATERIAL, mat) or "") if mat >= 0 else ""
     shape = GeomShape(
         name,
         kind,
@@ -334,6 +336,7 @@ def _geom(model: Any, g: int, kind: str, name: str, textures: dict[int, np.ndarr
         emission=emission,
         specular=specular,
         shininess=shininess,
+        material=material,
     )
     tex = _texture_id(model, mat)
     if tex < 0:

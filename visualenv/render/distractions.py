@@ -1,8 +1,9 @@
 """Distractions: what one episode's observation shows changed, drawn apart from the env's own random stream.
 
 The Distracting Control Suite (Stone et al., 2021) changes what a pixel agent sees and nothing it controls: the
-camera's pose, the colours of the bodies, the floor and the sky, the background (its videos; here a moving pattern).
-Here each kind is drawn at reset
+camera's pose, the colours of the bodies, the floor and the sky, the background (its videos; here visualenv's own
+moving pattern). The camera's ranges, its upper-hemisphere limit and the floor's alpha are the suite's
+(``suite_utils.py``, ``camera.py``). Here each kind is drawn at reset
 from a generator of its own (:func:`distraction_generator`), so the state, the rewards and the env's random numbers
 are those of the same env without distractions, and the same seed draws the same distractions.
 
@@ -24,21 +25,27 @@ from visualenv.render.plan import Distractions
 SPAWN_KEY = 0x4453
 #: a dynamic distraction's step: this share of its range at most, every env step
 DRIFT = 0.05
+#: a camera within this of looking straight down (radians) is not limited to the upper hemisphere by default
+STRAIGHT_DOWN = math.radians(1.0)
 #: how far a dynamic background plays each env step (the pattern's fourth coordinate: about 1 changes it wholly)
 BACKGROUND_STEP = 0.05
 
 
 @dataclass(frozen=True)
 class Distraction:
-    """One episode's changes (or one step's, when dynamic). Angles in radians, in the camera's own frame: ``yaw``
-    about its up axis and ``pitch`` about its right axis orbit it about the point it looks at, ``roll`` turns it
-    about its view axis; ``zoom`` scales its distance to that point. ``color_shift`` is the largest change of a
+    """One episode's changes (or one step's, when dynamic). Angles in radians: ``yaw`` (the azimuth, about the world's
+    vertical) and ``pitch`` (the polar angle, about the horizontal axis across the view; positive lowers the camera)
+    orbit it about the point it looks at (:func:`orbit`), ``roll`` turns it about its view axis; ``zoom`` scales its
+    distance to that point. ``color_shift`` is the largest change of a
     colour channel; ``colors_seed`` draws each material's and the sky's shift (:func:`color_shifts`)."""
 
     yaw: float = 0.0
-    pitch: float = 0.0
+    pitch: float = 0.0  # drawn in [-reach, reach]; the orbit maps it onto the interval the limit leaves (orbit_pitch)
     roll: float = 0.0
     zoom: float = 1.0
+    reach: float = 0.0  # the angles' bound, difficulty x pi/2 (0: the camera is not distracted)
+    upper_hemisphere: bool | None = None  # the suite's limit (None: unless the camera looks straight down)
+    floor_alpha: float = 1.0  # the opacity of a MuJoCo model's floor (its material 'grid')
     color_shift: float = 0.0
     colors_seed: int = 0
     colors_phase: float = 0.0  # a dynamic episode's drift of every colour, in [-1, 1] of color_shift
@@ -56,20 +63,25 @@ def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generat
 
 
 def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
-    """An episode's distraction at `settings`' difficulty: each angle uniform in ±difficulty·pi/2, the zoom in
-    1 ± difficulty/2, the colours' seed. A kind that is off stays as it is."""
+    """An episode's distraction at `settings`' difficulty, as the suite draws it: each angle uniform in
+    ±difficulty·pi/2 (the pitch then mapped onto the upper hemisphere's share of that: :func:`orbit_pitch`), the zoom
+    uniform in :func:`zoom_range`, the colours' seed. A kind that is off stays as it is."""
     scale = settings.difficulty
-    angles = rng.uniform(-1.0, 1.0, size=3) * scale * math.pi / 2
-    zoom = 1.0 + float(rng.uniform(-0.5, 0.5)) * scale
+    reach = scale * math.pi / 2
+    angles = rng.uniform(-1.0, 1.0, size=3) * reach
+    zoom = 1.0 + float(rng.uniform(-0.5, 1.5)) * scale
     seed = int(rng.integers(0, 2**31 - 1))
     if not settings.camera:
-        angles, zoom = np.zeros(3), 1.0
+        angles, zoom, reach = np.zeros(3), 1.0, 0.0
     background_seed = int(rng.integers(0, 2**31 - 1))  # drawn last: the draws before it are those of a spec without it
     return Distraction(
         yaw=float(angles[0]),
         pitch=float(angles[1]),
         roll=float(angles[2]),
         zoom=zoom,
+        reach=reach,
+        upper_hemisphere=settings.upper_hemisphere,
+        floor_alpha=1.0 if settings.floor_alpha is None else settings.floor_alpha,
         color_shift=scale if settings.colors else 0.0,
         colors_seed=seed,
         background=scale if settings.background else 0.0,
@@ -78,7 +90,8 @@ def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
 
 
 def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Generator) -> Distraction | None:
-    """A dynamic distraction one step on: every number moved by at most :data:`DRIFT` of its range, kept inside it."""
+    """A dynamic distraction one step on: every number moved by at most :data:`DRIFT` of its range, kept inside it
+    (the pitch in [-reach, reach], which the orbit maps inside the limit)."""
     if settings is None:
         return None
     scale = limits.difficulty
@@ -97,10 +110,94 @@ def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Gen
         yaw=moved(settings.yaw, step[0], -bound, bound),
         pitch=moved(settings.pitch, step[1], -bound, bound),
         roll=moved(settings.roll, step[2], -bound, bound),
-        zoom=moved(settings.zoom, step[3], 1 - scale / 2, 1 + scale / 2),
+        zoom=moved(settings.zoom, step[3], *zoom_range(scale)),
         colors_phase=phase,
         background_time=played,
     )
+
+
+def zoom_range(difficulty: float) -> tuple[float, float]:
+    """The factor of the camera's distance to the point it orbits: the suite's, in by up to difficulty/2 and out by up
+    to 1.5 x difficulty."""
+    return 1.0 - 0.5 * difficulty, 1.0 + 1.5 * difficulty
+
+
+def pitch_range(reach: float, elevation: float, limited: bool) -> tuple[float, float]:
+    """The pitches a camera at `elevation` (radians above the horizontal plane through the point it orbits) may take:
+    [-reach, reach], and where `limited` only those that keep it in [0, pi/2] of elevation (a positive pitch lowers
+    it: its elevation becomes elevation - pitch), as the suite narrows its polar angle's interval. A camera below the
+    plane, farther than `reach`, rises by `reach`."""
+    if not limited:
+        return -reach, reach
+    low, high = max(-reach, elevation - math.pi / 2), min(reach, elevation)
+    return (low, high) if low <= high else (low, low)
+
+
+def is_limited(distraction: Distraction, elevation: float) -> bool:
+    """Whether the camera keeps to the upper hemisphere: as the distraction says, else unless it looks straight down
+    (within :data:`STRAIGHT_DOWN`: the suite does not limit reacher's camera, which does)."""
+    if distraction.upper_hemisphere is not None:
+        return distraction.upper_hemisphere
+    return elevation < math.pi / 2 - STRAIGHT_DOWN
+
+
+def orbit_pitch(distraction: Distraction, elevation: float) -> float:
+    """The pitch the camera orbits by: the drawn one, uniform in [-reach, reach], mapped affinely onto
+    :func:`pitch_range` (so uniform inside the narrowed interval, none piled on its bounds)."""
+    reach = distraction.reach
+    if reach <= 0:
+        return 0.0
+    low, high = pitch_range(reach, elevation, is_limited(distraction, elevation))
+    return low + (distraction.pitch + reach) / (2 * reach) * (high - low)
+
+
+def axis_focus(pose: np.ndarray) -> float:
+    """How far along the view axis of a camera at `pose` (4x4, looking down its -Z) lies the point nearest the origin."""
+    pose = np.asarray(pose, dtype=np.float64)
+    forward = -pose[:3, 2] / np.linalg.norm(pose[:3, 2])
+    return float(-pose[:3, 3] @ forward)
+
+
+def world_up(pose: np.ndarray) -> np.ndarray:
+    """The world's up (+Z) in the frame of a camera at `pose` (4x4), unit."""
+    rotation = np.asarray(pose, dtype=np.float64)[:3, :3]
+    rotation = rotation / np.linalg.norm(rotation, axis=0)
+    return rotation.T @ np.array([0.0, 0.0, 1.0])
+
+
+def elevation_of(up: np.ndarray) -> float:
+    """A camera's elevation above the horizontal plane through the point ahead of it, `up` the world's up in its frame."""
+    return math.asin(float(np.clip(up[2] / np.linalg.norm(up), -1.0, 1.0)))
+
+
+def _rotation(axis: np.ndarray, angle: float) -> np.ndarray:
+    """4x4: a right-handed turn by `angle` about the unit `axis` (Rodrigues)."""
+    x, y, z = axis
+    k = np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
+    out = np.eye(4)
+    out[:3, :3] = np.eye(3) + math.sin(angle) * k + (1 - math.cos(angle)) * (k @ k)
+    return out
+
+
+def _translation(z: float) -> np.ndarray:
+    out = np.eye(4)
+    out[2, 3] = z
+    return out
+
+
+def orbit(distraction: Distraction, focus: float, up: np.ndarray) -> np.ndarray:
+    """The camera's local pose (4x4, in its own frame; `up`: the world's up there) on the suite's sphere about the point
+    `focus` ahead of it: turned by yaw about the world's vertical through that point (the azimuth) and by
+    :func:`orbit_pitch` about the horizontal axis across its view (the polar angle, its elevation lowered by it), its
+    distance times zoom, rolled about its view axis. A camera looking straight down pitches about its right axis."""
+    up = np.asarray(up, dtype=np.float64) / np.linalg.norm(up)
+    across = np.cross(up, [0.0, 0.0, 1.0])
+    length = float(np.linalg.norm(across))
+    across = across / length if length > 1e-9 else np.array([1.0, 0.0, 0.0])
+    pitch = orbit_pitch(distraction, elevation_of(up))
+    turn = _rotation(up, distraction.yaw) @ _rotation(across, pitch)
+    roll = _rotation(np.array([0.0, 0.0, 1.0]), distraction.roll)
+    return _translation(-focus) @ turn @ _translation(focus * distraction.zoom) @ roll
 
 
 #: the difficulty from which the background hides the sky wholly (the suite's hardest level); below, in proportion

@@ -171,6 +171,8 @@ class Distractions:
     colors: bool
     background: bool
     dynamic: bool
+    upper_hemisphere: bool | None = None  # None: limited unless the camera looks straight down
+    floor_alpha: float | None = None  # None: the floor as it is
 
 
 @dataclass(frozen=True, slots=True)

@@ -10,13 +10,14 @@ fails at ``make()`` with the message the spec would give, located at
 
 from __future__ import annotations
 
+from pathlib import PurePosixPath
 from typing import Annotated, Any, Literal, Mapping, Optional, Union
 
 from pydantic import Field, ValidationError, field_validator
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
-from visualenv.spec.models import Distractions, Name, RenderSettings, StrictModel
+from visualenv.spec.models import Distractions, Name, RenderSettings, Spec, StrictModel
 from visualenv.source_map import SourceMap
 
 #: where option errors are reported (in place of file:line)
@@ -25,6 +26,8 @@ WHERE = "visualenv.make()"
 _Pixels = Annotated[int, Field(ge=1, le=8192)]
 #: the Distracting Control Suite's levels, by the names its paper gives them
 DISTRACTION_LEVELS = {"easy": 0.1, "medium": 0.2, "hard": 0.3}
+#: the suite's ground_plane_alpha by DeepMind Control domain (the model file's name), and every other domain's
+DCS_FLOOR_ALPHA, DEFAULT_FLOOR_ALPHA = {"reacher": 0.0, "walker": 1.0, "cheetah": 1.0}, 0.3
 
 
 class MakeOptions(StrictModel):
@@ -69,10 +72,11 @@ class MakeOptions(StrictModel):
 
 
 def distraction_settings(
-    given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None
+    given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None, model: str | None = None
 ) -> Distractions | None:
     """The distractions an env draws: the option's (a difficulty, a level's name, or a section as a dict), else the spec's;
-    None for none."""
+    None for none (a difficulty of 0, or no kind on and no floor alpha below 1). A floor alpha not given is the suite's for the domain of `model` (the physics model's file,
+    :func:`floor_alpha`)."""
     if isinstance(given, str):
         given = DISTRACTION_LEVELS[given]
     if given is None:
@@ -83,11 +87,24 @@ def distraction_settings(
         chosen = Distractions.model_validate(dict(given))
     else:
         chosen = Distractions(difficulty=float(given))
-    return (
-        chosen
-        if chosen is not None and chosen.difficulty > 0 and (chosen.camera or chosen.colors or chosen.background)
-        else None
-    )
+    faded = chosen is not None and chosen.floor_alpha is not None and chosen.floor_alpha < 1
+    if chosen is None or chosen.difficulty <= 0 or not (chosen.camera or chosen.colors or chosen.background or faded):
+        return None
+    if chosen.floor_alpha is None:
+        chosen = chosen.model_copy(update={"floor_alpha": floor_alpha(model)})
+    return chosen
+
+
+def model_file(spec: Spec) -> str | None:
+    """The spec's physics model file (None without physics)."""
+    return spec.physics.model if spec.physics is not None else None
+
+
+def floor_alpha(model: str | None) -> float:
+    """The Distracting Control Suite's floor alpha for a physics model's file: by its name, the DeepMind Control domain
+    (``reacher.xml``: 0), else :data:`DEFAULT_FLOOR_ALPHA`."""
+    domain = PurePosixPath(model.replace("\\", "/")).stem if model else ""
+    return DCS_FLOOR_ALPHA.get(domain, DEFAULT_FLOOR_ALPHA)
 
 
 class _DistractionsSection(StrictModel):

@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal
+from typing import Annotated, Literal, Optional
 
 from pydantic import Field, field_validator, model_validator
 
@@ -152,8 +152,9 @@ class Distractions(StrictModel):
         ge=0.0,
         le=1.0,
         description=(
-            "the scale of every change: camera orbit and roll up to difficulty x pi/2, zoom up to difficulty/2, colours "
-            "shifted by up to difficulty per channel (the Distracting Control Suite's 0.1, 0.2, 0.3)"
+            "the scale of every change: camera orbit and roll up to difficulty x pi/2, its distance times 1 - "
+            "difficulty/2 to 1 + 1.5 x difficulty, colours shifted by up to difficulty per channel (the Distracting "
+            "Control Suite's ranges and its levels 0.1, 0.2, 0.3)"
         ),
     )
     camera: bool = Field(True, description="the observation cameras orbit, roll and zoom about the point they look at")
@@ -166,4 +167,22 @@ class Distractions(StrictModel):
     )
     dynamic: bool = Field(
         False, description="false: drawn at reset and kept for the episode; true: drifting every step as well"
+    )
+    upper_hemisphere: Optional[bool] = Field(
+        None,
+        description=(
+            "the orbiting camera stays at or above the horizontal plane through the point it orbits, and not past "
+            "overhead (the Distracting Control Suite's limit_to_upper_quadrant); default: so, unless the camera "
+            "looks straight down (as DeepMind Control's reacher's, which the suite does not limit)"
+        ),
+    )
+    floor_alpha: Optional[float] = Field(
+        None,
+        ge=0.0,
+        le=1.0,
+        description=(
+            "the opacity of a MuJoCo model's floor (the geoms of its material 'grid'), the sky and background seen "
+            "through the rest (the suite's ground_plane_alpha); default: the suite's by the model file's name "
+            "(reacher 0, walker and cheetah 1), else 0.3"
+        ),
     )

@@ -303,7 +303,11 @@ class BlenderRenderer(BindingSetters, Renderer):
                 self._scene,
                 [v.camera for v in self._views],
                 backdrop=distraction.background > 0 or distraction.color_shift > 0,
+                floor_alpha=distraction.floor_alpha,
             )
+            if self._rig.floor_faded:  # the floor's rays go on through it: transparent bounces
+                self._see_through = True
+                self._config = None
             self._ids.extend(tracker.new())
             if self._rig.backdrop is not None:
                 self._add_backdrop(self._rig.backdrop)

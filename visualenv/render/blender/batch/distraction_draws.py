@@ -11,6 +11,8 @@ Env k of a batch draws what env k alone draws (docs/distractions.md), by the bat
   (:func:`~visualenv.render.blender.look.distraction_scene.shift_by_attribute`), which each env's instances and copied objects
   hold (:class:`~visualenv.render.blender.batch.env_attributes.EnvAttributes`). So no static mesh is realized into one mesh
   of every env (its envs would read one shift);
+* **floor**: a MuJoCo model's floor takes the settings' alpha, one material for every env, as each env's own
+  (:func:`~visualenv.render.blender.look.distraction_scene.fade_floor`);
 * **sky and background**: envs share one world, which cannot tell them apart; each env has its own backdrop
   (:func:`~visualenv.render.blender.look.distraction_scene.make_backdrops`, as one env has), an instance about its ray origin
   whose attributes are its numbers. The copies stand twice the cameras' far clip apart, so that no env's backdrop
@@ -27,13 +29,14 @@ import numpy as np
 
 from visualenv.render.blender.look.distraction_scene import (
     distracted_materials,
+    fade_floor,
     make_backdrops,
     orbit,
     shift_by_attribute,
     write_backdrops,
 )
 from visualenv.render.blender.batch.env_attributes import EnvAttributes, shift_name
-from visualenv.render.distractions import Distraction, color_shifts
+from visualenv.render.distractions import Distraction, color_shifts, world_up
 from visualenv.render.plan import Distractions
 
 
@@ -48,6 +51,8 @@ class BatchDistractions:
         #: whether the materials read each env's shifts, and whether each env has a backdrop
         self.shifting = on and settings.colors
         self.backdropped = on and (settings.colors or settings.background)
+        #: whether the floor was made see-through (one floor material serves every env: the settings' alpha is theirs)
+        self.floor_faded = on and fade_floor(scene, 1.0 if settings.floor_alpha is None else settings.floor_alpha)
         materials = distracted_materials(scene)
         self._count = len(materials)
         if self.shifting:
@@ -58,7 +63,7 @@ class BatchDistractions:
         self._drawn: list[Distraction | None] = [None] * num_envs
         self._values: EnvAttributes | None = None  # where each env's shifts go
         self._backdrops: Any = None  # the object that holds every env's backdrop
-        self._focus: dict[tuple[int, int], float] = {}  # (camera, env) -> its orbit's centre
+        self._focus: dict[tuple[int, int], tuple[float, np.ndarray]] = {}  # (camera, env) -> its orbit's centre, up
         self._orbits: dict[tuple[int, int], tuple[Distraction, np.ndarray]] = {}  # (camera, env) -> the orbit drawn
 
     def attach(self, values: EnvAttributes) -> None:
@@ -84,16 +89,16 @@ class BatchDistractions:
         self._drawn = list(self.current)
 
     def orbited(self, camera: int, poses: np.ndarray, measure: Callable[[int], float]) -> list[np.ndarray]:
-        """Each env's camera pose (``(N, 4, 4)``, each in its own copy) orbited by its distraction about its centre, measured once
-        per env by `measure` (:func:`~visualenv.render.blender.look.distraction_scene.focus_distance`) for this `camera` (a pointer)."""
+        """Each env's camera pose (``(N, 4, 4)``, each in its own copy) orbited by its distraction about its centre (and
+        the world's up in its frame), measured once per env by `measure` (:func:`~visualenv.render.blender.look.distraction_scene.focus_distance`) for this `camera` (a pointer)."""
         out = []
         for k, (pose, distraction) in enumerate(zip(poses, self.current)):
             key = (camera, k)
             if key not in self._focus:
-                self._focus[key] = measure(k)
+                self._focus[key] = (measure(k), world_up(pose))
             drawn = self._orbits.get(key)
             if drawn is None or drawn[0] != distraction:
-                drawn = (distraction, np.array(orbit(distraction, self._focus[key]), dtype=np.float64))
+                drawn = (distraction, np.array(orbit(distraction, *self._focus[key]), dtype=np.float64))
                 self._orbits[key] = drawn
             out.append(pose @ drawn[1])
         return out

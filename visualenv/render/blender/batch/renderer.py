@@ -113,6 +113,8 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
         settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
         self._distracting = BatchDistractions(settings, built.scene, self.n) if settings is not None else None
         orbiting = self._distracting is not None and self._distracting.orbiting
+        if self._distracting is not None and self._distracting.floor_faded:
+            self._see_through = True  # the floor's rays go on through it
         self._orbiting = {self._objects[v.camera].as_pointer() for v in self.plan.views.values()} if orbiting else set()
         #: the MuJoCo model's cameras that move (tracking a body or hanging on one), by object pointer: (their row of
         #: cam_xpos and cam_xmat, whether they turn); each env's pose is its lane's (:meth:`_pose_envs`)

@@ -2,8 +2,9 @@
 sky's shift and the background drawn on a backdrop.
 
 Each observation camera gets a child camera (the same lens, parented to it) whose local pose is the orbit about the
-point the camera looks at: the parent goes on following its bindings or its MuJoCo body, the child follows it, and
-the observation is rendered through the child. Colours shift where colour bindings write (each Principled
+point the camera looks at (:func:`~visualenv.render.distractions.orbit`, the suite's sphere about it): the parent goes
+on following its bindings or its MuJoCo body, the child follows it, and the observation is rendered through the child.
+A MuJoCo model's floor (its material 'grid') takes the distraction's floor alpha (:func:`fade_floor`). Colours shift where colour bindings write (each Principled
 material's base colour or its tint, :func:`~visualenv.render.blender.look.materials.color_sockets`), so a MuJoCo look and
 a bound colour are shifted alike. A value is written only when it changes: Cycles updates a shader on every write.
 
@@ -28,11 +29,14 @@ from mathutils import Matrix, Vector
 
 from visualenv.render.blender.batch.env_attributes import env_attribute
 from visualenv.render.blender.batch.instance_nodes import geometry_node_group
-from visualenv.render.blender.look.materials import SHIFTED, color_sockets, ensure_node_tree
-from visualenv.render.distractions import Distraction, background, color_shifts
+from visualenv.render.blender.look.materials import MUJOCO_MATERIAL, SHIFTED, color_sockets, ensure_node_tree
+from visualenv.render.distractions import Distraction, background, color_shifts, world_up
+from visualenv.render.distractions import orbit as orbit_matrix
 
 #: the orbit's centre when a camera's view axis hits nothing: this far along it
 FALLBACK_FOCUS = 3.0
+#: the MuJoCo material of a model's floor, whose alpha the suite sets (ground_plane_alpha)
+FLOOR = "grid"
 #: what Blender appends to a datablock's name that another holds
 TAKEN_SUFFIX = re.compile(r"\.\d{3,}$")
 #: the custom property that marks a backdrop (a ray cast for the orbit's centre that meets it met nothing)
@@ -55,9 +59,12 @@ UNSEEN_BY = ("visible_diffuse", "visible_glossy", "visible_transmission", "visib
 class DistractionRig:
     """The cameras, colour sockets and backdrop of one env's scene that distractions change; :meth:`apply` draws one."""
 
-    def __init__(self, scene: Any, cameras: list[Any], backdrop: bool = False) -> None:
-        """`backdrop`: make the backdrop, for the sky's shift and the background (a distraction with either will come)."""
+    def __init__(self, scene: Any, cameras: list[Any], backdrop: bool = False, floor_alpha: float = 1.0) -> None:
+        """`backdrop`: make the backdrop, for the sky's shift and the background (a distraction with either will come);
+        `floor_alpha`: the floor's opacity (:func:`fade_floor`)."""
         self._scene = scene
+        #: whether the floor was made see-through (its rays then need transparent bounces)
+        self.floor_faded = fade_floor(scene, floor_alpha)
         #: the observation camera each child stands for, by the parent's name
         self.children: dict[str, Any] = {}
         for camera in cameras:
@@ -68,7 +75,7 @@ class DistractionRig:
             child.parent = camera
             child.matrix_parent_inverse = Matrix.Identity(4)
             self.children[camera.name] = child
-        self._focus: dict[str, float] = {}
+        self._focus: dict[str, tuple[float, np.ndarray]] = {}
         self._sockets = [sockets[0] for material in distracted_materials(scene) if (sockets := color_sockets(material))]
         self._base: list[tuple[float, ...]] = [tuple(socket.default_value) for socket in self._sockets]
         self._written = list(self._base)
@@ -90,7 +97,7 @@ class DistractionRig:
         changed = distraction != self._last
         if changed:
             for name, child in self.children.items():
-                child.matrix_basis = orbit(distraction, self._focus_of(name))
+                child.matrix_basis = orbit(distraction, *self._focus_of(name))
             self._shifts = color_shifts(distraction, len(self._sockets))
             if self.backdrop is not None:
                 write_backdrops(self.backdrop, [distraction], self._shifts[-1:])
@@ -113,12 +120,17 @@ class DistractionRig:
         value = (*np.clip(np.array(base[:3]) + self._shifts[i], 0.0, 1.0).tolist(), *base[3:])
         return tuple(np.asarray(value, dtype=np.float32).tolist())
 
-    def _focus_of(self, name: str) -> float:
-        """How far ahead of the camera its orbit's centre lies, measured once (:func:`focus_distance`)."""
+    def _focus_of(self, name: str) -> tuple[float, np.ndarray]:
+        """How far ahead of the camera its orbit's centre lies (:func:`focus_distance`) and the world's up in its frame,
+        measured once."""
         if name not in self._focus:
             camera = self.children[name].parent
             self._scene.view_layers[0].update()
-            self._focus[name] = focus_distance(self._scene, camera.matrix_world, camera.data.clip_start)
+            pose = camera.matrix_world
+            self._focus[name] = (
+                focus_distance(self._scene, pose, camera.data.clip_start),
+                world_up(np.array(pose, dtype=np.float64)),
+            )
         return self._focus[name]
 
 
@@ -157,13 +169,31 @@ def focus_distance(
     return float((where - camera).length) if hit and not obj.get(BACKDROP) else FALLBACK_FOCUS
 
 
-def orbit(distraction: Distraction, focus: float) -> Matrix:
-    """The camera's local pose that orbits it by yaw (about its up axis) and pitch (about its right axis) about the
-    point `focus` ahead of it, zooms its distance to that point and rolls it about its view axis."""
-    ahead = Matrix.Translation((0.0, 0.0, -focus))
-    turn = Matrix.Rotation(distraction.yaw, 4, "Y") @ Matrix.Rotation(distraction.pitch, 4, "X")
-    back = Matrix.Translation((0.0, 0.0, focus * distraction.zoom))
-    return ahead @ turn @ back @ Matrix.Rotation(distraction.roll, 4, "Z")
+def orbit(distraction: Distraction, focus: float, up: np.ndarray) -> Matrix:
+    """The camera's local pose on the suite's sphere about the point `focus` ahead of it (`up`: the world's up in its
+    frame): :func:`visualenv.render.distractions.orbit` as a Blender matrix."""
+    return Matrix(orbit_matrix(distraction, focus, up).tolist())
+
+
+def fade_floor(scene: Any, alpha: float) -> bool:
+    """Every material of a MuJoCo model's floor (made of its material :data:`FLOOR`) at opacity `alpha`, as the suite
+    sets that material's alpha: the rest of each camera ray goes on to what lies behind (the sky, the backdrop).
+    Whether any was faded (an `alpha` of 1 changes nothing)."""
+    if alpha >= 1.0:
+        return False
+    floors = {
+        slot.material.name: slot.material
+        for obj in scene.objects
+        for slot in obj.material_slots
+        if slot.material is not None and slot.material.get(MUJOCO_MATERIAL) == FLOOR and slot.material.node_tree
+    }
+    faded = False
+    for material in floors.values():
+        bsdf = next((n for n in material.node_tree.nodes if n.type == "BSDF_PRINCIPLED"), None)
+        if bsdf is not None:
+            bsdf.inputs["Alpha"].default_value = alpha
+            faded = True
+    return faded
 
 
 def shift_by_attribute(material: Any, name: str) -> None:

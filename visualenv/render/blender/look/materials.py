@@ -197,6 +197,8 @@ def fix_uv_coordinates(mat: Any, mesh: Any) -> None:
 TINT = "visualenv tint"  # the node a bound colour writes when a texture drives the base colour
 #: the node that adds a batch's per-env distraction shift to a material's colour (its second colour: what a binding writes)
 SHIFTED = "visualenv distraction shift"
+#: the custom property of a material made for a MuJoCo geom: its MuJoCo material's name (the floor's is 'grid')
+MUJOCO_MATERIAL = "visualenv_mujoco_material"
 
 
 def color_sockets(mat: Any) -> tuple[Any, Any] | None:

@@ -26,7 +26,13 @@ from visualenv.compat.blender import sort_faces
 from visualenv.physics.scene import GeomShape, LightInfo, PhysicsScene
 from visualenv.physics.tendons import TendonShape, tendon_path
 from visualenv.physics.texcoords import cube_uv, planar_uv
-from visualenv.render.blender.look.materials import make_material, show_skybox, tint_image, world_writer
+from visualenv.render.blender.look.materials import (
+    MUJOCO_MATERIAL,
+    make_material,
+    show_skybox,
+    tint_image,
+    world_writer,
+)
 from visualenv.render.blender.look.mujoco import ambient, light_data, light_material
 from visualenv.render.plan import Material
 
@@ -396,6 +402,8 @@ def _geom_object(
     mat = make_material(
         f"mjcf-{geom.name}", material, base_dir=base_dir, source=source, path=("physics", "model"), track=lambda d: d
     )
+    if geom.material:
+        mat[MUJOCO_MATERIAL] = geom.material
     if geom.texture is not None:  # MuJoCo multiplies the texture by the geom's colour
         _uv_map(mesh, geom, points, made)
         tint_image(mat, _texture_image(geom, images), repeat=geom.texture_type == "2d")
