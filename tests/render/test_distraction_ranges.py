@@ -148,8 +148,12 @@ def test_a_spec_says_whether_the_limit_applies() -> None:
     ("model", "alpha"),
     [("assets/reacher.xml", 0.0), ("walker.xml", 1.0), ("cheetah.xml", 1.0), ("assets/cartpole.xml", 0.3), (None, 0.3)],
 )
-def test_the_floor_alpha_is_the_suites_by_domain(model: str | None, alpha: float) -> None:
+def test_the_floor_alpha_is_the_suites_by_domain_when_asked(model: str | None, alpha: float) -> None:
+    """'dcs' takes the suite's alpha for the domain; by default the floor stays opaque (a partial alpha at 1 sample is
+    per-pixel noise, not the suite's blend)."""
     assert floor_alpha(model) == alpha
-    assert settings(0.2, model).floor_alpha == alpha
-    assert settings(0.2, model, floor_alpha=0.5).floor_alpha == 0.5  # a spec's own wins
-    assert draw(settings(0.2, model), np.random.default_rng(0)).floor_alpha == alpha
+    assert settings(0.2, model, floor_alpha="dcs").floor_alpha == alpha
+    assert draw(settings(0.2, model, floor_alpha="dcs"), np.random.default_rng(0)).floor_alpha == alpha
+    assert settings(0.2, model, floor_alpha=0.5).floor_alpha == 0.5
+    assert settings(0.2, model).floor_alpha is None
+    assert draw(settings(0.2, model), np.random.default_rng(0)).floor_alpha == 1.0

@@ -75,8 +75,8 @@ def distraction_settings(
     given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None, model: str | None = None
 ) -> Distractions | None:
     """The distractions an env draws: the option's (a difficulty, a level's name, or a section as a dict), else the spec's;
-    None for none (a difficulty of 0, or no kind on and no floor alpha below 1). A floor alpha not given is the suite's for the domain of `model` (the physics model's file,
-    :func:`floor_alpha`)."""
+    None for none (a difficulty of 0, or no kind on and no floor alpha below 1). A floor alpha of ``"dcs"`` is the
+    suite's for the domain of `model` (the physics model's file, :func:`floor_alpha`)."""
     if isinstance(given, str):
         given = DISTRACTION_LEVELS[given]
     if given is None:
@@ -87,11 +87,11 @@ def distraction_settings(
         chosen = Distractions.model_validate(dict(given))
     else:
         chosen = Distractions(difficulty=float(given))
-    faded = chosen is not None and chosen.floor_alpha is not None and chosen.floor_alpha < 1
+    if chosen is not None and chosen.floor_alpha == "dcs":
+        chosen = chosen.model_copy(update={"floor_alpha": floor_alpha(model)})
+    faded = chosen is not None and isinstance(chosen.floor_alpha, float) and chosen.floor_alpha < 1
     if chosen is None or chosen.difficulty <= 0 or not (chosen.camera or chosen.colors or chosen.background or faded):
         return None
-    if chosen.floor_alpha is None:
-        chosen = chosen.model_copy(update={"floor_alpha": floor_alpha(model)})
     return chosen
 
 

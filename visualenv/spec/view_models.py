@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from typing import Annotated, Literal, Optional
+from typing import Annotated, Literal, Optional, Union
 
 from pydantic import Field, field_validator, model_validator
 
@@ -176,13 +176,12 @@ class Distractions(StrictModel):
             "looks straight down (as DeepMind Control's reacher's, which the suite does not limit)"
         ),
     )
-    floor_alpha: Optional[float] = Field(
+    floor_alpha: Optional[Union[Annotated[float, Field(ge=0.0, le=1.0)], Literal["dcs"]]] = Field(
         None,
-        ge=0.0,
-        le=1.0,
         description=(
             "the opacity of a MuJoCo model's floor (the geoms of its material 'grid'), the sky and background seen "
-            "through the rest (the suite's ground_plane_alpha); default: the suite's by the model file's name "
-            "(reacher 0, walker and cheetah 1), else 0.3"
+            "through the rest (the suite's ground_plane_alpha); 'dcs': the suite's by the model file's name "
+            "(reacher 0, walker and cheetah 1, else 0.3); default: opaque. At 1 sample a partial opacity shows as "
+            "per-pixel noise of the right average: raise render.samples for a smooth blend"
         ),
     )
