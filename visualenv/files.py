@@ -83,14 +83,17 @@ class FileSizeError(VisualEnvError, ValueError):
     """
 
 
-def read_json(path: Path, max_bytes: int = MAX_JSON_BYTES, max_depth: int = MAX_JSON_DEPTH) -> Any:
+def read_json(path: Path, max_bytes: int | None = None, max_depth: int | None = None) -> Any:
     """JSON from a file that may come from elsewhere: its size and nesting checked before it is parsed.
 
     ``json.loads`` recurses once per level: 200,000 nested brackets end in a RecursionError. The depth is counted
     first, over the text with its strings taken out (brackets inside strings do not nest). OSError and
     UnicodeDecodeError as reading gives them; a file too large, too deep or not JSON is a ValueError, whose message
-    does not name the file (the caller's error does).
+    does not name the file (the caller's error does). The limits default to MAX_JSON_BYTES and MAX_JSON_DEPTH, read
+    when called (so setting them raises the limits everywhere).
     """
+    max_bytes = MAX_JSON_BYTES if max_bytes is None else max_bytes
+    max_depth = MAX_JSON_DEPTH if max_depth is None else max_depth
     with path.open("rb") as file:
         raw = file.read(max_bytes + 1)
     if len(raw) > max_bytes:
@@ -145,7 +148,7 @@ def check_image(path: Path, max_pixels: int, raise_with: str) -> tuple[int, int]
     size = image_size(path)
     if size is None:
         raise FileSizeError(
-            f"{path}: not an image whose size can be read from its header (PNG, JPEG, OpenEXR, Radiance HDR, or "
+            f"cannot read {path}: not an image whose size can be read from its header (PNG, JPEG, OpenEXR, Radiance HDR, or "
             "a format Pillow reads, such as TIFF, BMP, WebP, TGA)"
         )
     width, height = size
@@ -238,9 +241,10 @@ def _pillow_size(path: Path) -> tuple[int, int] | None:
             return None
 
 
-def npy_header(path: Path) -> tuple[tuple[int, ...], Any]:
-    """(shape, dtype) of a ``.npy`` file, read from its header; ValueError for a file that is not one or is shorter
-    than its header says (a small file whose header claims a huge array is refused before anything is allocated)."""
+def npy_header(path: Path, max_values: int | None = None) -> tuple[tuple[int, ...], Any]:
+    """(shape, dtype) of a ``.npy`` file, read from its header; FileSizeError for more than `max_values` values,
+    ValueError for a file that is not one or is shorter than its header says (a small file whose header claims a huge
+    array is refused before anything is allocated)."""
     import numpy as np
     from numpy.lib import format as npy
 
@@ -254,7 +258,10 @@ def npy_header(path: Path) -> tuple[tuple[int, ...], Any]:
             raise ValueError(f"a .npy file of format version {version[0]}.{version[1]}: 1.0 and 2.0 are read")
         if dtype.hasobject:
             raise ValueError(f"an array of Python objects ({dtype}): only numbers are read")
-        need = int(np.prod(shape, dtype=object)) * dtype.itemsize
+        count = int(np.prod(shape, dtype=object))
+        if max_values is not None and count > max_values:
+            raise FileSizeError(f"its header says {' x '.join(map(str, shape))}: more than {max_values} values")
+        need = count * dtype.itemsize
         have = path.stat().st_size - file.tell()
     if have < need:
         raise ValueError(

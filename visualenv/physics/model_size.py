@@ -36,7 +36,9 @@ class _Element:
 
     def where(self) -> str:
         key = "name" if self.attrs.get("name") else "file"
-        return f"{self.file}:{self.line}: <{self.tag}" + (f" {key}='{self.attrs[key]}'" if key in self.attrs else "") + ">"
+        return (
+            f"{self.file}:{self.line}: <{self.tag}" + (f" {key}='{self.attrs[key]}'" if key in self.attrs else "") + ">"
+        )
 
 
 def check_model_size(

@@ -58,16 +58,15 @@ def read_heightmap(path: Path, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray
         raise HeightmapError("heightmap file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")
     if path.suffix.lower() == ".npy":
         try:
-            shape, dtype = npy_header(path)
+            shape, dtype = npy_header(path, max_pixels)
+        except FileSizeError as exc:
+            raise HeightmapError(
+                f"{path}: {exc} (read before the array is; scene.max_image_pixels raises the limit)"
+            ) from None
         except (OSError, ValueError) as exc:
             raise HeightmapError(f"cannot read {path} as a .npy array: {exc}") from None
         if len(shape) != 2 or dtype.kind not in "iuf":
             raise HeightmapError(f"{path}: a heightmap array must be 2-D numbers, got shape {shape} of {dtype}")
-        if shape[0] * shape[1] > max_pixels:
-            raise HeightmapError(
-                f"{path} holds {shape[1]} x {shape[0]} values, more than the {max_pixels} a heightmap may have "
-                "(checked before it is read; scene.max_image_pixels raises the limit)"
-            )
         try:
             data = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
