@@ -71,7 +71,7 @@ MAX_IMAGE_PIXELS = 8192 * 8192
 #: ``<size memory>``) before MuJoCo is asked to; a spec raises it with ``physics.max_memory_mib``
 MAX_MODEL_MEMORY_MIB = 1024
 #: the largest JSON file read from a run folder or beside a policy (config.json, results.json, policy.json)
-MAX_JSON_BYTES = 64 * 2**20
+MAX_JSON_BYTES = 16 * 2**20
 #: the deepest nesting of lists and objects in such a file: visualenv writes 4 levels at most
 MAX_JSON_DEPTH = 64
 
@@ -99,7 +99,7 @@ def read_json(path: Path, max_bytes: int | None = None, max_depth: int | None = 
     if len(raw) > max_bytes:
         raise FileSizeError(f"larger than the {max_bytes} bytes visualenv reads from a JSON file")
     text = raw.decode("utf-8")
-    depth = json_depth(text)
+    depth = json_depth(raw)
     if depth > max_depth:
         raise FileSizeError(f"lists and objects nested {depth} deep, more than the {max_depth} levels visualenv reads")
     try:
@@ -112,13 +112,22 @@ def read_json(path: Path, max_bytes: int | None = None, max_depth: int | None = 
 _JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
 
 
-def json_depth(text: str) -> int:
-    """The deepest nesting of lists and objects in JSON text, counted without parsing it (in C loops: fast on megabytes)."""
+def json_depth(text: str | bytes) -> int:
+    """The deepest nesting of lists and objects in JSON text, counted without parsing it (in C loops: fast on
+    megabytes, a megabyte at a time)."""
     import numpy as np
 
-    bare = np.frombuffer(_JSON_STRING.sub(b'""', text.encode("utf-8")), dtype=np.uint8)
-    steps = ((bare == ord("[")) | (bare == ord("{"))).astype(np.int64) - ((bare == ord("]")) | (bare == ord("}")))
-    return int(np.cumsum(steps).max()) if steps.size else 0
+    raw = text.encode("utf-8") if isinstance(text, str) else text
+    bare = np.frombuffer(_JSON_STRING.sub(b'""', raw), dtype=np.uint8)
+    depth = deepest = 0
+    for start in range(0, bare.size, 2**20):
+        chunk = bare[start : start + 2**20]
+        steps = ((chunk == ord("[")) | (chunk == ord("{"))).astype(np.int32) - (
+            (chunk == ord("]")) | (chunk == ord("}"))
+        )
+        running = np.cumsum(steps, dtype=np.int64) + depth
+        deepest, depth = max(deepest, int(running.max())), int(running[-1])
+    return deepest
 
 
 def image_size(path: Path) -> tuple[int, int] | None:

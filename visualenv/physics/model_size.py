@@ -173,6 +173,7 @@ def _file_pixels(file: Path, element: _Element, max_pixels: int) -> int:
             return size[0] * size[1]
         with file.open("rb") as handle:
             head = handle.read(8)
+        length = file.stat().st_size
     except FileSizeError as exc:
         raise FileSizeError(f"{element.where()}: {exc}") from None
     except OSError:
@@ -181,7 +182,7 @@ def _file_pixels(file: Path, element: _Element, max_pixels: int) -> int:
         return 0
     rows, columns = struct.unpack("<ii", head)
     pixels = max(0, rows) * max(0, columns)
-    if file.stat().st_size < 8 + pixels * (4 if element.tag == "hfield" else 3):
+    if length < 8 + pixels * (4 if element.tag == "hfield" else 3):
         return 0
     _check_pixels(pixels, element, max_pixels)
     return pixels
