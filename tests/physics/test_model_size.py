@@ -85,6 +85,18 @@ def test_included_files_are_read_and_named(tmp_path: Path) -> None:
 
 def test_the_machines_available_memory_is_a_limit_too(tmp_path: Path) -> None:
     (tmp_path / "model.xml").write_text(MODEL.format(asset="", size='<size memory="100M"/>'))
-    assert check_model_size(tmp_path / "model.xml") == 100 * 2**20
+    assert 100 * 2**20 < check_model_size(tmp_path / "model.xml") < 101 * 2**20  # and 6 KB an element
     with pytest.raises(FileSizeError, match="more than this machine's available memory \\(50 MiB\\)"):
         check_model_size(tmp_path / "model.xml", available=50 * 2**20)
+
+
+def test_replicated_elements_are_counted_with_their_copies(tmp_path: Path) -> None:
+    (tmp_path / "model.xml").write_text(
+        '<mujoco>\n<worldbody>\n<replicate count="1000" offset="1 0 0">\n<replicate count="1000" offset="0 1 0">\n'
+        '<geom type="sphere" size="0.1"/>\n</replicate>\n</replicate>\n</worldbody>\n</mujoco>\n'
+    )
+    with pytest.raises(FileSizeError, match="model.xml:5: <geom> \\(1000000 copies\\): 5.7 GiB"):
+        check_model_size(tmp_path / "model.xml")
+    (tmp_path / "model.xml").write_text('<mujoco><worldbody><flexcomp count="500 500 500"/></worldbody></mujoco>')
+    with pytest.raises(FileSizeError, match="<flexcomp>: 715.3 GiB"):
+        check_model_size(tmp_path / "model.xml")
