@@ -72,7 +72,7 @@ MAX_IMAGE_PIXELS = 8192 * 8192
 MAX_MODEL_MEMORY_MIB = 1024
 #: the largest JSON file read from a run folder or beside a policy (config.json, results.json, policy.json)
 MAX_JSON_BYTES = 16 * 2**20
-#: the deepest nesting of lists and objects in such a file: visualenv writes 4 levels at most
+#: the deepest nesting of lists and objects in such a file: visualenv's own nest a few levels
 MAX_JSON_DEPTH = 64
 
 

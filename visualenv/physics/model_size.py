@@ -22,8 +22,9 @@ HFIELD_CELL_BYTES = 20
 #: per element (a body, geom, joint, site, ...) of the model, and per copy of it a ``<replicate count>`` makes, and per
 #: point of a ``<flexcomp>`` or ``<composite count>``: MuJoCo 3.17 took 5.5 KB a geom compiling 90,000 replicated ones
 ELEMENT_BYTES = 6 * 2**10
-#: per texel of a texture: up to 4 channels of a byte, decoded once and copied into the model
-TEXEL_BYTES = 8
+#: per texel of a texture: up to 4 channels of a byte, decoded once and copied into the model (8), and, when the
+#: scene is drawn, the texture as float RGBA pixels for Blender and their copies (about 40 more)
+TEXEL_BYTES = 48
 #: the includes followed at most (a file including itself is followed once)
 MAX_INCLUDES = 1000
 _CUBE_FACES = ("fileright", "fileleft", "fileup", "filedown", "filefront", "fileback")
