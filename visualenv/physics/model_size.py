@@ -61,7 +61,7 @@ def check_model_size(
         available = int(psutil.virtual_memory().available)
     limit, over = max_mib * 2**20, ""
     if total > limit:
-        over = f"more than physics.max_memory_mib ({max_mib} MiB; raise it for a model you trust)"
+        over = f"more than the limit of {max_mib} MiB (a spec's physics.max_memory_mib raises it for a model you trust)"
     elif total > available:
         over = f"more than this machine's available memory ({_gib(available)})"
     if over:
@@ -193,7 +193,7 @@ def _file_pixels(file: Path, element: _Element, max_pixels: int) -> int:
     try:
         size = image_size(file)
         if size is not None:
-            check_image(file, max_pixels, "scene.max_image_pixels")
+            check_image(file, max_pixels, "a spec's scene.max_image_pixels")
             return size[0] * size[1]
         with file.open("rb") as handle:
             head = handle.read(8)
@@ -216,5 +216,5 @@ def _check_pixels(pixels: int, element: _Element, max_pixels: int) -> None:
     if pixels > max_pixels:
         raise FileSizeError(
             f"{element.where()}: {pixels} pixels, more than the {max_pixels} an image may have "
-            "(scene.max_image_pixels raises the limit)"
+            "(a spec's scene.max_image_pixels raises the limit)"
         )
