@@ -132,9 +132,9 @@ def reset_finisher(sim: Any, settle: tuple[int, float | None] | None) -> Any:
     return finish
 
 
-def load(section: Physics, base_dir: Any) -> PhysicsModel:
-    """The section's MJCF, compiled; PhysicsError says why not (missing mujoco, file, include, bad XML)."""
-    return load_model(resolve_model_path(section.model, base_dir))
+def load(section: Physics, base_dir: Any, max_image_pixels: int) -> PhysicsModel:
+    """The section's MJCF, compiled; PhysicsError says why not (missing mujoco, file, include, bad XML, too large)."""
+    return load_model(resolve_model_path(section.model, base_dir), section.max_memory_mib, max_image_pixels)
 
 
 def scope(model: PhysicsModel, contacts: dict[str, Any]) -> dict[str, Type]:

@@ -257,7 +257,7 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
         if section is None:
             return
         try:
-            model = phys.load(section, self.loaded.base_dir)
+            model = phys.load(section, self.loaded.base_dir, self.spec.scene.max_image_pixels)
         except phys.PhysicsError as exc:
             self.error(("physics", "model"), str(exc))
             raise SpecError(in_file_order(self.problems)) from None
@@ -434,19 +434,20 @@ class _Compiler(ActionsCompiler, BindingsCompiler, StepCompiler):
             "dt": float(self.plan.dt if self.plan is not None else self.spec.dt),
         }
         self.params = {}
+        scope: dict[str, float | bool] = dict(builtins)  # grown in place: a copy per param is quadratic in their count
         for key, value in raw.items():
             if isinstance(value, bool):
-                params[key] = value
+                params[key] = scope[key] = value
             else:
                 try:
-                    checked = check(value, {}, constants={**builtins, **params}, allow_random=False)
+                    checked = check(value, {}, constants=scope, allow_random=False)
                 except ExpressionError as exc:
                     self.param_error(key, self.explain_order(("params", key), exc.message), column=exc.offset)
                     continue
                 if checked.constant is None or isinstance(checked.constant, tuple):
                     self.param_error(key, "a parameter must be a number or a condition")
                     continue
-                params[key] = checked.constant
+                params[key] = scope[key] = checked.constant
         return {**builtins, **params}
 
     def param_error(self, key: str, message: str, *, column: int | None = None) -> None:

@@ -78,6 +78,7 @@ def scene_plan(scene: m.Scene) -> p.Scene:
         world=world_plan(scene.world) if scene.world is not None else None,
         default_world=world_plan(m.World()),
         default_material=default_material,
+        max_image_pixels=scene.max_image_pixels,
     )
 
 

@@ -16,7 +16,8 @@ import ast
 import math
 import warnings
 from dataclasses import dataclass, field
-from typing import Mapping
+from collections import ChainMap
+from typing import Mapping, MutableMapping, cast
 
 from visualenv.errors import ExpressionError, did_you_mean
 from visualenv.expr.functions import CONSTANTS, FUNCTIONS, Function, Param
@@ -127,7 +128,8 @@ def check(
             f"expression is too long: more than {MAX_TREE_DEPTH} operations chained one after another; "
             "split it into named parts with dynamics.let"
         )
-    checker = _Checker(names, {**CONSTANTS, **(constants or {})}, allow_random)
+    # layered, not copied: the params check each param with the earlier ones, a copy each would be quadratic
+    checker = _Checker(names, ChainMap(cast("MutableMapping[str, float]", constants or {}), CONSTANTS), allow_random)
     try:
         new_tree, typ = checker.visit(tree, 0)
         if expect is not None and not _fits(typ, expect):

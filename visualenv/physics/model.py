@@ -36,8 +36,9 @@ from typing import Any
 
 from visualenv.compat.mujoco import ctrl_limited, spec_deletes
 from visualenv.errors import VisualEnvError
-from visualenv.files import PACKAGE_PREFIX, package_file
+from visualenv.files import MAX_IMAGE_PIXELS, MAX_MODEL_MEMORY_MIB, PACKAGE_PREFIX, FileSizeError, package_file
 from visualenv.physics.model_fields import MODEL_FIELDS, model_values
+from visualenv.physics.model_size import check_model_size
 
 INSTALL_HINT = "MuJoCo is not installed: physics specs need it: pip install 'visualenv[mujoco]' (or pip install mujoco)"
 #: arrays a name can point into (attributes of MjData; ``time`` and ``ncon`` are scalars; ``model.<field>``: MjModel's)
@@ -194,14 +195,25 @@ class PhysicsModel:
         return {k: v for k, v in groups.items() if v}
 
 
-def load_model(path: Path) -> PhysicsModel:
-    """Compile the MJCF at `path` (MuJoCo resolves its includes, meshes and textures); PhysicsError says what is wrong, with MuJoCo's line."""
+def load_model(
+    path: Path, max_memory_mib: int = MAX_MODEL_MEMORY_MIB, max_image_pixels: int = MAX_IMAGE_PIXELS
+) -> PhysicsModel:
+    """Compile the MJCF at `path` (MuJoCo resolves its includes, meshes and textures); PhysicsError says what is wrong, with MuJoCo's line.
+
+    What compiling it takes is estimated first (:func:`~visualenv.physics.model_size.check_model_size`): a model asking
+    for more than `max_memory_mib`, or the machine's available memory, or an image over `max_image_pixels`, is refused
+    before MuJoCo allocates it.
+    """
     mujoco = mujoco_module()
     if not path.is_file():
         raise PhysicsError(f"no MJCF file {path}")
     try:
+        check_model_size(path, max_memory_mib, max_image_pixels)
+    except FileSizeError as exc:
+        raise PhysicsError(str(exc)) from None
+    try:
         model = mujoco.MjModel.from_xml_path(str(path))
-    except ValueError as exc:
+    except (ValueError, mujoco.FatalError) as exc:  # FatalError: an allocation the estimate did not foresee
         message = " ".join(str(exc).split())
         raise PhysicsError(f"MuJoCo cannot load {path}: {message}") from None
     return PhysicsModel(path, model, name_tables(model), without_textures(path, model))
@@ -231,7 +243,7 @@ def without_textures(path: Path, model: Any) -> Any:
             for material in spec.materials:
                 material.textures = [""] * len(material.textures)
             return spec.compile()
-    except ValueError:
+    except (ValueError, mujoco.FatalError):
         return model
 
 

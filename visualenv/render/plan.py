@@ -13,6 +13,7 @@ from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any, Protocol, Union
 
+from visualenv.files import MAX_IMAGE_PIXELS
 from visualenv.physics.scene import PhysicsScene
 from visualenv.source_map import SourceMap
 
@@ -125,6 +126,7 @@ class Scene:
     world: World | None  # the spec's world; None: the file's, else `default_world`
     default_world: World
     default_material: Material  # for an object that a binding colours and that has no material of its own
+    max_image_pixels: int = MAX_IMAGE_PIXELS  # the most pixels an image file may have, read from its header first
 
 
 @dataclass(frozen=True, slots=True)

@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 
+from visualenv.files import MAX_IMAGE_PIXELS, FileSizeError, check_image, npy_header
 from visualenv.render.plan import Craters
 
 
@@ -46,26 +47,39 @@ class HeightmapError(ValueError):
     """A heightmap file that cannot be read as elevation data; the message says why and what is accepted."""
 
 
-def read_heightmap(path: Path) -> np.ndarray:
+def read_heightmap(path: Path, max_pixels: int = MAX_IMAGE_PIXELS) -> np.ndarray:
     """(rows, columns) float64 in 0..1 from a grayscale image or a .npy array: the lowest value 0, the highest 1.
 
     Row 0 is the north edge (+y), column 0 the west edge (-x), as a map is drawn.
-    A flat map gives zeros. Colour images are refused (which channel is the height?).
+    A flat map gives zeros. Colour images are refused (which channel is the height?). The size is read from the
+    file's header first: more than `max_pixels` values (``scene.max_image_pixels``) are refused before any is read.
     """
     if not path.is_file():
         raise HeightmapError("heightmap file " + ("is a folder" if path.is_dir() else "not found") + f": {path}")
     if path.suffix.lower() == ".npy":
         try:
+            shape, dtype = npy_header(path, max_pixels)
+        except FileSizeError as exc:
+            raise HeightmapError(
+                f"{path}: {exc} (read before the array is; scene.max_image_pixels raises the limit)"
+            ) from None
+        except (OSError, ValueError) as exc:
+            raise HeightmapError(f"cannot read {path} as a .npy array: {exc}") from None
+        if len(shape) != 2 or dtype.kind not in "iuf":
+            raise HeightmapError(f"{path}: a heightmap array must be 2-D numbers, got shape {shape} of {dtype}")
+        try:
             data = np.load(path, allow_pickle=False)
         except (OSError, ValueError) as exc:
             raise HeightmapError(f"cannot read {path} as a .npy array: {exc}") from None
-        if data.ndim != 2 or data.dtype.kind not in "iuf":
-            raise HeightmapError(
-                f"{path}: a heightmap array must be 2-D numbers, got shape {data.shape} of {data.dtype}"
-            )
     else:
         from PIL import Image, UnidentifiedImageError
 
+        try:
+            check_image(path, max_pixels, "scene.max_image_pixels")
+        except FileSizeError as exc:
+            raise HeightmapError(str(exc)) from None
+        except OSError as exc:
+            raise HeightmapError(f"cannot read {path}: {exc}") from None
         try:
             with Image.open(path) as image:
                 if image.mode not in _GRAY_MODES:
@@ -74,7 +88,7 @@ def read_heightmap(path: Path) -> np.ndarray:
                         "a 1-band TIFF, or a .npy array)"
                     )
                 data = np.array(image)
-        except (OSError, UnidentifiedImageError) as exc:
+        except (OSError, UnidentifiedImageError, Image.DecompressionBombError) as exc:
             raise HeightmapError(f"cannot read {path} as an image (PNG, TIFF) or .npy array: {exc}") from None
     heights = data.astype(np.float64)
     if min(heights.shape) < 2:

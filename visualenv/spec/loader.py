@@ -20,6 +20,7 @@ from pydantic.fields import FieldInfo
 from visualenv.errors import Diagnostic, SpecError, did_you_mean, in_file_order
 from visualenv.source_map import COMMA_HINT
 from visualenv.spec.models import Spec
+from visualenv.spec import source as spec_source
 from visualenv.spec.source import BASE60, SourceMap, format_path, load_document, load_toml_text, load_yaml_text
 from visualenv.spec.unused import unused_fields
 from visualenv.spec.yaml_pitfalls import split_at_comma
@@ -85,7 +86,9 @@ def spec_identity(path: str | Path) -> dict[str, str]:
 
 
 def load_spec_text(text: str, name: str = "<string>.yaml", base_dir: str | Path = ".") -> LoadedSpec:
-    """Validate spec text (YAML, or TOML when `name` ends in .toml)."""
+    """Validate spec text (YAML, or TOML when `name` ends in .toml), of at most MAX_SPEC_BYTES characters."""
+    if len(text) > spec_source.MAX_SPEC_BYTES:
+        raise SpecError([Diagnostic(name, None, None, "", spec_source.too_large(len(text)))])
     data, smap = load_toml_text(text, name) if name.endswith(".toml") else load_yaml_text(text, name)
     return validate_data(data, smap, Path(base_dir).resolve())
 

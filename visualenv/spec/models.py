@@ -14,6 +14,7 @@ from typing import Annotated, Any, Literal, Optional, Union
 from pydantic import ConfigDict, create_model, Field, ValidationInfo, field_validator, model_validator
 from pydantic_core import PydanticCustomError
 
+from visualenv.files import MAX_MODEL_MEMORY_MIB
 from visualenv.spec.fields import BlenderName, ColorExpr, Expr, Name, StrictModel, Vec3Expr
 from visualenv.bindables import BINDABLES
 from visualenv.spec.scene_models import (  # noqa: F401 - the spec's parts, importable with the whole spec
@@ -180,6 +181,14 @@ class Physics(StrictModel):
     draw_sites: bool = Field(
         True,
         description="draw the model's sites as MuJoCo's viewer does (groups 0 to 2, their rgba and size); false: not drawn",
+    )
+    max_memory_mib: int = Field(
+        MAX_MODEL_MEMORY_MIB,
+        ge=1,
+        description=(
+            "the most memory (MiB) compiling the model may take, estimated from the MJCF and its files' headers "
+            "(height fields, textures, <size memory>) before MuJoCo is asked to: raise it for a larger model you trust"
+        ),
     )
     look: Literal["mujoco", "physical"] = Field(
         "mujoco",

@@ -6,6 +6,7 @@ from typing import Annotated, Any, Literal, Union
 
 from pydantic import Discriminator, Field, Tag, field_validator, model_validator
 
+from visualenv.files import MAX_IMAGE_PIXELS
 from visualenv.spec.fields import BlenderName, Color, Name, StrictModel, Vec3
 
 
@@ -216,6 +217,14 @@ class Scene(StrictModel):
         default_factory=dict, description="objects to build (added to the file's scene, if any)"
     )
     world: World | None = Field(None, description="background; default: the file's world, or dark grey")
+    max_image_pixels: int = Field(
+        MAX_IMAGE_PIXELS,
+        ge=1,
+        description=(
+            "the most pixels an image may have (textures, the sky, heightmaps, an MJCF model's textures and height "
+            "fields), read from its header before it is (default 8192 x 8192): raise it for a larger image you trust"
+        ),
+    )
 
     @model_validator(mode="after")
     def _file_scene_needs_a_file(self) -> "Scene":

@@ -30,12 +30,21 @@ from visualenv.spec.yaml_pitfalls import (
 )
 
 
+#: the largest spec file read (1 MiB; the bundled specs are under 6 KB): a spec of megabytes takes minutes to parse
+#: and check. Raise it in Python, ``visualenv.spec.source.MAX_SPEC_BYTES = ...``, for a generated spec you trust
+MAX_SPEC_BYTES = 2**20
+
+
 def load_document(path: str | Path) -> tuple[Any, SourceMap]:
-    """Load a spec file (by extension: .yaml/.yml or .toml) with its source map."""
+    """Load a spec file (by extension: .yaml/.yml or .toml) with its source map; one over MAX_SPEC_BYTES is refused
+    before it is read."""
     p = Path(path)
     name = str(path)
     try:
-        raw = p.read_bytes()
+        with p.open("rb") as file:
+            raw = file.read(MAX_SPEC_BYTES + 1)
+        if len(raw) > MAX_SPEC_BYTES:
+            raise SpecError([Diagnostic(name, None, None, "", too_large(p.stat().st_size))])
     except FileNotFoundError:
         raise SpecError([Diagnostic(name, None, None, "", "file not found")]) from None
     except OSError as exc:
@@ -59,6 +68,14 @@ def load_document(path: str | Path) -> tuple[Any, SourceMap]:
         return load_yaml_text(text, name)
     raise SpecError(
         [Diagnostic(name, None, None, "", f"unknown spec file type '{suffix}': expected .yaml, .yml or .toml")]
+    )
+
+
+def too_large(size: int) -> str:
+    """Why a spec of `size` bytes (characters, for text given in Python) is refused."""
+    return (
+        f"the spec is {size} bytes, more than the {MAX_SPEC_BYTES} a spec may have (a spec of megabytes takes "
+        "minutes to check; docs/security.md#sizes-checked-before-reading says how to raise the limit)"
     )
 
 

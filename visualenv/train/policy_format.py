@@ -29,6 +29,7 @@ from typing import Any
 
 import numpy as np
 
+from visualenv.files import read_json
 from visualenv.train.policy_check import check_against, check_arguments, check_finite, check_space_size, on_meta
 from visualenv.train.policy_kinds import PolicyFileError, build_rllib_module, build_sb3_policy, rllib_kind, sb3_kind
 
@@ -245,7 +246,7 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     if not meta_path.is_file():
         raise PolicyFileError(missing.format(meta_path))
     try:
-        meta = json.loads(meta_path.read_text(encoding="utf-8"))
+        meta = read_json(meta_path)
     except (OSError, UnicodeDecodeError, ValueError) as exc:
         raise PolicyFileError(f"{meta_path}: not JSON ({exc})") from None
     if not isinstance(meta, dict) or meta.get("format") != FORMAT:

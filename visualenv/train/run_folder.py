@@ -42,6 +42,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.errors import ConfigError
+from visualenv.files import read_json
 from visualenv.train.policy_format import WEIGHTS
 
 FORMAT = "visualenv-run"
@@ -380,7 +381,7 @@ def check_results(results: Any, where: str = "results.json") -> dict[str, Any]:
 
 def _read_json(path: Path) -> Any:
     try:
-        return json.loads(path.read_text(encoding="utf-8"))
+        return read_json(path)
     except OSError as exc:
         raise RunFolderError(f"{path}: cannot read it ({exc.strerror or exc})") from None
     except ValueError as exc:

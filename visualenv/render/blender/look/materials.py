@@ -21,6 +21,7 @@ from typing import Any, Callable, Sequence
 import bpy
 
 from visualenv.errors import SpecError
+from visualenv.files import MAX_IMAGE_PIXELS, FileSizeError, check_image, image_size
 from visualenv.render.plan import Material, Texture, World
 from visualenv.source_map import SourceMap
 
@@ -50,8 +51,10 @@ def make_material(
     source: SourceMap,
     path: tuple,
     track: Callable[[Any], Any],
+    max_pixels: int = MAX_IMAGE_PIXELS,
 ) -> Any:
-    """A new material for `spec`; `path` locates the material in the spec (for errors)."""
+    """A new material for `spec`; `path` locates the material in the spec (for errors); an image texture of more than
+    `max_pixels` pixels (read from its header) is refused before Blender reads it."""
     mat = track(bpy.data.materials.new(name))
     ensure_node_tree(mat)
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
@@ -73,7 +76,17 @@ def make_material(
     mat.roughness = spec.roughness
     mat.metallic = spec.metallic
     if spec.texture is not None:
-        _texture(mat, bsdf, spec, spec.texture, base_dir=base_dir, source=source, path=path + ("texture",), track=track)
+        _texture(
+            mat,
+            bsdf,
+            spec,
+            spec.texture,
+            base_dir=base_dir,
+            source=source,
+            path=path + ("texture",),
+            track=track,
+            max_pixels=max_pixels,
+        )
     return mat
 
 
@@ -87,6 +100,7 @@ def _texture(
     source: SourceMap,
     path: tuple,
     track: Callable[[Any], Any],
+    max_pixels: int,
 ) -> None:
     nodes, links = mat.node_tree.nodes, mat.node_tree.links
     coords = nodes.new("ShaderNodeTexCoord")
@@ -95,7 +109,7 @@ def _texture(
         where = (
             [path + ("image", i) for i in range(len(files))] if isinstance(tex.image, tuple) else [path + ("image",)]
         )
-        images = [_load_image(base_dir / f, source, at, track) for f, at in zip(files, where)]
+        images = [_load_image(base_dir / f, source, at, track, max_pixels) for f, at in zip(files, where)]
         node = nodes.new("ShaderNodeTexImage")
         node.image = images[0]
         if isinstance(tex.image, tuple):
@@ -142,8 +156,11 @@ def _texture(
 TEXTURE_SET = "visualenv_texture_set"
 
 
-def _load_image(path: Path, source: SourceMap, where: tuple, track: Callable[[Any], Any], what: str = "image") -> Any:
-    """An image Blender reads, or a located error: a missing file, a folder, a file Blender cannot decode (`what`: 'image', 'sky image')."""
+def _load_image(
+    path: Path, source: SourceMap, where: tuple, track: Callable[[Any], Any], max_pixels: int, what: str = "image"
+) -> Any:
+    """An image Blender reads, or a located error: a missing file, a folder, an image of more than `max_pixels` pixels
+    (read from its header, before Blender allocates them), a file Blender cannot decode (`what`: 'image', 'sky image')."""
     file = path.resolve()
     if not file.is_file():
         raise SpecError(
@@ -157,6 +174,20 @@ def _load_image(path: Path, source: SourceMap, where: tuple, track: Callable[[An
                 )
             ]
         )
+    try:
+        if image_size(file) is None:
+            raise SpecError(
+                [
+                    source.diagnostic(
+                        where,
+                        f"cannot read {what} {file}: not an image whose size can be read from its header (PNG, JPEG, "
+                        "OpenEXR, Radiance HDR, or a format Pillow reads, such as TIFF, BMP, WebP, TGA)",
+                    )
+                ]
+            )
+        check_image(file, max_pixels, "scene.max_image_pixels")
+    except (FileSizeError, OSError) as exc:
+        raise SpecError([source.diagnostic(where, f"cannot read {what}: {exc}")]) from None
     try:
         image = track(bpy.data.images.load(str(file), check_existing=False))
     except RuntimeError as exc:
@@ -313,6 +344,7 @@ def make_world(
     *,
     base_dir: Path | None = None,
     source: SourceMap | None = None,
+    max_pixels: int = MAX_IMAGE_PIXELS,
 ) -> Any:
     """A world with a uniform background, or an image sky: an environment map turned by a Mapping node and tinted.
 
@@ -324,7 +356,7 @@ def make_world(
     if spec.image is None:
         return world
     assert base_dir is not None and source is not None, "an image sky is read relative to the spec"
-    image = _load_image(base_dir / spec.image, source, ("scene", "world", "image"), track, what="sky image")
+    image = _load_image(base_dir / spec.image, source, ("scene", "world", "image"), track, max_pixels, "sky image")
     nodes, links = world.node_tree.nodes, world.node_tree.links
     bg = next(n for n in nodes if n.type == "BACKGROUND")
     coords = nodes.new("ShaderNodeTexCoord")

@@ -30,6 +30,7 @@ from visualenv.render.blender.scene.blendfile import BlendReadError
 from visualenv.render.blender.scene import blendfile
 from visualenv.render.blender.runtime.autorun import turn_autorun_off
 from visualenv.errors import Diagnostic, SpecError, did_you_mean
+from visualenv.files import MAX_IMAGE_PIXELS
 from visualenv.render.blender.runtime.log import blender_output, marked
 from visualenv.render.terrain import HeightmapError, crater_heights, heightmap_heights, read_heightmap
 from visualenv.render.blender.look.materials import fix_uv_coordinates, make_material, make_world
@@ -126,6 +127,7 @@ class BuiltScene:
     scene: Any
     collection: Any
     objects: dict[str, Any] = field(default_factory=dict)  # spec/file name -> object
+    max_image_pixels: int = MAX_IMAGE_PIXELS  # the spec's scene.max_image_pixels: textures' and heightmaps' limit
 
 
 def build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str) -> BuiltScene:
@@ -151,7 +153,7 @@ def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str)
         scene, objects = bpy.data.scenes.new(reusable_scene_name()), {}
     collection = bpy.data.collections.new(f"{prefix}-objects")
     scene.collection.children.link(collection)
-    built = BuiltScene(scene, collection, objects)
+    built = BuiltScene(scene, collection, objects, spec.max_image_pixels)
     problems: list[Diagnostic] = []
     for name, obj_spec in spec.objects.items():
         try:
@@ -193,7 +195,12 @@ def _build_scene(spec: Scene, *, base_dir: Path, source: SourceMap, prefix: str)
             aim(built.objects[name], obj_spec.look_at)  # after parenting: the target is a world point
     if spec.world is not None or scene.world is None:
         scene.world = make_world(
-            f"{prefix}-world", spec.world or spec.default_world, _keep, base_dir=base_dir, source=source
+            f"{prefix}-world",
+            spec.world or spec.default_world,
+            _keep,
+            base_dir=base_dir,
+            source=source,
+            max_pixels=spec.max_image_pixels,
         )
     return built
 
@@ -313,14 +320,20 @@ def _build_object(name: str, spec: SceneObject, built: BuiltScene, *, base_dir: 
         heights = None
         if spec.primitive == "terrain" and spec.heightmap is not None:
             try:
-                heights = read_heightmap((base_dir / spec.heightmap).resolve())
+                heights = read_heightmap((base_dir / spec.heightmap).resolve(), built.max_image_pixels)
             except HeightmapError as exc:
                 raise SpecError([source.diagnostic(path + ("heightmap",), str(exc))]) from None
         mesh = bpy.data.meshes.new(name)
         _primitive_mesh(mesh, spec, heights)
         obj = bpy.data.objects.new(name, mesh)
         mat = make_material(
-            name, spec.material, base_dir=base_dir, source=source, path=path + ("material",), track=_keep
+            name,
+            spec.material,
+            base_dir=base_dir,
+            source=source,
+            path=path + ("material",),
+            track=_keep,
+            max_pixels=built.max_image_pixels,
         )
         mesh.materials.append(mat)
         fix_uv_coordinates(mat, mesh)
@@ -535,6 +548,7 @@ def _import_mesh(name: str, spec: MeshObject, built: BuiltScene, *, base_dir: Pa
             source=source,
             path=("scene", "objects", name, "material"),
             track=_keep,
+            max_pixels=built.max_image_pixels,
         )
         for o in new:
             if o.type == "MESH":
