@@ -175,9 +175,9 @@ class VisualEnv(PicklingEnv):
         self._not_carried: str | None = None  # why an unpickled copy could not go on with its episode
         if program.discrete is not None:
             self.action_space = spaces.Discrete(program.discrete)
-        else:
-            lows, highs = zip(*program.continuous)
-            self.action_space = spaces.Box(np.array(lows, np.float32), np.array(highs, np.float32), dtype=np.float32)
+        else:  # a model without actuators and a spec without actions: an empty Box (the model moves on its own)
+            lows, highs = np.array(program.continuous, np.float32).reshape(-1, 2).T
+            self.action_space = spaces.Box(lows, highs, dtype=np.float32)
         if self.uses_camera:
             self.observation_space = observation_space(s.observation)  # type: ignore[arg-type]
         elif program.physics is not None:  # Gymnasium's MuJoCo envs observe float64 vectors, unbounded
