@@ -20,7 +20,8 @@ from visualenv.train.evaluation import (
     selection_seed,
     wilson_interval,
 )
-from visualenv.train.run_folder import MAX_TRAIN_SEED, legacy_eval_seed
+from visualenv.train.run_folder import legacy_eval_seed
+from visualenv.train.run_settings import MAX_TRAIN_SEED
 
 pytestmark = pytest.mark.blender
 

@@ -17,10 +17,10 @@ from visualenv.train.run_folder import (
     read_config,
     read_run,
     record_run,
-    settings,
     write_config,
     write_results,
 )
+from visualenv.train.run_settings import settings
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
 SB3_FIRST = {

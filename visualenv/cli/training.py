@@ -21,7 +21,7 @@ from visualenv.cli.group import (
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
 from visualenv.train.distill import DistillConfig
-from visualenv.train.run_folder import MAX_TRAIN_SEED
+from visualenv.train.run_settings import MAX_TRAIN_SEED
 
 
 def _parse_value(text: str) -> Any:

@@ -7,7 +7,7 @@ plays the same episodes and prints the same numbers as the run's results.json.
 Seeds come in bands that never meet, so the figure a run reports is measured on
 episodes that neither trained nor picked its model (picking the best of many close
 evaluations biases the winner's score upward). A run seeded ``s`` (below
-:data:`~visualenv.train.run_folder.MAX_TRAIN_SEED`) trains on ``s, s+1, ...``, picks its best model on the stream
+:data:`~visualenv.train.run_settings.MAX_TRAIN_SEED`) trains on ``s, s+1, ...``, picks its best model on the stream
 :func:`selection_seed` ``(s)`` and reports :func:`final_seed` ``(s)``; ``visualenv eval``
 of a model without a run plays :data:`FRESH_SEED`.
 
@@ -30,7 +30,8 @@ from visualenv.compat import mkl
 from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.train.model_files import load_model, stacked_like
 from visualenv.train.reproducible import machine_record, pinned_inference
-from visualenv.train.run_folder import RESULT_KEYS, legacy_eval_seed, load_evaluations, read_run
+from visualenv.train.run_folder import legacy_eval_seed, load_evaluations, read_run
+from visualenv.train.run_settings import RESULT_KEYS
 
 SEED_BAND = 2**32  # each purpose's seeds lie in their own band of this width
 SELECTION_BAND, FINAL_BAND, FRESH_BAND = 1, 2, 3
