@@ -65,6 +65,7 @@ KINDS = [  # every SB3 policy kind the format takes, on spaces it fits
     ("stable_baselines3.sac.policies.SACPolicy", STATE, spaces.Box(-2.0, 2.0, (1,), np.float32)),
     ("stable_baselines3.sac.policies.CnnPolicy", IMAGE, spaces.Box(-1.0, 1.0, (2,), np.float32)),
     ("stable_baselines3.sac.policies.MultiInputPolicy", CAMERAS, spaces.Box(-1.0, 1.0, (2,), np.float32)),
+    ("visualenv.train.drq.DrQSACPolicy", IMAGE, spaces.Box(-1.0, 1.0, (2,), np.float32)),
 ]
 
 

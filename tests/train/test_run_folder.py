@@ -49,7 +49,7 @@ FIGURES = {
 
 
 def current(config=None, **record):
-    added = {"pin": True, "batched": False, "workers": None, "render_device": None}
+    added = {"pin": True, "batched": False, "workers": None, "render_device": None, "augment": None}
     return {
         "backend": "sb3",
         "command": "visualenv train Goalie-v0",
@@ -93,6 +93,7 @@ def test_config_round_trips_with_its_format_version(tmp_path):
 def test_a_resumed_older_run_is_written_in_the_current_format(tmp_path):
     (tmp_path / "config.json").write_text(json.dumps({"command": "visualenv train Goalie-v0", "config": SB3_FIRST}))
     resumed = {**SB3_FIRST, "steps": 2000, "pin": True, "batched": False, "workers": None, "render_device": None}
+    resumed["augment"] = None
     record_run(tmp_path, resumed, "specs/goalie.yaml", backend="sb3", resume=True, changes={"ent_coef": 0.02})
     record = json.loads((tmp_path / "config.json").read_text())
     assert record["format_version"] == FORMAT_VERSION and record["backend"] == "sb3"

@@ -54,6 +54,12 @@ FIXED_ON_RESUME = ("frame_stack", "eval_every", "eval_episodes", "final_episodes
 @shown_option("--seed", default=0, type=click.IntRange(0, MAX_TRAIN_SEED))
 @click.option("--state-only", is_flag=True, help="train on the state vector (MlpPolicy), no rendering")
 @click.option(
+    "--augment",
+    type=click.Choice(["shift"]),
+    default=None,
+    help="sac, ppo: DrQ's random shift of the frames (pad 4, per sample); sac then trains DrQ's shared encoder",
+)
+@click.option(
     "--set",
     "overrides",
     multiple=True,
@@ -150,6 +156,7 @@ def train(
     torch_device: str | None = None,
     render_device: str | None = None,
     trust_code: bool = False,
+    augment: str | None = None,
 ) -> None:
     """Train an agent on SPEC (PPO + CnnPolicy on 4 stacked frames by default).
 
@@ -177,7 +184,7 @@ def train(
     if resume_dir:
         _refuse_fixed_on_resume(
             ctx,
-            ("algo", "envs", "batched", "batch_workers", "render_device", *FIXED_ON_RESUME),
+            ("algo", "envs", "batched", "batch_workers", "render_device", "augment", *FIXED_ON_RESUME),
             "only --steps, --set and --config change on --resume",
         )
         config = _resumed(TrainConfig, spec, resume_dir, steps, hyper, not no_progress)
@@ -197,6 +204,7 @@ def train(
             progress=not no_progress,
             pin=pin,
             render_device=render_device,
+            augment=augment,
         )
         if batch_workers is not None and not batched:
             raise click.BadParameter("splits a batch among processes: give --batched N as well", param_hint="--workers")
@@ -380,7 +388,7 @@ def _chosen_backend(ctx: click.Context, backend: str, resume_dir: str | None) ->
             f"--backend {backend}: {resume_dir} was trained with --backend {saved_backend}; a resumed run keeps its backend"
         )
     if saved_backend == "rllib" or backend == "rllib":
-        sb3_only = _given(ctx, ["algo", "envs", "batch_workers", "torch_device", "render_device"])
+        sb3_only = _given(ctx, ["algo", "envs", "batch_workers", "torch_device", "render_device", "augment"])
         if sb3_only:
             raise click.UsageError(
                 f"{', '.join(sb3_only)}: not for --backend rllib (it trains PPO; use --env-runners and --envs-per-runner)"

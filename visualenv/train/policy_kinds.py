@@ -47,10 +47,12 @@ def dotted(cls: type) -> str:
 
 
 def sb3_policies() -> dict[str, type]:
-    """The SB3 policy kinds of the algorithms `visualenv train` runs (PPO and A2C, DQN, SAC)."""
+    """The SB3 policy kinds of the algorithms `visualenv train` runs (PPO and A2C, DQN, SAC, DrQ's SAC)."""
     from stable_baselines3.common import policies
     from stable_baselines3.dqn import policies as dqn
     from stable_baselines3.sac import policies as sac
+
+    from visualenv.train.drq import DrQSACPolicy
 
     kinds = (
         policies.ActorCriticPolicy,
@@ -62,6 +64,7 @@ def sb3_policies() -> dict[str, type]:
         sac.SACPolicy,
         sac.CnnPolicy,
         sac.MultiInputPolicy,
+        DrQSACPolicy,  # `train --algo sac --augment shift`
     )
     return {dotted(cls): cls for cls in kinds}
 

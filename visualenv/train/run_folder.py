@@ -317,7 +317,8 @@ def migrate(record: Any, results: Any = None, folder: RunFolder | None = None, *
       ``backend``: a distillation's config has ``algo`` ``"dagger"``, any other run is SB3's;
     * SB3 runs before ``pin``, ``batched``, ``workers`` and ``render_device`` existed lack them; they resume as
       the defaults then were: pinned, one process per env, the spec's render device. RLlib runs before ``pin`` and
-      ``batched`` likewise; distillations before ``--student`` lack ``student`` (none);
+      ``batched`` likewise; distillations before ``--student`` lack ``student`` (none); SB3 runs before
+      ``--augment`` (format 2 included) lack ``augment`` (none);
     * results.json before ``eval_seed`` (SB3 and RLlib runs): the final evaluation ran on the env of the periodic
       evaluations, seeded the run's seed + 10000 at the start of the run's last segment (its start or latest
       ``--resume``), reset once then and ``eval_episodes + 1`` times by each periodic evaluation since. ``eval_seed``
@@ -354,11 +355,10 @@ def _migrated_record(record: Any, where: str) -> dict[str, Any]:
         )
     record = {**record, "config": dict(record["config"])}
     if version == 1:
-        config = record["config"]
-        backend = record.get("backend") or ("distill" if config.get("algo") == "dagger" else "sb3")
+        backend = record.get("backend") or ("distill" if record["config"].get("algo") == "dagger" else "sb3")
         record = {"format": FORMAT, "format_version": FORMAT_VERSION, "backend": backend, **record}
-        if backend in ADDED:
-            record["config"] = {**config, **{k: v for k, v in ADDED[backend].items() if k not in config}}
+    # a setting added since (format 1: pin and others; format 2: augment) takes the value older runs had
+    record["config"] = {**ADDED.get(str(record.get("backend")), {}), **record["config"]}
     return check_record(record, where)
 
 

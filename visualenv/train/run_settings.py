@@ -84,6 +84,7 @@ SETTINGS: dict[str, Rule] = {
     "seed": Rule(int, 0, MAX_TRAIN_SEED),
     "hyperparams": Rule(dict),
     "render_device": Rule(str, choices=("cpu", "gpu"), optional=True),
+    "augment": Rule(str, choices=("shift",), optional=True),
     "backend": Rule(str, choices=("rllib",)),
     # distillation
     "student": Rule(str, optional=True),
@@ -101,7 +102,7 @@ KEYS: dict[str, tuple[str, ...]] = {
     "distill": (*_COMMON, "teacher", "rounds", "episodes", "mixing", "epochs", "batch_size", "learning_rate", "shift"),
 }
 ADDED: dict[str, dict[str, Any]] = {
-    "sb3": {"pin": True, "batched": False, "workers": None, "render_device": None},
+    "sb3": {"pin": True, "batched": False, "workers": None, "render_device": None, "augment": None},
     "rllib": {"pin": True, "batched": False},
     "distill": {"student": None},
 }

@@ -63,6 +63,7 @@ class TrainConfig:
     batched: bool = False  # the envs in one process and one Blender (BatchedVectorEnv) instead of one process each
     workers: int | None = None  # with batched: the envs split into this many batches, one process each
     render_device: str | None = None  # "cpu" or "gpu": where the training envs render (None: the spec's render.device)
+    augment: str | None = None  # "shift": DrQ's random shift of the image observations (visualenv.train.drq)
 
     def policy(self, observation_space: Any) -> str:
         """SB3's policy for the env: images through a CNN, several cameras through one CNN each, a state vector through an MLP."""
@@ -231,8 +232,11 @@ def _make_model(
             return algo.load(checkpoint, env=train_env, **changed_kwargs)
         except Exception as exc:  # SB3 raises whatever its unpickling met
             raise ConfigError(f"cannot resume from {checkpoint}: {type(exc).__name__}: {exc}") from None
+    from visualenv.train.drq import model_arguments
+
+    policy, extra = model_arguments(config.algo, config.augment, config.policy(train_env.observation_space))
     try:
-        model = algo(config.policy(train_env.observation_space), train_env, seed=config.seed, verbose=0, **kwargs)
+        model = algo(policy, train_env, seed=config.seed, verbose=0, **kwargs, **extra)
     except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
         raise ConfigError(
             f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}"
@@ -346,12 +350,14 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     """What can be wrong with a run before any env starts; the algorithm's keyword arguments (all, and the changed ones)."""
     from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
+    from visualenv.train.drq import check_augment
 
     kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})
     check_torch_device({**kwargs, **changed}.get("device", "auto"))
     loaded = load_spec(resolve(config.spec))
     if config.render:
         check_cnn_input(loaded, config.hyperparams)
+    check_augment(config.augment, config.algo, config.render, loaded)
     check_replay_buffer(config, {**kwargs, **changed}, loaded)
     return kwargs, changed
 
@@ -385,7 +391,7 @@ REPLAY_MEMORY_SHARE = 0.7
 def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> int | None:
     """What an off-policy algorithm's replay buffer will hold at most, in bytes; None for an on-policy algorithm.
 
-    SB3 stores each observation and the next one (``optimize_memory_usage`` keeps
+    SB3 stores each observation and the next one (``optimize_memory_usage`` and ``--augment``'s buffer keep
     one: consecutive samples share it), as uint8 images (frames stacked) or float32 states.
     """
     import inspect
@@ -397,7 +403,9 @@ def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
         return None
     defaults = inspect.signature(algo.__init__).parameters
     size = int(kwargs.get("buffer_size", defaults["buffer_size"].default))
-    optimized = bool(kwargs.get("optimize_memory_usage", defaults["optimize_memory_usage"].default))
+    optimized = config.augment is not None or bool(
+        kwargs.get("optimize_memory_usage", defaults["optimize_memory_usage"].default)
+    )
     observation = loaded.spec.observation
     if config.render and observation is not None:
         channels = {"rgb": 3, "grayscale": 1, "depth": 1}
@@ -413,6 +421,8 @@ def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
 
 def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> None:
     """A replay buffer of image stacks that cannot fit in memory is refused before any env starts (SB3 would only warn, then fail hours later)."""
+    import inspect
+
     import psutil
 
     need = replay_buffer_bytes(config, kwargs, loaded)
@@ -420,10 +430,20 @@ def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
         return
     free = psutil.virtual_memory().available
     if need > REPLAY_MEMORY_SHARE * free:
+        size = (
+            kwargs.get("buffer_size")
+            or inspect.signature(algorithm_class(config.algo).__init__).parameters["buffer_size"].default
+        )
+        fits = int(size * REPLAY_MEMORY_SHARE * free / need)
         raise ConfigError(
             f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
-            f"are available: set a smaller buffer_size (--set buffer_size=...), and optimize_memory_usage=true "
-            "(one copy of each observation; SB3 then needs replay_buffer_kwargs: {handle_timeout_termination: false})"
+            f"are available: set buffer_size={fits:,} or less (--set buffer_size={fits})"
+            + (
+                ""
+                if config.augment
+                else ", and optimize_memory_usage=true (one copy of each observation; SB3 then needs "
+                "replay_buffer_kwargs: {handle_timeout_termination: false}; --augment shift keeps one copy and timeouts)"
+            )
         )
 
 

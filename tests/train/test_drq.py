@@ -1,0 +1,236 @@
+"""`train --augment shift` without rendering: DrQ's random shift, its replay and rollout buffers, and the SAC policy
+whose shared encoder learns from the critic only (visualenv.train.drq)."""
+
+import json
+
+import gymnasium as gym
+import numpy as np
+import pytest
+import torch
+from click.testing import CliRunner
+from gymnasium import spaces
+
+from visualenv.cli import main
+from visualenv.errors import ConfigError
+from visualenv.train.drq import (
+    PAD,
+    DrQReplayBuffer,
+    DrQSACPolicy,
+    ShiftedRolloutBuffer,
+    model_arguments,
+    random_shift,
+)
+
+
+def _pattern(n: int, c: int = 2, h: int = 20, w: int = 24) -> torch.Tensor:
+    """A batch of images whose every pixel is distinct within its channel (row * w + column), as int64."""
+    image = torch.arange(h * w).reshape(h, w)
+    return torch.stack([image + 1000 * k for k in range(c)])[None].repeat(n, 1, 1, 1)
+
+
+def _shift_of(original: np.ndarray, shifted: np.ndarray, pad: int) -> tuple[int, int]:
+    """The (dy, dx) for which `shifted` is `original` edge-padded by `pad` and cropped at that offset; fails if none."""
+    _, h, w = original.shape
+    padded = np.pad(original, ((0, 0), (pad, pad), (pad, pad)), mode="edge")
+    found = [
+        (dy, dx)
+        for dy in range(-pad, pad + 1)
+        for dx in range(-pad, pad + 1)
+        if np.array_equal(padded[:, pad + dy : pad + dy + h, pad + dx : pad + dx + w], shifted)
+    ]
+    assert len(found) == 1, "not a replicate-padded crop of the image"
+    return found[0]
+
+
+def test_the_shift_moves_each_image_by_at_most_4_pixels_its_edges_repeated_and_differs_across_samples():
+    torch.manual_seed(0)
+    images = _pattern(64)
+    shifted = random_shift(images)
+    assert shifted.shape == images.shape and shifted.dtype == images.dtype
+    shifts = [_shift_of(images[i].numpy(), shifted[i].numpy(), PAD) for i in range(64)]
+    assert all(abs(dy) <= PAD and abs(dx) <= PAD for dy, dx in shifts)
+    assert len(set(shifts)) > 20  # drawn per sample: 81 possible offsets
+    # uint8 frames stay uint8, channel-last images move the same way
+    frames = torch.randint(0, 256, (8, 12, 12, 3), dtype=torch.uint8)
+    moved = random_shift(frames, channels_first=False)
+    assert moved.dtype == torch.uint8 and moved.shape == frames.shape
+    for i in range(8):
+        _shift_of(frames[i].permute(2, 0, 1).numpy(), moved[i].permute(2, 0, 1).numpy(), PAD)
+
+
+IMAGE = spaces.Box(0, 255, (3, 40, 40), np.uint8)  # channel-first, as SB3 transposes it
+ACTION = spaces.Box(-1.0, 1.0, (2,), np.float32)
+
+
+def test_the_replay_buffer_keeps_each_frame_once_and_the_final_frame_of_a_timeout(capsys):
+    buffer = DrQReplayBuffer(10, IMAGE, ACTION, device="cpu", n_envs=1, pad=0)
+    assert "replay buffer: 10 transitions of 3x40x40 uint8 observations, each stored once" in capsys.readouterr().out
+    assert buffer.handle_timeout_termination and getattr(buffer, "next_observations", None) is None
+    frames = [np.full((1, 3, 40, 40), k, np.uint8) for k in range(8)]
+    final = np.full((1, 3, 40, 40), 99, np.uint8)  # the frame an episode cut by its time limit ends on
+    for k in range(6):
+        timeout = k == 3
+        buffer.add(
+            frames[k],
+            final if timeout else frames[k + 1],
+            np.zeros((1, 2)),
+            np.ones(1),
+            np.array([timeout]),
+            [{"TimeLimit.truncated": timeout}],
+        )
+    samples = buffer._get_samples(np.arange(5))
+    next_first = samples.next_observations[:, 0, 0, 0].tolist()
+    assert samples.observations[:, 0, 0, 0].tolist() == [0, 1, 2, 3, 4]
+    assert next_first == [1, 2, 3, 99, 5]  # slot 4's frame is the reset's, not the final one
+    assert samples.dones.flatten().tolist() == [0, 0, 0, 0, 0]  # a timeout bootstraps
+    for _ in range(10):  # the slot is overwritten: its final frame goes
+        buffer.add(frames[0], frames[0], np.zeros((1, 2)), np.ones(1), np.array([False]), [{}])
+    assert not buffer.final_observations and not buffer.has_final.any()
+
+
+def test_the_replay_buffer_shifts_observations_and_next_observations_independently():
+    torch.manual_seed(0)
+    buffer = DrQReplayBuffer(64, IMAGE, ACTION, device="cpu", n_envs=1)
+    rng = np.random.default_rng(0)
+    frame = rng.integers(0, 256, (1, 3, 40, 40), dtype=np.uint8)
+    for _ in range(40):
+        buffer.add(frame, frame, np.zeros((1, 2)), np.ones(1), np.array([False]), [{}])
+    samples = buffer.sample(16)
+    assert samples.observations.dtype == torch.uint8
+    obs = [_shift_of(frame[0], samples.observations[i].numpy(), PAD) for i in range(16)]
+    nxt = [_shift_of(frame[0], samples.next_observations[i].numpy(), PAD) for i in range(16)]
+    assert obs != nxt and len(set(obs)) > 4
+
+
+def test_ppo_minibatches_carry_shifted_observations():
+    torch.manual_seed(0)
+    buffer = ShiftedRolloutBuffer(8, IMAGE, ACTION, device="cpu", n_envs=1)
+    frame = np.random.default_rng(1).integers(0, 256, (1, 3, 40, 40), dtype=np.uint8)
+    for _ in range(8):
+        buffer.add(frame, np.zeros((1, 2)), np.zeros(1), np.array([False]), torch.zeros(1), torch.zeros(1))
+    buffer.compute_returns_and_advantage(torch.zeros(1), np.array([False]))
+    (batch,) = buffer.get(8)
+    shifts = [_shift_of(frame[0].astype(np.float32), batch.observations[i].numpy(), PAD) for i in range(8)]
+    assert len(set(shifts)) > 1
+    with pytest.raises(ConfigError, match="--augment shift shifts images"):
+        ShiftedRolloutBuffer(8, spaces.Box(-1, 1, (5,), np.float32), ACTION, device="cpu")
+
+
+class _Frames(gym.Env):
+    """A tiny image env: random 40x40 RGB frames, a reward for the first action's sign."""
+
+    observation_space = spaces.Box(0, 255, (40, 40, 3), np.uint8)
+    action_space = ACTION
+
+    def reset(self, *, seed=None, options=None):
+        super().reset(seed=seed)
+        return self.observation_space.sample(), {}
+
+    def step(self, action):
+        return self.observation_space.sample(), float(action[0] > 0), False, False, {}
+
+
+def _sac():
+    from stable_baselines3 import SAC
+
+    policy, extra = model_arguments("sac", "shift", "CnnPolicy")
+    model = SAC(policy, _Frames(), buffer_size=64, learning_starts=16, batch_size=8, seed=0, device="cpu", **extra)
+    model.learn(16)  # fills the buffer
+    return model
+
+
+def _params(module):
+    return [p.detach().clone() for p in module.parameters()]
+
+
+def test_the_encoder_is_shared_and_learns_from_the_critics_loss_only():
+    model = _sac()
+    policy = model.policy
+    assert isinstance(policy, DrQSACPolicy)
+    encoder = policy.actor.features_extractor
+    assert policy.critic.features_extractor is encoder and policy.critic_target.features_extractor is not encoder
+    in_actor = {id(p) for group in policy.actor.optimizer.param_groups for p in group["params"]}
+    in_critic = {id(p) for group in policy.critic.optimizer.param_groups for p in group["params"]}
+    assert all(id(p) in in_critic and id(p) not in in_actor for p in encoder.parameters())
+
+    # an actor loss (the policy's, as SAC computes it) puts no gradient on the encoder; a critic loss does
+    batch = model.replay_buffer.sample(8)
+    encoder.zero_grad(set_to_none=True)
+    actions, log_prob = policy.actor.action_log_prob(batch.observations)
+    q = torch.cat(policy.critic(batch.observations, actions), dim=1).min(dim=1).values
+    (0.1 * log_prob - q).mean().backward()
+    assert all(p.grad is None or not p.grad.any() for p in encoder.parameters())
+    assert any(p.grad is not None and p.grad.any() for p in policy.actor.mu.parameters())
+    sum(q.pow(2).mean() for q in policy.critic(batch.observations, batch.actions)).backward()
+    assert all(p.grad is not None for p in encoder.parameters()) and any(p.grad.any() for p in encoder.parameters())
+
+    # one SAC train step moves the encoder; with the critic's optimizer stilled, the actor's step leaves it be
+    before = _params(encoder)
+    model.train(gradient_steps=1, batch_size=8)
+    assert any(not torch.equal(a, b) for a, b in zip(before, _params(encoder)))
+    before, actor_before = _params(encoder), _params(policy.actor.mu)
+    policy.critic.optimizer.step = lambda *args, **kwargs: None
+    model.train(gradient_steps=1, batch_size=8)
+    assert all(torch.equal(a, b) for a, b in zip(before, _params(encoder)))
+    assert any(not torch.equal(a, b) for a, b in zip(actor_before, _params(policy.actor.mu)))
+
+
+def test_augment_is_refused_where_it_cannot_apply(tmp_path):
+    from visualenv.env.registration import resolve
+    from visualenv.spec import load_spec
+    from visualenv.train.drq import check_augment
+
+    loaded = load_spec(resolve("LunarLanding-v0"))
+    out = tmp_path / "runs"
+    result = CliRunner().invoke(
+        main, ["train", "LunarLanding-v0", "--algo", "sac", "--state-only", "--augment", "shift", "--out", str(out)]
+    )
+    assert result.exit_code != 0 and "--augment shift" in result.output and "state-only" in result.output
+    assert "Traceback" not in result.output and not out.exists()
+    with pytest.raises(ConfigError, match="--augment shift: for --algo ppo or sac, not dqn"):
+        check_augment("shift", "dqn", True, loaded)
+    check_augment("shift", "sac", True, loaded)  # one camera: fine
+    check_augment(None, "dqn", False, loaded)
+    assert model_arguments("ppo", None, "CnnPolicy") == ("CnnPolicy", {})
+    result = CliRunner().invoke(main, ["train", "LunarLanding-v0", "--augment", "flip"])
+    assert result.exit_code != 0 and "--augment" in result.output
+
+
+def test_a_config_without_augment_reads_as_none(tmp_path):
+    from dataclasses import asdict
+
+    from visualenv.train.run_folder import read_config, write_config
+    from visualenv.train.sb3 import TrainConfig, resumed_config
+
+    settings = asdict(TrainConfig("LunarLanding-v0", algo="sac", augment="shift"))
+    write_config(tmp_path, {"backend": "sb3", "command": "visualenv train", "config": settings})
+    assert read_config(tmp_path)["config"]["augment"] == "shift"
+    record = json.loads((tmp_path / "config.json").read_text())
+    del record["config"]["augment"]  # a run (or shipped agent) from before --augment
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    assert read_config(tmp_path)["config"]["augment"] is None
+    assert resumed_config(TrainConfig, tmp_path, steps=None, hyperparams={}, progress=False).augment is None
+    record["config"]["augment"] = "crop"
+    (tmp_path / "config.json").write_text(json.dumps(record))
+    with pytest.raises(ConfigError, match="augment: expected one of shift"):
+        read_config(tmp_path)
+
+
+def test_the_refusal_of_a_buffer_too_big_names_a_size_that_fits(tmp_path):
+    from visualenv.env.registration import resolve
+    from visualenv.spec import load_spec
+    from visualenv.train.sb3 import REPLAY_MEMORY_SHARE, TrainConfig, check_replay_buffer, replay_buffer_bytes
+
+    import psutil
+    import re
+
+    loaded = load_spec(resolve("LunarLanding-v0"))
+    config = TrainConfig("LunarLanding-v0", algo="sac", augment="shift")
+    one = replay_buffer_bytes(config, {"buffer_size": 1}, loaded)
+    assert one == 4 * 100 * 100  # 4 stacked grayscale frames, once
+    huge = 10 * int(psutil.virtual_memory().total // one)
+    with pytest.raises(ConfigError) as refused:
+        check_replay_buffer(config, {"buffer_size": huge}, loaded)
+    fits = int(re.search(r"set buffer_size=([\d,]+) or less", str(refused.value)).group(1).replace(",", ""))
+    assert 0 < fits * one <= REPLAY_MEMORY_SHARE * psutil.virtual_memory().total
+    check_replay_buffer(config, {"buffer_size": fits // 2}, loaded)

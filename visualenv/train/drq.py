@@ -1,0 +1,254 @@
+"""`visualenv train --augment shift`: DrQ's random shift of image observations, for SAC and PPO.
+
+* :func:`random_shift`: each image padded by 4 pixels (its edge pixels repeated) and cropped back at a random
+  offset, drawn per sample (DrQ, Kostrikov et al. 2020);
+* SAC: :class:`DrQReplayBuffer` keeps each frame once (uint8) and shifts the observations and the next observations of
+  every sampled batch independently; :class:`DrQSACPolicy` shares one encoder between actor and critic, trained by
+  the critic's loss only (DrQ's recipe: the actor reads the encoder's features detached);
+* PPO: :class:`ShiftedRolloutBuffer` shifts the observations of each minibatch (as RAD and DrAC do).
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+import torch as th
+from gymnasium import spaces
+from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
+from stable_baselines3.common.policies import ContinuousCritic
+from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
+from stable_baselines3.common.type_aliases import ReplayBufferSamples, RolloutBufferSamples
+from stable_baselines3.sac.policies import Actor, CnnPolicy
+
+from visualenv.errors import ConfigError
+
+AUGMENTS = ("shift",)
+PAD = 4  # DrQ's padding: shifts of up to 4 pixels each way on 84x84 frames
+ALGORITHMS = ("ppo", "sac")  # those `--augment` trains
+
+
+def random_shift(images: th.Tensor, pad: int = PAD, *, channels_first: bool = True) -> th.Tensor:
+    """Each image of the batch moved by its own random offset of up to `pad` pixels each way, the pixels it uncovers
+    repeating its edge: DrQ's replicate-pad then random crop back to the image's size. Any dtype (uint8 frames stay
+    uint8, the pixels only move); `images` is (N, C, H, W), or (N, H, W, C) where not `channels_first`."""
+    if pad == 0 or images.shape[0] == 0:
+        return images
+    batch = images if channels_first else images.permute(0, 3, 1, 2)
+    n, c, h, w = batch.shape
+    device = batch.device
+    dy, dx = th.randint(-pad, pad + 1, (2, n), device=device)
+    rows = (th.arange(h, device=device)[None, :] + dy[:, None]).clamp_(0, h - 1)  # (N, H): the padded image's rows
+    cols = (th.arange(w, device=device)[None, :] + dx[:, None]).clamp_(0, w - 1)
+    shifted = batch[
+        th.arange(n, device=device)[:, None, None, None],
+        th.arange(c, device=device)[None, :, None, None],
+        rows[:, None, :, None],
+        cols[:, None, None, :],
+    ]
+    return shifted if channels_first else shifted.permute(0, 2, 3, 1)
+
+
+def shift_observations(observations: th.Tensor, space: spaces.Space, pad: int = PAD) -> th.Tensor:
+    """A batch of observations of the image space `space` (channel-first as SB3 transposes it, or channel-last)
+    shifted by :func:`random_shift`."""
+    return random_shift(observations, pad, channels_first=is_image_space_channels_first(space))  # type: ignore[arg-type]
+
+
+def check_augment(augment: str | None, algo: str, render: bool, loaded: Any) -> None:
+    """`--augment` of a run, refused now (before any env starts) where it cannot apply: another augmentation, another
+    algorithm, a state-only run, or a spec whose observation is not one image."""
+    if augment is None:
+        return
+    if augment not in AUGMENTS:
+        raise ConfigError(f"--augment {augment}: expected one of {', '.join(AUGMENTS)}")
+    if algo not in ALGORITHMS:
+        raise ConfigError(f"--augment {augment}: for --algo {' or '.join(ALGORITHMS)}, not {algo}")
+    observation = loaded.spec.observation
+    if not render or observation is None:
+        raise ConfigError(f"--augment {augment} shifts image observations: a state-only run has none")
+    if len(observation.views()) != 1:
+        raise ConfigError(
+            f"--augment {augment} shifts one image per observation; {loaded.spec.id} observes "
+            f"{len(observation.views())} cameras"
+        )
+
+
+def model_arguments(algo: str, augment: str | None, policy: Any) -> tuple[Any, dict[str, Any]]:
+    """The policy and the extra keyword arguments of the SB3 algorithm that `augment` asks for: SAC gets DrQ's policy
+    and buffer, PPO its shifting rollout buffer; without `augment`, `policy` and none."""
+    if augment is None:
+        return policy, {}
+    if algo == "sac":
+        return DrQSACPolicy, {"replay_buffer_class": DrQReplayBuffer}
+    return policy, {"rollout_buffer_class": ShiftedRolloutBuffer}
+
+
+def _image_space(space: spaces.Space) -> None:
+    if not is_image_space(space, check_channels=False):
+        raise ConfigError(f"--augment shift shifts images (uint8 Box of height, width and channels), not {space}")
+
+
+# -- SAC: DrQ -------------------------------------------------------------------------------------------------------
+
+
+class DrQReplayBuffer(ReplayBuffer):
+    """SB3's replay buffer of uint8 frames, each observation stored once, timeouts handled, batches shifted.
+
+    A transition's next observation is the next slot's observation (as SB3's ``optimize_memory_usage``), except at the
+    end of an episode cut by its time limit, where the next slot holds the reset's frame: that final observation,
+    which the critic's target bootstraps from, is kept aside (one frame per such episode end). SB3's own
+    ``optimize_memory_usage`` cannot do this and refuses ``handle_timeout_termination``. The memory the buffer takes
+    is printed before it is allocated.
+    """
+
+    def __init__(
+        self,
+        buffer_size: int,
+        observation_space: spaces.Space,
+        action_space: spaces.Space,
+        device: th.device | str = "auto",
+        n_envs: int = 1,
+        optimize_memory_usage: bool = True,  # always: each observation once
+        handle_timeout_termination: bool = True,
+        pad: int = PAD,
+    ):
+        _image_space(observation_space)
+        print(f"replay buffer: {buffer_memory(buffer_size, observation_space, action_space)}", flush=True)
+        super().__init__(
+            buffer_size,
+            observation_space,
+            action_space,
+            device,
+            n_envs,
+            optimize_memory_usage=True,
+            handle_timeout_termination=False,  # SB3 refuses it with optimize_memory_usage; set below
+        )
+        self.handle_timeout_termination = handle_timeout_termination
+        self.pad = pad
+        self.has_final = np.zeros((self.buffer_size, self.n_envs), dtype=bool)
+        self.final_observations: dict[tuple[int, int], np.ndarray] = {}
+
+    def add(
+        self,
+        obs: np.ndarray,
+        next_obs: np.ndarray,
+        action: np.ndarray,
+        reward: np.ndarray,
+        done: np.ndarray,
+        infos: list[dict[str, Any]],
+    ) -> None:
+        pos = self.pos
+        for env in np.flatnonzero(self.has_final[pos]):  # the slot's earlier transition is overwritten
+            self.final_observations.pop((pos, int(env)), None)
+        self.has_final[pos] = False
+        super().add(obs, next_obs, action, reward, done, infos)
+        if self.handle_timeout_termination:
+            for env in np.flatnonzero(np.asarray(done) * self.timeouts[pos]):
+                self.final_observations[(pos, int(env))] = np.array(next_obs[env], dtype=self.observations.dtype)
+                self.has_final[pos, env] = True
+
+    def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> ReplayBufferSamples:
+        env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
+        next_obs = self.observations[(batch_inds + 1) % self.buffer_size, env_indices]
+        for k in np.flatnonzero(self.has_final[batch_inds, env_indices]):
+            next_obs[k] = self.final_observations[(int(batch_inds[k]), int(env_indices[k]))]
+        rewards = self.rewards[batch_inds, env_indices].reshape(-1, 1)
+        data = (
+            self.observations[batch_inds, env_indices],
+            self.actions[batch_inds, env_indices, :],
+            next_obs,
+            (self.dones[batch_inds, env_indices] * (1 - self.timeouts[batch_inds, env_indices])).reshape(-1, 1),
+            rewards if env is None else env.normalize_reward(rewards).astype(np.float32),  # SB3's, without VecNormalize
+        )
+        samples = ReplayBufferSamples(*tuple(map(self.to_torch, data)))
+        return samples._replace(
+            observations=shift_observations(samples.observations, self.observation_space, self.pad),
+            next_observations=shift_observations(samples.next_observations, self.observation_space, self.pad),
+        )
+
+
+def buffer_memory(buffer_size: int, observation_space: spaces.Space, action_space: spaces.Space) -> str:
+    """What a :class:`DrQReplayBuffer` of `buffer_size` transitions takes, in words."""
+    shape = observation_space.shape or ()
+    frame = int(np.prod(shape)) * np.dtype(observation_space.dtype).itemsize
+    per_transition = frame + 4 * (int(np.prod(action_space.shape or (1,))) + 3)  # action, reward, done, timeout
+    total = buffer_size * per_transition
+    return (
+        f"{buffer_size:,} transitions of {'x'.join(map(str, shape))} "
+        f"{np.dtype(observation_space.dtype).name} observations, each stored once: "
+        + (f"{total / 2**30:.1f} GiB " if total >= 2**30 else f"{total / 2**20:.1f} MiB ")
+        + "(and one frame per episode cut by its time limit)"
+    )
+
+
+class DrQActor(Actor):
+    """SB3's SAC actor reading the shared encoder's features detached: the actor's loss does not train the encoder."""
+
+    def extract_features(self, obs: Any, features_extractor: Any) -> th.Tensor:  # type: ignore[override]
+        return super().extract_features(obs, features_extractor).detach()
+
+
+class DrQCritic(ContinuousCritic):
+    """SB3's SAC critic whose encoder learns from the critic's loss; in the actor's loss (actions drawn by the actor,
+    which carry gradients) it reads the features detached, as DrQ's critic does there."""
+
+    def forward(self, obs: th.Tensor, actions: th.Tensor) -> tuple[th.Tensor, ...]:
+        features = self.extract_features(obs, self.features_extractor)
+        if actions.requires_grad:
+            features = features.detach()
+        qvalue_input = th.cat([features, actions], dim=1)
+        return tuple(q_net(qvalue_input) for q_net in self.q_networks)
+
+
+class DrQSACPolicy(CnnPolicy):
+    """SB3's SAC CnnPolicy built as DrQ's: one encoder (NatureCNN, or the features extractor the config names) shared by
+    actor and critic, in the critic's optimizer and not in the actor's; the target critic has its own copy, updated
+    with the Q heads by SB3's soft update (`tau`). ``share_features_extractor`` is not read: the encoder is shared."""
+
+    def make_actor(self, features_extractor: Any = None) -> Actor:
+        return DrQActor(**self.with_encoder(self.actor_kwargs, features_extractor)).to(self.device)
+
+    def make_critic(self, features_extractor: Any = None) -> ContinuousCritic:
+        return DrQCritic(**self.with_encoder(self.critic_kwargs, features_extractor)).to(self.device)
+
+    def with_encoder(self, kwargs: dict[str, Any], encoder: Any) -> dict[str, Any]:
+        """The actor's or critic's arguments with `encoder`, or a new one (what SB3's policies do for themselves)."""
+        encoder = encoder if encoder is not None else self.make_features_extractor()
+        return {**kwargs, "features_extractor": encoder, "features_dim": encoder.features_dim}
+
+    def _build(self, lr_schedule: Any) -> None:
+        self.actor = self.make_actor()
+        encoder = self.actor.features_extractor
+        self.critic = self.make_critic(features_extractor=encoder)
+        self.critic_target = self.make_critic(features_extractor=None)
+        self.critic_target.load_state_dict(self.critic.state_dict())
+        shared = {id(p) for p in encoder.parameters()}
+        self.actor.optimizer = self.optimizer_class(
+            [p for p in self.actor.parameters() if id(p) not in shared],
+            lr=lr_schedule(1),  # type: ignore[call-arg]
+            **self.optimizer_kwargs,
+        )
+        self.critic.optimizer = self.optimizer_class(
+            self.critic.parameters(),
+            lr=lr_schedule(1),  # type: ignore[call-arg]
+            **self.optimizer_kwargs,
+        )
+        self.critic_target.set_training_mode(False)
+
+
+# -- PPO: RAD / DrAC ------------------------------------------------------------------------------------------------
+
+
+class ShiftedRolloutBuffer(RolloutBuffer):
+    """SB3's rollout buffer whose minibatches carry shifted observations (the log-probabilities and values of the
+    rollout stay those of the frames the policy acted on)."""
+
+    def __init__(self, *args: Any, pad: int = PAD, **kwargs: Any):
+        super().__init__(*args, **kwargs)
+        _image_space(self.observation_space)
+        self.pad = pad
+
+    def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> RolloutBufferSamples:
+        samples = super()._get_samples(batch_inds, env)
+        return samples._replace(observations=shift_observations(samples.observations, self.observation_space, self.pad))
