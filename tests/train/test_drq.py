@@ -234,3 +234,29 @@ def test_the_refusal_of_a_buffer_too_big_names_a_size_that_fits(tmp_path):
     fits = int(re.search(r"set buffer_size=([\d,]+) or less", str(refused.value)).group(1).replace(",", ""))
     assert 0 < fits * one <= REPLAY_MEMORY_SHARE * psutil.virtual_memory().total
     check_replay_buffer(config, {"buffer_size": fits // 2}, loaded)
+
+
+def test_the_dmc_preset_builds_drqs_sac():
+    """examples/hyperparams/dmc_drq.yaml: SAC's hyperparameters, checked as `train --config` checks them."""
+    from pathlib import Path
+
+    import yaml
+    from stable_baselines3 import SAC
+
+    from visualenv.train.sb3 import algorithm_kwargs
+
+    preset = yaml.safe_load((Path(__file__).parents[2] / "examples/hyperparams/dmc_drq.yaml").read_text())
+    kwargs = algorithm_kwargs("sac", {**preset, "buffer_size": 100})  # the preset's 100k frames: 5.9 GiB
+    assert preset["buffer_size"] == 100_000 and preset["ent_coef"] == "auto_0.1" and preset["tau"] == 0.01
+
+    class Pixels(_Frames):
+        observation_space = spaces.Box(0, 255, (84, 84, 9), np.uint8)  # 3 stacked RGB frames
+
+    policy, extra = model_arguments("sac", "shift", "CnnPolicy")
+    model = SAC(policy, Pixels(), seed=0, device="cpu", **kwargs, **extra)
+    assert model.policy.actor.features_extractor.features_dim == 50
+    assert [layer.out_features for layer in model.policy.critic.q_networks[0] if hasattr(layer, "out_features")] == [
+        1024,
+        1024,
+        1,
+    ]
