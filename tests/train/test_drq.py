@@ -260,3 +260,16 @@ def test_the_dmc_preset_builds_drqs_sac():
         1024,
         1,
     ]
+
+
+def test_a_resumed_model_keeps_drqs_policy_and_buffers(tmp_path):
+    """`train --resume` loads checkpoints/latest.zip with the algorithm's class: DrQ's classes come back with it."""
+    from stable_baselines3 import PPO, SAC
+
+    policy, extra = model_arguments("sac", "shift", "CnnPolicy")
+    SAC(policy, _Frames(), buffer_size=32, device="cpu", **extra).save(tmp_path / "sac.zip")
+    back = SAC.load(tmp_path / "sac.zip", env=_Frames(), device="cpu")
+    assert isinstance(back.policy, DrQSACPolicy) and isinstance(back.replay_buffer, DrQReplayBuffer)
+    policy, extra = model_arguments("ppo", "shift", "CnnPolicy")
+    PPO(policy, _Frames(), n_steps=8, batch_size=8, device="cpu", **extra).save(tmp_path / "ppo.zip")
+    assert isinstance(PPO.load(tmp_path / "ppo.zip", env=_Frames(), device="cpu").rollout_buffer, ShiftedRolloutBuffer)
