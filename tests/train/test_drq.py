@@ -273,3 +273,41 @@ def test_a_resumed_model_keeps_drqs_policy_and_buffers(tmp_path):
     policy, extra = model_arguments("ppo", "shift", "CnnPolicy")
     PPO(policy, _Frames(), n_steps=8, batch_size=8, device="cpu", **extra).save(tmp_path / "ppo.zip")
     assert isinstance(PPO.load(tmp_path / "ppo.zip", env=_Frames(), device="cpu").rollout_buffer, ShiftedRolloutBuffer)
+
+
+def test_a_checkpoint_keeps_the_final_frames_of_timeouts(tmp_path):
+    """`train --resume`'s data checkpoint (visualenv.train.checkpoints) saves the frames the buffer keeps aside."""
+    from stable_baselines3 import SAC
+
+    from visualenv.train.checkpoints import CheckpointError, load_state, save_state
+    from visualenv.train.run_folder import STATE_REPLAY, RunFolder
+
+    def make():
+        policy, extra = model_arguments("sac", "shift", "CnnPolicy")
+        env = gym.wrappers.TimeLimit(_Frames(), 3)  # every episode cut by its time limit
+        return SAC(policy, env, buffer_size=32, learning_starts=32, seed=0, device="cpu", **extra)
+
+    trained = make()
+    trained.learn(12)
+    kept = trained.replay_buffer.kept_arrays()
+    assert len(kept["final_slots"]) == 4 and kept["final_slots"][:, 0].tolist() == [2, 5, 8, 11]
+    folder = RunFolder(tmp_path)
+    save_state(trained, folder, "sac")
+    resumed = make()
+    load_state(resumed, folder.latest_dir, "sac")
+    back = resumed.replay_buffer.kept_arrays()
+    assert all(np.array_equal(kept[k], back[k]) for k in kept)
+    assert np.array_equal(resumed.replay_buffer.has_final, trained.replay_buffer.has_final)
+    assert np.array_equal(resumed.replay_buffer.observations, trained.replay_buffer.observations)
+
+    saved = dict(np.load(folder.latest_dir / STATE_REPLAY))  # a slot past the buffer's end is refused
+    np.savez(folder.latest_dir / STATE_REPLAY, **{**saved, "final_slots": saved["final_slots"] + [40, 0]})
+    with pytest.raises(CheckpointError, match="final_slots: a slot outside the buffer"):
+        load_state(make(), folder.latest_dir, "sac")
+    frames = np.zeros((100, 3, 40, 40), np.uint8)  # more frames than the buffer has slots: refused unread
+    np.savez(
+        folder.latest_dir / STATE_REPLAY,
+        **{**saved, "final_observations": frames, "final_slots": np.zeros((100, 2), np.int64)},
+    )
+    with pytest.raises(CheckpointError, match="expected at most 32 frames"):
+        load_state(make(), folder.latest_dir, "sac")

@@ -156,7 +156,7 @@ def save_state(model: Any, folder: RunFolder, algorithm: str) -> Path:
     fresh.mkdir(parents=True)
     save_file(tensors, str(fresh / STATE_WEIGHTS), metadata={"format": FORMAT})
     if buffer is not None:
-        np.savez(fresh / STATE_REPLAY, **{key: array for key, array in _replay_arrays(buffer).items()})
+        np.savez(fresh / STATE_REPLAY, **_replay_arrays(buffer), **_kept_arrays(buffer))
     (fresh / STATE_JSON).write_text(json.dumps(state, indent=1, allow_nan=False) + "\n", encoding="utf-8")
     if latest.exists():
         shutil.rmtree(old, ignore_errors=True)
@@ -187,6 +187,12 @@ def _replay_arrays(buffer: Any) -> dict[str, np.ndarray]:
         elif value is not None:
             arrays[field] = value[: _rows(buffer, field)]
     return arrays
+
+
+def _kept_arrays(buffer: Any) -> dict[str, np.ndarray]:
+    """What a buffer keeps besides SB3's rows (`--augment`'s buffer: the final frames of episodes cut by a timeout)."""
+    kept = getattr(buffer, "kept_arrays", None)
+    return kept() if kept is not None else {}
 
 
 def _rows(buffer: Any, field: str) -> int:
@@ -427,7 +433,10 @@ def _load_replay(model: Any, record: Any, checkpoint: Path) -> None:
         )
     buffer.pos, buffer.full = pos, full
     targets = _replay_arrays(buffer)  # views of the new buffer's rows that the saved ones fill
-    headers = _npz_headers(path, sorted(targets))
+    kept = _kept_arrays(buffer)  # their number varies: checked against the buffer's bounds
+    headers = _npz_headers(path, sorted([*targets, *kept]))
+    if kept:
+        _check_kept(headers, buffer, path)
     for name, target in targets.items():
         if headers[name] != (target.shape, target.dtype):
             shape, dtype = headers[name]
@@ -437,6 +446,28 @@ def _load_replay(model: Any, record: Any, checkpoint: Path) -> None:
     with np.load(path, allow_pickle=False) as saved:
         for name, target in targets.items():
             target[...] = saved[name]
+        if kept:
+            slots = saved["final_slots"]
+            if ((slots < 0) | (slots >= np.array(buffer.has_final.shape))).any():
+                raise CheckpointError(f"{path}: final_slots: a slot outside the buffer's {buffer.has_final.shape}")
+            buffer.restore_kept(saved["final_observations"], slots)
+
+
+def _check_kept(headers: dict[str, tuple[tuple[int, ...], np.dtype]], buffer: Any, path: Path) -> None:
+    """The final frames' shapes and types, and their number within the buffer's slots, before they are read."""
+    (frames, frame_type), (slots, slot_type) = headers["final_observations"], headers["final_slots"]
+    count = frames[0] if frames else -1
+    if not (
+        frames[1:] == tuple(buffer.obs_shape)
+        and frame_type == buffer.observations.dtype
+        and slots == (count, 2)
+        and slot_type == np.int64
+        and count <= buffer.has_final.size
+    ):
+        raise CheckpointError(
+            f"{path}: final_observations {list(frames)} and final_slots {list(slots)}: expected at most "
+            f"{buffer.has_final.size} frames of {buffer.observations.dtype} {list(buffer.obs_shape)} and their slots"
+        )
 
 
 def _npz_headers(path: Path, names: list[str]) -> dict[str, tuple[tuple[int, ...], np.dtype]]:

@@ -148,6 +148,24 @@ class DrQReplayBuffer(ReplayBuffer):
                 self.final_observations[(pos, int(env))] = np.array(next_obs[env], dtype=self.observations.dtype)
                 self.has_final[pos, env] = True
 
+    def kept_arrays(self) -> dict[str, np.ndarray]:
+        """The final frames kept aside, stacked, and their (slot, env): what a checkpoint saves besides SB3's rows."""
+        slots = sorted(self.final_observations)
+        frames = [self.final_observations[slot] for slot in slots]
+        return {
+            "final_observations": np.stack(frames)
+            if frames
+            else np.zeros((0, *self.obs_shape), self.observations.dtype),
+            "final_slots": np.array(slots, dtype=np.int64).reshape(-1, 2),
+        }
+
+    def restore_kept(self, frames: np.ndarray, slots: np.ndarray) -> None:
+        """Put back the final frames :meth:`kept_arrays` gave (a checkpoint's, checked by the caller)."""
+        self.final_observations = {(int(i), int(e)): np.array(frame) for (i, e), frame in zip(slots, frames)}
+        self.has_final[:] = False
+        for i, e in self.final_observations:
+            self.has_final[i, e] = True
+
     def _get_samples(self, batch_inds: np.ndarray, env: Any = None) -> ReplayBufferSamples:
         env_indices = np.random.randint(0, high=self.n_envs, size=(len(batch_inds),))
         next_obs = self.observations[(batch_inds + 1) % self.buffer_size, env_indices]

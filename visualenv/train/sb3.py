@@ -403,9 +403,7 @@ def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
         return None
     defaults = inspect.signature(algo.__init__).parameters
     size = int(kwargs.get("buffer_size", defaults["buffer_size"].default))
-    optimized = config.augment is not None or bool(
-        kwargs.get("optimize_memory_usage", defaults["optimize_memory_usage"].default)
-    )
+    optimized = bool(config.augment or kwargs.get("optimize_memory_usage", defaults["optimize_memory_usage"].default))
     observation = loaded.spec.observation
     if config.render and observation is not None:
         channels = {"rgb": 3, "grayscale": 1, "depth": 1}
@@ -421,8 +419,6 @@ def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
 
 def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> None:
     """A replay buffer of image stacks that cannot fit in memory is refused before any env starts (SB3 would only warn, then fail hours later)."""
-    import inspect
-
     import psutil
 
     need = replay_buffer_bytes(config, kwargs, loaded)
@@ -430,19 +426,17 @@ def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
         return
     free = psutil.virtual_memory().available
     if need > REPLAY_MEMORY_SHARE * free:
-        size = (
-            kwargs.get("buffer_size")
-            or inspect.signature(algorithm_class(config.algo).__init__).parameters["buffer_size"].default
+        fits = int(
+            REPLAY_MEMORY_SHARE * free // (replay_buffer_bytes(config, {**kwargs, "buffer_size": 1}, loaded) or 1)
         )
-        fits = int(size * REPLAY_MEMORY_SHARE * free / need)
         raise ConfigError(
             f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
             f"are available: set buffer_size={fits:,} or less (--set buffer_size={fits})"
             + (
                 ""
                 if config.augment
-                else ", and optimize_memory_usage=true (one copy of each observation; SB3 then needs "
-                "replay_buffer_kwargs: {handle_timeout_termination: false}; --augment shift keeps one copy and timeouts)"
+                else ", or optimize_memory_usage=true (one copy of each observation; SB3 then needs "
+                "replay_buffer_kwargs: {handle_timeout_termination: false})"
             )
         )
 
