@@ -10,7 +10,8 @@ keeps its own checkpoint), a folder swapped in whole, so a run killed while savi
   ``_n_updates``, ...), each optimizer's ``param_groups`` and any state that is not a tensor, the recent episodes
   behind ``rollout/ep_rew_mean``, and the replay buffer's ``pos`` and ``full``;
 * ``replay_buffer.npz`` (off-policy algorithms: SAC, DQN): the buffer's filled rows (observations, next
-  observations unless ``optimize_memory_usage``, actions, rewards, dones, timeouts), read with ``allow_pickle=False``.
+  observations unless ``optimize_memory_usage``, actions, rewards, dones, timeouts), read with ``allow_pickle=False``;
+  ``--augment``'s buffer adds the final frames of episodes cut by a timeout (``final_observations``, ``final_slots``).
 
 ``--resume`` builds a new model from the run's config.json as ``train`` does and loads this state into it, each
 name, shape, type and value checked against that model first: nothing is unpickled, and a checkpoint that does not
