@@ -169,23 +169,29 @@ def build_physics_objects(
     images: dict[int, Any] = {}  # by MuJoCo texture: geoms sharing a texture share its image
     as_mujoco = scene_data.look == "mujoco"  # lit as MuJoCo's renderer lights it (look/mujoco.py)
     lighting = (scene_data.headlight, ambient(scene_data)) if as_mujoco else None
-    for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
-        if geom.body in own:
-            continue
+
+    def drawn(shape: GeomShape) -> Any:
+        """The shape's object in the collection (named as the shape in built.objects), lit as the look lights it."""
         obj = _geom_object(
-            geom, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material
+            shape, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material
         )
         if lighting is not None:
             light_material(
                 obj.data.materials[0],
                 *lighting,
-                emission=geom.emission,
-                specular=geom.specular,
-                shininess=geom.shininess,
+                emission=shape.emission,
+                specular=shape.specular,
+                shininess=shape.shininess,
             )
         collection.objects.link(obj)
+        built.objects.setdefault(shape.name, obj)
+        return obj
+
+    for geom in (*scene_data.geoms, *scene_data.sites):  # a site is drawn as a geom of its shape (named site:<name>)
+        if geom.body in own:
+            continue
+        obj = drawn(geom)
         obj.parent = empty_of(geom.body)
-        built.objects.setdefault(geom.name, obj)
     tendons = []
     for tendon in scene_data.tendons:  # a unit cylinder per segment, stretched along its path at every write
         cylinders, names = [], []
@@ -202,20 +208,8 @@ def build_physics_objects(
                 specular=tendon.specular,
                 shininess=tendon.shininess,
             )
-            obj = _geom_object(
-                shape, base_dir=base_dir, source=source, images=images, split_caps=as_mujoco, material=material
-            )
-            if lighting is not None:
-                light_material(
-                    obj.data.materials[0],
-                    *lighting,
-                    emission=shape.emission,
-                    specular=shape.specular,
-                    shininess=shape.shininess,
-                )
+            obj = drawn(shape)
             obj[STRETCHED] = True
-            collection.objects.link(obj)
-            built.objects.setdefault(shape.name, obj)
             cylinders.append(obj)
             names.append(shape.name)
         draw_tendon(tendon, cylinders, scene_data.body_pos, scene_data.body_quat)
