@@ -19,7 +19,6 @@ from tests.fixtures.policy_files import (
     rewrite_weights,
     small_policy,
     with_value,
-    without_blender_version,
 )
 from visualenv.cli import main
 
@@ -29,11 +28,6 @@ pytest.importorskip("torch")
 @pytest.fixture(scope="module")
 def policy(tmp_path_factory):
     return small_policy(tmp_path_factory.mktemp("small"))
-
-
-@pytest.fixture(autouse=True)
-def _no_bpy(monkeypatch):
-    without_blender_version(monkeypatch)
 
 
 def _refused(args: list[str], message: str) -> str:

@@ -21,7 +21,6 @@ from tests.fixtures.policy_files import (
     small_policy,
     transposed,
     with_value,
-    without_blender_version,
 )
 from visualenv.compat.sb3 import constructor_parameters
 from visualenv.train.model_files import export_policy, load_model
@@ -35,11 +34,6 @@ RESULTS = Path(__file__).resolve().parents[2] / "results"
 @pytest.fixture(scope="module")
 def policy(tmp_path_factory):
     return small_policy(tmp_path_factory.mktemp("small"))
-
-
-@pytest.fixture(autouse=True)
-def _no_bpy(monkeypatch):
-    without_blender_version(monkeypatch)
 
 
 def _peak_rss_mb() -> float:
