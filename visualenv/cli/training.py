@@ -163,9 +163,6 @@ def train(
     Writes runs/<Id>/<timestamp>/: logs (CSV, TensorBoard), best model, plots, results.json.
     With --backend rllib the envs run in Ray RLlib EnvRunners, on this machine or a cluster (--address).
     """
-    from visualenv.env.registration import resolve
-    from visualenv.spec.loader import load_spec
-    from visualenv.train.run_folder import new_run_dir
     from visualenv.train.sb3 import TrainConfig, check_config, train as run_training
 
     ctx = click.get_current_context()
@@ -217,17 +214,7 @@ def train(
             config = dataclasses.replace(config, envs=batched, batched=True, workers=batch_workers)
     check_config(config)  # a misspelt hyperparameter or a too small image fails before a run folder or an env exists
     refuse_code_without_consent(config.spec, trust_code)  # so does a spec's code without consent
-    run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(spec)).spec.id)
-    click.echo(f"run folder: {run_dir}")
-    results = run_training(
-        config,
-        run_dir,
-        resume=bool(resume_dir),
-        changes=hyper if resume_dir else None,
-        trust_code=trust_code,
-        trust_pickle=trust_pickle,
-    )
-    _report(results, run_dir)
+    _run(run_training, config, resume_dir, out_root, hyper, trust_code=trust_code, trust_pickle=trust_pickle)
 
 
 @main.command()
@@ -447,10 +434,7 @@ def _train_rllib(
         from visualenv.train.rllib import RLlibTrainConfig, algorithm_config, train as run_training
     except ImportError as exc:
         raise click.UsageError(f"--backend rllib needs Ray RLlib: pip install 'visualenv[ray]' ({exc})") from None
-    from visualenv.env.registration import resolve
     from visualenv.train.rllib_setup import check_address
-    from visualenv.spec.loader import load_spec
-    from visualenv.train.run_folder import new_run_dir
 
     import logging
 
@@ -486,18 +470,22 @@ def _train_rllib(
     refuse_code_without_consent(config.spec, trust_code)  # before a Ray cluster starts
     # a misspelt hyperparameter or an observation the encoder cannot take fails before a run folder exists
     algorithm_config(config, trust_code)
+    options = {"address": address, "trust_code": trust_code, "trust_pickle": params["trust_pickle"]}
+    _run(run_training, config, resume_dir, out_root, hyper, **options)
+
+
+def _run(
+    run_training: Any, config: Any, resume_dir: str | None, out_root: str, hyper: dict[str, Any], **options: Any
+) -> None:
+    """The run in its folder (the resumed one, or a new one under `out_root`), then its report."""
+    from visualenv.env.registration import resolve
+    from visualenv.spec.loader import load_spec
+    from visualenv.train.run_folder import new_run_dir
+
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
-    results = run_training(
-        config,
-        run_dir,
-        resume=bool(resume_dir),
-        changes=hyper if resume_dir else None,
-        address=address,
-        trust_code=trust_code,
-        trust_pickle=params["trust_pickle"],
-    )
-    _report(results, run_dir)
+    changes = hyper if resume_dir else None
+    _report(run_training(config, run_dir, resume=bool(resume_dir), changes=changes, **options), run_dir)
 
 
 def _report(results: dict[str, Any], run_dir: Path) -> None:
