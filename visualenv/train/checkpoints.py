@@ -35,6 +35,7 @@ import numpy as np
 
 from visualenv.compat.sb3 import episode_window, set_training_counters, state_names, training_counters
 from visualenv.errors import ConfigError, VisualEnvError
+from visualenv.files import read_json
 from visualenv.train.model_files import PickleRefused
 from visualenv.train.policy_format import weights_of
 from visualenv.spec.loader import spec_identity
@@ -251,14 +252,10 @@ def load_state(model: Any, checkpoint: Path, algorithm: str) -> None:
 
 def _read_state(path: Path) -> dict[str, Any]:
     try:
-        with path.open("rb") as f:
-            text = f.read(MAX_STATE_JSON + 1)
-        if len(text) > MAX_STATE_JSON:
-            raise CheckpointError(f"{path}: larger than {MAX_STATE_JSON // 2**20} MiB, which no checkpoint's state is")
-        state = json.loads(text)
+        state = read_json(path, max_bytes=MAX_STATE_JSON)
     except OSError as exc:
         raise CheckpointError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-    except (ValueError, RecursionError) as exc:
+    except ValueError as exc:  # too large, too deep (FileSizeError), not UTF-8 or not JSON
         raise CheckpointError(f"{path}: not JSON ({type(exc).__name__}: {str(exc)[:200]})") from None
     if not isinstance(state, dict) or state.get("format") != FORMAT:
         raise CheckpointError(f'{path}: not a checkpoint of visualenv (no "format": "{FORMAT}")')
