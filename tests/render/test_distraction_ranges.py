@@ -55,7 +55,9 @@ def camera_pose(spec: Path) -> np.ndarray:
 
 
 def settings(level: float | str, model: str, **given):
-    chosen = distraction_settings({"difficulty": DISTRACTION_LEVELS.get(level, level), **given}, None, model)
+    chosen = distraction_settings(
+        {"difficulty": DISTRACTION_LEVELS.get(level, level) if isinstance(level, str) else level, **given}, None, model
+    )
     return to_plan(chosen)
 
 
@@ -157,3 +159,37 @@ def test_the_floor_alpha_is_the_suites_by_domain_when_asked(model: str | None, a
     assert settings(0.2, model, floor_alpha=0.5).floor_alpha == 0.5
     assert settings(0.2, model).floor_alpha is None
     assert draw(settings(0.2, model), np.random.default_rng(0)).floor_alpha == 1.0
+
+
+def test_a_range_of_difficulties_draws_each_episodes_uniformly_in_it() -> None:
+    """difficulty: [low, high] draws an episode's difficulty uniformly between them, and everything else at it (the
+    colours' and background's scale, the camera's reach, its zoom and its drift); a single difficulty draws as before."""
+    rng = np.random.default_rng(4)
+    ranged = settings([0.05, 0.35], "cartpole.xml")
+    assert ranged.largest == 0.35
+    draws = [draw(ranged, rng) for _ in range(DRAWS)]
+    levels = np.array([x.difficulty for x in draws])
+    assert levels.min() >= 0.05 and levels.max() <= 0.35 and abs(levels.mean() - 0.2) < 0.01
+    assert np.histogram(levels, bins=6, range=(0.05, 0.35))[0].min() > DRAWS / 6 * 0.8
+    for x in draws[:200]:
+        assert x.color_shift == x.background == x.difficulty
+        assert x.reach == pytest.approx(x.difficulty * math.pi / 2)
+        low, high = zoom_range(x.difficulty)
+        assert low <= x.zoom <= high
+        current = x
+        for _ in range(20):
+            current = drift(current, ranged, rng)
+            assert low <= current.zoom <= high and abs(current.yaw) <= x.reach + 1e-12
+    fixed = draw(settings(0.3, "cartpole.xml"), np.random.default_rng(5))
+    assert fixed.difficulty == 0.3 and fixed == draw(settings(0.3, "cartpole.xml"), np.random.default_rng(5))
+
+
+@pytest.mark.parametrize(
+    ("given", "message"),
+    [([0.3, 0.1], "low <= high"), ([0.1, 1.5], "less than or equal to 1"), ([0.1], "at least 2 items")],
+)
+def test_a_bad_range_is_refused_with_what_was_expected(given: list[float], message: str) -> None:
+    from pydantic import ValidationError
+
+    with pytest.raises(ValidationError, match=message):
+        distraction_settings({"difficulty": given}, None)

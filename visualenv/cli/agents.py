@@ -14,6 +14,7 @@ from visualenv.cli.group import (
     MODEL_HELP,
     RANDOM,
     check_writable,
+    difficulty,
     friendly,
     main,
     model_file,
@@ -104,26 +105,6 @@ def play(
         click.echo(f"recorded {record}")
 
 
-def _difficulty(value: str | None) -> float | None:
-    """--distractions: a difficulty in [0, 1], or a Distracting Control Suite level by name."""
-    from visualenv.spec.options import DISTRACTION_LEVELS
-
-    if value is None:
-        return None
-    if value in DISTRACTION_LEVELS:
-        return DISTRACTION_LEVELS[value]
-    try:
-        difficulty = float(value)
-    except ValueError:
-        difficulty = -1.0
-    if not 0.0 <= difficulty <= 1.0:
-        raise click.BadParameter(
-            f"{value!r}: expected a difficulty from 0 to 1, or {', '.join(DISTRACTION_LEVELS)}",
-            param_hint="--distractions",
-        )
-    return difficulty
-
-
 @main.command("eval")
 @click.argument("spec")
 @click.option(
@@ -154,9 +135,9 @@ def _difficulty(value: str | None) -> float | None:
 @click.option(
     "--distractions",
     metavar="D",
-    callback=lambda ctx, param, value: _difficulty(value),
+    callback=lambda ctx, param, value: difficulty(value),
     default=None,
-    help="observations distracted at this difficulty, 0 to 1, or easy, medium, hard (0.1, 0.2, 0.3) (docs/distractions.md: "
+    help="observations distracted at this difficulty, 0 to 1, easy, medium, hard (0.1, 0.2, 0.3), or LOW:HIGH (drawn per episode) (docs/distractions.md: "
     "camera, colours, background, per episode); new episodes, not compared with results.json",
 )
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")

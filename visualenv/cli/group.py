@@ -132,3 +132,24 @@ def worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
         what = "batch sizes" if option == "--batched" else "a number of workers"
         raise click.BadParameter(f"expected {what} or a list such as 1,2,4,8, got {value!r}", param_hint=option)
     return counts
+
+
+def difficulty(value: str | None, option: str = "--distractions") -> float | list[float] | None:
+    """--distractions: a difficulty in [0, 1], a Distracting Control Suite level by name, or a range LOW:HIGH (each
+    episode's difficulty drawn uniformly in it)."""
+    from visualenv.spec.options import DISTRACTION_LEVELS
+
+    if value is None:
+        return None
+    if value in DISTRACTION_LEVELS:
+        return DISTRACTION_LEVELS[value]
+    try:
+        bounds = [float(part) for part in value.split(":")]
+    except ValueError:
+        bounds = []
+    if len(bounds) not in (1, 2) or not all(0.0 <= b <= 1.0 for b in bounds) or bounds != sorted(bounds):
+        raise click.BadParameter(
+            f"{value!r}: expected a difficulty from 0 to 1, {', '.join(DISTRACTION_LEVELS)}, or a range LOW:HIGH",
+            param_hint=option,
+        )
+    return bounds[0] if len(bounds) == 1 else bounds

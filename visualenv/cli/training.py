@@ -13,6 +13,7 @@ from click.core import ParameterSource
 from visualenv.cli.group import (
     shown_option,
     ALGORITHMS,
+    difficulty,
     friendly,
     main,
     refuse_code_without_consent,
@@ -258,6 +259,13 @@ def train(
     "--shift", default=DistillConfig.shift, type=click.IntRange(min=0), help="random shift of the frames in pixels"
 )
 @shown_option("--frame-stack", default=DistillConfig.frame_stack, type=click.IntRange(min=1))
+@click.option(
+    "--distractions",
+    default=None,
+    callback=lambda ctx, param, value: difficulty(value),
+    help="the rounds' frames (rollouts and selection) distracted at this difficulty, 0 to 1, easy, medium, hard, "
+    "or LOW:HIGH, drawn per episode (docs/distractions.md); the final evaluation stays undistracted",
+)
 @shown_option(
     "--eval-episodes",
     default=DistillConfig.eval_episodes,
@@ -288,6 +296,7 @@ def distill(
     learning_rate: float,
     shift: int,
     frame_stack: int,
+    distractions: float | list[float] | None,
     eval_episodes: int,
     final_episodes: int,
     seed: int,
@@ -313,6 +322,7 @@ def distill(
         learning_rate=learning_rate,
         shift=shift,
         frame_stack=frame_stack,
+        distractions=distractions,
         eval_episodes=eval_episodes,
         final_eval_episodes=final_episodes,
         seed=seed,

@@ -125,7 +125,7 @@ def check_batchable(plan: RenderPlan, num_envs: int = 1) -> None:
     for target in plan.bindings:
         bound.setdefault(target.object, set()).add(target.property)
     distractions = plan.distractions
-    orbiting = distractions is not None and distractions.camera and distractions.difficulty > 0
+    orbiting = distractions is not None and distractions.camera and distractions.largest > 0
     for view in plan.views.values():
         why = spec_turning(plan, view.camera, bound)
         if why:

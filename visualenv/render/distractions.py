@@ -53,6 +53,7 @@ class Distraction:
     background: float = 0.0
     background_seed: int = 0
     background_time: float = 0.0
+    difficulty: float = 0.0  # the episode's (drawn when the settings give a range)
 
 
 def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generator:
@@ -65,8 +66,9 @@ def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generat
 def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
     """An episode's distraction at `settings`' difficulty, as the suite draws it: each angle uniform in
     ±difficulty·pi/2 (the pitch then mapped onto the upper hemisphere's share of that: :func:`orbit_pitch`), the zoom
-    uniform in :func:`zoom_range`, the colours' seed. A kind that is off stays as it is."""
-    scale = settings.difficulty
+    uniform in :func:`zoom_range`, the colours' seed; a range of difficulties draws the episode's first. A kind that is off stays as it is."""
+    given = settings.difficulty
+    scale = float(rng.uniform(*given)) if isinstance(given, tuple) else given  # a range's draw comes first
     reach = scale * math.pi / 2
     angles = rng.uniform(-1.0, 1.0, size=3) * reach
     zoom = 1.0 + float(rng.uniform(-0.5, 1.5)) * scale
@@ -86,6 +88,7 @@ def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
         colors_seed=seed,
         background=scale if settings.background else 0.0,
         background_seed=background_seed,
+        difficulty=scale,
     )
 
 
@@ -94,7 +97,7 @@ def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Gen
     (the pitch in [-reach, reach], which the orbit maps inside the limit)."""
     if settings is None:
         return None
-    scale = limits.difficulty
+    scale = settings.difficulty if isinstance(limits.difficulty, tuple) else limits.difficulty
     bound = scale * math.pi / 2
     step = rng.uniform(-DRIFT, DRIFT, size=5)
 

@@ -168,13 +168,18 @@ class RenderSettings:
 
 @dataclass(frozen=True, slots=True)
 class Distractions:
-    difficulty: float
+    difficulty: float | tuple[float, float]  # a pair: each episode's drawn uniformly between them
     camera: bool
     colors: bool
     background: bool
     dynamic: bool
     upper_hemisphere: bool | None = None  # None: limited unless the camera looks straight down
     floor_alpha: float | None = None  # None: the floor as it is
+
+    @property
+    def largest(self) -> float:
+        """The largest difficulty an episode may draw (0: no distraction)."""
+        return max(self.difficulty) if isinstance(self.difficulty, tuple) else self.difficulty
 
 
 @dataclass(frozen=True, slots=True)

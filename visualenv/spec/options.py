@@ -11,13 +11,14 @@ fails at ``make()`` with the message the spec would give, located at
 from __future__ import annotations
 
 from pathlib import PurePosixPath
-from typing import Annotated, Any, Literal, Mapping, Optional, Union
+from typing import Annotated, Any, Literal, Mapping, Optional, Sequence, Union
 
 from pydantic import Field, ValidationError, field_validator
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
 from visualenv.spec.models import Distractions, Name, RenderSettings, Spec, StrictModel
+from visualenv.spec.view_models import DifficultyRange
 from visualenv.source_map import SourceMap
 
 #: where option errors are reported (in place of file:line)
@@ -50,11 +51,12 @@ class MakeOptions(StrictModel):
         description="the spec's steps per step() with the same action, rewards summed (in place of the spec's action_repeat)",
     )
     distractions: Optional[
-        Union[Annotated[float, Field(ge=0.0, le=1.0)], Literal["easy", "medium", "hard"], Distractions]
+        Union[Annotated[float, Field(ge=0.0, le=1.0)], DifficultyRange, Literal["easy", "medium", "hard"], Distractions]
     ] = Field(
         None,
-        description="a difficulty (every kind, fixed per episode), one of the Distracting Control Suite's levels by name "
-        "(easy 0.1, medium 0.2, hard 0.3) or the spec's distractions section as a dict; 0 turns the spec's off",
+        description="a difficulty (every kind, fixed per episode), a range [low, high] (each episode's drawn in it), one "
+        "of the Distracting Control Suite's levels by name (easy 0.1, medium 0.2, hard 0.3) or the spec's distractions "
+        "section as a dict; 0 turns the spec's off",
     )
 
     trust_code: bool = Field(
@@ -72,9 +74,11 @@ class MakeOptions(StrictModel):
 
 
 def distraction_settings(
-    given: float | str | Mapping[str, Any] | Distractions | None, spec: Distractions | None, model: str | None = None
+    given: float | Sequence[float] | str | Mapping[str, Any] | Distractions | None,
+    spec: Distractions | None,
+    model: str | None = None,
 ) -> Distractions | None:
-    """The distractions an env draws: the option's (a difficulty, a level's name, or a section as a dict), else the spec's;
+    """The distractions an env draws: the option's (a difficulty or a range, a level's name, or a section as a dict), else the spec's;
     None for none (a difficulty of 0, or no kind on and no floor alpha below 1). A floor alpha of ``"dcs"`` is the
     suite's for the domain of `model` (the physics model's file, :func:`floor_alpha`)."""
     if isinstance(given, str):
@@ -85,12 +89,14 @@ def distraction_settings(
         chosen = given
     elif isinstance(given, Mapping):
         chosen = Distractions.model_validate(dict(given))
+    elif isinstance(given, Sequence):
+        chosen = Distractions(difficulty=[float(v) for v in given])
     else:
         chosen = Distractions(difficulty=float(given))
     if chosen is not None and chosen.floor_alpha == "dcs":
         chosen = chosen.model_copy(update={"floor_alpha": floor_alpha(model)})
     faded = chosen is not None and isinstance(chosen.floor_alpha, float) and chosen.floor_alpha < 1
-    if chosen is None or chosen.difficulty <= 0 or not (chosen.camera or chosen.colors or chosen.background or faded):
+    if chosen is None or chosen.largest <= 0 or not (chosen.camera or chosen.colors or chosen.background or faded):
         return None
     return chosen
 

@@ -144,17 +144,19 @@ class RenderSettings(StrictModel):
     view: ViewSettings = Field(default_factory=ViewSettings)
 
 
+#: ``difficulty: [low, high]``: each episode's difficulty drawn uniformly between the two
+DifficultyRange = Annotated[list[Annotated[float, Field(ge=0.0, le=1.0)]], Field(min_length=2, max_length=2)]
+
+
 class Distractions(StrictModel):
     """The ``distractions`` section: what the observation shows changed per episode (or drifting every step), the
     state and rewards untouched; the Distracting Control Suite's kinds at its scale (docs/distractions.md)."""
 
-    difficulty: float = Field(
-        ge=0.0,
-        le=1.0,
+    difficulty: Union[Annotated[float, Field(ge=0.0, le=1.0)], DifficultyRange] = Field(
         description=(
             "the scale of every change: camera orbit and roll up to difficulty x pi/2, its distance times 1 - "
             "difficulty/2 to 1 + 1.5 x difficulty, colours shifted by up to difficulty per channel (the Distracting "
-            "Control Suite's ranges and its levels 0.1, 0.2, 0.3)"
+            "Control Suite's ranges and its levels 0.1, 0.2, 0.3); [low, high]: drawn uniformly per episode"
         ),
     )
     camera: bool = Field(True, description="the observation cameras orbit, roll and zoom about the point they look at")
@@ -185,3 +187,15 @@ class Distractions(StrictModel):
             "per-pixel noise of the right average: raise render.samples for a smooth blend"
         ),
     )
+
+    @field_validator("difficulty")
+    @classmethod
+    def _range_in_order(cls, value: float | list[float]) -> float | list[float]:
+        if isinstance(value, list) and value[0] > value[1]:
+            raise ValueError(f"expected [low, high] with low <= high, got {value}")
+        return value
+
+    @property
+    def largest(self) -> float:
+        """The largest difficulty an episode may draw (0: no distraction)."""
+        return max(self.difficulty) if isinstance(self.difficulty, list) else self.difficulty

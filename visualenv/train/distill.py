@@ -55,6 +55,9 @@ class DistillConfig:
     learning_rate: float = 3e-4
     shift: int = 4  # random shift of the frames in pixels (0: none)
     frame_stack: int = 3
+    # the rounds' frames distracted (docs/distractions.md): a difficulty or [low, high] drawn per episode; the final
+    # evaluation stays undistracted, as results.json is everywhere
+    distractions: float | list[float] | None = None
     eval_episodes: int = 10  # per round, on the selection seeds
     final_eval_episodes: int = 100
     seed: int = 0
@@ -79,10 +82,11 @@ def distill(
     teacher = load_policy_file(config.teacher, "distill")
     _check_teacher(teacher, spec_path, trust_code)
     torch.manual_seed(config.seed)
-    rollouts = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack, trust_code=trust_code)
-    evaluator = make_eval_env(
-        spec_path, seed=selection_seed(config.seed), frame_stack=config.frame_stack, trust_code=trust_code
-    )
+    options: dict[str, Any] = {"frame_stack": config.frame_stack, "trust_code": trust_code}
+    if config.distractions is not None:
+        options["distractions"] = config.distractions
+    rollouts = make_eval_env(spec_path, seed=config.seed, **options)
+    evaluator = make_eval_env(spec_path, seed=selection_seed(config.seed), **options)
     try:
         student = _student(rollouts, load_policy_file(config.student, "distill") if config.student else None)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
@@ -181,7 +185,10 @@ def _record_run(folder: RunFolder, config: DistillConfig, spec_path: str) -> Non
         return {"path": path, "sha256": hashlib.sha256(Path(path).read_bytes()).hexdigest()}
 
     extra = {"teacher": named(config.teacher), **({"student": named(config.student)} if config.student else {})}
-    record_run(folder, {**asdict(config), "algo": "dagger", "render": True}, spec_path, backend="distill", extra=extra)
+    settings = {**asdict(config), "algo": "dagger", "render": True}
+    if isinstance(config.distractions, (int, float)):
+        settings["distractions"] = [config.distractions]  # recorded as a list: [difficulty] or [low, high]
+    record_run(folder, settings, spec_path, backend="distill", extra=extra)
 
 
 def _check_teacher(teacher: Any, spec_path: str, trust_code: bool = False) -> None:

@@ -89,7 +89,7 @@ def make_eval_env(
     frame_stack: int,
     render: bool = True,
     transpose: bool = True,
-    distractions: float | str | None = None,
+    distractions: float | str | list[float] | None = None,
     trust_code: bool = False,
 ) -> Any:
     """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.

@@ -366,10 +366,13 @@ def _train_loop(
 ) -> dict[str, Any]:
     from tqdm import tqdm
 
+    from visualenv.env.registration import resolve
+    from visualenv.spec import load_spec
     from visualenv.train.model_files import save_rllib_module
     from visualenv.train.rllib_setup import RLlibPolicy
 
     evaluations = _Evaluations(folder.evaluations)
+    succeeds = load_spec(resolve(config.spec)).spec.declares_success  # else no success line: there is none to rate
     last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps
     latest = folder.latest_dir
     latest.parent.mkdir(exist_ok=True)
@@ -395,7 +398,7 @@ def _train_loop(
                 improved = float(np.mean(returns)) > evaluations.best
                 evaluations.add(steps, returns, lengths, successes)
                 if not config.progress:
-                    print(evaluation_line(steps, returns, successes), flush=True)
+                    print(evaluation_line(steps, returns, successes if succeeds else None), flush=True)
                 if improved:
                     save_checkpoint(algo, folder.best_dir, steps)
                     save_rllib_module(algo.get_module(), folder.best_policy, half=False, run_dir=folder.path)

@@ -269,7 +269,7 @@ def _learn(
             best_model_save_path=str(folder.path),
             deterministic=True,
             verbose=0,
-            callback_after_eval=None if config.progress else _EvalLine(),
+            callback_after_eval=None if config.progress else _EvalLine(_declares_success(config.spec)),
             callback_on_new_best=_BestPolicy(folder, config.algo),
         ),
         _LatestCheckpoint(folder, config.algo, every=per_env),
@@ -464,15 +464,27 @@ class _ResumableEval(EvalCallback):
             self.best_mean_reward = float(max(np.mean(r) for r in self.evaluations_results))
 
 
+def _declares_success(spec: str) -> bool:
+    from visualenv.env.registration import resolve
+    from visualenv.spec import load_spec
+
+    return load_spec(resolve(spec)).spec.declares_success
+
+
 class _EvalLine(BaseCallback):
-    """Without the progress bar, one line per evaluation on stdout: its steps, mean return and successes."""
+    """Without the progress bar, one line per evaluation on stdout: its steps, mean return and (where the spec declares
+    a success) its successes."""
+
+    def __init__(self, succeeds: bool) -> None:
+        super().__init__()
+        self.succeeds = succeeds
 
     def _on_step(self) -> bool:
         parent = self.parent
         if isinstance(parent, EvalCallback) and parent.evaluations_results:
             successes = (
                 parent.evaluations_successes[-1]
-                if len(parent.evaluations_successes) == len(parent.evaluations_results)
+                if self.succeeds and len(parent.evaluations_successes) == len(parent.evaluations_results)
                 else None
             )
             print(

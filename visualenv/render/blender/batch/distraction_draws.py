@@ -45,7 +45,7 @@ class BatchDistractions:
 
     def __init__(self, settings: Distractions, scene: Any, num_envs: int) -> None:
         """Made with the scene as one env's (its materials in the order one env draws their shifts), before the copies."""
-        on = settings.difficulty > 0
+        on = settings.largest > 0
         #: whether the observation cameras orbit: each env's copy then follows its camera and its rays turn
         self.orbiting = on and settings.camera
         #: whether the materials read each env's shifts, and whether each env has a backdrop
