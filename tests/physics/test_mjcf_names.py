@@ -17,6 +17,7 @@ pytest.importorskip("mujoco")
 
 from visualenv.cli import main  # noqa: E402
 from visualenv.compiler.program import compile_spec  # noqa: E402
+from visualenv.env.visual_env import VisualEnv  # noqa: E402
 from visualenv.errors import SpecError  # noqa: E402
 from visualenv.spec.loader import load_spec  # noqa: E402
 
@@ -58,6 +59,11 @@ CASES = {
         body('<joint name="j1"/>', name="arm.1") + body('<joint name="j2"/>', name="arm_1"),
         "",
         "body 'arm.1' and body 'arm_1' are both 'body_arm_1_x'",
+    ),
+    "a body and its centre of mass": (
+        body('<joint name="j1"/>', name="arm") + body('<joint name="j2"/>', name="arm_com"),
+        "",
+        "body 'arm' and body 'arm_com' are both 'body_arm_com_x'",
     ),
     "sites": (
         body('<joint name="j"/>', inner='<site name="tip-1"/><site name="tip_1"/>'),
@@ -137,6 +143,23 @@ def test_distinct_names_stay_distinct(tmp_path: Path) -> None:
     assert program.physics is not None
     values = program.physics.model.names.values
     assert {"qpos_a_x", "qpos_a_qw", "qpos_a_y2", "body_b_z", "body_c_z", "site_tip_x", "ctrl_m"} <= set(values)
+
+
+def test_a_bodys_centre_of_mass_is_read_apart_from_its_frame(tmp_path: Path) -> None:
+    """``body_<b>_com_x/_y/_z`` read MuJoCo's ``xipos`` (where hopper's reward measures heights), ``body_<b>_x`` the
+    body's frame (``xpos``): a body whose geom sits off its frame has the two apart."""
+    model = MODEL.format(
+        body='    <body name="b" pos="0 0 1"><freejoint/><geom pos="0.3 0 0.2" size="0.1"/></body>', extra=""
+    )
+    path = write(tmp_path, model, "  observe: [body_b_x, body_b_z, body_b_com_x, body_b_com_y, body_b_com_z]")
+    env = VisualEnv(compile_spec(load_spec(path)), render=False)
+    obs, _ = env.reset(seed=0)
+    data = env.data
+    assert obs.tolist() == [*data.xpos[1, [0, 2]], *data.xipos[1]]
+    assert obs.tolist() == pytest.approx([0.0, 1.0, 0.3, 0.0, 1.2])
+    env.step(env.action_space.sample())  # it falls: both still read the step's state
+    assert env.step(env.action_space.sample())[0].tolist() == [*data.xpos[1, [0, 2]], *data.xipos[1]]
+    env.close()
 
 
 def test_a_contact_named_like_a_model_name_or_a_state_variable(tmp_path: Path) -> None:

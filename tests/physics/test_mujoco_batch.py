@@ -44,6 +44,7 @@ IDS = [
     "DMC-finger-spin-v0",
     "DMC-reacher-easy-v0",
     "DMC-acrobot-swingup-v0",  # RK4: dm_control's step is one mj_step(nstep)
+    "DMC-hopper-hop-v0",  # its reward reads the bodies' centres of mass (xipos) and its observation touch sensors
     "VisualHalfCheetah-v0",
 ]
 

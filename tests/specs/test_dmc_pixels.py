@@ -100,7 +100,9 @@ def test_the_frames_look_like_dm_controls_own_render_of_the_same_state() -> None
         assert np.abs(a.astype(int) - b.astype(int)).mean() <= 4
 
 
-@pytest.mark.parametrize("task", ["reacher", "cheetah", "finger", "ball_in_cup", "walker", "pendulum", "acrobot"])
+@pytest.mark.parametrize(
+    "task", ["reacher", "cheetah", "finger", "ball_in_cup", "walker", "pendulum", "acrobot", "hopper"]
+)
 def test_the_other_tasks_look_like_dm_controls_render_too(task: str) -> None:
     """The other tasks' models at one state (seed 1, 40 control steps): frames 1.8 to 5.3 levels apart on average
     (measured), the sky and the floor (the world body's geoms) within 12 levels, the bodies in the same pixels. What

@@ -121,7 +121,7 @@ def body_column(frame: np.ndarray) -> tuple[float, int]:
     return (float(np.nonzero(body)[1].mean()) if body.any() else -1.0), int(body.sum())
 
 
-@pytest.mark.parametrize("ident", ["DMC-cheetah-run-v0", "DMC-walker-walk-v0"])
+@pytest.mark.parametrize("ident", ["DMC-cheetah-run-v0", "DMC-walker-walk-v0", "DMC-hopper-hop-v0"])
 def test_the_tracking_camera_keeps_the_body_in_view(ident: str) -> None:
     """Moved 3 m along the floor (beyond a fixed camera's view), the body is drawn where it was in the frame: the camera followed."""
     env = visualenv.make(ident, action_repeat=1)

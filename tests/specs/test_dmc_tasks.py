@@ -44,6 +44,8 @@ TASKS = {
     "DMC-walker-run-v0": ("walker", "run", 2, "side"),
     "DMC-pendulum-swingup-v0": ("pendulum", "swingup", 2, "fixed"),
     "DMC-acrobot-swingup-v0": ("acrobot", "swingup", 2, "fixed"),
+    "DMC-hopper-stand-v0": ("hopper", "stand", 2, "cam0"),
+    "DMC-hopper-hop-v0": ("hopper", "hop", 2, "cam0"),
 }
 #: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
 DRQ_V2 = list(TASKS)[5:]
@@ -256,3 +258,34 @@ def test_a_sparse_task_pays_where_dm_controls_pays(ident: str) -> None:
         assert reward == theirs.step(np.zeros(model.nu)).reward, qpos
         paid.append(reward)
     assert set(paid) == {0.0, 1.0}
+
+
+@pytest.mark.parametrize("ident", ["DMC-hopper-stand-v0", "DMC-hopper-hop-v0"])
+def test_a_hopper_set_upright_is_paid_as_dm_controls(ident: str) -> None:
+    """Random actions hardly ever pay a hopper (it falls at once): states set around upright (its joints near zero, the
+    torso's centre of mass 0.6 to 2 m above the foot's or not; moving forward at up to 3 m/s), then a step with random
+    controls, pay what dm_control's do, the standing term read from the centres of mass (xipos), zero and positive."""
+    ours = visualenv.make(ident, render=False, action_repeat=1)
+    theirs = load(ident, 0)
+    ours.reset(seed=0)
+    theirs.reset()
+    model, data = ours.unwrapped.model, ours.unwrapped.data
+    rng = np.random.default_rng(5)
+    paid = []
+    for _ in range(60):
+        qpos = np.zeros(model.nq)
+        qpos[1] = rng.uniform(-0.6, 0.2)  # rootz: the hopper lowered, so that the torso falls below 0.6 m over the foot
+        qpos[2:] = rng.uniform(-0.3, 0.3, model.nq - 2)
+        qpos[5] = rng.uniform(0.1, 1.5)  # the knee, within its range, bent up to where the stand pays no more
+        qvel = np.zeros(model.nv)
+        qvel[0] = rng.uniform(0.0, 3.0)  # rootx: forward, through hop's linear ramp from 0 to 2 m/s
+        data.qpos[:], data.qvel[:] = qpos, qvel
+        mujoco.mj_forward(model, data)
+        with theirs.physics.reset_context():
+            theirs.physics.data.qpos[:] = qpos
+            theirs.physics.data.qvel[:] = qvel
+        action = rng.uniform(-1, 1, model.nu)
+        reward = ours.step(action)[1]
+        assert abs(reward - theirs.step(action).reward) <= 1e-15, (qpos, qvel)
+        paid.append(reward)
+    assert min(paid) == 0.0 and len({r for r in paid if r > 0}) > 10, paid

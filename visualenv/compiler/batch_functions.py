@@ -195,6 +195,7 @@ _NUMPY: dict[str, Callable[..., Any]] = {
     "sqrt": np.sqrt,
     "exp": np.exp,
     "log": _log,
+    "log1p": np.log1p,
     "abs": np.abs,
     "min": _noting("min", _reduce(np.minimum), _nan),
     "max": _noting("max", _reduce(np.maximum), _nan),
@@ -228,6 +229,7 @@ _CHECKED: dict[str, tuple[float, float]] = {
     "tanh": (-5, 5),
     "exp": (-50, 50),
     "log": (1e-6, 1e6),
+    "log1p": (-0.999, 1e6),
     "pow": (0.01, 10),
 }
 SAMPLE_SIZE = 1024

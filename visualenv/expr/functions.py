@@ -106,6 +106,7 @@ FUNCTIONS: dict[str, Function] = {
         _f("sqrt", math.sqrt, 1, "square root"),
         _f("exp", math.exp, 1, "e to the power x"),
         _f("log", _log, (1, 2), "natural log, or log(x, base)"),
+        _f("log1p", math.log1p, 1, "log(1 + x), exact for x near 0 (dm_control's np.log1p)"),
         _f("abs", abs, 1, "absolute value"),
         _f("min", _min, (2, None), "smallest argument"),
         _f("max", _max, (2, None), "largest argument"),

@@ -10,6 +10,7 @@ are called ``<kind><index>``, e.g. ``actuator0``):
 * ``body_<b>_x/_y/_z`` (world position) and ``body_<b>_qw/_qx/_qy/_qz`` (world orientation);
   ``body_<b>_xx ... _zz``: its rotation matrix (MuJoCo's ``xmat``, row then column: ``_xz`` is
   the world x of the body's z axis), as dm_control's ``named.data.xmat[b, 'xz']`` reads it;
+  ``body_<b>_com_x/_y/_z``: its centre of mass (MuJoCo's ``xipos``), where hopper's reward reads heights;
 * ``mocap_<b>_x/_y/_z`` and ``mocap_<b>_qw/_qx/_qy/_qz`` for a mocap body (``<body mocap="true">``): MuJoCo's
   ``mocap_pos`` and ``mocap_quat``, which the spec sets (:data:`SETTABLE`) to move a body that has no joint;
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
@@ -48,6 +49,7 @@ ARRAYS = (
     "xpos",
     "xquat",
     "xmat",
+    "xipos",
     "site_xpos",
     "geom_xpos",
     "sensordata",
@@ -178,6 +180,7 @@ class PhysicsModel:
             ("bodies", "xpos"),
             ("body orientations", "xquat"),
             ("body rotation matrices", "xmat"),
+            ("body centres of mass", "xipos"),
             ("sites", "site_xpos"),
             ("sensors", "sensordata"),
             ("actuator controls", "ctrl"),
@@ -376,7 +379,8 @@ def _joint_values(model: Any, names: _Names, idents: list[str], owners: list[str
 
 
 def _body_values(names: _Names, idents: list[str], owners: list[str]) -> None:
-    """``body_<b>_x/_y/_z`` (xpos), ``_qw..._qz`` (xquat) and ``_xx..._zz`` (xmat) of every body but the world."""
+    """``body_<b>_x/_y/_z`` (xpos), ``_qw..._qz`` (xquat), ``_xx..._zz`` (xmat) and ``_com_x/_y/_z`` (xipos) of every
+    body but the world."""
     for b, name in enumerate(idents):
         if b == 0:
             continue  # the world body never moves
@@ -386,3 +390,5 @@ def _body_values(names: _Names, idents: list[str], owners: list[str]) -> None:
             names.add(f"body_{name}_{p}", ("xquat", 4 * b + i), owners[b])
         for i, p in enumerate(_XMAT):
             names.add(f"body_{name}_{p}", ("xmat", 9 * b + i), owners[b])
+        for i, p in enumerate("xyz"):
+            names.add(f"body_{name}_com_{p}", ("xipos", 3 * b + i), owners[b])

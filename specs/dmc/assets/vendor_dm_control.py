@@ -46,6 +46,7 @@ MODELS = {
     "walker.xml": "dm_control.suite.walker",
     "pendulum.xml": "dm_control.suite.pendulum",
     "acrobot.xml": "dm_control.suite.acrobot",
+    "hopper.xml": "dm_control.suite.hopper",
 }
 COMMON = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
 RENAMED_CAMERA = ('<camera name="hand" ', '<camera name="hand_camera" ')
