@@ -34,6 +34,7 @@ import numpy as np
 from visualenv.compat import mkl
 from visualenv.errors import ConfigError
 from visualenv.train.run_folder import RunFolder, new_run_dir, record_run, write_results
+from visualenv.train.stopping import StopRequest
 
 ROUNDS_COLUMNS = ("round", "frames", "rollout_return", "loss", "eval_return", "wall_s")
 
@@ -94,11 +95,11 @@ def distill(
         log(f"run folder: {run_dir}")
         _record_run(folder, config, spec_path)
         started = time.perf_counter()
-        best_score, best_weights, frames = _rounds(student, teacher, rollouts, evaluator, config, folder.rounds, log)
+        with StopRequest("this round").listening() as stop:
+            best_score, frames = _rounds(student, teacher, rollouts, evaluator, config, folder, log, stop)
         student.to(memory_format=torch.contiguous_format)  # safetensors stores contiguous tensors
         save_policy(student, folder.final_policy, half=False, algorithm="dagger", run_dir=run_dir)
-        student.load_state_dict(best_weights)
-        best_path = save_policy(student, folder.best_policy, half=False, algorithm="dagger", run_dir=run_dir)
+        best_path = folder.best_policy
     finally:
         rollouts.close()
         evaluator.close()
@@ -133,21 +134,24 @@ def _rounds(
     rollouts: Any,
     evaluator: Any,
     config: DistillConfig,
-    table: Path,
+    folder: RunFolder,
     log: Callable[[str], None],
-) -> tuple[float, dict[str, Any], int]:
-    """The DAgger rounds, each a row of `table` (rounds.csv): the best evaluation, the student's weights then, the frames."""
+    stop: StopRequest,
+) -> tuple[float, int]:
+    """The DAgger rounds, each a row of rounds.csv, until the last or a stop request: the best evaluation and the
+    frames. The best round's student is saved as it evaluates, so a stopped or killed run keeps it."""
     import torch
 
     from visualenv.train.evaluation import evaluate
+    from visualenv.train.model_files import save_policy
 
     optimizer = torch.optim.Adam(student.parameters(), lr=config.learning_rate)
     generator = np.random.default_rng(config.seed)
     frames: list[np.ndarray] = []
     labels: list[np.ndarray] = []
-    best: tuple[float, dict[str, Any]] = (-np.inf, {})
+    best = -np.inf
     started = time.perf_counter()
-    with table.open("w", newline="") as f:
+    with folder.rounds.open("w", newline="") as f:
         writer = csv.writer(f)
         writer.writerow(ROUNDS_COLUMNS)
         for round_ in range(config.rounds):
@@ -157,8 +161,10 @@ def _rounds(
             labels.append(act)
             loss = _fit(student, optimizer, np.concatenate(frames), np.concatenate(labels), config, generator)
             scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
-            if scored > best[0]:
-                best = (scored, {k: v.clone() for k, v in student.state_dict().items()})
+            if scored > best:
+                best = scored
+                student.to(memory_format=torch.contiguous_format)  # safetensors stores contiguous tensors
+                save_policy(student, folder.best_policy, half=False, algorithm="dagger", run_dir=folder.path)
             row = (
                 round_,
                 sum(len(x) for x in frames),
@@ -174,7 +180,9 @@ def _rounds(
                     f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
                     f"loss {loss:.4f}, evaluation {scored:.1f}"
                 )
-    return best[0], best[1], sum(len(x) for x in frames)
+            if stop.requested:
+                break
+    return best, sum(len(x) for x in frames)
 
 
 def _record_run(folder: RunFolder, config: DistillConfig, spec_path: str) -> None:

@@ -22,9 +22,7 @@ from __future__ import annotations
 import csv
 import json
 import shutil
-import signal
 import sys
-import threading
 import time
 from collections.abc import Iterator
 from contextlib import contextmanager
@@ -36,6 +34,7 @@ import numpy as np
 
 from visualenv.train.evaluation import FINAL_EPISODES, evaluation_line
 from visualenv.train.run_folder import CHECKPOINT_STEPS, RunFolder, record_run, write_results
+from visualenv.train.stopping import StopRequest
 
 BACKEND = "rllib"
 PROGRESS_COLUMNS = (
@@ -116,31 +115,6 @@ def ray_cluster(address: str | None, cpus: int) -> Iterator[None]:
         yield
     finally:
         ray.shutdown()
-
-
-class _StopRequest:
-    """SIGINT/SIGTERM set a flag the training loop reads between iterations, so the run still saves."""
-
-    def __init__(self) -> None:
-        self.requested = False
-
-    @contextmanager
-    def listening(self) -> Iterator["_StopRequest"]:
-        def request(signum: int, frame: Any) -> None:
-            if self.requested:  # a second Ctrl-C: the user means it
-                raise KeyboardInterrupt
-            self.requested = True
-            print("stopping after this iteration; saving and evaluating (Ctrl-C again to abort)", file=sys.stderr)
-
-        if threading.current_thread() is not threading.main_thread():
-            yield self
-            return
-        previous = {sig: signal.signal(sig, request) for sig in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield self
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
 
 
 def save_checkpoint(algo: Any, path: Path, steps: int) -> None:
@@ -298,7 +272,7 @@ def train(
         transpose=False,
         trust_code=trust_code,
     )
-    stop = _StopRequest()
+    stop = StopRequest()
     cpus = max(len(usable_cores()), config.env_runners)  # a local cluster: one CPU per runner even on a small machine
     try:
         with ray_cluster(address, cpus):
@@ -362,7 +336,7 @@ def _restore(algo: Any, run_dir: Path) -> int:
 
 
 def _train_loop(
-    config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env: Any, stop: _StopRequest, steps: int
+    config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env: Any, stop: StopRequest, steps: int
 ) -> dict[str, Any]:
     from tqdm import tqdm
 
