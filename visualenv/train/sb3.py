@@ -12,9 +12,7 @@ step and still saves, evaluates and plots what was learnt so far.
 
 from __future__ import annotations
 
-import signal
 import sys
-import threading
 import time
 import warnings
 from collections.abc import Iterator
@@ -39,6 +37,7 @@ from visualenv.train.evaluation import (
 )
 from visualenv.train.checkpoints import load_state, resume_checkpoint, save_state, sb3_checkpoint
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
+from visualenv.train.stopping import StopRequest
 from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
@@ -556,26 +555,21 @@ class _PhaseThreads(BaseCallback):
 
 
 class _StopOnSignal(BaseCallback):
-    """Turn SIGINT/SIGTERM into a clean stop, so an interrupted run still gets its evaluation and plots."""
+    """Turn SIGINT/SIGTERM into a clean stop, so an interrupted run still gets its evaluation and plots (a second
+    Ctrl-C aborts)."""
 
     def __init__(self) -> None:
         super().__init__()
-        self.requested = False
+        self.stop = StopRequest("this step")
+
+    @property
+    def requested(self) -> bool:
+        return self.stop.requested
 
     @contextmanager
     def listening(self) -> Iterator[None]:
-        def request_stop(signum: int, frame: Any) -> None:
-            self.requested = True
-
-        if threading.current_thread() is not threading.main_thread():  # only the main thread may set handlers
+        with self.stop.listening():
             yield
-            return
-        previous = {sig: signal.signal(sig, request_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
-        try:
-            yield
-        finally:
-            for sig, handler in previous.items():
-                signal.signal(sig, handler)
         if self.requested:
             print(f"stopped early at {self.model.num_timesteps} steps; evaluating the best model", file=sys.stderr)
 
