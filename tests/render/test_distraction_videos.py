@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import bpy
 import numpy as np
 import pytest
 from PIL import Image
@@ -79,6 +80,7 @@ def test_a_dynamic_video_plays_a_frame_a_step_forward_and_back(tmp_path: Path) -
     videos = davis_folder(tmp_path / "davis", DAVIS17_TRAINING_VIDEOS[:4])
     settings = {**BACKGROUND_ONLY, "dynamic": True, "background": {"videos": str(videos)}}
     env = visualenv.make(segmented_cartpole(tmp_path), distractions=settings)
+    images = len(bpy.data.images)
     try:
         obs, _ = env.reset(seed=3)
         played, colors = [], []
@@ -94,6 +96,7 @@ def test_a_dynamic_video_plays_a_frame_a_step_forward_and_back(tmp_path: Path) -
         assert 0 in played and 2 in played and len(set(colors)) == 3  # every frame of the 3, each seen
     finally:
         env.close()
+    assert len(bpy.data.images) == images  # every frame's image removed with the renderer
 
 
 def test_a_batch_shows_each_envs_own_video(tmp_path: Path) -> None:

@@ -45,9 +45,17 @@ from visualenv.render.plan import Distractions, VideoBackground
 class BatchDistractions:
     """The distractions of a batch's envs (:attr:`current`, one per env), drawn into its scene by :meth:`draw`."""
 
-    def __init__(self, settings: Distractions, scene: Any, num_envs: int, raw_colors: bool = False) -> None:
+    def __init__(
+        self,
+        settings: Distractions,
+        scene: Any,
+        num_envs: int,
+        raw_colors: bool = False,
+        own: Callable[[Any], object] = lambda image: None,
+    ) -> None:
         """Made with the scene as one env's (its materials in the order one env draws their shifts), before the copies;
-        `raw_colors`: the scene writes colours as they are (a video's frames read so: :class:`VideoAtlas`)."""
+        `raw_colors`: the scene writes colours as they are (a video's frames read so: :class:`VideoAtlas`, which gives
+        `own` every image it makes)."""
         on = settings.difficulty > 0
         #: whether the observation cameras orbit: each env's copy then follows its camera and its rays turn
         self.orbiting = on and settings.camera
@@ -57,7 +65,7 @@ class BatchDistractions:
         #: whether the background is the suite's videos: each env's frame a tile of one image
         self.videos = on and isinstance(settings.background, VideoBackground)
         self._atlas: VideoAtlas | None = None
-        self._raw_colors = raw_colors
+        self._raw_colors, self._own = raw_colors, own
         #: whether the floor was made see-through (one floor material serves every env: the settings' alpha is theirs)
         self.floor_faded = on and fade_floor(scene, 1.0 if settings.floor_alpha is None else settings.floor_alpha)
         materials = distracted_materials(scene)
@@ -81,7 +89,7 @@ class BatchDistractions:
         """Each env's backdrop about its place (``(N, 3)``: where its rays start) for cameras whose far clip is
         `clip_end`, with its own numbers (:meth:`draw`). Returns the object that holds them."""
         if self.videos:
-            self._atlas = VideoAtlas(f"{collection.name} videos", len(places), self._raw_colors)
+            self._atlas = VideoAtlas(f"{collection.name} videos", len(places), self._raw_colors, self._own)
         self._backdrops = make_backdrops(collection, f"{collection.name} backdrop", places, clip_end, self._atlas)
         return self._backdrops
 

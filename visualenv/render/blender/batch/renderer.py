@@ -112,7 +112,9 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
         super()._setup(built, threads)
         settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
         self._distracting = (
-            BatchDistractions(settings, built.scene, self.n, self._raw_colors) if settings is not None else None
+            BatchDistractions(settings, built.scene, self.n, self._raw_colors, self._own)
+            if settings is not None
+            else None
         )
         orbiting = self._distracting is not None and self._distracting.orbiting
         if self._distracting is not None and self._distracting.floor_faded:

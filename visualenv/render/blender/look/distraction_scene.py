@@ -68,10 +68,11 @@ class DistractionRig:
         floor_alpha: float = 1.0,
         videos: bool = False,
         raw_colors: bool = False,
+        own: Callable[[Any], object] = lambda image: None,
     ) -> None:
         """`backdrop`: make the backdrop, for the sky's shift and the background (a distraction with either will come);
         `floor_alpha`: the floor's opacity (:func:`fade_floor`); `videos`: the background is the suite's videos, in a
-        scene whose colours are written `raw_colors` (:class:`VideoAtlas`)."""
+        scene whose colours are written `raw_colors` (:class:`VideoAtlas`, which gives `own` every image it makes)."""
         self._scene = scene
         #: whether the floor was made see-through (its rays then need transparent bounces)
         self.floor_faded = fade_floor(scene, floor_alpha)
@@ -96,7 +97,7 @@ class DistractionRig:
         self._atlas = None
         if backdrop:
             first = next(iter(self.children.values()))
-            self._atlas = VideoAtlas(f"{first.name} videos", 1, raw_colors) if videos else None
+            self._atlas = VideoAtlas(f"{first.name} videos", 1, raw_colors, own) if videos else None
             self.backdrop = make_backdrops(
                 scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end, self._atlas
             )

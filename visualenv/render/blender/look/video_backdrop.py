@@ -14,7 +14,7 @@ one it was given a render or two before, but loads an image new to it. The image
 from __future__ import annotations
 
 import math
-from typing import Any, Sequence
+from typing import Any, Callable, Sequence
 
 import bpy
 import numpy as np
@@ -34,14 +34,17 @@ class VideoAtlas:
     """One image holding a tile per env in a grid (each :data:`FRAME_SIDE` pixels square, smaller where the image
     would pass :data:`ATLAS_SIDE`); :meth:`show` writes frames."""
 
-    def __init__(self, name: str, count: int, raw: bool = False) -> None:
+    def __init__(
+        self, name: str, count: int, raw: bool = False, own: Callable[[Any], object] = lambda image: None
+    ) -> None:
         """`raw`: the scene writes colours as they are (MuJoCo's look, as MuJoCo shows a texture's bytes), else through
-        sRGB: either way a frame's pixel is shown as its bytes."""
+        sRGB: either way a frame's pixel is shown as its bytes. `own` is given every image made, for the renderer to
+        remove at close."""
         self.columns = math.ceil(math.sqrt(count))
         self.rows = math.ceil(count / self.columns)
         #: a tile's side in pixels
         self.side = side = min(FRAME_SIDE, ATLAS_SIDE // self.columns)
-        self._name, self._raw = name, raw
+        self._name, self._raw, self._own = name, raw, own
         #: the image the lookups read now, and the nodes that read it (:func:`cube_lookup`)
         self.image = self._new_image()
         self.nodes: list[Any] = []
@@ -79,6 +82,7 @@ class VideoAtlas:
         side = self.side
         image = bpy.data.images.new(self._name, self.columns * side, self.rows * side, alpha=False)
         image.colorspace_settings.name = RAW_COLORSPACE if self._raw else "sRGB"
+        self._own(image)
         return image
 
 
