@@ -10,7 +10,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import bpy
 import numpy as np
 import pytest
 from PIL import Image
@@ -22,6 +21,7 @@ from visualenv.render.videos import DAVIS17_TRAINING_VIDEOS, DAVIS17_VALIDATION_
 from tests.render.test_distractions import segmented_cartpole
 
 pytestmark = pytest.mark.blender
+bpy = pytest.importorskip("bpy")
 
 #: every kind but the background off (the floor opaque), at the suite's easy level: its first 4 videos
 BACKGROUND_ONLY = {"difficulty": 0.1, "camera": False, "colors": False, "floor_alpha": 1.0}
