@@ -32,6 +32,7 @@ PLAN_TYPES: dict[type[BaseModel], type] = {
     m.ViewSettings: p.ViewSettings,
     m.RenderSettings: p.RenderSettings,
     m.Distractions: p.Distractions,
+    m.VideoBackground: p.VideoBackground,
 }
 
 

@@ -39,17 +39,22 @@ from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
 from visualenv.compiler.program import Program
-from visualenv.compiler.render_plan import checked_options, observation_space, to_plan
+from visualenv.compiler.render_plan import checked_options, observation_space
 from visualenv.compiler.batch_functions import float_errors
 from visualenv.env.batch_observations import BatchObservations
-from visualenv.env.construction import camera_sensors, episode_length, program_for, uses_camera
+from visualenv.env.construction import (
+    camera_sensors,
+    episode_distractions,
+    episode_length,
+    program_for,
+    uses_camera,
+)
 from visualenv.env.episode import EpisodeRules
 from visualenv.env.human import HumanDisplay
 from visualenv.env.visual_env import VisualEnv
 from visualenv.errors import StepError
 from visualenv.render.base import RendererOptions
 from visualenv.render.batch_limits import check_batchable
-from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.profile import Profile
 from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.options import distraction_settings, model_file
@@ -139,7 +144,9 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         self._display: HumanDisplay | None = None  # render_mode="human": where the grid is shown, opened at first
         #: what each env's observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
         self.distractions = (
-            distraction_settings(distractions, program.spec.distractions, model_file(program.spec))
+            distraction_settings(
+                distractions, program.spec.distractions, model_file(program.spec), program.loaded.base_dir
+            )
             if self.uses_camera
             else None
         )
@@ -190,7 +197,9 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         self._was_reset = False
         #: each env's distractions, drawn from its own generator as the env alone draws them (its lane's seed)
         self._distractions = (
-            [EpisodeDistractions(to_plan(self.distractions)) for _ in range(n)] if self.distractions is not None else []
+            [episode_distractions(program, self.distractions, distractions is not None) for _ in range(n)]
+            if self.distractions is not None
+            else []
         )
 
     @property

@@ -14,8 +14,13 @@ from visualenv.compiler.program import Program, compile_spec
 from visualenv.compiler.render_plan import views_plan
 from visualenv.env.episode import step_limit
 from visualenv.env.registration import resolve
-from visualenv.errors import SpecError
+from visualenv.compiler.render_plan import to_plan
+from visualenv.errors import Diagnostic, SpecError
+from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.sensor import SensorModel, sensor_models
+from visualenv.render.videos import VideoFolderError
+from visualenv.spec.models import Distractions
+from visualenv.spec.options import WHERE
 from visualenv.spec.loader import LoadedSpec, load_spec
 from visualenv.spec.view_models import Observation
 
@@ -42,6 +47,18 @@ def uses_camera(program: Program, render: bool | None) -> bool:
         message = "render=True needs an 'observation' section (a camera) in the spec"
         raise SpecError([program.loaded.source.diagnostic((), message)])
     return observation is not None and render is not False
+
+
+def episode_distractions(program: Program, settings: Distractions, optioned: bool) -> EpisodeDistractions:
+    """An env's distractions across episodes; a folder of background videos that is missing or lacks the level's
+    videos is a SpecError at the field that names it: the spec's line, or make()'s option where `optioned`."""
+    try:
+        return EpisodeDistractions(to_plan(settings))
+    except VideoFolderError as exc:
+        path = ("distractions", "background", "videos")
+        if optioned:
+            raise SpecError([Diagnostic(WHERE, None, None, ".".join(path), exc.detail)]) from None
+        raise SpecError([program.loaded.source.diagnostic(path, exc.detail)]) from None
 
 
 @dataclass(frozen=True)

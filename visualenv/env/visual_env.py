@@ -12,16 +12,21 @@ from gymnasium import spaces
 from gymnasium.error import ResetNeeded
 
 from visualenv.compiler.program import Program
-from visualenv.compiler.render_plan import checked_options, observation_space, to_plan, views_plan
+from visualenv.compiler.render_plan import checked_options, observation_space, views_plan
 from visualenv.errors import StepError, did_you_mean
 from visualenv.expr.functions import RandomSource
-from visualenv.env.construction import camera_sensors, episode_length, program_for, uses_camera
+from visualenv.env.construction import (
+    camera_sensors,
+    episode_distractions,
+    episode_length,
+    program_for,
+    uses_camera,
+)
 from visualenv.env.episode import EpisodeRules
 from visualenv.env.human import HumanDisplay, open_human_display
 from visualenv.env.pickling import PicklingEnv
 from visualenv.physics.conventions import legacy_stream
 from visualenv.render.base import BLENDER_BACKEND, Renderer, RendererOptions, create_renderer
-from visualenv.render.distractions import EpisodeDistractions
 from visualenv.render.frames import Frames
 from visualenv.render.sensor import SensorModel, sensor_generator
 from visualenv.spec.loader import LoadedSpec
@@ -192,9 +197,9 @@ class VisualEnv(PicklingEnv):
         self._sensor_rng: np.random.Generator | None = None
         self._observed = program.observed
         #: what the observation shows changed per episode (the spec's ``distractions``, or the option's); None: nothing
-        self.distractions = distraction_settings(distractions, s.distractions, model_file(s))
+        self.distractions = distraction_settings(distractions, s.distractions, model_file(s), program.loaded.base_dir)
         self._distractions = (
-            EpisodeDistractions(to_plan(self.distractions))
+            episode_distractions(program, self.distractions, distractions is not None)
             if self.distractions is not None and self.uses_camera
             else None
         )

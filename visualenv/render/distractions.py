@@ -1,8 +1,8 @@
 """Distractions: what one episode's observation shows changed, drawn apart from the env's own random stream.
 
 The Distracting Control Suite (Stone et al., 2021) changes what a pixel agent sees and nothing it controls: the
-camera's pose, the colours of the bodies, the floor and the sky, the background (its videos; here visualenv's own
-moving pattern). The camera's ranges, its upper-hemisphere limit and the floor's alpha are the suite's
+camera's pose, the colours of the bodies, the floor and the sky, the background (its DAVIS videos from the user's
+folder: :mod:`visualenv.render.videos`; else visualenv's own moving pattern). The camera's ranges, its upper-hemisphere limit and the floor's alpha are the suite's
 (``suite_utils.py``, ``camera.py``). Here each kind is drawn at reset
 from a generator of its own (:func:`distraction_generator`), so the state, the rewards and the env's random numbers
 are those of the same env without distractions, and the same seed draws the same distractions.
@@ -16,10 +16,12 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, replace
+from typing import Any
 
 import numpy as np
 
-from visualenv.render.plan import Distractions
+from visualenv.render.plan import Distractions, VideoBackground
+from visualenv.render.videos import VideoLibrary, ping_pong, video_library
 
 #: the spawn key that derives the distractions' generator from the env's seed (the letters "DS")
 SPAWN_KEY = 0x4453
@@ -54,6 +56,12 @@ class Distraction:
     background_seed: int = 0
     background_time: float = 0.0
     difficulty: float = 0.0  # the episode's (drawn when the settings give a range)
+    #: the suite's video background (:mod:`visualenv.render.videos`): the video's index in the level's list (-1: none),
+    #: the frame shown (its file, and its index), and the way a dynamic episode plays it (+1 forward, -1 back)
+    video: int = -1
+    video_frame: str = ""
+    frame: int = 0
+    frame_step: int = 1
 
 
 def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generator:
@@ -76,6 +84,7 @@ def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
     if not settings.camera:
         angles, zoom, reach = np.zeros(3), 1.0, 0.0
     background_seed = int(rng.integers(0, 2**31 - 1))  # drawn last: the draws before it are those of a spec without it
+    video = draw_video(settings, rng, scale)
     return Distraction(
         yaw=float(angles[0]),
         pitch=float(angles[1]),
@@ -89,7 +98,32 @@ def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
         background=scale if settings.background else 0.0,
         background_seed=background_seed,
         difficulty=scale,
+        **video,
     )
+
+
+def draw_video(settings: Distractions, rng: np.random.Generator, difficulty: float) -> dict[str, Any]:
+    """The episode's video, as the suite draws it: one of the level's (at the episode's `difficulty`) uniformly, a
+    frame of it uniformly and a way to play it (forward or back); nothing (and no draw) without the suite's
+    backgrounds."""
+    library = videos_of(settings, difficulty)
+    if library is None:
+        return {}
+    video = int(rng.integers(len(library.names)))
+    frame = int(rng.integers(len(library.frames[video])))
+    step = 1 if rng.integers(2) else -1
+    return {"video": video, "frame": frame, "frame_step": step, "video_frame": library.frames[video][frame]}
+
+
+def videos_of(settings: Distractions, difficulty: float | None = None) -> VideoLibrary | None:
+    """The videos of the level at `difficulty` (by default the largest the settings draw) in the user's folder (listed
+    once per process), None without the suite's backgrounds. A lower level's list starts the higher's, so a video's
+    index is the same in both."""
+    videos = settings.background
+    level = settings.largest if difficulty is None else difficulty
+    if not isinstance(videos, VideoBackground) or level <= 0:
+        return None
+    return video_library(videos.videos, videos.split, level)
 
 
 def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Generator) -> Distraction | None:
@@ -106,10 +140,17 @@ def drift(settings: Distraction | None, limits: Distractions, rng: np.random.Gen
 
     phase = moved(settings.colors_phase, step[4], -1.0, 1.0) if limits.colors else 0.0
     played = settings.background_time + (BACKGROUND_STEP if limits.background else 0.0)
+    video: dict[str, Any] = {}
+    library = videos_of(limits, scale)
+    if library is not None and settings.video >= 0:
+        frames = library.frames[settings.video]
+        frame, way = ping_pong(settings.frame, settings.frame_step, len(frames))
+        video = {"frame": frame, "frame_step": way, "video_frame": frames[frame]}
     if not limits.camera:
-        return replace(settings, colors_phase=phase, background_time=played)
+        return replace(settings, colors_phase=phase, background_time=played, **video)
     return replace(
         settings,
+        **video,
         yaw=moved(settings.yaw, step[0], -bound, bound),
         pitch=moved(settings.pitch, step[1], -bound, bound),
         roll=moved(settings.roll, step[2], -bound, bound),
@@ -253,6 +294,8 @@ class EpisodeDistractions:
     draw, which a dynamic setting moves every step. Pickles with the env's episode."""
 
     def __init__(self, settings: Distractions) -> None:
+        """Lists the settings' videos now, so that a missing folder or video is an error before the first episode."""
+        videos_of(settings)
         self.settings = settings
         self.rng: np.random.Generator | None = None
         self.current: Distraction | None = None

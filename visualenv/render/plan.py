@@ -167,11 +167,19 @@ class RenderSettings:
 
 
 @dataclass(frozen=True, slots=True)
+class VideoBackground:
+    """The Distracting Control Suite's backgrounds: DAVIS 2017's videos under `videos` (a folder, as resolved)."""
+
+    videos: str
+    split: str  # "train" or "val"
+
+
+@dataclass(frozen=True, slots=True)
 class Distractions:
     difficulty: float | tuple[float, float]  # a pair: each episode's drawn uniformly between them
     camera: bool
     colors: bool
-    background: bool
+    background: bool | VideoBackground  # True: visualenv's pattern; videos: the suite's
     dynamic: bool
     upper_hemisphere: bool | None = None  # None: limited unless the camera looks straight down
     floor_alpha: float | None = None  # None: the floor as it is

@@ -39,6 +39,7 @@ from visualenv.spec.view_models import (  # noqa: F401
     ViewSettings,
     RenderSettings,
     Distractions,
+    VideoBackground,
 )
 
 # -- state, actions, dynamics -------------------------------------------------------------------

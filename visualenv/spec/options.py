@@ -10,14 +10,15 @@ fails at ``make()`` with the message the spec would give, located at
 
 from __future__ import annotations
 
-from pathlib import PurePosixPath
+import os
+from pathlib import Path, PurePosixPath
 from typing import Annotated, Any, Literal, Mapping, Optional, Sequence, Union
 
 from pydantic import Field, ValidationError, field_validator
 
 from visualenv.errors import SpecError
 from visualenv.spec.loader import diagnostics_of
-from visualenv.spec.models import Distractions, Name, RenderSettings, Spec, StrictModel
+from visualenv.spec.models import Distractions, Name, RenderSettings, Spec, StrictModel, VideoBackground
 from visualenv.spec.view_models import DifficultyRange
 from visualenv.source_map import SourceMap
 
@@ -77,14 +78,18 @@ def distraction_settings(
     given: float | Sequence[float] | str | Mapping[str, Any] | Distractions | None,
     spec: Distractions | None,
     model: str | None = None,
+    base_dir: Path | None = None,
 ) -> Distractions | None:
     """The distractions an env draws: the option's (a difficulty or a range, a level's name, or a section as a dict), else the spec's;
     None for none (a difficulty of 0, or no kind on and no floor alpha below 1). A floor alpha of ``"dcs"`` is the
-    suite's for the domain of `model` (the physics model's file, :func:`floor_alpha`)."""
+    suite's for the domain of `model` (the physics model's file, :func:`floor_alpha`). A folder of background videos is
+    made absolute: the spec's relative to `base_dir` (its folder), the option's to the working directory."""
     if isinstance(given, str):
         given = DISTRACTION_LEVELS[given]
     if given is None:
         chosen = spec
+        if chosen is not None and base_dir is not None:
+            chosen = with_videos_from(chosen, base_dir)
     elif isinstance(given, Distractions):
         chosen = given
     elif isinstance(given, Mapping):
@@ -93,12 +98,23 @@ def distraction_settings(
         chosen = Distractions(difficulty=[float(v) for v in given])
     else:
         chosen = Distractions(difficulty=float(given))
+    if given is not None and chosen is not None:
+        chosen = with_videos_from(chosen, Path.cwd())
     if chosen is not None and chosen.floor_alpha == "dcs":
         chosen = chosen.model_copy(update={"floor_alpha": floor_alpha(model)})
     faded = chosen is not None and isinstance(chosen.floor_alpha, float) and chosen.floor_alpha < 1
     if chosen is None or chosen.largest <= 0 or not (chosen.camera or chosen.colors or chosen.background or faded):
         return None
     return chosen
+
+
+def with_videos_from(chosen: Distractions, base: Path) -> Distractions:
+    """`chosen` with its background's folder of videos absolute (``~`` and ``$VARIABLES`` expanded, then under `base`)."""
+    videos = chosen.background
+    if not isinstance(videos, VideoBackground):
+        return chosen
+    folder = base / Path(os.path.expandvars(os.path.expanduser(videos.videos)))
+    return chosen.model_copy(update={"background": videos.model_copy(update={"videos": str(folder)})})
 
 
 def model_file(spec: Spec) -> str | None:

@@ -148,6 +148,23 @@ class RenderSettings(StrictModel):
 DifficultyRange = Annotated[list[Annotated[float, Field(ge=0.0, le=1.0)]], Field(min_length=2, max_length=2)]
 
 
+class VideoBackground(StrictModel):
+    """``distractions.background`` as the Distracting Control Suite's: DAVIS 2017's videos from the user's copy."""
+
+    videos: str = Field(
+        min_length=1,
+        description=(
+            "the folder of DAVIS 2017's videos (DAVIS/JPEGImages/480p: a folder of .jpg frames per video); "
+            "relative to the spec's folder (to the working directory in make()'s option), ~ and $VARIABLES expanded"
+        ),
+    )
+    split: Literal["train", "val"] = Field(
+        "train",
+        description="the suite's 60 training videos or its 30 validation ones; a level plays the first 4 (up to 0.1), "
+        "8 (up to 0.2) or all",
+    )
+
+
 class Distractions(StrictModel):
     """The ``distractions`` section: what the observation shows changed per episode (or drifting every step), the
     state and rewards untouched; the Distracting Control Suite's kinds at its scale (docs/distractions.md)."""
@@ -161,10 +178,11 @@ class Distractions(StrictModel):
     )
     camera: bool = Field(True, description="the observation cameras orbit, roll and zoom about the point they look at")
     colors: bool = Field(True, description="every material's colour and the sky's shift")
-    background: bool = Field(
+    background: Union[bool, VideoBackground] = Field(
         True,
         description=(
-            "a moving pattern of two random colours in place of the sky, seen by the camera only (standing in for the suite's videos)"
+            "true: a moving pattern of two random colours over the sky, seen by the camera only (visualenv's own); "
+            "{videos: DIR, split: train|val}: the suite's DAVIS 2017 videos, fully opaque in place of the sky"
         ),
     )
     dynamic: bool = Field(

@@ -304,6 +304,9 @@ class BlenderRenderer(BindingSetters, Renderer):
                 [v.camera for v in self._views],
                 backdrop=distraction.background > 0 or distraction.color_shift > 0,
                 floor_alpha=distraction.floor_alpha,
+                videos=distraction.video >= 0,
+                raw_colors=self._raw_colors,
+                own=self._ids.append,  # the frames' images, removed at close
             )
             if self._rig.floor_faded:  # the floor's rays go on through it: transparent bounces
                 self._see_through = True

@@ -16,7 +16,8 @@ Env k of a batch draws what env k alone draws (docs/distractions.md), by the bat
 * **sky and background**: envs share one world, which cannot tell them apart; each env has its own backdrop
   (:func:`~visualenv.render.blender.look.distraction_scene.make_backdrops`, as one env has), an instance about its ray origin
   whose attributes are its numbers. The copies stand twice the cameras' far clip apart, so that no env's backdrop
-  reaches another's.
+  reaches another's. With the suite's videos, each env's frame is its tile of one image
+  (:class:`~visualenv.render.blender.look.video_backdrop.VideoAtlas`).
 
 Numbers are written when an env's distraction changes: at its resets, and every step when dynamic.
 """
@@ -37,20 +38,34 @@ from visualenv.render.blender.look.distraction_scene import (
 )
 from visualenv.render.blender.batch.env_attributes import EnvAttributes, shift_name
 from visualenv.render.distractions import Distraction, color_shifts, world_up
-from visualenv.render.plan import Distractions
+from visualenv.render.blender.look.video_backdrop import VideoAtlas
+from visualenv.render.plan import Distractions, VideoBackground
 
 
 class BatchDistractions:
     """The distractions of a batch's envs (:attr:`current`, one per env), drawn into its scene by :meth:`draw`."""
 
-    def __init__(self, settings: Distractions, scene: Any, num_envs: int) -> None:
-        """Made with the scene as one env's (its materials in the order one env draws their shifts), before the copies."""
+    def __init__(
+        self,
+        settings: Distractions,
+        scene: Any,
+        num_envs: int,
+        raw_colors: bool = False,
+        own: Callable[[Any], object] = lambda image: None,
+    ) -> None:
+        """Made with the scene as one env's (its materials in the order one env draws their shifts), before the copies;
+        `raw_colors`: the scene writes colours as they are (a video's frames read so: :class:`VideoAtlas`, which gives
+        `own` every image it makes)."""
         on = settings.largest > 0
         #: whether the observation cameras orbit: each env's copy then follows its camera and its rays turn
         self.orbiting = on and settings.camera
         #: whether the materials read each env's shifts, and whether each env has a backdrop
         self.shifting = on and settings.colors
-        self.backdropped = on and (settings.colors or settings.background)
+        self.backdropped = on and (settings.colors or bool(settings.background))
+        #: whether the background is the suite's videos: each env's frame a tile of one image
+        self.videos = on and isinstance(settings.background, VideoBackground)
+        self._atlas: VideoAtlas | None = None
+        self._raw_colors, self._own = raw_colors, own
         #: whether the floor was made see-through (one floor material serves every env: the settings' alpha is theirs)
         self.floor_faded = on and fade_floor(scene, 1.0 if settings.floor_alpha is None else settings.floor_alpha)
         materials = distracted_materials(scene)
@@ -73,7 +88,9 @@ class BatchDistractions:
     def make_backdrops(self, collection: Any, places: np.ndarray, clip_end: float) -> Any:
         """Each env's backdrop about its place (``(N, 3)``: where its rays start) for cameras whose far clip is
         `clip_end`, with its own numbers (:meth:`draw`). Returns the object that holds them."""
-        self._backdrops = make_backdrops(collection, f"{collection.name} backdrop", places, clip_end)
+        if self.videos:
+            self._atlas = VideoAtlas(f"{collection.name} videos", len(places), self._raw_colors, self._own)
+        self._backdrops = make_backdrops(collection, f"{collection.name} backdrop", places, clip_end, self._atlas)
         return self._backdrops
 
     def draw(self) -> None:
@@ -85,7 +102,7 @@ class BatchDistractions:
         if self.shifting and self._values is not None:
             self._values.write({shift_name(i): shifts[:, i] for i in range(self._count)})
         if self._backdrops is not None:
-            write_backdrops(self._backdrops, self.current, shifts[:, -1])
+            write_backdrops(self._backdrops, self.current, shifts[:, -1], self._atlas)
         self._drawn = list(self.current)
 
     def orbited(self, camera: int, poses: np.ndarray, measure: Callable[[int], float]) -> list[np.ndarray]:

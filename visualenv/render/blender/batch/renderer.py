@@ -111,7 +111,11 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
         self._removed: set[int] = set()
         super()._setup(built, threads)
         settings = self.plan.distractions  # drawn per env (batch_distractions), the scene's materials as one env's
-        self._distracting = BatchDistractions(settings, built.scene, self.n) if settings is not None else None
+        self._distracting = (
+            BatchDistractions(settings, built.scene, self.n, self._raw_colors, self._own)
+            if settings is not None
+            else None
+        )
         orbiting = self._distracting is not None and self._distracting.orbiting
         if self._distracting is not None and self._distracting.floor_faded:
             self._see_through = True  # the floor's rays go on through it

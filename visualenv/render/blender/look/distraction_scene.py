@@ -30,6 +30,7 @@ from mathutils import Matrix, Vector
 from visualenv.render.blender.batch.env_attributes import env_attribute
 from visualenv.render.blender.batch.instance_nodes import geometry_node_group
 from visualenv.render.blender.look.materials import MUJOCO_MATERIAL, SHIFTED, color_sockets, ensure_node_tree
+from visualenv.render.blender.look.video_backdrop import VIDEO, VideoAtlas, cube_lookup
 from visualenv.render.distractions import Distraction, background, color_shifts, world_up
 from visualenv.render.distractions import orbit as orbit_matrix
 
@@ -59,9 +60,19 @@ UNSEEN_BY = ("visible_diffuse", "visible_glossy", "visible_transmission", "visib
 class DistractionRig:
     """The cameras, colour sockets and backdrop of one env's scene that distractions change; :meth:`apply` draws one."""
 
-    def __init__(self, scene: Any, cameras: list[Any], backdrop: bool = False, floor_alpha: float = 1.0) -> None:
+    def __init__(
+        self,
+        scene: Any,
+        cameras: list[Any],
+        backdrop: bool = False,
+        floor_alpha: float = 1.0,
+        videos: bool = False,
+        raw_colors: bool = False,
+        own: Callable[[Any], object] = lambda image: None,
+    ) -> None:
         """`backdrop`: make the backdrop, for the sky's shift and the background (a distraction with either will come);
-        `floor_alpha`: the floor's opacity (:func:`fade_floor`)."""
+        `floor_alpha`: the floor's opacity (:func:`fade_floor`); `videos`: the background is the suite's videos, in a
+        scene whose colours are written `raw_colors` (:class:`VideoAtlas`, which gives `own` every image it makes)."""
         self._scene = scene
         #: whether the floor was made see-through (its rays then need transparent bounces)
         self.floor_faded = fade_floor(scene, floor_alpha)
@@ -83,10 +94,12 @@ class DistractionRig:
         self._shifts = np.zeros((len(self._sockets) + 1, 3))  # the current distraction's (color_shifts), the sky's last
         #: the object that holds the backdrop, about the first camera (None: no background or colours)
         self.backdrop = None
+        self._atlas = None
         if backdrop:
             first = next(iter(self.children.values()))
+            self._atlas = VideoAtlas(f"{first.name} videos", 1, raw_colors, own) if videos else None
             self.backdrop = make_backdrops(
-                scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end
+                scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end, self._atlas
             )
             self.backdrop.parent = first
             self.backdrop.matrix_parent_inverse = Matrix.Identity(4)
@@ -100,7 +113,7 @@ class DistractionRig:
                 child.matrix_basis = orbit(distraction, *self._focus_of(name))
             self._shifts = color_shifts(distraction, len(self._sockets))
             if self.backdrop is not None:
-                write_backdrops(self.backdrop, [distraction], self._shifts[-1:])
+                write_backdrops(self.backdrop, [distraction], self._shifts[-1:], self._atlas)
             self._last = distraction
         for i, socket in enumerate(self._sockets):
             now = tuple(socket.default_value)
@@ -224,10 +237,12 @@ def mix_node(nodes: Any, blend: str) -> Any:
     return node
 
 
-def make_backdrops(collection: Any, name: str, places: np.ndarray, clip_end: float) -> Any:
+def make_backdrops(
+    collection: Any, name: str, places: np.ndarray, clip_end: float, atlas: VideoAtlas | None = None
+) -> Any:
     """Backdrops in `collection` about `places` (``(n, 3)``, in the space of the object returned: parent it to a camera)
     for cameras whose far clip is `clip_end`: instances of one hidden icosphere just inside it on the points of a mesh,
-    whose attributes hold each one's numbers (:func:`write_backdrops`)."""
+    whose attributes hold each one's numbers (:func:`write_backdrops`). `atlas`: the suite's videos, a tile per point."""
     mesh = bpy.data.meshes.new(name)
     bm = bmesh.new()
     try:
@@ -235,7 +250,7 @@ def make_backdrops(collection: Any, name: str, places: np.ndarray, clip_end: flo
         bm.to_mesh(mesh)
     finally:
         bm.free()
-    mesh.materials.append(backdrop_material(name))
+    mesh.materials.append(backdrop_material(name, atlas))
     sphere = bpy.data.objects.new(name, mesh)
     collection.objects.link(sphere)
     for visibility in UNSEEN_BY:
@@ -244,7 +259,7 @@ def make_backdrops(collection: Any, name: str, places: np.ndarray, clip_end: flo
     points = bpy.data.meshes.new(f"{name} places")
     points.vertices.add(len(places))
     points.vertices.foreach_set("co", np.asarray(places, dtype=np.float32).ravel())
-    for key in (SKY_SHIFT, FIRST, SECOND, PATTERN):
+    for key in (SKY_SHIFT, FIRST, SECOND, PATTERN, VIDEO):
         points.attributes.new(key, "FLOAT_COLOR", "POINT")
     holder = bpy.data.objects.new(f"{name} places", points)
     collection.objects.link(holder)
@@ -253,16 +268,28 @@ def make_backdrops(collection: Any, name: str, places: np.ndarray, clip_end: flo
     return holder
 
 
-def write_backdrops(holder: Any, distractions: Sequence[Distraction], sky_shifts: np.ndarray) -> None:
+def write_backdrops(
+    holder: Any, distractions: Sequence[Distraction], sky_shifts: np.ndarray, atlas: VideoAtlas | None = None
+) -> None:
     """Each backdrop's numbers (one distraction per point of `holder`, made by :func:`make_backdrops`; its sky's shift
     given, ``(n, 3)``: the last row of its colour shifts): the shift, the background's colours, and its pattern's
-    scale, time and opacity (0: no background)."""
-    shown = [background(d) for d in distractions]
+    scale, time and opacity (0: no background); with the suite's videos, each one's frame in `atlas`, wholly opaque."""
+    videos = [atlas is not None and d.video >= 0 for d in distractions]
+    shown = [None if video else background(d) for d, video in zip(distractions, videos)]
+    tiles = atlas.tiles() if atlas is not None else np.zeros((len(distractions), 2))
+    if atlas is not None:
+        atlas.show([d.video_frame for d in distractions])
     numbers = {
         SKY_SHIFT: np.asarray(sky_shifts),
         FIRST: np.array([b.first if b else (0.0, 0.0, 0.0) for b in shown]),
         SECOND: np.array([b.second if b else (0.0, 0.0, 0.0) for b in shown]),
-        PATTERN: np.array([(b.scale, b.time, b.opacity) if b else (1.0, 0.0, 0.0) for b in shown]),
+        PATTERN: np.array(
+            [
+                (1.0, 0.0, 1.0) if video else (b.scale, b.time, b.opacity) if b else (1.0, 0.0, 0.0)
+                for b, video in zip(shown, videos)
+            ]
+        ),
+        VIDEO: np.column_stack([tiles, np.array(videos, dtype=np.float64)]),
     }
     for key, values in numbers.items():
         rgba = np.ones((len(values), 4), dtype=np.float32)
@@ -286,10 +313,11 @@ def _instancing(name: str, obj: Any) -> Any:
     return group
 
 
-def backdrop_material(name: str) -> Any:
+def backdrop_material(name: str, atlas: VideoAtlas | None = None) -> Any:
     """The backdrop's shader: Transparent of 1 - opacity, plus Emission of (1 - opacity) x the sky's shift + opacity x
     the pattern, two colours blended by a 4D noise of the ray's direction (scale and time its attributes'), as one
-    env's world shows them to its camera rays; every number an attribute. Not a light Cycles samples."""
+    env's world shows them to its camera rays; every number an attribute. With `atlas`, the pattern gives way to the
+    env's video frame where its attribute says so (:func:`cube_lookup`). Not a light Cycles samples."""
     material = bpy.data.materials.new(name)
     ensure_node_tree(material)
     material.cycles.emission_sampling = "NONE"
@@ -308,9 +336,20 @@ def backdrop_material(name: str) -> Any:
     links.new(pattern.outputs["Y"], noise.inputs["W"])
     blend, glow = mix_node(nodes, "MIX"), mix_node(nodes, "MIX")
     links.new(noise.outputs["Fac"], blend.inputs["Factor"])
+    shown = blend  # the pattern, or the video's frame
+    if atlas is not None:
+        video = env_attribute(nodes, VIDEO)
+        on = nodes.new("ShaderNodeSeparateXYZ")
+        links.new(video.outputs["Vector"], on.inputs[0])
+        frame = cube_lookup(nodes, links, direction.outputs["Vector"], video.outputs["Vector"], atlas)
+        shown = mix_node(nodes, "MIX")
+        links.new(on.outputs["Z"], shown.inputs["Factor"])
+        a, b = [sock for sock in shown.inputs if sock.type == "RGBA"]
+        links.new(next(sock for sock in blend.outputs if sock.type == "RGBA"), a)
+        links.new(frame.outputs["Color"], b)
     for node, first, second in (
         (blend, env_attribute(nodes, FIRST), env_attribute(nodes, SECOND)),
-        (glow, env_attribute(nodes, SKY_SHIFT), blend),
+        (glow, env_attribute(nodes, SKY_SHIFT), shown),
     ):
         a, b = [sock for sock in node.inputs if sock.type == "RGBA"]
         links.new(first.outputs["Color"], a)
