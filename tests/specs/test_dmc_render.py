@@ -1,7 +1,8 @@
 """The DMC tasks from pixels, rendered by Blender: a geom the reset moves is drawn where it is; tracking cameras follow.
 
 Reacher's reset writes its target geom's model position (``model_geom_pos_target_x/_y``): the
-target is drawn there, in one env and in each env of a batch (each env its own target). Cheetah's
+target is drawn there, in one env and in each env of a batch (each env its own target); reacher hard's
+also writes its size (``model_geom_size_target_0``, 0.015): drawn at that size. Cheetah's
 and walker's camera 0 tracks the body's centre of mass: their single envs render through it, so
 the body stays in view wherever it runs. (The look, dm_control's lighting, is a later stage: docs/dmc.md.)
 """
@@ -35,9 +36,13 @@ def target_pixel(model) -> tuple[float, float]:
     return (SIZE - 1) / 2 + PER_METRE * x, (SIZE - 1) / 2 - PER_METRE * y
 
 
-def reacher_with_a_mask(tmp_path: Path) -> Path:
-    """DMC-reacher-easy-v0 with a segmentation camera beside its own (the same camera): where the target is drawn, exactly."""
-    text = (DMC / "reacher_easy.yaml").read_text(encoding="utf-8")
+#: the target's radius in each reacher task (dm_control's _BIG_TARGET, _SMALL_TARGET)
+RADIUS = {"easy": 0.05, "hard": 0.015}
+
+
+def reacher_with_a_mask(tmp_path: Path, task: str = "easy") -> Path:
+    """DMC-reacher-<task>-v0 with a segmentation camera beside its own (the same camera): where the target is drawn, exactly."""
+    text = (DMC / f"reacher_{task}.yaml").read_text(encoding="utf-8")
     text = text.replace("model: assets/reacher.xml", f"model: {DMC / 'assets' / 'reacher.xml'}")
     text = text.replace(
         "observation: {camera: fixed, resolution: [84, 84], color: rgb}",
@@ -45,12 +50,15 @@ def reacher_with_a_mask(tmp_path: Path) -> Path:
         "    mask: {camera: fixed, resolution: [84, 84], color: segmentation}",
     )
     path = tmp_path / "reacher_mask.yaml"
-    path.write_text(text.replace("id: DMC-reacher-easy-v0", "id: ReacherMask-v0"), encoding="utf-8")
+    path.write_text(text.replace(f"id: DMC-reacher-{task}-v0", "id: ReacherMask-v0"), encoding="utf-8")
     return path
 
 
-def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None:
-    env = VisualEnv(reacher_with_a_mask(tmp_path))
+@pytest.mark.parametrize("task", RADIUS)
+def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path, task: str) -> None:
+    """Where the reset put it, and as large as it made it: a disc of the target's radius seen from above."""
+    env = VisualEnv(reacher_with_a_mask(tmp_path, task))
+    disc = math.pi * (RADIUS[task] * PER_METRE) ** 2  # about 147 pixels (easy) and 13 (hard)
     try:
         target = env.segmentation_ids["geom:target"]  # a geom the reset moves is drawn on a body of its own
         seen = []
@@ -59,7 +67,7 @@ def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None
             mask = obs["mask"][..., 0] == target
             rows, columns = np.nonzero(mask)
             column, row = target_pixel(env.model)
-            assert 60 <= mask.sum() <= 160, mask.sum()  # a disc of radius 0.05 m: about 6.8 pixels
+            assert 0.6 * disc <= mask.sum() <= 1.1 * disc, (mask.sum(), disc)  # the arm may hide some of it
             assert abs(columns.mean() - column) < 1.0 and abs(rows.mean() - row) < 1.0, (
                 seed,
                 columns.mean(),
@@ -79,9 +87,11 @@ def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None
         env.close()
 
 
-def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path) -> None:
-    """Tile i's target is where env i's reset put it, and its mask is env i's rendered alone, over a few steps."""
-    path = reacher_with_a_mask(tmp_path)
+@pytest.mark.parametrize("task", RADIUS)
+def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path, task: str) -> None:
+    """Tile i's target is where env i's reset put it, and its mask is env i's rendered alone, over a few steps (hard's
+    target as small as its reset made it: drawn scaled in each env's tile)."""
+    path = reacher_with_a_mask(tmp_path, task)
     batch = BatchedVectorEnv(path, 3, action_repeat=1)
     singles = [VisualEnv(path, action_repeat=1) for _ in range(3)]
     try:

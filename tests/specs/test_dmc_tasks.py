@@ -44,6 +44,7 @@ TASKS = {
     "DMC-walker-run-v0": ("walker", "run", 2, "side"),
     "DMC-pendulum-swingup-v0": ("pendulum", "swingup", 2, "fixed"),
     "DMC-acrobot-swingup-v0": ("acrobot", "swingup", 2, "fixed"),
+    "DMC-reacher-hard-v0": ("reacher", "hard", 2, "fixed"),
 }
 #: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
 DRQ_V2 = list(TASKS)[5:]
