@@ -21,7 +21,7 @@ from visualenv.spec.loader import load_spec  # noqa: E402
 pytestmark = pytest.mark.blender
 
 SPECS = sorted((Path(__file__).resolve().parents[2] / "specs" / "dmc").glob("*.yaml"))
-#: drawn by MuJoCo, not by visualenv, and why: finger's initialize_episode makes these sites transparent, which only its
+#: drawn by MuJoCo, not by visualenv, and why: finger spin's initialize_episode makes these sites transparent, which only its
 #: renderer sees (finger_spin.yaml: physics.draw_sites false)
 NOT_DRAWN = {"DMC-finger-spin-v0": {"site:target", "site:tip"}}
 KINDS = {"geom": mujoco.mjtObj.mjOBJ_GEOM, "site": mujoco.mjtObj.mjOBJ_SITE, "tendon": mujoco.mjtObj.mjOBJ_TENDON}

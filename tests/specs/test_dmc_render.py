@@ -2,7 +2,8 @@
 
 Reacher's reset writes its target geom's model position (``model_geom_pos_target_x/_y``): the
 target is drawn there, in one env and in each env of a batch (each env its own target); reacher hard's
-also writes its size (``model_geom_size_target_0``, 0.015): drawn at that size. Cheetah's
+also writes its size (``model_geom_size_target_0``, 0.015): drawn at that size. Finger turn's reset moves its
+target site and sets its radius: each env of a batch draws its own, as that env alone. Cheetah's
 and walker's camera 0 tracks the body's centre of mass: their single envs render through it, so
 the body stays in view wherever it runs. (The look, dm_control's lighting, is a later stage: docs/dmc.md.)
 """
@@ -40,18 +41,23 @@ def target_pixel(model) -> tuple[float, float]:
 RADIUS = {"easy": 0.05, "hard": 0.015}
 
 
-def reacher_with_a_mask(tmp_path: Path, task: str = "easy") -> Path:
-    """DMC-reacher-<task>-v0 with a segmentation camera beside its own (the same camera): where the target is drawn, exactly."""
-    text = (DMC / f"reacher_{task}.yaml").read_text(encoding="utf-8")
-    text = text.replace("model: assets/reacher.xml", f"model: {DMC / 'assets' / 'reacher.xml'}")
+def with_a_mask(tmp_path: Path, domain: str, task: str, camera: str) -> Path:
+    """DMC-<domain>-<task>-v0 with a segmentation camera beside its own (the same camera): where each object is drawn, exactly."""
+    text = (DMC / f"{domain}_{task}.yaml").read_text(encoding="utf-8")
+    text = text.replace(f"model: assets/{domain}.xml", f"model: {DMC / 'assets' / f'{domain}.xml'}")
     text = text.replace(
-        "observation: {camera: fixed, resolution: [84, 84], color: rgb}",
-        "observation:\n  cameras:\n    eye: {camera: fixed, resolution: [84, 84], color: rgb}\n"
-        "    mask: {camera: fixed, resolution: [84, 84], color: segmentation}",
+        f"observation: {{camera: {camera}, resolution: [84, 84], color: rgb}}",
+        f"observation:\n  cameras:\n    eye: {{camera: {camera}, resolution: [84, 84], color: rgb}}\n"
+        f"    mask: {{camera: {camera}, resolution: [84, 84], color: segmentation}}",
     )
-    path = tmp_path / "reacher_mask.yaml"
-    path.write_text(text.replace(f"id: DMC-reacher-{task}-v0", "id: ReacherMask-v0"), encoding="utf-8")
+    path = tmp_path / f"{domain}_mask.yaml"
+    path.write_text(text.replace(f"id: DMC-{domain}-{task}-v0", "id: MaskedTask-v0"), encoding="utf-8")
     return path
+
+
+def reacher_with_a_mask(tmp_path: Path, task: str = "easy") -> Path:
+    """DMC-reacher-<task>-v0 with a segmentation camera: where the target is drawn, exactly."""
+    return with_a_mask(tmp_path, "reacher", task, "fixed")
 
 
 @pytest.mark.parametrize("task", RADIUS)
@@ -122,6 +128,27 @@ def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path, task: str) -> 
         batch.close()
         for env in singles:
             env.close()
+
+
+@pytest.mark.parametrize("ident", ["DMC-finger-turn_easy-v0", "DMC-finger-turn_hard-v0"])
+def test_each_env_of_a_finger_turn_batch_draws_its_own_target(ident: str) -> None:
+    """Finger turn's reset moves its target site and sets its radius (a site of the world body, which segmentation
+    counts as the floor's): tile i is env i's frame alone, its own target where and as large as env i's, though each
+    env's target is elsewhere. (One env's target against MuJoCo's: tests/specs/test_dmc_drawn.py.)"""
+    batch = visualenv.make_vec(ident, 2, batched=True, action_repeat=1)
+    try:
+        tiles, _ = batch.reset(seed=2)
+        assert not np.array_equal(batch.unwrapped.lanes[0].model.site_pos, batch.unwrapped.lanes[1].model.site_pos)
+        for i in range(2):
+            env = visualenv.make(ident, action_repeat=1)
+            try:
+                alone = env.reset(seed=2 + i)[0].astype(int)
+            finally:
+                env.close()
+            difference = np.abs(tiles[i].astype(int) - alone)
+            assert (difference > 8).mean() < 0.001, (i, (difference > 8).sum(), difference.mean())
+    finally:
+        batch.close()
 
 
 def body_column(frame: np.ndarray) -> tuple[float, int]:
