@@ -69,6 +69,23 @@ def test_the_state_interface_steps_as_dm_control_over_two_episodes(seed: int) ->
     assert [mine.step(np.zeros(1)).step_type for _ in range(2)] == [StepType.MID] * 2
 
 
+@pytest.mark.parametrize("domain, task", [("reacher", "hard"), ("finger", "turn_easy"), ("finger", "turn_hard")])
+def test_the_tasks_whose_reset_writes_sizes_and_sites_step_as_dm_control(domain: str, task: str) -> None:
+    """reacher hard (the target's size) and finger turn (the target site's place and radius, from the hinge's anchor):
+    dm_control's flat observation spec, and its observations, rewards and qpos over a few steps."""
+    mine = dmc.load(domain, task, task_kwargs={"random": 3}, render=False)
+    other = suite.load(domain, task, task_kwargs={"random": 3}, environment_kwargs={"flat_observation": True})
+    assert mine.observation_spec() == other.observation_spec() and mine.action_spec() == other.action_spec()
+    actions = np.random.default_rng(3)
+    a, b = mine.reset(), other.reset()
+    for step in range(30):
+        assert_same_step(a, b, f"step {step}")
+        np.testing.assert_allclose(a.observation["observations"], b.observation["observations"], atol=1e-9, rtol=0)
+        np.testing.assert_array_equal(mine.physics.named.data.qpos, other.physics.named.data.qpos)
+        action = actions.uniform(-1, 1, size=other.action_spec().shape)
+        a, b = mine.step(action), other.step(action)
+
+
 @pytest.mark.blender
 def test_the_pixels_interface_is_dm_controls_layout_and_steps_as_it_does() -> None:
     mine, other = dmc.load("cartpole", "swingup", task_kwargs={"random": 2}), theirs(2)

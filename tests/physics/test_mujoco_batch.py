@@ -43,6 +43,7 @@ IDS = [
     "DMC-cheetah-run-v0",
     "DMC-finger-spin-v0",
     "DMC-reacher-easy-v0",
+    "DMC-reacher-hard-v0",  # its reset writes a geom's size too
     "DMC-acrobot-swingup-v0",  # RK4: dm_control's step is one mj_step(nstep)
     "DMC-hopper-hop-v0",  # its reward reads the bodies' centres of mass (xipos) and its observation touch sensors
     "VisualHalfCheetah-v0",

@@ -142,18 +142,72 @@ def test_a_reset_key_that_cannot_be_written_is_a_located_error(tmp_path: Path) -
         """\
         reset:
           values:
-            model_geom_size_ball_geom_0: 0.2
+            model_jnt_range_hinge_lo: 0.2
             model_geom_pos_markr_x: 1
             body_ball_x: 1
     """,
     )
     message = errors_of(path)
-    line = line_of(path, "model_geom_size_ball_geom_0")
-    assert located(message, path, "'model_geom_size_ball_geom_0' is read from the model, not written") == (line, 7)
+    line = line_of(path, "model_jnt_range_hinge_lo")
+    assert located(message, path, "'model_jnt_range_hinge_lo' is read from the model, not written") == (line, 7)
     assert located(
         message, path, "no writable model field 'model_geom_pos_markr_x' to set (did you mean 'model_geom_pos_marker_x'"
     ) == (line + 1, 7)
     assert located(message, path, "'body_ball_x' is computed by MuJoCo from the state") == (line + 2, 7)
+
+
+#: MODEL with a camera to render through and a site on the world body (finger turn's target is one)
+DRAWN = MODEL.replace(
+    "<worldbody>", '<worldbody>\n    <camera name="top" pos="0 0 5"/>\n    <site name="goal" pos="0 1 0.1" size="0.1"/>'
+)
+
+
+def test_a_reset_writes_sizes_and_a_sites_position_from_a_joints_anchor(tmp_path: Path) -> None:
+    """Sizes and a site's position are written as finger turn's reset writes them (from its hinge's anchor, ``xanchor``);
+    drawn, each is a binding of its object: the scale over the size it was built at, a site's location in its body."""
+    path = write(
+        tmp_path,
+        """\
+        reset:
+          values:
+            model_geom_size_marker_0: 0.2
+            model_site_pos_goal_x: joint_hinge_x + 1
+            model_site_size_goal_0: 0.3
+        observe: [model_geom_size_marker_0, site_goal_x, model_site_size_goal_0, joint_hinge_x, joint_hinge_y, joint_hinge_z]
+    """,
+        top="observation: {camera: top, resolution: [16, 16], color: rgb}",
+    )
+    (tmp_path / "reset.xml").write_text(DRAWN, encoding="utf-8")
+    env = VisualEnv(path, render=False)
+    obs, _ = env.reset(seed=0)
+    assert obs.tolist() == [0.2, 3.0, 0.3, 2.0, 0.0, 1.0]  # the arm's hinge is anchored at its body's (2, 0, 1)
+    assert env.model.site_pos[0].tolist() == [3.0, 1.0, 0.1] and env.model.site_size[0][0] == 0.3
+    assert [(t.object, t.property) for t in env.program.bindings] == [
+        ("marker", "scale"),
+        ("site:goal", "scale"),
+        ("site:goal", "location"),
+    ]
+
+
+def test_a_drawn_capsules_size_is_not_written(tmp_path: Path) -> None:
+    """A capsule drawn at a new radius would need its caps rebuilt: a located error; hidden (not drawn), it is written."""
+    extra = """\
+        reset:
+          values: {model_geom_size_arm_geom_0: 0.1}
+    """
+    path = write(tmp_path, extra, top="observation: {camera: top, resolution: [16, 16], color: rgb}")
+    (tmp_path / "reset.xml").write_text(DRAWN, encoding="utf-8")
+    message = errors_of(path)
+    assert located(
+        message, path, "the geom 'arm_geom' is drawn as a capsule, which cannot be drawn at another size"
+    ) == (
+        line_of(path, "model_geom_size_arm_geom_0"),
+        14,
+    )
+    hidden = write(tmp_path, extra)  # no observation: nothing is drawn
+    env = VisualEnv(hidden, render=False)
+    env.reset(seed=0)
+    assert env.model.geom_size[4][0] == 0.1
 
 
 # -- redraw -----------------------------------------------------------------------------------------

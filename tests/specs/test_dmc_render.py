@@ -1,7 +1,9 @@
 """The DMC tasks from pixels, rendered by Blender: a geom the reset moves is drawn where it is; tracking cameras follow.
 
 Reacher's reset writes its target geom's model position (``model_geom_pos_target_x/_y``): the
-target is drawn there, in one env and in each env of a batch (each env its own target). Cheetah's
+target is drawn there, in one env and in each env of a batch (each env its own target); reacher hard's
+also writes its size (``model_geom_size_target_0``, 0.015): drawn at that size. Finger turn's reset moves its
+target site and sets its radius: each env of a batch draws its own, as that env alone. Cheetah's
 and walker's camera 0 tracks the body's centre of mass: their single envs render through it, so
 the body stays in view wherever it runs. (The look, dm_control's lighting, is a later stage: docs/dmc.md.)
 """
@@ -35,22 +37,34 @@ def target_pixel(model) -> tuple[float, float]:
     return (SIZE - 1) / 2 + PER_METRE * x, (SIZE - 1) / 2 - PER_METRE * y
 
 
-def reacher_with_a_mask(tmp_path: Path) -> Path:
-    """DMC-reacher-easy-v0 with a segmentation camera beside its own (the same camera): where the target is drawn, exactly."""
-    text = (DMC / "reacher_easy.yaml").read_text(encoding="utf-8")
-    text = text.replace("model: assets/reacher.xml", f"model: {DMC / 'assets' / 'reacher.xml'}")
+#: the target's radius in each reacher task (dm_control's _BIG_TARGET, _SMALL_TARGET)
+RADIUS = {"easy": 0.05, "hard": 0.015}
+
+
+def with_a_mask(tmp_path: Path, domain: str, task: str, camera: str) -> Path:
+    """DMC-<domain>-<task>-v0 with a segmentation camera beside its own (the same camera): where each object is drawn, exactly."""
+    text = (DMC / f"{domain}_{task}.yaml").read_text(encoding="utf-8")
+    text = text.replace(f"model: assets/{domain}.xml", f"model: {DMC / 'assets' / f'{domain}.xml'}")
     text = text.replace(
-        "observation: {camera: fixed, resolution: [84, 84], color: rgb}",
-        "observation:\n  cameras:\n    eye: {camera: fixed, resolution: [84, 84], color: rgb}\n"
-        "    mask: {camera: fixed, resolution: [84, 84], color: segmentation}",
+        f"observation: {{camera: {camera}, resolution: [84, 84], color: rgb}}",
+        f"observation:\n  cameras:\n    eye: {{camera: {camera}, resolution: [84, 84], color: rgb}}\n"
+        f"    mask: {{camera: {camera}, resolution: [84, 84], color: segmentation}}",
     )
-    path = tmp_path / "reacher_mask.yaml"
-    path.write_text(text.replace("id: DMC-reacher-easy-v0", "id: ReacherMask-v0"), encoding="utf-8")
+    path = tmp_path / f"{domain}_mask.yaml"
+    path.write_text(text.replace(f"id: DMC-{domain}-{task}-v0", "id: MaskedTask-v0"), encoding="utf-8")
     return path
 
 
-def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None:
-    env = VisualEnv(reacher_with_a_mask(tmp_path))
+def reacher_with_a_mask(tmp_path: Path, task: str = "easy") -> Path:
+    """DMC-reacher-<task>-v0 with a segmentation camera: where the target is drawn, exactly."""
+    return with_a_mask(tmp_path, "reacher", task, "fixed")
+
+
+@pytest.mark.parametrize("task", RADIUS)
+def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path, task: str) -> None:
+    """Where the reset put it, and as large as it made it: a disc of the target's radius seen from above."""
+    env = VisualEnv(reacher_with_a_mask(tmp_path, task))
+    disc = math.pi * (RADIUS[task] * PER_METRE) ** 2  # about 147 pixels (easy) and 13 (hard)
     try:
         target = env.segmentation_ids["geom:target"]  # a geom the reset moves is drawn on a body of its own
         seen = []
@@ -59,7 +73,7 @@ def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None
             mask = obs["mask"][..., 0] == target
             rows, columns = np.nonzero(mask)
             column, row = target_pixel(env.model)
-            assert 60 <= mask.sum() <= 160, mask.sum()  # a disc of radius 0.05 m: about 6.8 pixels
+            assert 0.6 * disc <= mask.sum() <= 1.1 * disc, (mask.sum(), disc)  # the arm may hide some of it
             assert abs(columns.mean() - column) < 1.0 and abs(rows.mean() - row) < 1.0, (
                 seed,
                 columns.mean(),
@@ -79,9 +93,11 @@ def test_reachers_target_is_drawn_where_the_reset_put_it(tmp_path: Path) -> None
         env.close()
 
 
-def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path) -> None:
-    """Tile i's target is where env i's reset put it, and its mask is env i's rendered alone, over a few steps."""
-    path = reacher_with_a_mask(tmp_path)
+@pytest.mark.parametrize("task", RADIUS)
+def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path, task: str) -> None:
+    """Tile i's target is where env i's reset put it, and its mask is env i's rendered alone, over a few steps (hard's
+    target as small as its reset made it: drawn scaled in each env's tile)."""
+    path = reacher_with_a_mask(tmp_path, task)
     batch = BatchedVectorEnv(path, 3, action_repeat=1)
     singles = [VisualEnv(path, action_repeat=1) for _ in range(3)]
     try:
@@ -112,6 +128,27 @@ def test_each_env_of_a_batch_draws_its_own_target(tmp_path: Path) -> None:
         batch.close()
         for env in singles:
             env.close()
+
+
+@pytest.mark.parametrize("ident", ["DMC-finger-turn_easy-v0", "DMC-finger-turn_hard-v0"])
+def test_each_env_of_a_finger_turn_batch_draws_its_own_target(ident: str) -> None:
+    """Finger turn's reset moves its target site and sets its radius (a site of the world body, which segmentation
+    counts as the floor's): tile i is env i's frame alone, its own target where and as large as env i's, though each
+    env's target is elsewhere. (One env's target against MuJoCo's: tests/specs/test_dmc_drawn.py.)"""
+    batch = visualenv.make_vec(ident, 2, batched=True, action_repeat=1)
+    try:
+        tiles, _ = batch.reset(seed=2)
+        assert not np.array_equal(batch.unwrapped.lanes[0].model.site_pos, batch.unwrapped.lanes[1].model.site_pos)
+        for i in range(2):
+            env = visualenv.make(ident, action_repeat=1)
+            try:
+                alone = env.reset(seed=2 + i)[0].astype(int)
+            finally:
+                env.close()
+            difference = np.abs(tiles[i].astype(int) - alone)
+            assert (difference > 8).mean() < 0.001, (i, (difference > 8).sum(), difference.mean())
+    finally:
+        batch.close()
 
 
 def body_column(frame: np.ndarray) -> tuple[float, int]:

@@ -46,6 +46,9 @@ TASKS = {
     "DMC-acrobot-swingup-v0": ("acrobot", "swingup", 2, "fixed"),
     "DMC-hopper-stand-v0": ("hopper", "stand", 2, "cam0"),
     "DMC-hopper-hop-v0": ("hopper", "hop", 2, "cam0"),
+    "DMC-reacher-hard-v0": ("reacher", "hard", 2, "fixed"),
+    "DMC-finger-turn_easy-v0": ("finger", "turn_easy", 2, "cam0"),
+    "DMC-finger-turn_hard-v0": ("finger", "turn_hard", 2, "cam0"),
 }
 #: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
 DRQ_V2 = list(TASKS)[5:]
@@ -59,7 +62,7 @@ DENSE = (
     "DMC-acrobot-swingup-v0",
 )
 #: the model fields each task's reset writes (dm_control's initialize_episode), compared after every reset
-WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping",)}
+WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping", "site_pos", "site_size")}
 
 
 def load(ident: str, seed: int):
@@ -230,11 +233,14 @@ def test_a_batch_steps_as_dm_control(ident: str) -> None:
 
 
 #: the sparse tasks random actions rarely pay: qpos set around where they pay (cartpole: the cart within 0.25 m and the
-#: pole within about 5.7 degrees of upright; pendulum: the pole within 8 degrees), as (low, high) of each qpos
+#: pole within about 5.7 degrees of upright; pendulum: the pole within 8 degrees; finger turn: the spinner at any angle,
+#: its tip within the target's radius for some), as (low, high) of each qpos
 AROUND_THE_BOUNDS = {
     "DMC-cartpole-balance_sparse-v0": ([-0.4, -0.15], [0.4, 0.15]),
     "DMC-cartpole-swingup_sparse-v0": ([-0.4, -0.15], [0.4, 0.15]),
     "DMC-pendulum-swingup-v0": ([-0.3], [0.3]),
+    "DMC-finger-turn_easy-v0": ([-0.2, -0.2, -math.pi], [0.2, 0.2, math.pi]),
+    "DMC-finger-turn_hard-v0": ([-0.2, -0.2, -math.pi], [0.2, 0.2, math.pi]),
 }
 
 

@@ -68,11 +68,31 @@ class BindingsCompiler:
                     raw = getattr(actor, prop)
                     if raw is not None:
                         self.bind_property(fb, ("actors", obj_name, prop), raw, scope, targets, values)
+        self.bind_written_fields(fb, targets, values)
         self.physics_reads(fb, "bind", start, self.used, set(state_names))
         self.used |= before
         fb.returns(tuple_of(values))
         self.check_cameras()
         return fb, targets
+
+    def bind_written_fields(self, fb: FunctionBuilder, targets: list[BindingTarget], values: list[ast.expr]) -> None:
+        """The model fields a reset writes of drawn geoms and sites, drawn: their objects' scale (a size written) and a
+        site's location (its position written), bound as an actor's are (:func:`~visualenv.physics.geom_poses.drawn_writes`)."""
+        plan = self.plan
+        if plan is None or plan.scene is None:
+            return
+        from visualenv.physics.geom_poses import drawn_writes
+
+        written = [*plan.reset_targets, *plan.redraw_targets]
+        for write in drawn_writes(plan.scene, plan.model, written, set(self.spec.scene.objects))[0]:
+            site = Site("physics.reset", f"the {write.prop} of '{write.object}' the reset wrote, drawn")
+            for field, divisor in write.values:
+                self.used.add(field)
+                read = name(local(field))
+                var = f"_b{len(values)}"
+                fb.assign(var, read if divisor == 1.0 else ast.BinOp(read, ast.Div(), const(divisor)), site)
+                values.append(name(var))
+            targets.append(BindingTarget(write.object, write.prop, len(write.values)))
 
     def bound_object_known(self, obj_name: str) -> bool:
         """A bound object must be declared, unless a .blend may hold it (the renderer checks those)."""

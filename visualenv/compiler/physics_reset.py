@@ -92,6 +92,14 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
         from visualenv.physics.geom_poses import with_posed_geoms
 
         plan.scene = with_posed_geoms(plan.scene, plan.model, geoms)
+    if plan.scene is not None:
+        from visualenv.physics.geom_poses import drawn_writes
+
+        for written, problem in drawn_writes(plan.scene, plan.model, [*targets, *redrawn])[1]:
+            place = ("values",) if written in targets else ("redraw", "values")
+            keys = section.values if written in targets else section.redraw.values  # type: ignore[union-attr]
+            key = next(k for k in keys if written in [p.strip() for p in k.split(",")])
+            c.error(("physics", "reset", *place, key), problem, key=True)
 
 
 def entries(
@@ -144,8 +152,8 @@ def why(key: str, c: ResetCompiler, writable: Collection[str]) -> str:
     array = c.plan.model.names.values.get(key, ("", 0))[0]
     if key in c.pnames and array.startswith(MODEL_PREFIX):
         return (
-            f"'{key}' is read from the model, not written: a reset writes joint values (qpos_, qvel_), geoms' positions "
-            "(model_geom_pos_...) and damping (model_dof_damping_...); the renderer draws a geom at its model size"
+            f"'{key}' is read from the model, not written: a reset writes joint values (qpos_, qvel_), geoms' and "
+            "sites' positions and sizes (model_geom_pos_..., model_site_size_...) and damping (model_dof_damping_...)"
         )
     if key in c.pnames:
         return f"'{key}' is computed by MuJoCo from the state: a reset writes joint values (qpos_, qvel_), mocap poses and writable model fields"

@@ -15,7 +15,7 @@ are called ``<kind><index>``, e.g. ``actuator0``):
   ``mocap_pos`` and ``mocap_quat``, which the spec sets (:data:`SETTABLE`) to move a body that has no joint;
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
 * ``ctrl_<actuator>``; ``sim_time``;
-* ``geom_<g>_x/_y/_z`` (world position), ``ncon`` (the contact count) and the model's own fields,
+* ``geom_<g>_x/_y/_z`` (world position), ``joint_<j>_x/_y/_z`` (a joint's anchor), ``ncon`` (the contact count) and the model's own fields,
   ``model_<field>_<element>[_<column>]``, some of which a reset writes (:mod:`visualenv.physics.model_fields`).
 
 Two elements that come to one name (joints ``left-leg`` and ``left_leg``, a free
@@ -50,6 +50,7 @@ ARRAYS = (
     "xquat",
     "xmat",
     "xipos",
+    "xanchor",
     "site_xpos",
     "geom_xpos",
     "sensordata",
@@ -182,13 +183,14 @@ class PhysicsModel:
             ("body rotation matrices", "xmat"),
             ("body centres of mass", "xipos"),
             ("sites", "site_xpos"),
+            ("joint anchors", "xanchor"),
             ("sensors", "sensordata"),
             ("actuator controls", "ctrl"),
         ):
             groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
         groups["mocap bodies (set in physics.reset.values and dynamics.update)"] = self.mocap_names()
         groups["geom positions"] = [n for n, (a, _) in self.names.values.items() if a == "geom_xpos"]
-        groups["model fields (model_geom_pos_... and model_dof_damping_... written at reset)"] = [
+        groups["model fields (positions, sizes and damping written at reset)"] = [
             n for n, (a, _) in self.names.values.items() if a.startswith("model.")
         ]
         groups["contacts"] = ["ncon"]

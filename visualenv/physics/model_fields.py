@@ -1,4 +1,5 @@
-"""The names that read a model's own numbers: geoms' world positions, the contact count, and MjModel fields a reset may write.
+"""The names that read a model's own numbers: geoms' world positions, joints' anchors, the contact count, and MjModel
+fields a reset may write.
 
 DeepMind Control's tasks read and write the model in ``initialize_episode`` and their rewards
 (reacher moves its target geom and reads the geoms' radii, finger sets its hinge's damping, the
@@ -6,6 +7,7 @@ joint randomiser draws in each joint's range, ball_in_cup counts contacts). Thes
 in a spec:
 
 * ``geom_<g>_x/_y/_z``: a geom's world position (MjData's ``geom_xpos``), as ``body_`` and ``site_`` names are;
+* ``joint_<j>_x/_y/_z``: a joint's anchor in the world (MjData's ``xanchor``), which finger turn's reset reads;
 * ``ncon``: the number of contacts MuJoCo found (MjData's ``ncon``): ``ncon == 0`` is nothing touching;
 * ``model_<field>_<element>`` and ``model_<field>_<element>_<column>``: the element's row of MjModel's
   ``<field>`` (:data:`MODEL_FIELDS`), as dm_control's ``physics.named.model.<field>[element, column]``
@@ -20,7 +22,7 @@ the flat live view a reader indexes (none for the scalars, read as attributes ea
 
 from __future__ import annotations
 
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any, Callable, Collection, Mapping, Sequence
 
 import numpy as np
 
@@ -28,13 +30,14 @@ import numpy as np
 MODEL_FIELDS: dict[str, tuple[str, tuple[str, ...]]] = {
     "geom_pos": ("geom", ("x", "y", "z")),
     "geom_size": ("geom", ("0", "1", "2")),
+    "site_pos": ("site", ("x", "y", "z")),
     "site_size": ("site", ("0", "1", "2")),
     "jnt_range": ("joint", ("lo", "hi")),
     "dof_damping": ("dof", ()),
 }
-#: the fields a reset may write: a geom's position (a drawn geom follows it) and a degree of freedom's damping (physics
-#: alone); sizes and ranges are read only (the renderer draws a geom at its model size)
-WRITABLE = ("geom_pos", "dof_damping")
+#: the fields a reset may write: geoms' and sites' positions and sizes (drawn where and as large as written) and a degree
+#: of freedom's damping (physics alone); joint ranges are read only
+WRITABLE = ("geom_pos", "geom_size", "site_pos", "site_size", "dof_damping")
 #: a name's array is MjModel's field when it starts so
 MODEL_PREFIX = "model."
 #: MjData's scalars a name reads (as attributes, each time: no view holds them)
@@ -51,9 +54,10 @@ def is_writable(array: str) -> bool:
     return array.startswith(MODEL_PREFIX) and array[len(MODEL_PREFIX) :] in WRITABLE
 
 
-def written_geoms(names: Sequence[str], table: Mapping[str, tuple[str, int]]) -> list[int]:
-    """The geoms (ids, ascending) whose model position `names` write: those a renderer moves after a reset."""
-    return sorted({table[n][1] // 3 for n in names if table.get(n, ("", 0))[0] == model_array("geom_pos")})
+def written_geoms(names: Collection[str], table: Mapping[str, tuple[str, int]], field: str = "geom_pos") -> list[int]:
+    """The elements (ids, ascending) whose row of `field` (a field of three columns) `names` write: by default the geoms
+    whose model position a renderer moves after a reset."""
+    return sorted({table[n][1] // 3 for n in names if table.get(n, ("", 0))[0] == model_array(field)})
 
 
 def live_array(model: Any, data: Any, array: str) -> np.ndarray | None:
@@ -80,6 +84,9 @@ def model_values(
     for g, name in enumerate(ident["geom"]):
         for i, p in enumerate("xyz"):
             out.append((f"geom_{name}_{p}", ("geom_xpos", 3 * g + i), owners["geom"][g]))
+    for j, name in enumerate(ident["joint"]):
+        for i, p in enumerate("xyz"):
+            out.append((f"joint_{name}_{p}", ("xanchor", 3 * j + i), owners["joint"][j]))
     out.append(("ncon", ("ncon", 0), "the contact count"))
     dofs = {index: name[len("qvel_") :] for name, index in qvel.items()}
     for field, (kind, columns) in MODEL_FIELDS.items():
