@@ -222,6 +222,16 @@ def table(records: list[dict[str, Any]]) -> list[str]:
     ]
     for r in records:
         out.append(f"| {r['id']} | " + " | ".join(f"{r['sync_ms'][p]:.2f}" for p in SYNC_PARTS) + " |")
+    out += [
+        "",
+        "what recording added to a render call (the median over pairs of alternate steps), and how much of it hooks holds:",
+    ]
+    for r in records:
+        out.append(
+            f"  {r['id']}: {r['hooks_added_ms']:.2f} ms for {r['status_lines_per_step']:.0f} lines; "
+            f"{r['columns_ms']['hooks']:.2f} ms taken out ({r['hooks_us_per_line']:.1f} us a line), the rest left in the "
+            f"phases; unrecorded step {r['step_unrecorded_ms_median']:.2f} ms (median)"
+        )
     out += ["", "the render call's longest stretches, by the status line that opened them (ms, hooks included):"]
     for r in records:
         top = list(r["status_lines_ms"].items())[:6]
