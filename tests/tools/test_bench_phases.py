@@ -9,7 +9,7 @@ from click.testing import CliRunner
 from visualenv.cli import main
 from visualenv.tools.bench import blender_data_blocks
 from visualenv.tools.bench_phases import COLUMNS
-from visualenv.tools.render_events import SYNC_PARTS
+from visualenv.tools.render_events import MARKED, SYNC_PARTS
 
 pytestmark = pytest.mark.blender
 
@@ -38,6 +38,10 @@ def test_phases_prints_every_column_and_they_add_up_to_the_step(tmp_path):
     assert math.isclose(sum(record["sync_ms"][part] for part in SYNC_PARTS), columns["sync"], rel_tol=1e-6)
     assert columns["trace"] > 0 and record["steps"] == 6  # every other step recorded
     assert set(record["ablation"]["parts"]) == {"bodies"} and record["ablation"]["control_call_ms"] > 0
+    # every step's call is also cut at Cycles' marks alone, with and without the lines
+    assert "the render call cut at Cycles' marks alone" in result.output
+    for marked in record["marked_ms"].values():
+        assert set(marked) == set(MARKED) and min(marked.values()) >= 0 and marked["cycles_render"] > 0
     assert blender_data_blocks() == blocks  # the env and the copies are gone
 
 

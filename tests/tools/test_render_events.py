@@ -2,7 +2,7 @@
 
 import pytest
 
-from visualenv.tools.render_events import UPDATE_MARK, label_of, phase_of, split_call
+from visualenv.tools.render_events import UPDATE_MARK, label_of, marked_call, phase_of, split_call
 
 
 @pytest.mark.parametrize(
@@ -64,3 +64,15 @@ def test_a_call_is_split_at_its_lines_and_the_stretches_add_up_to_it():
 def test_a_call_without_lines_is_all_blenders_own():
     split = split_call(1.0, 3.0, [])
     assert split.seconds["depsgraph"] == 2.0 and split.total("sync") == 0.0
+
+
+def test_a_call_is_cut_at_the_first_of_each_of_cycles_marks():
+    marks = [(0.5, "render_end"), (2.0, "update"), (3.0, "update_end"), (3.5, "render"), (8.0, "render_end")]
+    assert marked_call(1.0, 9.0, marks) == {
+        "before_update": 1.0,
+        "cycles_update": 1.0,
+        "between": 0.5,
+        "cycles_render": 4.5,
+        "after_render": 1.0,
+    }
+    assert marked_call(1.0, 9.0, marks[:3]) is None  # Cycles never rendered: nothing to cut

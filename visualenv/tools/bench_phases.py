@@ -11,7 +11,6 @@ each, at the same states. Timings vary on a shared machine: this prints figures,
 
 from __future__ import annotations
 
-import contextlib
 import time
 from typing import Any
 
@@ -21,7 +20,7 @@ from visualenv.errors import ConfigError
 from visualenv.render.profile import Profile
 from visualenv.tools.bench import device_option, random_actions, run_env
 from visualenv.tools.bench_ablation import PARTS, ablation
-from visualenv.tools.render_events import SYNC_PARTS, BlenderEvents, split_call
+from visualenv.tools.render_events import MARKED, SYNC_PARTS, BlenderEvents, marked_call, split_call
 
 #: the columns of a step, in its order; they add up to the step
 COLUMNS = ("env", "update", "depsgraph", "sync", "bvh", "trace", "film", "readback", "rest", "hooks")
@@ -43,6 +42,8 @@ HOW = {
     "pass, render_post",
     "readback": "the pass converted to the observation's bytes (the renderer's profile)",
     "rest": "the step after the readback: sensors, info, wrappers",
+    "marked": "the render call cut at the marks Cycles' engine methods make (nearly free, on every step): before its "
+    "update, the update, between, its render method, after it; median, for the steps with the lines and without",
     "hooks": "what recording costs, taken out of each phase for its status lines: per line, the median difference "
     "between the render calls of alternate steps with and without the handler over the lines of a call, at most the "
     "shortest stretches between two lines (10th percentile); the rest of that difference (hooks_added_ms in the "
@@ -126,8 +127,8 @@ def bench_phases(
         try:
             env.reset(seed=seed + 1)
             for i, action in enumerate(actions[warmup : warmup + steps]):
-                recorded = i % 2 == 0
-                with events if recorded else contextlib.nullcontext():
+                recorded = events.lines = i % 2 == 0
+                with events:
                     start = time.perf_counter()
                     _, _, terminated, truncated, _ = env.step(action)
                     windows.append((start, time.perf_counter(), recorded))
@@ -136,6 +137,7 @@ def bench_phases(
         finally:
             renderer.profile = None
         record = _summary(windows, profile, events.events)
+        record["marked_ms"] = _marked(windows, profile, events.marks)
         record.update(spec=str(spec), id=base.program.spec.id, pixels=_pixels(renderer))
         rest = actions[warmup + steps :]
 
@@ -153,6 +155,23 @@ def bench_phases(
 
 def _pixels(renderer: Any) -> str:
     return ", ".join(f"{v.resolution[0]}x{v.resolution[1]} {v.color}" for v in renderer.plan.views.values())
+
+
+def _marked(
+    windows: list[tuple[float, float, bool]], profile: Profile, marks: list[tuple[float, str]]
+) -> dict[str, dict[str, float]]:
+    """The render calls cut at Cycles' marks alone, median per step (ms), for the steps with the lines and without."""
+    out: dict[str, dict[str, float]] = {}
+    for recorded, key in ((True, "with_lines"), (False, "without_lines")):
+        rows = []
+        for start, end, r in windows:
+            if r is not recorded:
+                continue
+            cut = [marked_call(s, e, marks) for s, e in _spans(profile, "render", start, end)]
+            if cut and all(c is not None for c in cut):
+                rows.append({name: sum(c[name] for c in cut if c is not None) for name in MARKED})
+        out[key] = {name: 1000 * float(np.median([row[name] for row in rows])) if rows else 0.0 for name in MARKED}
+    return out
 
 
 def _summary(windows: list[tuple[float, float, bool]], profile: Profile, events: list[tuple[float, str]]) -> dict:
@@ -232,6 +251,15 @@ def table(records: list[dict[str, Any]]) -> list[str]:
             f"{r['columns_ms']['hooks']:.2f} ms taken out ({r['hooks_us_per_line']:.1f} us a line), the rest left in the "
             f"phases; unrecorded step {r['step_unrecorded_ms_median']:.2f} ms (median)"
         )
+    out += [
+        "",
+        "the render call cut at Cycles' marks alone (median ms; "
+        + ", ".join(MARKED)
+        + "), without the lines / with them:",
+    ]
+    for r in records:
+        without, lines = r["marked_ms"]["without_lines"], r["marked_ms"]["with_lines"]
+        out.append(f"  {r['id']}: " + "; ".join(f"{name} {without[name]:.2f} / {lines[name]:.2f}" for name in MARKED))
     out += ["", "the render call's longest stretches, by the status line that opened them (ms, hooks included):"]
     for r in records:
         top = list(r["status_lines_ms"].items())[:6]

@@ -124,10 +124,15 @@ def split_call(start: float, end: float, events: list[tuple[float, str]]) -> Cal
 
 
 class BlenderEvents:
-    """Records Blender's status lines and the start of Cycles' update while entered (``with events: render()``)."""
+    """Records Blender's status lines (where `lines`) and the moments Cycles' engine marks (its update's and render's
+    starts and ends, into :attr:`marks`; the update's start also into :attr:`events`) while entered
+    (``with events: render()``). The marks cost next to nothing (Python calls on the thread already running Python);
+    the lines are a Python handler Blender calls from Cycles' threads, which costs each render call some time."""
 
     def __init__(self) -> None:
         self.events: list[tuple[float, str]] = []
+        self.marks: list[tuple[float, str]] = []
+        self.lines = True
         self._stop: Any = None
 
     def line(self, text: str, *args: Any) -> None:
@@ -135,19 +140,23 @@ class BlenderEvents:
         self.events.append((time.perf_counter(), text))
 
     def mark(self, moment: str) -> None:
-        """Cycles' engine calls this at its update's and render's starts and ends; the update's start is kept."""
+        """Cycles' engine calls this at its update's and render's starts and ends (:data:`~visualenv.compat.blender.CYCLES_MARKS`)."""
+        now = time.perf_counter()
+        self.marks.append((now, moment))
         if moment == "update":
-            self.events.append((time.perf_counter(), UPDATE_MARK))
+            self.events.append((now, UPDATE_MARK))
 
     def clear(self) -> None:
         self.events.clear()
+        self.marks.clear()
 
     def __enter__(self) -> BlenderEvents:
         import bpy
 
         from visualenv.compat.blender import mark_cycles_calls
 
-        bpy.app.handlers.render_stats.append(self.line)
+        if self.lines:
+            bpy.app.handlers.render_stats.append(self.line)
         self._stop = mark_cycles_calls(self.mark)
         return self
 
@@ -159,3 +168,21 @@ class BlenderEvents:
         if self._stop is not None:
             self._stop()
             self._stop = None
+
+
+#: the render call cut at Cycles' marks alone: Blender before Cycles' update, the update (Blender's data read into
+#: Cycles), Blender between it and the render, Cycles' render method (device update, BVH, tracing, the result written
+#: back, the in-memory copy), Blender after it
+MARKED = ("before_update", "cycles_update", "between", "cycles_render", "after_render")
+
+
+def marked_call(start: float, end: float, marks: list[tuple[float, str]]) -> dict[str, float] | None:
+    """The call from `start` to `end` cut at the first of each Cycles mark in it; None where one is missing."""
+    inside = {}
+    for moment, name in marks:
+        if start <= moment <= end and name not in inside:
+            inside[name] = moment
+    if not all(name in inside for name in ("update", "update_end", "render", "render_end")):
+        return None
+    cuts = [start, inside["update"], inside["update_end"], inside["render"], inside["render_end"], end]
+    return {name: b - a for name, a, b in zip(MARKED, cuts[:-1], cuts[1:])}
