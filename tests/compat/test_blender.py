@@ -141,6 +141,25 @@ def test_cycles_render_method_can_be_wrapped_to_read_its_result():
     assert pixels == [64]
 
 
+def test_cycles_update_and_render_can_be_marked_and_the_marks_stopped():
+    """Part: Cycles' update and render methods wrapped (bench --phases: where Blender's depsgraph ends, Cycles' sync starts)."""
+    moments: list[str] = []
+    scene, camera, data = cycles_scene("visualenv-compat-marks", 8)
+    stop = compat.mark_cycles_calls(moments.append)
+    try:
+        assert stop is not None
+        bpy.ops.render.render(scene=scene.name)
+        stop()
+        bpy.ops.render.render(scene=scene.name)
+    finally:
+        if stop is not None:
+            stop()
+        bpy.data.scenes.remove(scene)
+        bpy.data.objects.remove(camera)
+        bpy.data.cameras.remove(data)
+    assert moments == list(compat.CYCLES_MARKS)
+
+
 def random_objects(rng: np.random.Generator, count: int, mode: str, scene) -> list:
     objects = []
     for _ in range(count):

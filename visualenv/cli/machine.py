@@ -56,6 +56,29 @@ def _bench_batched(
         results.append({"spec": spec, "batched": batches, "per_process": per_process})
 
 
+def _bench_phases(
+    specs: tuple[str, ...],
+    steps: int,
+    readback: str,
+    threads: int | None,
+    device: str | None,
+    trust_code: bool,
+    results: list[Any],
+) -> None:
+    """`bench --phases`: each spec's phase record, then the table of them all."""
+    from visualenv.tools.bench_phases import bench_phases, table
+
+    for spec in specs:
+        click.echo(
+            f"{spec}: {steps} steps, every other one recorded, then the shader copies at {max(1, steps // 2)} states"
+        )
+        results.append(
+            bench_phases(spec, steps, readback=readback, threads=threads, device=device, trust_code=trust_code)
+        )
+    for line in table(results):
+        click.echo(line)
+
+
 @main.command()
 @click.argument("specs", nargs=-1, required=True)
 @shown_option("--steps", default=500, type=click.IntRange(min=1), help="measured env steps (after a warm-up)")
@@ -103,7 +126,13 @@ def _bench_batched(
     default=None,
     help="render on this device (default: the spec's render.device)",
 )
-@click.option("--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
+@click.option(
+    "--phases",
+    is_flag=True,
+    help="instead: where a rendered step's time goes (env, scene update, Cycles' sync, BVH, path tracing, film, "
+    "readback) and what making the floor, skybox or bodies plain diffuse saves; one row per spec (docs/performance.md)",
+)
+@click.option("-o", "--json", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @trust_code_option
 @friendly
 def bench(
@@ -117,10 +146,12 @@ def bench(
     batch_sizes: tuple[int, ...] | None,
     autoreset: str,
     device: str | None,
+    phases: bool,
     json_out: str | None,
     trust_code: bool,
 ) -> None:
-    """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up."""
+    """Measure steps/s, render time, overhead vs the raw render floor, memory, parallel speed-up (--phases: where a
+    step's time goes)."""
     import platform
 
     import psutil
@@ -128,6 +159,8 @@ def bench(
     from visualenv.tools.bench import as_dict, bench_one
     from visualenv.env.cores import usable_cores
 
+    if phases and batch_sizes:
+        raise click.BadParameter("--phases splits one env's step; it does not take --batched", param_hint="--phases")
     if json_out:
         check_writable(json_out, "--json")
     for spec in specs:
@@ -140,14 +173,16 @@ def bench(
         f"{psutil.virtual_memory().total / 2**30:.0f} GiB, Python {platform.python_version()}"
     )
     results: list[Any] = []
-    if batch_sizes:
+    if phases:
+        _bench_phases(specs, steps, readback, threads, device, trust_code, results)
+    elif batch_sizes:
         split = (
             workers
             if click.get_current_context().get_parameter_source("workers") is ParameterSource.COMMANDLINE
             else None
         )
         _bench_batched(specs, batch_sizes, steps, cores, autoreset, results, split, device, trust_code)
-    for spec in specs if not batch_sizes else ():
+    for spec in specs if not (batch_sizes or phases) else ():
         single, scaling = (workers[0], ()) if len(workers) == 1 else (0, workers)
         figures = bench_one(
             spec,

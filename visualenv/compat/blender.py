@@ -112,6 +112,45 @@ def compile_camera_shader(camera: Any, scene: Any) -> None:
 # -- Cycles' render method ------------------------------------------------------------------------------------------
 
 
+def _cycles_method(name: str) -> Any:
+    """Cycles' engine method `name` ("update" or "render"), wrapped once per process so that it calls the functions in
+    its ``_visualenv_before`` and ``_visualenv_after`` lists (each ``f(engine)``) around the original; None without
+    the Cycles add-on."""
+    try:
+        import cycles  # Blender's bundled add-on, importable once bpy is
+
+        engine_class = cycles.CyclesRender
+    except (ImportError, AttributeError):
+        return None
+    check_bpy(f"wrapper of Cycles' {name} method")
+    method = getattr(engine_class, name)
+    if getattr(method, "_visualenv_after", None) is not None:
+        return method
+    original = method
+
+    def around(engine: Any, *args: Any) -> None:
+        for call in list(wrapper._visualenv_before):  # type: ignore[attr-defined]
+            call(engine)
+        original(engine, *args)
+        for call in list(wrapper._visualenv_after):  # type: ignore[attr-defined]
+            call(engine)
+
+    # explicit arguments: Blender passes as many as the method names
+    if name == "render":
+
+        def wrapper(self: Any, depsgraph: Any) -> None:
+            around(self, depsgraph)
+    else:
+
+        def wrapper(self: Any, data: Any, depsgraph: Any) -> None:  # type: ignore[misc]
+            around(self, data, depsgraph)
+
+    wrapper._visualenv_before = []  # type: ignore[attr-defined]
+    wrapper._visualenv_after = []  # type: ignore[attr-defined]
+    setattr(engine_class, name, wrapper)
+    return wrapper
+
+
 def wrap_cycles_render(after: Callable[[Any], None]) -> bool:
     """Have Cycles' engine call ``after(engine)`` at the end of each render, while it still holds its result
     (``engine.get_result()``); once per process. False when this bpy has no Cycles add-on.
@@ -120,24 +159,10 @@ def wrap_cycles_render(after: Callable[[Any], None]) -> bool:
     pixels); only the engine reads its result, inside its ``render``. Cycles' engine is the add-on's class
     ``cycles.CyclesRender``, not a documented hook.
     """
-    try:
-        import cycles  # Blender's bundled add-on, importable once bpy is
-
-        engine_class = cycles.CyclesRender
-    except (ImportError, AttributeError):
+    method = _cycles_method("render")
+    if method is None:
         return False
-    check_bpy("wrapper of Cycles' render method")
-    if getattr(engine_class.render, "_visualenv_after", None) is None:
-        original = engine_class.render
-
-        def render(self: Any, depsgraph: Any) -> None:  # explicit arguments: Blender passes as many as the method names
-            original(self, depsgraph)
-            for call in render._visualenv_after:  # type: ignore[attr-defined]
-                call(self)
-
-        render._visualenv_after = []  # type: ignore[attr-defined]
-        engine_class.render = render
-    calls = engine_class.render._visualenv_after
+    calls = method._visualenv_after
     if after not in calls:
         calls.append(after)
     return True
@@ -150,6 +175,40 @@ def unwrap_cycles_render(after: Callable[[Any], None]) -> None:
     calls = getattr(cycles.CyclesRender.render, "_visualenv_after", [])
     if after in calls:
         calls.remove(after)
+
+
+#: the moments :func:`mark_cycles_calls` reports, in the order of a render
+CYCLES_MARKS = ("update", "update_end", "render", "render_end")
+
+
+def mark_cycles_calls(mark: Callable[[str], None]) -> Callable[[], None] | None:
+    """Have Cycles' engine call ``mark(moment)`` at the start and end of its ``update`` (Blender's data synced into
+    Cycles) and its ``render`` (device update, path tracing, the result written back): the moments of
+    :data:`CYCLES_MARKS`. Returns the function that stops it; None without the Cycles add-on.
+
+    Why: Blender's render call gives Python its start and end (and ``bpy.app.handlers.render_stats``' status lines in
+    between), not where Blender's own depsgraph evaluation ends and Cycles' sync starts; only the engine's methods see that.
+    """
+    methods = {name: _cycles_method(name) for name in ("update", "render")}
+    if any(method is None for method in methods.values()):
+        return None
+
+    def marker(moment: str) -> Callable[[Any], None]:
+        return lambda engine: mark(moment)
+
+    added: list[tuple[list, Callable[[Any], None]]] = []
+    for name, method in methods.items():
+        for calls, moment in ((method._visualenv_before, name), (method._visualenv_after, f"{name}_end")):
+            call = marker(moment)
+            calls.append(call)
+            added.append((calls, call))
+
+    def stop() -> None:
+        for calls, call in added:
+            if call in calls:
+                calls.remove(call)
+
+    return stop
 
 
 # -- Blender's matrix arithmetic ------------------------------------------------------------------------------------

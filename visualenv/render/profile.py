@@ -18,12 +18,17 @@ class Profile:
     """Seconds spent per phase (one entry per occurrence), appended while attached."""
 
     times: dict[str, list[float]] = field(default_factory=lambda: {phase: [] for phase in PHASES})
+    #: when each occurrence began (``time.perf_counter()``), for the phases whose recorder says so: placing them in a
+    #: step, and Blender's own events in a render call (``visualenv bench --phases``)
+    starts: dict[str, list[float]] = field(default_factory=lambda: {phase: [] for phase in PHASES})
 
-    def add(self, phase: str, seconds: float) -> None:
-        """Record one occurrence of `phase` (one of :data:`PHASES`)."""
+    def add(self, phase: str, seconds: float, start: float | None = None) -> None:
+        """Record one occurrence of `phase` (one of :data:`PHASES`), begun at `start` where given."""
         self.times[phase].append(seconds)
+        if start is not None:
+            self.starts[phase].append(start)
 
     def clear(self) -> None:
         """Forget what was recorded (after a warm-up)."""
-        for times in self.times.values():
+        for times in (*self.times.values(), *self.starts.values()):
             times.clear()

@@ -289,11 +289,14 @@ class BlenderRenderer(BindingSetters, Renderer):
         self._check_open()
         if len(frames.values) != 1:
             raise ValueError(f"this renderer draws one env, got binding values for {len(frames.values)}")
+        start = time.perf_counter()
         if frames.poses is not None and self._poses is not None:
             self._poses.write(*frames.poses[0])
         if frames.distractions is not None:
             self._distract(frames.distractions[0])
         self.apply(frames.values[0])
+        if self.profile is not None:
+            self.profile.add("write", time.perf_counter() - start, start)
 
     def _distract(self, distraction: Distraction) -> None:
         """Draw `distraction` in the next renders: observation cameras moved, colours shifted (:mod:`distractions`)."""
@@ -362,8 +365,8 @@ class BlenderRenderer(BindingSetters, Renderer):
         self.raw_render()
         rendered = time.perf_counter()
         pixels = self._read_capture(view, capture) if capture is not None else self._read_file(view)
-        profile.add("render", rendered - start)
-        profile.add("readback", time.perf_counter() - rendered)
+        profile.add("render", rendered - start, start)
+        profile.add("readback", time.perf_counter() - rendered, rendered)
         return pixels
 
     def last_linear_pass(self) -> np.ndarray | None:
