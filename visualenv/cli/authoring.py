@@ -89,13 +89,14 @@ def inspect(blend: str, as_json: bool) -> None:
 
     The file is read in a child process: a file that crashes Blender is reported, not fatal.
     """
-    from visualenv.render.blender.scene import blendfile
     from visualenv.tools.mjcf_starter import is_mjcf, mjcf_report
     from visualenv.tools.starter import format_report
 
-    if is_mjcf(Path(blend)):  # an MJCF model: the names expressions can read (docs/physics.md)
+    if is_mjcf(Path(blend)):  # an MJCF model: the names expressions can read (docs/physics.md), no Blender needed
         click.echo(mjcf_report(Path(blend)))
         return
+    from visualenv.render.blender.scene import blendfile
+
     info = blendfile.describe(_blend_path(blend))
     click.echo(json.dumps(info, indent=1, ensure_ascii=False) if as_json else format_report(info))
 
