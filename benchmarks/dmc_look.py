@@ -33,7 +33,7 @@ TASKS = {"cartpole": ("cartpole", "swingup", "cartpole_swingup.yaml"), "reacher"
          "cheetah": ("cheetah", "run", "cheetah_run.yaml"), "finger": ("finger", "spin", "finger_spin.yaml"),
          "ball_in_cup": ("ball_in_cup", "catch", "ball_in_cup_catch.yaml"), "walker": ("walker", "walk", "walker_walk.yaml"),
          "pendulum": ("pendulum", "swingup", "pendulum_swingup.yaml"), "acrobot": ("acrobot", "swingup", "acrobot_swingup.yaml"),
-         "hopper": ("hopper", "stand", "hopper_stand.yaml")}
+         "hopper": ("hopper", "stand", "hopper_stand.yaml"), "humanoid": ("humanoid", "walk", "humanoid_walk.yaml")}
 #: the states compared: (seed, control steps of its action sequence before the frame)
 STATES = ((0, 0), (1, 40), (2, 120))
 SIZE = 84

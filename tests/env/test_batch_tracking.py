@@ -71,10 +71,12 @@ def test_each_cheetah_tile_is_its_own_env_seen_from_its_own_tracking_camera() ->
             env.close()
 
 
-@pytest.mark.parametrize("ident", ["DMC-walker-walk-v0", "DMC-pendulum-swingup-v0", "DMC-hopper-hop-v0"])
+@pytest.mark.parametrize(
+    "ident", ["DMC-walker-walk-v0", "DMC-pendulum-swingup-v0", "DMC-hopper-hop-v0", "DMC-humanoid-walk-v0"]
+)
 def test_a_dmc_batch_shows_each_env_as_it_is_alone(ident: str) -> None:
     """Walker's tracking camera; pendulum, one of the models DrQ-v2's tasks added (spot-lit, seen from above); hopper's
-    camera, a child of the world body that tracks the whole model's centre of mass."""
+    camera, a child of the world body that tracks the whole model's centre of mass; the humanoid's, on a free body."""
     batch = visualenv.make_vec(ident, 2, batched=True)
     alone = [visualenv.make(ident) for _ in range(2)]
     rng = np.random.default_rng(1)

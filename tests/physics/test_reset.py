@@ -416,3 +416,92 @@ def test_a_batch_reads_contacts_and_model_fields_as_its_envs_do(tmp_path: Path) 
             assert rewards[i] == reward
     assert len({float(o[1]) for o in obs}) == 4  # each env's own marker
     batch.close()
+
+
+# -- random orientations ---------------------------------------------------------------------------------------------
+
+#: a free body with a ball-jointed arm on a limited hinge: one joint of each kind dm_control's randomiser draws in turn
+ROTATIONS = """\
+<mujoco model="rotations">
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint name="root"/>
+      <geom name="base_geom" type="box" size="0.1 0.1 0.1"/>
+      <body name="arm" pos="0 0 0.2">
+        <joint name="shoulder" type="ball"/>
+        <geom name="arm_geom" type="capsule" fromto="0 0 0 0 0 0.3" size="0.03"/>
+        <body name="hand" pos="0 0 0.3">
+          <joint name="wrist" type="hinge" axis="0 1 0" limited="true" range="-30 60"/>
+          <geom name="hand_geom" type="sphere" size="0.05"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>
+"""
+ROTATIONS_SPEC = """\
+id: Rotations-v0
+physics:
+  model: rotations.xml
+  convention: {convention}
+  reset:
+    values:   # randomize_limited_and_rotational_joints, in joint order
+      qpos_root_qw, qpos_root_qx, qpos_root_qy, qpos_root_qz: random_quaternion_positive()
+      qpos_shoulder_qw, qpos_shoulder_qx, qpos_shoulder_qy, qpos_shoulder_qz: random_quaternion()
+      qpos_wrist: uniform(model_jnt_range_wrist_lo, model_jnt_range_wrist_hi)
+  observe: [qpos_root_qw, qpos_root_qx, qpos_root_qy, qpos_root_qz,
+            qpos_shoulder_qw, qpos_shoulder_qx, qpos_shoulder_qy, qpos_shoulder_qz, qpos_wrist]
+"""
+
+
+def rotations(tmp_path: Path, convention: str) -> VisualEnv:
+    (tmp_path / "rotations.xml").write_text(ROTATIONS, encoding="utf-8")
+    (tmp_path / "spec.yaml").write_text(ROTATIONS_SPEC.format(convention=convention), encoding="utf-8")
+    return VisualEnv(tmp_path / "spec.yaml", render=False)
+
+
+def test_random_quaternions_draw_as_dm_controls_randomiser(tmp_path: Path) -> None:
+    """A free joint's orientation (four uniform draws, normalised) and a ball joint's (four normal draws, normalised), then
+    a hinge, are dm_control's ``randomize_limited_and_rotational_joints`` to the bit: the same draws, in its order."""
+    randomizers = pytest.importorskip("dm_control.suite.utils.randomizers")
+    dm_mujoco = pytest.importorskip("dm_control.mujoco")
+    env = rotations(tmp_path, "dm_control")
+    physics = dm_mujoco.Physics.from_xml_string(ROTATIONS)
+    for seed in range(5):
+        obs, _ = env.reset(seed=seed)
+        with physics.reset_context():
+            randomizers.randomize_limited_and_rotational_joints(physics, np.random.RandomState(seed))
+        np.testing.assert_array_equal(env.data.qpos, physics.data.qpos)
+        assert (obs[:4] > 0).all() and np.linalg.norm(obs[:4]) == pytest.approx(1, abs=1e-15)
+        assert np.linalg.norm(obs[4:8]) == pytest.approx(1, abs=1e-15)
+
+
+def test_random_quaternions_draw_from_gymnasiums_generator_too(tmp_path: Path) -> None:
+    """Under Gymnasium's convention the draws are the Generator's (``random``, ``standard_normal``), unit length."""
+    env = rotations(tmp_path, "gymnasium")
+    seen = set()
+    for seed in range(5):
+        obs, _ = env.reset(seed=seed)
+        rng = np.random.default_rng(seed)
+        positive, normal = rng.random(4), rng.standard_normal(4)
+        np.testing.assert_array_equal(obs[:8], [*positive / np.linalg.norm(positive), *normal / np.linalg.norm(normal)])
+        seen.add(tuple(obs[:8]))
+    assert len(seen) == 5
+
+
+@pytest.mark.parametrize(
+    ("value", "message"),
+    [
+        ("random_quaternion(2)", "random_quaternion() takes 0 arguments, got 1"),
+        ("random_quaternion()", "got a vector of 4"),
+    ],
+)
+def test_a_quaternion_misused_is_a_located_error(tmp_path: Path, value: str, message: str) -> None:
+    """A quaternion takes no argument, and goes to four values (``qpos_<j>_qw, ..._qz: random_quaternion()``), not one."""
+    (tmp_path / "rotations.xml").write_text(ROTATIONS, encoding="utf-8")
+    path = tmp_path / "spec.yaml"
+    drawn = "qpos_wrist: uniform(model_jnt_range_wrist_lo, model_jnt_range_wrist_hi)"
+    path.write_text(
+        ROTATIONS_SPEC.format(convention="dm_control").replace(drawn, f"qpos_wrist: {value}"), encoding="utf-8"
+    )
+    assert located(errors_of(path), path, message) == (line_of(path, "qpos_wrist:"), 19)

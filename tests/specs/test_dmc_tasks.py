@@ -7,7 +7,7 @@ tests/specs/test_dmc_parity.py does for cartpole: with the same seed (``reset(se
 integration state, and the model fields the task's reset writes), and qpos, qvel, the observation
 and the reward agree to 1e-9 over the 1,000 steps of an episode, which both end there; the second
 episode's reset (the random stream continued) and steps too. The resets' rejection loops (finger,
-ball_in_cup) are checked on seeds where dm_control's needed several tries.
+ball_in_cup, humanoid) are checked on seeds where dm_control's needed several tries.
 """
 
 from __future__ import annotations
@@ -49,6 +49,9 @@ TASKS = {
     "DMC-reacher-hard-v0": ("reacher", "hard", 2, "fixed"),
     "DMC-finger-turn_easy-v0": ("finger", "turn_easy", 2, "cam0"),
     "DMC-finger-turn_hard-v0": ("finger", "turn_hard", 2, "cam0"),
+    "DMC-humanoid-stand-v0": ("humanoid", "stand", 2, "back"),
+    "DMC-humanoid-walk-v0": ("humanoid", "walk", 2, "back"),
+    "DMC-humanoid-run-v0": ("humanoid", "run", 2, "back"),
 }
 #: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
 DRQ_V2 = list(TASKS)[5:]
@@ -146,7 +149,7 @@ def tries_of(theirs) -> int:
     return len(calls) - 1
 
 
-@pytest.mark.parametrize("ident", ["DMC-finger-spin-v0", "DMC-ball_in_cup-catch-v0"])
+@pytest.mark.parametrize("ident", ["DMC-finger-spin-v0", "DMC-ball_in_cup-catch-v0", "DMC-humanoid-stand-v0"])
 def test_a_reset_redraws_until_nothing_touches_as_dm_controls_does(ident: str) -> None:
     """The seeds whose first draw touched (dm_control drew again) reset to dm_control's state too, and nothing touches."""
     ours = visualenv.make(ident, render=False, action_repeat=1)
@@ -295,3 +298,37 @@ def test_a_hopper_set_upright_is_paid_as_dm_controls(ident: str) -> None:
         assert abs(reward - theirs.step(action).reward) <= 1e-15, (qpos, qvel)
         paid.append(reward)
     assert min(paid) == 0.0 and len({r for r in paid if r > 0}) > 10, paid
+
+
+@pytest.mark.parametrize("ident", ["DMC-humanoid-stand-v0", "DMC-humanoid-walk-v0", "DMC-humanoid-run-v0"])
+def test_a_humanoid_set_upright_is_paid_as_dm_controls(ident: str) -> None:
+    """Random actions hardly pay a humanoid (it falls): states set around standing (the torso 1 to 1.6 m up, tilted,
+    its joints near zero, moving horizontally at up to 12 m/s, through stand's, walk's and run's ramps), then a step
+    with random controls, pay what dm_control's do (within rounding: dm_control's mean of the controls' terms is
+    numpy's pairwise sum), and the pay varies."""
+    ours = visualenv.make(ident, render=False, action_repeat=1)
+    theirs = load(ident, 0)
+    ours.reset(seed=0)
+    theirs.reset()
+    model, data = ours.unwrapped.model, ours.unwrapped.data
+    rng = np.random.default_rng(6)
+    paid = []
+    for _ in range(40):
+        qpos = np.zeros(model.nq)
+        qpos[2] = rng.uniform(1.0, 1.6)  # the torso's height: the head from below to above 1.4 m
+        tilt = np.array([1.0, *rng.uniform(-0.5, 0.5, 2), 0.0])
+        qpos[3:7] = tilt / np.linalg.norm(tilt)  # up to about 53 degrees from upright: uprightness 0.9 and below
+        qpos[7:] = rng.uniform(-0.2, 0.2, model.nq - 7)
+        qvel = np.zeros(model.nv)
+        qvel[:2] = rng.uniform(-12.0, 12.0, 2) * rng.uniform(0.0, 1.0)  # horizontal, slow to fast
+        data.qpos[:], data.qvel[:] = qpos, qvel
+        mujoco.mj_forward(model, data)
+        with theirs.physics.reset_context():
+            theirs.physics.data.qpos[:] = qpos
+            theirs.physics.data.qvel[:] = qvel
+        action = rng.uniform(-1, 1, model.nu)
+        reward = ours.step(action)[1]
+        expected = theirs.step(action).reward
+        assert abs(reward - expected) <= 1e-12 * max(1.0, abs(expected)), (qpos, qvel, reward, expected)
+        paid.append(reward)
+    assert len({round(r, 6) for r in paid if r > 0.05}) > 10, paid

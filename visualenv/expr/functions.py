@@ -154,6 +154,24 @@ FUNCTIONS: dict[str, Function] = {
             returns=vec(2),
             random=True,
         ),
+        _f(
+            "random_quaternion",
+            None,
+            0,
+            "random_quaternion(): a unit quaternion [w, x, y, z] uniform over rotations (four normal(0, 1) draws, "
+            "normalised, as dm_control draws an unlimited ball joint)",
+            returns=vec(4),
+            random=True,
+        ),
+        _f(
+            "random_quaternion_positive",
+            None,
+            0,
+            "random_quaternion_positive(): a unit quaternion [w, x, y, z] of four uniform(0, 1) draws, normalised: "
+            "every part positive, not uniform over rotations (as dm_control draws a free joint's orientation)",
+            returns=vec(4),
+            random=True,
+        ),
     ]
 }
 
@@ -193,6 +211,16 @@ class RandomSource:
             if radius <= 0 or float(np.linalg.norm(point)) < radius:
                 return float(point[0]), float(point[1])
 
+    def random_quaternion(self) -> tuple[float, ...]:
+        # randomize_limited_and_rotational_joints' ball joint, exactly: randn(4), then divided by its norm
+        legacy = isinstance(self.generator, np.random.RandomState)
+        return _unit(self.generator.randn(4) if legacy else self.generator.standard_normal(4))
+
+    def random_quaternion_positive(self) -> tuple[float, ...]:
+        # its free joint, exactly: rand(4) (its comment: "this should be random.randn"), divided by its norm
+        legacy = isinstance(self.generator, np.random.RandomState)
+        return _unit(self.generator.rand(4) if legacy else self.generator.random(4))
+
     def choice(self, *values: Any) -> float:
         options = values[0] if len(values) == 1 and isinstance(values[0], tuple) else values
         draw = self.generator.randint if isinstance(self.generator, np.random.RandomState) else self.generator.integers
@@ -207,4 +235,12 @@ def bind_random(source: RandomSource) -> dict[str, Callable[..., Any]]:
         "randint": source.randint,
         "choice": source.choice,
         "uniform_disk": source.uniform_disk,
+        "random_quaternion": source.random_quaternion,
+        "random_quaternion_positive": source.random_quaternion_positive,
     }
+
+
+def _unit(q: np.ndarray) -> tuple[float, ...]:
+    """`q` divided by its length as numpy computes it (``q /= np.linalg.norm(q)``, dm_control's own lines)."""
+    q /= np.linalg.norm(q)
+    return tuple(float(v) for v in q)

@@ -47,6 +47,7 @@ MODELS = {
     "pendulum.xml": "dm_control.suite.pendulum",
     "acrobot.xml": "dm_control.suite.acrobot",
     "hopper.xml": "dm_control.suite.hopper",
+    "humanoid.xml": "dm_control.suite.humanoid",
 }
 COMMON = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
 RENAMED_CAMERA = ('<camera name="hand" ', '<camera name="hand_camera" ')
