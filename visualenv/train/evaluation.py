@@ -399,6 +399,14 @@ def replays_prefix(results: dict[str, Any], recorded: dict[str, Any]) -> bool:
     )
 
 
+def declares_success(spec: str) -> bool:
+    """Whether the spec (a path or an id) has a success outcome: else an evaluation has no success rate to show."""
+    from visualenv.env.registration import resolve
+    from visualenv.spec import load_spec
+
+    return load_spec(resolve(spec)).spec.declares_success
+
+
 def evaluation_line(steps: int, returns: Any, successes: Any = None) -> str:
     """One periodic evaluation as a line of text (``train --no-progress`` prints it: a log file shows the run's course)."""
     values = np.asarray(returns, dtype=np.float64)

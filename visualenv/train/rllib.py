@@ -32,7 +32,7 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.train.evaluation import FINAL_EPISODES, evaluation_line
+from visualenv.train.evaluation import FINAL_EPISODES, declares_success, evaluation_line
 from visualenv.train.run_folder import CHECKPOINT_STEPS, RunFolder, record_run, write_results
 from visualenv.train.stopping import StopRequest
 
@@ -340,13 +340,11 @@ def _train_loop(
 ) -> dict[str, Any]:
     from tqdm import tqdm
 
-    from visualenv.env.registration import resolve
-    from visualenv.spec import load_spec
     from visualenv.train.model_files import save_rllib_module
     from visualenv.train.rllib_setup import RLlibPolicy
 
     evaluations = _Evaluations(folder.evaluations)
-    succeeds = load_spec(resolve(config.spec)).spec.declares_success  # else no success line: there is none to rate
+    succeeds = declares_success(config.spec)
     last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps
     latest = folder.latest_dir
     latest.parent.mkdir(exist_ok=True)

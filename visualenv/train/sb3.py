@@ -27,6 +27,7 @@ from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 from visualenv.env.cores import usable_cores
 from visualenv.errors import ConfigError, SpecError, did_you_mean
 from visualenv.train.evaluation import (
+    declares_success,
     FINAL_EPISODES,
     evaluation_line,
     final_evaluation,
@@ -268,7 +269,7 @@ def _learn(
             best_model_save_path=str(folder.path),
             deterministic=True,
             verbose=0,
-            callback_after_eval=None if config.progress else _EvalLine(_declares_success(config.spec)),
+            callback_after_eval=None if config.progress else _EvalLine(declares_success(config.spec)),
             callback_on_new_best=_BestPolicy(folder, config.algo),
         ),
         _LatestCheckpoint(folder, config.algo, every=per_env),
@@ -461,13 +462,6 @@ class _ResumableEval(EvalCallback):
                 self.evaluations_successes = earlier["successes"].tolist()
         if self.evaluations_results:
             self.best_mean_reward = float(max(np.mean(r) for r in self.evaluations_results))
-
-
-def _declares_success(spec: str) -> bool:
-    from visualenv.env.registration import resolve
-    from visualenv.spec import load_spec
-
-    return load_spec(resolve(spec)).spec.declares_success
 
 
 class _EvalLine(BaseCallback):
