@@ -103,6 +103,7 @@ FUNCTIONS: dict[str, Function] = {
         _f("sinh", math.sinh, 1, "hyperbolic sine"),
         _f("cosh", math.cosh, 1, "hyperbolic cosine"),
         _f("tanh", math.tanh, 1, "hyperbolic tangent"),
+        _f("asinh", math.asinh, 1, "inverse hyperbolic sine (dm_control's np.arcsinh: quadruped's force sensors)"),
         _f("sqrt", math.sqrt, 1, "square root"),
         _f("exp", math.exp, 1, "e to the power x"),
         _f("log", _log, (1, 2), "natural log, or log(x, base)"),
@@ -154,6 +155,15 @@ FUNCTIONS: dict[str, Function] = {
             returns=vec(2),
             random=True,
         ),
+        _f(
+            "unit_quaternion",
+            None,
+            0,
+            "unit_quaternion(): a random orientation [w, x, y, z], uniform over rotations: four normal(0, 1) draws "
+            "over their norm (dm_control's randn(4) / np.linalg.norm, as quadruped's reset draws it)",
+            returns=vec(4),
+            random=True,
+        ),
     ]
 }
 
@@ -193,6 +203,13 @@ class RandomSource:
             if radius <= 0 or float(np.linalg.norm(point)) < radius:
                 return float(point[0]), float(point[1])
 
+    def unit_quaternion(self) -> tuple[float, ...]:
+        # dm_control's draw, exactly: randn(4) (a legacy stream) divided by np.linalg.norm of it
+        legacy = isinstance(self.generator, np.random.RandomState)
+        quaternion = self.generator.randn(4) if legacy else self.generator.standard_normal(4)
+        quaternion /= np.linalg.norm(quaternion)
+        return tuple(float(v) for v in quaternion)
+
     def choice(self, *values: Any) -> float:
         options = values[0] if len(values) == 1 and isinstance(values[0], tuple) else values
         draw = self.generator.randint if isinstance(self.generator, np.random.RandomState) else self.generator.integers
@@ -207,4 +224,5 @@ def bind_random(source: RandomSource) -> dict[str, Callable[..., Any]]:
         "randint": source.randint,
         "choice": source.choice,
         "uniform_disk": source.uniform_disk,
+        "unit_quaternion": source.unit_quaternion,
     }
