@@ -158,7 +158,9 @@ def body_column(frame: np.ndarray) -> tuple[float, int]:
     return (float(np.nonzero(body)[1].mean()) if body.any() else -1.0), int(body.sum())
 
 
-@pytest.mark.parametrize("ident", ["DMC-cheetah-run-v0", "DMC-walker-walk-v0", "DMC-hopper-hop-v0"])
+@pytest.mark.parametrize(
+    "ident", ["DMC-cheetah-run-v0", "DMC-walker-walk-v0", "DMC-hopper-hop-v0", "DMC-quadruped-walk-v0"]
+)
 def test_the_tracking_camera_keeps_the_body_in_view(ident: str) -> None:
     """Moved 3 m along the floor (beyond a fixed camera's view), the body is drawn where it was in the frame: the camera followed."""
     env = visualenv.make(ident, action_repeat=1)
@@ -167,7 +169,10 @@ def test_the_tracking_camera_keeps_the_body_in_view(ident: str) -> None:
         column, count = body_column(obs)
         assert count > 40, count
         data, model = env.unwrapped.data, env.unwrapped.model
-        data.qpos[mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "rootx")] += 3.0
+        root = mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "rootx")  # quadruped's: a free joint, x first
+        data.qpos[
+            model.jnt_qposadr[root if root >= 0 else mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, "root")]
+        ] += 3.0
         mujoco.mj_forward(model, data)
         moved, _, _, _, _ = env.step(np.zeros(env.action_space.shape))
         assert env.unwrapped.data.subtree_com[1][0] > 2.5  # the body's centre of mass is 3 m further
