@@ -29,11 +29,21 @@ import yaml
 
 SPECS = Path(__file__).resolve().parent.parent / "specs" / "dmc"
 #: dm_control's domain and task of each bundled spec, by the name --task takes
-TASKS = {"cartpole": ("cartpole", "swingup", "cartpole_swingup.yaml"), "reacher": ("reacher", "easy", "reacher_easy.yaml"),
-         "cheetah": ("cheetah", "run", "cheetah_run.yaml"), "finger": ("finger", "spin", "finger_spin.yaml"),
-         "ball_in_cup": ("ball_in_cup", "catch", "ball_in_cup_catch.yaml"), "walker": ("walker", "walk", "walker_walk.yaml"),
-         "pendulum": ("pendulum", "swingup", "pendulum_swingup.yaml"), "acrobot": ("acrobot", "swingup", "acrobot_swingup.yaml"),
-         "hopper": ("hopper", "stand", "hopper_stand.yaml"), "humanoid": ("humanoid", "walk", "humanoid_walk.yaml")}
+TASKS = {
+    "cartpole": ("cartpole", "swingup", "cartpole_swingup.yaml"),
+    "reacher": ("reacher", "easy", "reacher_easy.yaml"),
+    "cheetah": ("cheetah", "run", "cheetah_run.yaml"),
+    "finger": ("finger", "spin", "finger_spin.yaml"),
+    "ball_in_cup": ("ball_in_cup", "catch", "ball_in_cup_catch.yaml"),
+    "walker": ("walker", "walk", "walker_walk.yaml"),
+    "pendulum": ("pendulum", "swingup", "pendulum_swingup.yaml"),
+    "acrobot": ("acrobot", "swingup", "acrobot_swingup.yaml"),
+    "hopper": ("hopper", "stand", "hopper_stand.yaml"),
+    "humanoid": ("humanoid", "walk", "humanoid_walk.yaml"),
+    "quadruped": ("quadruped", "walk", "quadruped_walk.yaml"),
+}
+#: DrQ-v2's camera where it is not camera 0: quadruped's camera 2 (its spec's camera)
+CAMERA_ID = {"quadruped": 2}
 #: the states compared: (seed, control steps of its action sequence before the frame)
 STATES = ((0, 0), (1, 40), (2, 120))
 SIZE = 84
@@ -43,14 +53,14 @@ import json, os, sys
 import numpy as np
 from dm_control import suite
 states, actions, out, size = json.loads(sys.argv[1]), np.load(sys.argv[2]), sys.argv[3], int(sys.argv[4])
-domain, task = sys.argv[5], sys.argv[6]
+domain, task, camera = sys.argv[5], sys.argv[6], int(sys.argv[7])
 frames = []
 for (seed, steps), acts in zip(states, actions):
     env = suite.load(domain, task, task_kwargs={"random": seed})
     env.reset()
     for a in acts[:steps]:
         env.step(a)
-    frames.append(env.physics.render(size, size, camera_id=0))
+    frames.append(env.physics.render(size, size, camera_id=camera))
 np.save(out, np.stack(frames))
 sys.stdout.flush()
 os._exit(0)  # MuJoCo's EGL context complains when it is freed at exit
@@ -75,14 +85,29 @@ def action_size(task: str) -> int:
 
 
 def dm_control_frames(states: tuple[tuple[int, int], ...] = STATES, task: str = "cartpole") -> np.ndarray:
-    """dm_control's camera-0 frames of the states, (states, 84, 84, 3); RuntimeError with its words if it cannot render."""
+    """dm_control's frames of the states from the spec's camera (camera 0; quadruped's 2), (states, 84, 84, 3); RuntimeError with its words if it cannot render."""
     domain, name, _ = TASKS[task]
     with tempfile.TemporaryDirectory() as folder:
         acts, out = Path(folder) / "actions.npy", Path(folder) / "frames.npy"
         np.save(acts, actions(states, action_size(task)))
         backend = os.environ.get("MUJOCO_GL")  # a test process may have set "disable" for dm_control's import
-        done = subprocess.run([sys.executable, "-c", _DM_CONTROL, json.dumps(states), str(acts), str(out), str(SIZE), domain, name], capture_output=True,
-                              text=True, env={**os.environ, "MUJOCO_GL": backend if backend in ("egl", "osmesa", "glfw") else "egl"})
+        done = subprocess.run(
+            [
+                sys.executable,
+                "-c",
+                _DM_CONTROL,
+                json.dumps(states),
+                str(acts),
+                str(out),
+                str(SIZE),
+                domain,
+                name,
+                str(CAMERA_ID.get(task, 0)),
+            ],
+            capture_output=True,
+            text=True,
+            env={**os.environ, "MUJOCO_GL": backend if backend in ("egl", "osmesa", "glfw") else "egl"},
+        )
         if done.returncode != 0 or not out.exists():
             raise RuntimeError(f"dm_control could not render: {done.stderr.strip()[-800:]}")
         return np.load(out)
@@ -100,7 +125,9 @@ def segmented_spec(folder: Path, task: str) -> Path:
     return out
 
 
-def visualenv_frames(states: tuple[tuple[int, int], ...] = STATES, task: str = "cartpole") -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
+def visualenv_frames(
+    states: tuple[tuple[int, int], ...] = STATES, task: str = "cartpole"
+) -> tuple[np.ndarray, np.ndarray, dict[str, int]]:
     """visualenv's frames of the states (states, 84, 84, 3), their segmentation (states, 84, 84) and its ids."""
     import visualenv
 
@@ -147,14 +174,20 @@ def main() -> None:
         theirs = dm_control_frames(states, task)
         ours, masks, ids = visualenv_frames(states, task)
         for (seed, steps), a, b, mask in zip(states, theirs, ours, masks):
-            print(f"{task}, seed {seed}, {steps} steps: mean |difference| {np.abs(a.astype(int) - b.astype(int)).mean():.1f} levels")
+            print(
+                f"{task}, seed {seed}, {steps} steps: mean |difference| {np.abs(a.astype(int) - b.astype(int)).mean():.1f} levels"
+            )
             mine = region_means(b, mask, ids)
             for region, colour in region_means(a, mask, ids).items():
-                print(f"  {region:12s} dm_control {np.round(colour).astype(int)}  visualenv {np.round(mine[region]).astype(int)}")
+                print(
+                    f"  {region:12s} dm_control {np.round(colour).astype(int)}  visualenv {np.round(mine[region]).astype(int)}"
+                )
             rows.append(np.concatenate([a, np.full((SIZE, 2, 3), 255, np.uint8), b], axis=1))
     from PIL import Image
 
-    Image.fromarray(np.repeat(np.repeat(np.concatenate(rows, axis=0), args.scale, axis=0), args.scale, axis=1)).save(args.out)
+    Image.fromarray(np.repeat(np.repeat(np.concatenate(rows, axis=0), args.scale, axis=0), args.scale, axis=1)).save(
+        args.out
+    )
     print(f"wrote {args.out}: dm_control left, visualenv right")
 
 

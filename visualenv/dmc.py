@@ -68,8 +68,9 @@ class Environment(dm_env.Environment):
         size = env.program.physics.observe_size  # type: ignore[union-attr]
         shapes = {STATE_KEY: ((size,), np.float64), PIXELS_KEY: (self._env.observation_space.shape, np.uint8)}
         self._observation_spec = collections.OrderedDict((key, specs.Array(*shapes[key], key)) for key in self._keys)
-        box: Any = env.action_space
-        self._action_spec = specs.BoundedArray(box.shape, np.float64, box.low.astype(float), box.high.astype(float))
+        # the spec's float64 bounds, as dm_control's ctrlrange (the Box rounds them to float32: quadruped's -0.8, 1.1)
+        low, high = np.array(env.program.continuous, np.float64).reshape(-1, 2).T
+        self._action_spec = specs.BoundedArray(env.action_space.shape, np.float64, low, high)
 
     def reset(self) -> dm_env.TimeStep:
         seed, self._seed = self._seed, None  # the task's stream is seeded once, then goes on (task_kwargs' random)

@@ -180,3 +180,21 @@ def test_what_the_spec_fixes_is_refused_with_what_it_renders() -> None:
         dmc.load("cartpole", "swingup", task_kwargs={"time_limit": 5})
     with pytest.raises(ValueError, match="render=False"):
         dmc.load("cartpole", "swingup", render=False, render_kwargs=dict(height=84))
+
+
+@pytest.mark.parametrize("task", ["walk", "run"])
+def test_quadrupeds_action_spec_is_dm_controls_and_it_steps_as_dm_control(task: str) -> None:
+    """Quadruped's actions range from -1, -0.8 to 0.8, 1, 1.1 in float64 as dm_control's (the Box holds them as float32),
+    and it steps as dm_control's with DrQ-v2's camera 2 accepted."""
+    mine = dmc.load("quadruped", task, task_kwargs={"random": 5}, render=False)
+    other = suite.load("quadruped", task, task_kwargs={"random": 5}, environment_kwargs={"flat_observation": True})
+    assert mine.observation_spec() == other.observation_spec() and mine.action_spec() == other.action_spec()
+    actions = np.random.default_rng(5)
+    a, b = mine.reset(), other.reset()
+    for step in range(20):
+        assert_same_step(a, b, f"step {step}")
+        np.testing.assert_allclose(a.observation["observations"], b.observation["observations"], atol=1e-9, rtol=0)
+        action = actions.uniform(-1, 1, size=other.action_spec().shape)
+        a, b = mine.step(action), other.step(action)
+    with pytest.raises(ValueError, match="from camera 'y' \\(camera_id 2\\), not 84x84 from 'global'"):
+        dmc.load("quadruped", task, render_kwargs=dict(height=84, width=84, camera_id=0))

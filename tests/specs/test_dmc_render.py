@@ -159,12 +159,14 @@ def body_column(frame: np.ndarray) -> tuple[float, int]:
 
 
 #: the joint moved, its qpos entry and the world axis: the planar bodies move along their root's x slide (across the side
-#: camera's view), the humanoid along its free joint's y (across its camera 'back', which looks along x)
+#: camera's view), the humanoid along its free joint's y (across its camera 'back', which looks along x), the quadruped
+#: along its free joint's x (across its camera 2, 'y', beside it)
 MOVED = {
     "DMC-cheetah-run-v0": ("rootx", 0, 0),
     "DMC-walker-walk-v0": ("rootx", 0, 0),
     "DMC-hopper-hop-v0": ("rootx", 0, 0),
     "DMC-humanoid-walk-v0": ("root", 1, 1),
+    "DMC-quadruped-walk-v0": ("root", 0, 0),
 }
 
 

@@ -7,7 +7,8 @@ tests/specs/test_dmc_parity.py does for cartpole: with the same seed (``reset(se
 integration state, and the model fields the task's reset writes), and qpos, qvel, the observation
 and the reward agree to 1e-9 over the 1,000 steps of an episode, which both end there; the second
 episode's reset (the random stream continued) and steps too. The resets' rejection loops (finger,
-ball_in_cup, humanoid) are checked on seeds where dm_control's needed several tries.
+ball_in_cup, humanoid) are checked on seeds where dm_control's needed several tries; quadruped's search (its body raised
+1 cm a try until nothing touches) takes dozens of tries on every seed.
 """
 
 from __future__ import annotations
@@ -52,7 +53,11 @@ TASKS = {
     "DMC-humanoid-stand-v0": ("humanoid", "stand", 2, "back"),
     "DMC-humanoid-walk-v0": ("humanoid", "walk", 2, "back"),
     "DMC-humanoid-run-v0": ("humanoid", "run", 2, "back"),
+    "DMC-quadruped-walk-v0": ("quadruped", "walk", 2, "y"),  # camera 2 (QUADRUPED_CAMERA)
+    "DMC-quadruped-run-v0": ("quadruped", "run", 2, "y"),
 }
+#: DrQ-v2's camera for quadruped is camera 2 (its cfgs/task/quadruped_*.yaml); every other task's is camera 0
+QUADRUPED_CAMERA = {"quadruped": 2}
 #: the ids added from DrQ-v2's list (at its action repeat, 2), after PlaNet's
 DRQ_V2 = list(TASKS)[5:]
 #: the tasks whose reward is dense: a run of random actions earns some, so comparing rewards compares numbers that vary
@@ -63,6 +68,8 @@ DENSE = (
     "DMC-walker-stand-v0",
     "DMC-walker-run-v0",
     "DMC-acrobot-swingup-v0",
+    "DMC-quadruped-walk-v0",
+    "DMC-quadruped-run-v0",
 )
 #: the model fields each task's reset writes (dm_control's initialize_episode), compared after every reset
 WRITTEN = {"reacher": ("geom_pos", "geom_size"), "finger": ("dof_damping", "site_pos", "site_size")}
@@ -175,10 +182,10 @@ def test_the_env_is_dm_controls_task_as_gymnasium_sees_it(ident: str) -> None:
     theirs = load(ident, 0)
     spec = theirs.action_spec()
     assert isinstance(env.unwrapped.data, mujoco.MjData) and isinstance(env.unwrapped.model, mujoco.MjModel)
-    assert (
+    assert (  # the Box is float32 (quadruped's -0.8 and 1.1 as float32 rounds them); MuJoCo clamps to the float64 range
         env.action_space.shape == spec.shape
-        and (env.action_space.low == spec.minimum).all()
-        and (env.action_space.high == spec.maximum).all()
+        and (env.action_space.low == spec.minimum.astype(np.float32)).all()
+        and (env.action_space.high == spec.maximum.astype(np.float32)).all()
     )
     assert (
         env.observation_space.shape == their_observation(theirs.reset()).shape
@@ -192,9 +199,10 @@ def test_the_env_is_dm_controls_task_as_gymnasium_sees_it(ident: str) -> None:
         1000 / repeat
     )  # PlaNet's
     view = env.unwrapped.program.spec.observation
+    index = QUADRUPED_CAMERA.get(TASKS[ident][0], 0)
     assert (
-        view.camera == mujoco.mj_id2name(theirs.physics.model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, 0) == camera
-    )  # camera 0
+        view.camera == mujoco.mj_id2name(theirs.physics.model.ptr, mujoco.mjtObj.mjOBJ_CAMERA, index) == camera
+    )  # DrQ-v2's camera
     assert list(view.resolution) == [84, 84] and view.color == "rgb"
     env.close()
 

@@ -83,7 +83,7 @@ class BindingsCompiler:
             return
         from visualenv.physics.geom_poses import drawn_writes
 
-        written = [*plan.reset_targets, *plan.redraw_targets]
+        written = plan.written()
         for write in drawn_writes(plan.scene, plan.model, written, set(self.spec.scene.objects))[0]:
             site = Site("physics.reset", f"the {write.prop} of '{write.object}' the reset wrote, drawn")
             for field, divisor in write.values:

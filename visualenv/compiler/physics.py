@@ -31,6 +31,10 @@ WRITE_RESET = "_phys_write_reset"
 WRITE_REDRAW = "_phys_write_redraw"
 REDRAW_TRIES = "_phys_redraw_tries"
 REDRAW_FAILED = "_phys_redraw_failed"
+#: a reset's search loop (physics.reset.search): its writer, its range of tries, its fault when none met `until`
+WRITE_SEARCH = "_phys_write_search"
+SEARCH_TRIES = "_phys_search_tries"
+SEARCH_FAILED = "_phys_search_failed"
 #: the reset's settling steps and last forward, after a redraw or a settle
 FINISH_RESET = "_phys_finish_reset"
 
@@ -50,9 +54,13 @@ class PhysicsPlan:
     observe_size: int = 0  # values in the state-only observation
     scene: PhysicsScene | None = None  # what a renderer draws (made when the spec renders)
     convention: str = "gymnasium"  # whose MuJoCo calls step and reset it (visualenv.physics.conventions)
-    finishes: bool = False  # the reset goes on after its values (a redraw or a settle), and ends with its own forward
+    finishes: bool = (
+        False  # the reset goes on after its values (a redraw, search or settle), and ends with its own forward
+    )
     redraw_targets: list[str] = field(default_factory=list)  # what each try of the redraw writes, in order
     redraw_attempts: int = 0
+    search_targets: list[str] = field(default_factory=list)  # what each try of the search writes, in order
+    search_attempts: int = 0
     settle: tuple[int, float | None] | None = None  # the reset's settling steps and the time set after them
     # geoms whose model position the reset writes: drawn posed from geom_xpos/geom_xmat
     posed_geoms: tuple[int, ...] = ()
@@ -77,8 +85,16 @@ class PhysicsPlan:
             env[WRITE_REDRAW] = sim.writer(self.redraw_targets)
             env[REDRAW_TRIES] = range(self.redraw_attempts)
             env[REDRAW_FAILED] = redraw_failure(self.redraw_attempts)
+        if self.search_attempts:
+            env[WRITE_SEARCH] = sim.writer(self.search_targets)
+            env[SEARCH_TRIES] = range(self.search_attempts)
+            env[SEARCH_FAILED] = redraw_failure(self.search_attempts, "search")
         if self.finishes:
             env[FINISH_RESET] = reset_finisher(sim, self.settle)
+
+    def written(self) -> list[str]:
+        """Every name the reset writes: its values', its redraw's and its search's."""
+        return [*self.reset_targets, *self.redraw_targets, *self.search_targets]
 
     def poses(self, data: Any) -> tuple:
         """What a renderer poses the drawn model from (xpos, xquat, cam_xpos, cam_xmat, light_xpos, light_xdir), geoms a
@@ -93,7 +109,7 @@ class PhysicsPlan:
         from visualenv.physics.model_fields import is_writable
 
         table = self.model.names.values
-        written = any(is_writable(table[n][0]) for n in (*self.reset_targets, *self.redraw_targets))
+        written = any(is_writable(table[n][0]) for n in self.written())
         return BatchSimulation(sims, self.reads, self.controls, workers, self.moved, models_written=written)
 
     def bind_batch(self, env: dict[str, Any], batch: Any) -> None:
@@ -103,15 +119,16 @@ class PhysicsPlan:
         env[ADVANCE] = batch.advance
 
 
-def redraw_failure(attempts: int) -> Any:
-    """The call a redraw loop makes when no try met its condition: a fault the env locates at ``physics.reset.redraw.until``."""
+def redraw_failure(attempts: int, loop: str = "redraw") -> Any:
+    """The call a redraw (or search) loop makes when no try met its condition: a fault the env locates at
+    ``physics.reset.<loop>.until``."""
 
     def fail() -> None:
         from visualenv.physics.simulation import PhysicsFault
 
         raise PhysicsFault(
-            f"none of {attempts} tries met the condition (physics.reset.redraw.attempts): draw the values "
-            "differently, or allow more attempts"
+            f"none of {attempts} tries met the condition (physics.reset.{loop}.attempts): "
+            f"{'draw' if loop == 'redraw' else 'step'} the values differently, or allow more attempts"
         )
 
     return fail
@@ -239,7 +256,10 @@ __all__ = [
     "FINISH_RESET",
     "REDRAW_FAILED",
     "REDRAW_TRIES",
+    "SEARCH_FAILED",
+    "SEARCH_TRIES",
     "WRITE_REDRAW",
+    "WRITE_SEARCH",
     "WRITE_RESET",
     "PhysicsError",
     "PhysicsPlan",

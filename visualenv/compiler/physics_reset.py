@@ -10,8 +10,12 @@ simulation has been reset by MuJoCo, and forwarded, before init runs; docs/physi
 3. ``redraw``: at most ``attempts`` tries, each starting from the values step 2 left: its entries,
    written and forwarded (``_phys_write_redraw``), then ``until`` read after that forward; the
    first try that meets it ends the loop, none is a located fault at ``physics.reset.redraw.until``;
-4. ``settle``: its physics steps and the time set, then a last forward (``_phys_finish_reset``;
-   after a redraw without a settle, the forward alone, as dm_control's ``after_reset``).
+4. ``search``: at most ``attempts`` tries, each writing its values (the first: as the steps before
+   left them) and forwarding (``_phys_write_search``), then reading ``until``; a try that fails
+   computes the next try's values from its own (``step``): a loop on a value, as quadruped's
+   reset raises its body until nothing touches;
+5. ``settle``: its physics steps and the time set, then a last forward (``_phys_finish_reset``;
+   after a redraw or search without a settle, the forward alone, as dm_control's ``after_reset``).
 
 The generated loop is Python's ``for ... else`` over a range bound per env: each statement that
 evaluates a spec expression keeps a line (and site) of its own, so a fault inside names it.
@@ -66,7 +70,7 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
     c.used = set()
     targets = entries(c, fb, section.values, ("physics", "reset", "values"), scope, writable)
     plan.reset_targets = targets
-    plan.finishes = section.redraw is not None or section.settle is not None
+    plan.finishes = section.redraw is not None or section.search is not None or section.settle is not None
     fb.add(
         phys.call_statement(phys.WRITE_RESET, targets), Site("physics.reset", "the reset values, written to the model")
     )
@@ -76,17 +80,21 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
         redrawn, until_used = redraw_loop(c, fb, scope, writable)
     plan.redraw_targets = redrawn
     plan.redraw_attempts = section.redraw.attempts if section.redraw is not None else 0
+    searched: list[str] = []
+    if section.search is not None:
+        searched, search_used = search_loop(c, fb, scope, writable)
+        until_used |= search_used
+    plan.search_targets = searched
+    plan.search_attempts = section.search.attempts if section.search is not None else 0
     plan.settle = (section.settle.steps, section.settle.time) if section.settle is not None else None
     if plan.finishes:
         what = "the settling steps, then the model forwarded" if section.settle is not None else "the model forwarded"
-        fb.add(
-            ast.Expr(ast.Call(name(phys.FINISH_RESET), [], [])),
-            Site("physics.reset.settle" if section.settle else "physics.reset.redraw", what),
-        )
+        last = "settle" if section.settle else "search" if section.search else "redraw"
+        fb.add(ast.Expr(ast.Call(name(phys.FINISH_RESET), [], [])), Site(f"physics.reset.{last}", what))
     reads = c.used
-    c.physics_reads(fb, "reset", start, reads | set(targets) | set(redrawn))
+    c.physics_reads(fb, "reset", start, reads | set(targets) | set(redrawn) | set(searched))
     c.used = before | reads | until_used
-    geoms = written_geoms([*targets, *redrawn], table)
+    geoms = written_geoms(plan.written(), table)
     plan.posed_geoms = tuple(geoms)
     if plan.scene is not None and geoms:
         from visualenv.physics.geom_poses import with_posed_geoms
@@ -95,9 +103,14 @@ def build_reset(c: ResetCompiler, fb: FunctionBuilder) -> None:
     if plan.scene is not None:
         from visualenv.physics.geom_poses import drawn_writes
 
-        for written, problem in drawn_writes(plan.scene, plan.model, [*targets, *redrawn])[1]:
-            place = ("values",) if written in targets else ("redraw", "values")
-            keys = section.values if written in targets else section.redraw.values  # type: ignore[union-attr]
+        for written, problem in drawn_writes(plan.scene, plan.model, plan.written())[1]:
+            place, keys = (
+                (("values",), section.values)
+                if written in targets
+                else (("redraw", "values"), section.redraw.values)  # type: ignore[union-attr]
+                if written in redrawn
+                else (("search", "step"), section.search.step)  # type: ignore[union-attr]
+            )
             key = next(k for k in keys if written in [p.strip() for p in k.split(",")])
             c.error(("physics", "reset", *place, key), problem, key=True)
 
@@ -199,4 +212,39 @@ def redraw_loop(
         fb.add(ast.Assign([ast.Name(BASE_PREFIX + t, ast.Store())], name(local(t))))
     loop = ast.For(ast.Name("_try", ast.Store()), name(phys.REDRAW_TRIES), [*restore, *body], [fail_stmt])
     fb.body.append(loop)
+    return targets, until_used
+
+
+def search_loop(
+    c: ResetCompiler, fb: FunctionBuilder, scope: dict[str, Type], writable: Collection[str]
+) -> tuple[list[str], set[str]]:
+    """``for _try in tries: write and forward; read; if until: break; <step>`` ``else: fail``; its targets and until's names.
+
+    Each try writes what the one before left (the first: what the reset's values and redraw left, or the model's own),
+    and a try that fails steps them: a loop on a value (dm_control's ``_find_non_contacting_height``: z += 0.01)."""
+    assert c.plan is not None and c.spec.physics is not None and c.spec.physics.reset.search is not None
+    search = c.spec.physics.reset.search
+    where = ("physics", "reset", "search")
+    mark = len(fb.body)
+    targets = entries(c, fb, search.step, (*where, "step"), scope, writable)
+    step = fb.body[mark:]
+    del fb.body[mark:]
+    fb.add(
+        phys.call_statement(phys.WRITE_SEARCH, targets),
+        Site("physics.reset.search", "the searched values, written to the model"),
+    )
+    outer, c.used = c.used, set()
+    at = len(fb.body)
+    checked = c.expr((*where, "until"), search.until, scope, expect=BOOL)
+    until_used = c.used
+    c.physics_reads(fb, "search", at, until_used)
+    c.used = outer
+    until_site = Site(
+        "physics.reset.search.until", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()
+    )
+    fb.add(ast.If(lower(checked.tree) if checked else const(True), [ast.Break()], []), until_site)
+    fb.add(ast.Expr(ast.Call(name(phys.SEARCH_FAILED), [], [])), until_site)
+    body, fail_stmt = fb.body[mark:-1], fb.body[-1]
+    del fb.body[mark:]
+    fb.body.append(ast.For(ast.Name("_try", ast.Store()), name(phys.SEARCH_TRIES), [*body, *step], [fail_stmt]))
     return targets, until_used

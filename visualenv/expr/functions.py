@@ -103,6 +103,7 @@ FUNCTIONS: dict[str, Function] = {
         _f("sinh", math.sinh, 1, "hyperbolic sine"),
         _f("cosh", math.cosh, 1, "hyperbolic cosine"),
         _f("tanh", math.tanh, 1, "hyperbolic tangent"),
+        _f("asinh", math.asinh, 1, "inverse hyperbolic sine (dm_control's np.arcsinh: quadruped's force sensors)"),
         _f("sqrt", math.sqrt, 1, "square root"),
         _f("exp", math.exp, 1, "e to the power x"),
         _f("log", _log, (1, 2), "natural log, or log(x, base)"),

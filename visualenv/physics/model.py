@@ -14,7 +14,8 @@ are called ``<kind><index>``, e.g. ``actuator0``):
 * ``mocap_<b>_x/_y/_z`` and ``mocap_<b>_qw/_qx/_qy/_qz`` for a mocap body (``<body mocap="true">``): MuJoCo's
   ``mocap_pos`` and ``mocap_quat``, which the spec sets (:data:`SETTABLE`) to move a body that has no joint;
 * ``site_<s>_x/_y/_z``; ``sensor_<s>`` (or ``sensor_<s>_<i>`` for a sensor of several values);
-* ``ctrl_<actuator>``; ``sim_time``;
+* ``ctrl_<actuator>``; ``act_<actuator>`` (``act_<a>_<i>`` for several), MuJoCo's ``act``, the state of an actuator
+  with dynamics (a filter's, a muscle's), which dm_control's quadruped observes; ``sim_time``;
 * ``geom_<g>_x/_y/_z`` (world position), ``joint_<j>_x/_y/_z`` (a joint's anchor), ``ncon`` (the contact count) and the model's own fields,
   ``model_<field>_<element>[_<column>]``, some of which a reset writes (:mod:`visualenv.physics.model_fields`).
 
@@ -55,6 +56,7 @@ ARRAYS = (
     "geom_xpos",
     "sensordata",
     "ctrl",
+    "act",
     "time",
     "ncon",
     "mocap_pos",
@@ -186,6 +188,7 @@ class PhysicsModel:
             ("joint anchors", "xanchor"),
             ("sensors", "sensordata"),
             ("actuator controls", "ctrl"),
+            ("actuator activations", "act"),
         ):
             groups[title] = [n for n, (a, _) in self.names.values.items() if a == array]
         groups["mocap bodies (set in physics.reset.values and dynamics.update)"] = self.mocap_names()
@@ -325,6 +328,9 @@ def name_tables(model: Any) -> NameTables:
             )
     for a, name in enumerate(ident["actuator"]):
         names.add(f"ctrl_{name}", ("ctrl", a), owners["actuator"][a])
+        adr, count = int(model.actuator_actadr[a]), int(model.actuator_actnum[a])
+        for i in range(count if adr >= 0 else 0):
+            names.add(f"act_{name}" if count == 1 else f"act_{name}_{i}", ("act", adr + i), owners["actuator"][a])
     names.add("sim_time", ("time", 0), "the simulation time")
     qvel = {n: i for n, (a, i) in names.values.items() if a == "qvel"}
     for name, target, owner in model_values(model, ident, owners, qvel):

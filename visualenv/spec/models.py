@@ -122,6 +122,24 @@ class Redraw(StrictModel):
     )
 
 
+class Search(StrictModel):
+    """Values stepped until a condition holds, each try going on from the last (dm_control's quadruped raises its body
+    1 cm at a time until nothing touches): a bounded loop on a value, where a redraw draws afresh."""
+
+    until: Expr = Field(
+        description="a condition read after each try's write and forward, e.g. 'ncon == 0': the first try that meets it is kept"
+    )
+    step: Annotated[dict[str, Expr], Field(min_length=1)] = Field(
+        description=(
+            "after a try that fails, the next try's values, from this try's (e.g. qpos_root_z: qpos_root_z + 0.01); the "
+            "first try writes them as the values before it left them"
+        )
+    )
+    attempts: int = Field(
+        10_000, ge=1, le=1_000_000, description="tries at most; none meeting 'until' is a located fault at reset"
+    )
+
+
 class Settle(StrictModel):
     """Physics steps taken at reset, after the values are written (dm_control's cheetah settles 200 steps), with the controls the reset left (zero, or a keyframe's)."""
 
@@ -137,7 +155,8 @@ class Settle(StrictModel):
 
 class PhysicsReset(StrictModel):
     """How each episode starts: MuJoCo's reset (or a keyframe), values written in order (random draws allowed), then
-    optionally values drawn again until a condition holds (redraw) and settling steps (settle): docs/physics.md#reset."""
+    optionally values drawn again (redraw) or stepped (search) until a condition holds and settling steps (settle):
+    docs/physics.md#reset."""
 
     keyframe: str | None = Field(None, description="start from this named keyframe of the model instead of its qpos0")
     values: dict[str, Expr] = Field(
@@ -150,6 +169,9 @@ class PhysicsReset(StrictModel):
         ),
     )
     redraw: Redraw | None = Field(None, description="values drawn again, after 'values', until a condition holds")
+    search: Search | None = Field(
+        None, description="values stepped, after 'values' and a redraw, until a condition holds (a bounded loop)"
+    )
     settle: Settle | None = Field(None, description="physics steps taken last, e.g. {steps: 200, time: 0}")
 
 

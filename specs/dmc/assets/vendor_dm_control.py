@@ -18,7 +18,10 @@ for byte, but for two edits (:data:`EDITS`), each checked to change nothing MuJo
   builds from its XML with that one rename, MuJoCo's binary model equal.
 
 Every other copy compiles to the model dm_control's own loader builds (``get_model_and_assets()``),
-MuJoCo's binary model equal. The script writes SOURCES.md (the dm_control version, each original's
+MuJoCo's binary model equal. Quadruped's model is built at load: its tasks call ``make_model``, which
+edits quadruped.xml (the floor's size, the walls, ball, terrain and rangefinders removed), so the
+model each task loads is written as built (:data:`BUILT`, a comment added on top) and checked
+against the model ``suite.load`` steps, MuJoCo's binary model equal. The script writes SOURCES.md (the dm_control version, each original's
 sha256 and whether the copy is verbatim). dm_control is Apache-2.0 licensed: LICENSE.dm_control is
 its licence, kept beside the copies.
 """
@@ -48,6 +51,12 @@ MODELS = {
     "acrobot.xml": "dm_control.suite.acrobot",
     "hopper.xml": "dm_control.suite.hopper",
     "humanoid.xml": "dm_control.suite.humanoid",
+}
+#: models a task builds at load (quadruped's make_model), copied as built: file -> (suite module, task, the builder
+#: called as the task calls it, the suite file it edits); the floor is the time limit (20 s) times the speed wide
+BUILT: dict[str, tuple[str, str, Callable[[Any], bytes], str]] = {
+    "quadruped_walk.xml": ("dm_control.suite.quadruped", "walk", lambda q: q.make_model(floor_size=10), "quadruped.xml"),
+    "quadruped_run.xml": ("dm_control.suite.quadruped", "run", lambda q: q.make_model(floor_size=100), "quadruped.xml"),
 }
 COMMON = ("common/materials.xml", "common/skybox.xml", "common/visual.xml")
 RENAMED_CAMERA = ('<camera name="hand" ', '<camera name="hand_camera" ')
@@ -131,6 +140,27 @@ def check(name: str, module: str, folder: Path = HERE) -> None:
         raise SystemExit(f"{name}: the copy compiles to another model than dm_control's loader builds")
 
 
+def build(name: str) -> str:
+    """The model `name` of :data:`BUILT`, as its task builds it, with a comment saying so."""
+    module, task, builder, source = BUILT[name]
+    xml = builder(importlib.import_module(module)).decode("utf-8")
+    note = (f"<!-- visualenv: dm_control's {source} as {module}.{task} builds it at load (make_model), written out by "
+            "specs/dmc/assets/vendor_dm_control.py: it compiles to the model suite.load steps, bit for bit. -->\n")
+    return note + xml
+
+
+def check_built(name: str, folder: Path = HERE) -> None:
+    """SystemExit unless the copy of a :data:`BUILT` model compiles to the model ``suite.load`` steps (MJB equal)."""
+    from dm_control import suite
+
+    module, task, _, _ = BUILT[name]
+    domain = module.rsplit(".", 1)[1]
+    assets = importlib.import_module("dm_control.suite.common").ASSETS  # the task's Physics.from_xml_string reads these
+    ours = compile_quietly((folder / name).read_text(encoding="utf-8"), assets)
+    if binary(ours) != binary(suite.load(domain, task).physics.model.ptr):
+        raise SystemExit(f"{name}: the copy compiles to another model than suite.load({domain!r}, {task!r}) steps")
+
+
 def main() -> None:
     from importlib import metadata
 
@@ -148,8 +178,14 @@ def main() -> None:
         else:
             (HERE / name).write_bytes(original)
         rows.append(f"| `{name}` | `{hashlib.sha256(original).hexdigest()}` | {EDITS[name][2] if name in EDITS else 'verbatim'} |")
+    for name, (_, task, _, source) in BUILT.items():
+        (HERE / name).write_text(build(name), encoding="utf-8")
+        digest = hashlib.sha256((suite / source).read_bytes()).hexdigest()
+        rows.append(f"| `{name}` | `{digest}` (`{source}`) | built as `{task}()` builds it (make_model) |")
     for name, module in MODELS.items():
         check(name, module)
+    for name in BUILT:
+        check_built(name)
     (HERE / "SOURCES.md").write_text(f"""\
 # Where these files come from
 
@@ -162,7 +198,7 @@ what the two edited copies change and what they are compared with).
 | --- | --- | --- |
 {chr(10).join(rows)}
 """, encoding="utf-8")
-    print(f"wrote {', '.join((*MODELS, *COMMON))} and SOURCES.md from dm_control {version}", file=sys.stderr)
+    print(f"wrote {', '.join((*MODELS, *BUILT, *COMMON))} and SOURCES.md from dm_control {version}", file=sys.stderr)
 
 
 if __name__ == "__main__":
