@@ -94,3 +94,19 @@ def test_a_folder_without_the_levels_videos_names_them(tmp_path: Path) -> None:
         video_library(str(folder), "train", 0.1)
     with pytest.raises(VisualEnvError, match=r"no folder .*elsewhere"):
         video_library(str(tmp_path / "elsewhere"), "train", 0.1)
+
+
+def test_split_all_takes_any_folder_of_clips_in_name_order(tmp_path: Path) -> None:
+    """`split: all`: every subfolder holding frames is a clip, in name order, the level taking the first 4, 8 or all;
+    a folder without one is a located error."""
+    names = tuple(f"clip-{i:02d}" for i in range(10))
+    folder = davis(tmp_path / "clips", names[::-1])
+    (folder / "notes").mkdir()  # no frames: not a clip
+    assert video_library(str(folder), "all", 0.1).names == names[:4]
+    assert video_library(str(folder), "all", 0.2).names == names[:8]
+    assert video_library(str(folder), "all", 0.3).names == names
+    ranged = Distractions((0.0, 0.3), True, True, VideoBackground(str(folder), "all"), False)
+    assert {draw(ranged, np.random.default_rng(seed)).video for seed in range(200)} == set(range(10))
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(VisualEnvError, match="holds no clip"):
+        video_library(str(tmp_path / "empty"), "all", 0.1)

@@ -116,8 +116,10 @@ def test_eval_of_the_shipped_agent_reproduces_the_first_episodes_of_its_results_
         evaluation["comparison"] == "exact"
     ):  # rendering is deterministic: every agent, the pendulum included, replays every bit
         assert kept == played
-    elif env_id in CHAOTIC:  # another machine: the episodes are a new sample of the agent's, and must look like one
-        assert evaluation["consistent_sample"] is True, result.stdout
+    elif env_id in CHAOTIC:  # another machine: the episodes replay within the tolerance, or are a new sample of the
+        # agent's that looks like one (a long chaotic episode grows a kernel's last-bit differences)
+        assert evaluation["comparison"] == "tolerance", result.stdout
+        assert evaluation["matches_results_json"] or evaluation["consistent_sample"] is True, result.stdout
     else:
         assert evaluation["comparison"] == "tolerance" and "is unlike the one that wrote results.json" in result.stdout
         assert_close_episodes(

@@ -59,10 +59,10 @@ class VideoFolderError(VisualEnvError):
         self.detail = detail
 
 
-def videos_at(difficulty: float, split: str) -> tuple[str, ...]:
+def videos_at(difficulty: float, split: str, clips: tuple[str, ...] = ()) -> tuple[str, ...]:
     """The videos the suite plays at `difficulty`: the first 4 of the split up to its easy level (0.1), 8 up to its
-    medium (0.2), every one above."""
-    names = SPLITS[split]
+    medium (0.2), every one above. The split ``all`` is `clips`, a folder's every clip by name."""
+    names = clips if split == "all" else SPLITS[split]
     for level, count in LEVEL_VIDEOS:
         if difficulty <= level + 1e-9:
             return names[:count]
@@ -87,11 +87,14 @@ def video_library(folder: str, split: str, difficulty: float) -> VideoLibrary:
         raise VideoFolderError(
             f"no folder {root} (a folder of DAVIS 2017's videos, DAVIS/JPEGImages/480p: docs/distractions.md)"
         )
-    names = videos_at(difficulty, split)
+    clips = tuple(sorted(d.name for d in root.iterdir() if d.is_dir() and _frames_in(d))) if split == "all" else ()
+    if split == "all" and not clips:
+        raise VideoFolderError(f"{root} holds no clip (a folder of .jpg or .png frames)")
+    names = videos_at(difficulty, split, clips)
     frames, missing = [], []
     for name in names:
         video = root / name
-        files = sorted(str(f) for f in video.iterdir() if f.suffix.lower() in FRAME_SUFFIXES) if video.is_dir() else []
+        files = _frames_in(video)
         if not files:
             missing.append(name)
         frames.append(tuple(files))
@@ -102,6 +105,11 @@ def video_library(folder: str, split: str, difficulty: float) -> VideoLibrary:
             f"difficulty (a folder of .jpg frames each): {shown}"
         )
     return VideoLibrary(root, names, tuple(frames))
+
+
+def _frames_in(video: Path) -> list[str]:
+    """A clip's frame files (full paths) in name order; none where `video` is not a folder."""
+    return sorted(str(f) for f in video.iterdir() if f.suffix.lower() in FRAME_SUFFIXES) if video.is_dir() else []
 
 
 @functools.lru_cache(maxsize=512)

@@ -158,10 +158,10 @@ class VideoBackground(StrictModel):
             "relative to the spec's folder (to the working directory in make()'s option), ~ and $VARIABLES expanded"
         ),
     )
-    split: Literal["train", "val"] = Field(
+    split: Literal["train", "val", "all"] = Field(
         "train",
-        description="the suite's 60 training videos or its 30 validation ones; a level plays the first 4 (up to 0.1), "
-        "8 (up to 0.2) or all",
+        description="the suite's 60 training videos or its 30 validation ones, or 'all': every clip in the folder (a "
+        "folder of frames each, in name order), not DAVIS's; a level plays the first 4 (up to 0.1), 8 (up to 0.2) or all",
     )
 
 
@@ -182,7 +182,7 @@ class Distractions(StrictModel):
         True,
         description=(
             "true: a moving pattern of two random colours over the sky, seen by the camera only (visualenv's own); "
-            "{videos: DIR, split: train|val}: the suite's DAVIS 2017 videos, fully opaque in place of the sky"
+            "{videos: DIR, split: train|val|all}: the suite's DAVIS 2017 videos, fully opaque in place of the sky"
         ),
     )
     dynamic: bool = Field(
