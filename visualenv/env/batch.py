@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import os
 import time
+from dataclasses import dataclass
 from typing import Any, Mapping
 
 import gymnasium as gym
@@ -61,6 +62,22 @@ from visualenv.spec.options import distraction_settings, model_file
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
 BATCH_BACKEND = "visualenv.render.blender.batch.renderer:BatchedBlenderRenderer"
+
+
+@dataclass
+class StepResults:
+    """What one step gives each env, written in place by the vectorised step and by the lanes."""
+
+    rewards: np.ndarray
+    terminated: np.ndarray
+    truncated: np.ndarray
+
+    @classmethod
+    def empty(cls, n: int) -> StepResults:
+        return cls(np.zeros(n), np.zeros(n, dtype=bool), np.zeros(n, dtype=bool))
+
+    def clear(self) -> None:
+        self.rewards[:], self.terminated[:], self.truncated[:] = 0.0, False, False
 
 
 class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
@@ -238,14 +255,13 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             raise gym.error.ResetNeeded("call reset() before step(): the state is set by reset (Gymnasium's order)")
         actions = self._check_actions(actions)
         n = self.num_envs
-        rewards = np.zeros(n)
-        terminated = np.zeros(n, dtype=bool)
-        truncated = np.zeros(n, dtype=bool)
+        results = StepResults.empty(n)
+        rewards, terminated, truncated = results.rewards, results.terminated, results.truncated
         resetting = self._autoreset.copy()
         stepping = ~resetting
         if stepping.any():
             start = time.perf_counter()
-            self._repeat(actions, stepping, rewards, terminated, truncated)
+            self._repeat(actions, stepping, results)
             if self.profile is not None:
                 self.profile.add("dynamics", time.perf_counter() - start)
         for i in np.flatnonzero(stepping & (self._errors == None)) if self._distractions else ():  # noqa: E711 - as one env, not after a fault
@@ -305,40 +321,26 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
 
     # -- the step -----------------------------------------------------------------------------------
 
-    def _repeat(
-        self,
-        actions: np.ndarray,
-        stepping: np.ndarray,
-        rewards: np.ndarray,
-        terminated: np.ndarray,
-        truncated: np.ndarray,
-    ) -> None:
+    def _repeat(self, actions: np.ndarray, stepping: np.ndarray, results: StepResults) -> None:
         """The action repeat: each stepping env's spec step ``action_repeat`` times with its action, its rewards summed,
         stopping where its episode ends; a step a fault ended has no reward (as one env's)."""
         if self.action_repeat == 1:
-            self._advance(actions, stepping, rewards, terminated, truncated)
+            self._advance(actions, stepping, results)
             return
         going = stepping.copy()
-        reward, ended, cut = np.zeros_like(rewards), np.zeros_like(terminated), np.zeros_like(truncated)
+        each = StepResults.empty(self.num_envs)
         for _ in range(self.action_repeat):
-            reward[:], ended[:], cut[:] = 0.0, False, False
-            self._advance(actions, going, reward, ended, cut)
-            rewards[going] += reward[going]
-            terminated |= ended
-            truncated |= cut
-            going &= ~(ended | cut)
+            each.clear()
+            self._advance(actions, going, each)
+            results.rewards[going] += each.rewards[going]
+            results.terminated |= each.terminated
+            results.truncated |= each.truncated
+            going &= ~(each.terminated | each.truncated)
             if not going.any():
                 break
-        rewards[stepping & (self._errors != None)] = 0.0  # noqa: E711 - element-wise: ended by a fault (on_fault: terminate)
+        results.rewards[stepping & (self._errors != None)] = 0.0  # noqa: E711 - element-wise: ended by a fault (on_fault: terminate)
 
-    def _advance(
-        self,
-        actions: np.ndarray,
-        stepping: np.ndarray,
-        rewards: np.ndarray,
-        terminated: np.ndarray,
-        truncated: np.ndarray,
-    ) -> None:
+    def _advance(self, actions: np.ndarray, stepping: np.ndarray, results: StepResults) -> None:
         """Every stepping env's step at once, then the lanes of those the vectorised step could not do.
 
         An env goes to its lane when its result is one the episode's rules refuse (NaN, an infinity,
@@ -347,6 +349,7 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         whose env the element-wise code cannot say, and whose result numpy may have clipped into a number).
         """
         alone = stepping.copy()
+        rewards, terminated, truncated = results.rewards, results.terminated, results.truncated
         step = self._batch.step
         if step is not None:
             unfinite = None  # the envs whose continuous action is not finite, if any
@@ -380,27 +383,23 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             self._errors[ok] = None
         for i in np.flatnonzero(alone):
             if self._physics is not None:
-                self._replay_lane(int(i), actions[i], rewards, terminated, truncated)
+                self._replay_lane(int(i), actions[i], results)
             else:
-                self._step_lane(int(i), actions[i], rewards, terminated, truncated)
+                self._step_lane(int(i), actions[i], results)
         if self._physics is not None:
             self._physics.kept.clear()
 
-    def _replay_lane(
-        self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
-    ) -> None:
+    def _replay_lane(self, i: int, action: Any, results: StepResults) -> None:
         """Env i's step, whose MuJoCo step the batch took, run again by its lane: its result or its located fault, as env i alone."""
         physics, simulation = self._physics, self._lanes[i].simulation
         try:
             with simulation.replaying(physics.recorded(i, (BEFORE,)), bool(physics.blown[i])):
-                self._step_lane(i, action, rewards, terminated, truncated)
+                self._step_lane(i, action, results)
         finally:
             if not simulation.replay_stepped:  # it faulted before its MuJoCo step: alone, its data was not stepped
                 physics.put_back(i)
 
-    def _step_lane(
-        self, i: int, action: Any, rewards: np.ndarray, terminated: np.ndarray, truncated: np.ndarray
-    ) -> None:
+    def _step_lane(self, i: int, action: Any, results: StepResults) -> None:
         """Env i stepped by its lane: the scalar step, with its checks and faults."""
         lane = self._lane_at(i)
         try:
@@ -409,7 +408,7 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
             raise err.in_env(i) from None
         self._state[:, i] = [info["state"][n] for n in self.program.state_names]
         self._steps[i], self._fired[i], self._success[i] = lane.steps, lane.fired, info["is_success"]
-        rewards[i], terminated[i], truncated[i] = reward, term, trunc
+        results.rewards[i], results.terminated[i], results.truncated[i] = reward, term, trunc
         self._outcome[i] = info["outcome"]
         self._errors[i] = info.get("error")
 
