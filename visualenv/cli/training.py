@@ -490,18 +490,22 @@ def _run(
     """The run in its folder (the resumed one, or a new one under `out_root`), then its report."""
     from visualenv.env.registration import resolve
     from visualenv.spec.loader import load_spec
+    from visualenv.train.evaluation import declares_success
     from visualenv.train.run_folder import new_run_dir
 
     run_dir = Path(resume_dir) if resume_dir else new_run_dir(out_root, load_spec(resolve(config.spec)).spec.id)
     click.echo(f"run folder: {run_dir}")
     changes = hyper if resume_dir else None
-    _report(run_training(config, run_dir, resume=bool(resume_dir), changes=changes, **options), run_dir)
+    results = run_training(config, run_dir, resume=bool(resume_dir), changes=changes, **options)
+    _report(results, run_dir, declares_success(config.spec))
 
 
-def _report(results: dict[str, Any], run_dir: Path) -> None:
+def _report(results: dict[str, Any], run_dir: Path, succeeds: bool) -> None:
+    """The best model's final evaluation in one line (its success rate where the spec declares a success)."""
     click.echo(
         f"best model over {results['episodes']} episodes: reward {results['mean_reward']:.2f} +- {results['std_reward']:.2f}, "
-        f"length {results['mean_length']:.1f}, success {100 * results['success_rate']:.0f} %"
+        f"length {results['mean_length']:.1f}"
+        + (f", success {100 * results['success_rate']:.0f} %" if succeeds else "")
     )
     from visualenv.train.run_folder import RunFolder
 
