@@ -315,9 +315,10 @@ def test_eval_plays_an_agent_on_distracted_episodes(tmp_path: Path) -> None:
     refused = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "random", "--distractions", "0.2"])
     assert refused.exit_code == 2 and "--distractions" in refused.output
     unknown = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--distractions", "harder"])
-    assert unknown.exit_code == 2 and "expected a difficulty from 0 to 1, or easy, medium, hard" in unknown.output, (
-        unknown.output
-    )
+    assert (
+        unknown.exit_code == 2
+        and "expected a difficulty from 0 to 1, easy, medium, hard, or a range LOW:HIGH" in unknown.output
+    ), unknown.output
 
 
 TWO_NAMES = """id: TwoNames-v0

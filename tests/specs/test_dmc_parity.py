@@ -41,15 +41,22 @@ def test_the_pinned_files_are_dm_controls_own() -> None:
     text = (ASSETS / "SOURCES.md").read_text(encoding="utf-8")
     version = re.search(r"^dm_control (\S+) ", text, re.M)
     assert version is not None and "Apache License" in (ASSETS / "LICENSE.dm_control").read_text(encoding="utf-8")
-    rows = {
-        name: (sha, how)
-        for name, sha, how in re.findall(r"^\| `([\w./]+)` \| `([0-9a-f]{64})` \| ([^|]+) \|", text, re.M)
+    rows = {  # a copy, the sha256 of dm_control's file (the one it was built from, where it names one), how it is here
+        name: (sha, original or name, how)
+        for name, sha, original, how in re.findall(
+            r"^\| `([\w./]+)` \| `([0-9a-f]{64})`(?: \(`([\w./]+)`\))? \| ([^|]+) \|", text, re.M
+        )
     }
     assert sorted(rows) == sorted(p.relative_to(ASSETS).as_posix() for p in ASSETS.rglob("*.xml"))
-    verbatim = [name for name, (_, how) in rows.items() if how.strip() == "verbatim"]
+    verbatim = [name for name, (_, _, how) in rows.items() if how.strip() == "verbatim"]
     for name in verbatim:
         assert hashlib.sha256((ASSETS / name).read_bytes()).hexdigest() == rows[name][0], name
-    assert sorted(set(rows) - set(verbatim)) == ["cheetah.xml", "reacher.xml"]
+    assert sorted(set(rows) - set(verbatim)) == [
+        "cheetah.xml",
+        "quadruped_run.xml",
+        "quadruped_walk.xml",
+        "reacher.xml",
+    ]
     if metadata.version("dm_control") != version.group(1):
         pytest.skip(f"dm_control {metadata.version('dm_control')} is installed; the copies are of {version.group(1)}")
     found = importlib.util.spec_from_file_location("vendor_dm_control", ASSETS / "vendor_dm_control.py")
@@ -57,13 +64,15 @@ def test_the_pinned_files_are_dm_controls_own() -> None:
     vendor = importlib.util.module_from_spec(found)
     found.loader.exec_module(vendor)
     theirs = Path(suite.__file__).parent
-    for name, (sha, _) in rows.items():
-        assert hashlib.sha256((theirs / name).read_bytes()).hexdigest() == sha, name
+    for name, (sha, original, _) in rows.items():
+        assert hashlib.sha256((theirs / original).read_bytes()).hexdigest() == sha, name
     for name in verbatim:
         assert (theirs / name).read_bytes() == (ASSETS / name).read_bytes(), name
-    assert sorted(vendor.MODELS) == sorted(p.name for p in ASSETS.glob("*.xml"))
+    assert sorted([*vendor.MODELS, *vendor.BUILT]) == sorted(p.name for p in ASSETS.glob("*.xml"))
     for name, module in vendor.MODELS.items():
         vendor.check(name, module)  # SystemExit if the copy compiles to another model
+    for name in vendor.BUILT:
+        vendor.check_built(name)  # the same, against the model suite.load steps
     cheetah = (ASSETS / "cheetah.xml").read_text(encoding="utf-8")
     assert "settotalmass" not in re.search(r"<compiler [^>]*>", cheetah).group(0) and cheetah.count("<inertial ") == 7
     mass = re.search(r'<body name="torso"[^>]*>\n *<inertial [^>]* mass="([^"]+)"', cheetah).group(1)
