@@ -33,17 +33,20 @@ def evaluations(run_dir: Path) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 
 def wall_times(run_dir: Path, steps: np.ndarray) -> list[float | None]:
-    """The run's elapsed seconds when it had taken each of `steps` (the first progress row at or past it)."""
-    log = run_dir / "logs" / "progress.csv"
-    if not log.exists():
-        return [None] * len(steps)
-    with log.open() as f:
-        rows = [
-            (int(float(r["time/total_timesteps"])), float(r["time/time_elapsed"]))
-            for r in csv.DictReader(f)
-            if r.get("time/time_elapsed") and r.get("time/total_timesteps")
-        ]
-    return [next((t for s, t in rows if s >= step), None) for step in steps]
+    """The run's elapsed seconds when it had taken each of `steps` (the first progress row at or past it), a resumed
+    run's segments added end to end (each segment's log starts its clock at 0)."""
+    from visualenv.train.run_folder import RunFolder
+
+    rows: list[tuple[int, float]] = []
+    for part in RunFolder(run_dir).progress_parts():
+        offset = rows[-1][1] if rows else 0.0
+        with part.open() as f:
+            rows += [
+                (int(float(r["time/total_timesteps"])), offset + float(r["time/time_elapsed"]))
+                for r in csv.DictReader(f)
+                if r.get("time/time_elapsed") and r.get("time/total_timesteps")
+            ]
+    return [next((round(t) for s, t in rows if s >= step), None) for step in steps]
 
 
 def main() -> None:
