@@ -2,10 +2,10 @@
 
 The Distracting Control Suite (Stone et al., 2021) changes what a pixel agent sees and nothing it controls: the
 camera's pose, the colours of the bodies, the floor and the sky, the background (its DAVIS videos from the user's
-folder: :mod:`visualenv.render.videos`; else visualenv's own moving pattern). The camera's ranges, its upper-hemisphere limit and the floor's alpha are the suite's
-(``suite_utils.py``, ``camera.py``). Here each kind is drawn at reset
-from a generator of its own (:func:`distraction_generator`), so the state, the rewards and the env's random numbers
-are those of the same env without distractions, and the same seed draws the same distractions.
+folder: :mod:`visualenv.render.videos`; else visualenv's own moving pattern). The camera's ranges, its
+upper-hemisphere limit and the floor's alpha are the suite's (``suite_utils.py``, ``camera.py``). Here each kind is
+drawn at reset from a generator of its own (:func:`distraction_generator`), so the state, the rewards and the env's
+random numbers are those of the same env without distractions, and the same seed draws the same distractions.
 
 A :class:`Distraction` is renderer-neutral numbers; a renderer applies it (Blender:
 :mod:`visualenv.render.blender.look.distraction_scene`). Colours are drawn per material in the renderer's order from
@@ -74,7 +74,8 @@ def distraction_generator(seed_seq: np.random.SeedSequence) -> np.random.Generat
 def draw(settings: Distractions, rng: np.random.Generator) -> Distraction:
     """An episode's distraction at `settings`' difficulty, as the suite draws it: each angle uniform in
     ±difficulty·pi/2 (the pitch then mapped onto the upper hemisphere's share of that: :func:`orbit_pitch`), the zoom
-    uniform in :func:`zoom_range`, the colours' seed; a range of difficulties draws the episode's first. A kind that is off stays as it is."""
+    uniform in :func:`zoom_range`, the colours' seed; a range of difficulties draws the episode's first. A kind that
+    is off stays as it is."""
     given = settings.difficulty
     scale = float(rng.uniform(*given)) if isinstance(given, tuple) else given  # a range's draw comes first
     reach = scale * math.pi / 2
