@@ -31,6 +31,7 @@ from visualenv.errors import did_you_mean
 from visualenv.expr import BOOL, NUM, Checked, Type, vec
 from visualenv.expr.codegen import FunctionBuilder, Site, const, local, lower, name
 from visualenv.physics.model_fields import MODEL_PREFIX, is_writable, written_geoms
+from visualenv.spec.fields import Expr
 from visualenv.spec.models import Spec
 
 #: keys of reset values that name the model's values (anything else is a temporary)
@@ -193,18 +194,7 @@ def redraw_loop(
         phys.call_statement(phys.WRITE_REDRAW, targets),
         Site("physics.reset.redraw", "the redrawn values, written to the model"),
     )
-    outer, c.used = c.used, set()
-    at = len(fb.body)
-    checked = c.expr((*where, "until"), redraw.until, scope, expect=BOOL)
-    until_used = c.used
-    c.physics_reads(fb, "redraw", at, until_used)
-    c.used = outer
-    until_site = Site(
-        "physics.reset.redraw.until", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()
-    )
-    fb.add(ast.If(lower(checked.tree) if checked else const(True), [ast.Break()], []), until_site)
-    fail = ast.Expr(ast.Call(name(phys.REDRAW_FAILED), [], []))
-    fb.add(fail, until_site)
+    until_used = _until_or_fail(c, fb, "redraw", redraw.until, scope, phys.REDRAW_FAILED)
     body, fail_stmt = fb.body[mark:-1], fb.body[-1]
     del fb.body[mark:]
     restore = [ast.Assign([ast.Name(local(t), ast.Store())], name(BASE_PREFIX + t)) for t in targets]
@@ -233,18 +223,27 @@ def search_loop(
         phys.call_statement(phys.WRITE_SEARCH, targets),
         Site("physics.reset.search", "the searched values, written to the model"),
     )
-    outer, c.used = c.used, set()
-    at = len(fb.body)
-    checked = c.expr((*where, "until"), search.until, scope, expect=BOOL)
-    until_used = c.used
-    c.physics_reads(fb, "search", at, until_used)
-    c.used = outer
-    until_site = Site(
-        "physics.reset.search.until", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()
-    )
-    fb.add(ast.If(lower(checked.tree) if checked else const(True), [ast.Break()], []), until_site)
-    fb.add(ast.Expr(ast.Call(name(phys.SEARCH_FAILED), [], [])), until_site)
+    until_used = _until_or_fail(c, fb, "search", search.until, scope, phys.SEARCH_FAILED)
     body, fail_stmt = fb.body[mark:-1], fb.body[-1]
     del fb.body[mark:]
     fb.body.append(ast.For(ast.Name("_try", ast.Store()), name(phys.SEARCH_TRIES), [*body, *step], [fail_stmt]))
     return targets, until_used
+
+
+def _until_or_fail(
+    c: ResetCompiler, fb: FunctionBuilder, step: str, until: Expr, scope: dict[str, Type], failed: str
+) -> set[str]:
+    """A reset loop's test, written once for redraw and search: the model's names `until` reads, then ``if until:
+    break``, then the call to `failed` (the loop's last statement: it moves to the loop's ``else``); until's names."""
+    outer, c.used = c.used, set()
+    at = len(fb.body)
+    checked = c.expr(("physics", "reset", step, "until"), until, scope, expect=BOOL)
+    until_used = c.used
+    c.physics_reads(fb, step, at, until_used)
+    c.used = outer
+    until_site = Site(
+        f"physics.reset.{step}.until", checked.text if checked else "", tuple(sorted(checked.names)) if checked else ()
+    )
+    fb.add(ast.If(lower(checked.tree) if checked else const(True), [ast.Break()], []), until_site)
+    fb.add(ast.Expr(ast.Call(name(failed), [], [])), until_site)
+    return until_used
