@@ -277,6 +277,17 @@ def test_a_sparse_task_pays_where_dm_controls_pays(ident: str) -> None:
     assert set(paid) == {0.0, 1.0}
 
 
+def rewards_from(ours, theirs, qpos: np.ndarray, qvel: np.ndarray, action: np.ndarray) -> tuple[float, float]:
+    """Our env's and dm_control's reward for one step with `action` from the state (qpos, qvel) set in both."""
+    model, data = ours.unwrapped.model, ours.unwrapped.data
+    data.qpos[:], data.qvel[:] = qpos, qvel
+    mujoco.mj_forward(model, data)
+    with theirs.physics.reset_context():
+        theirs.physics.data.qpos[:] = qpos
+        theirs.physics.data.qvel[:] = qvel
+    return float(ours.step(action)[1]), float(theirs.step(action).reward)
+
+
 @pytest.mark.parametrize("ident", ["DMC-hopper-stand-v0", "DMC-hopper-hop-v0"])
 def test_a_hopper_set_upright_is_paid_as_dm_controls(ident: str) -> None:
     """Random actions hardly ever pay a hopper (it falls at once): states set around upright (its joints near zero, the
@@ -286,7 +297,7 @@ def test_a_hopper_set_upright_is_paid_as_dm_controls(ident: str) -> None:
     theirs = load(ident, 0)
     ours.reset(seed=0)
     theirs.reset()
-    model, data = ours.unwrapped.model, ours.unwrapped.data
+    model = ours.unwrapped.model
     rng = np.random.default_rng(5)
     paid = []
     for _ in range(60):
@@ -296,14 +307,8 @@ def test_a_hopper_set_upright_is_paid_as_dm_controls(ident: str) -> None:
         qpos[5] = rng.uniform(0.1, 1.5)  # the knee, within its range, bent up to where the stand pays no more
         qvel = np.zeros(model.nv)
         qvel[0] = rng.uniform(0.0, 3.0)  # rootx: forward, through hop's linear ramp from 0 to 2 m/s
-        data.qpos[:], data.qvel[:] = qpos, qvel
-        mujoco.mj_forward(model, data)
-        with theirs.physics.reset_context():
-            theirs.physics.data.qpos[:] = qpos
-            theirs.physics.data.qvel[:] = qvel
-        action = rng.uniform(-1, 1, model.nu)
-        reward = ours.step(action)[1]
-        assert abs(reward - theirs.step(action).reward) <= 1e-15, (qpos, qvel)
+        reward, expected = rewards_from(ours, theirs, qpos, qvel, rng.uniform(-1, 1, model.nu))
+        assert abs(reward - expected) <= 1e-15, (qpos, qvel)
         paid.append(reward)
     assert min(paid) == 0.0 and len({r for r in paid if r > 0}) > 10, paid
 
@@ -318,7 +323,7 @@ def test_a_humanoid_set_upright_is_paid_as_dm_controls(ident: str) -> None:
     theirs = load(ident, 0)
     ours.reset(seed=0)
     theirs.reset()
-    model, data = ours.unwrapped.model, ours.unwrapped.data
+    model = ours.unwrapped.model
     rng = np.random.default_rng(6)
     paid = []
     for _ in range(40):
@@ -329,14 +334,7 @@ def test_a_humanoid_set_upright_is_paid_as_dm_controls(ident: str) -> None:
         qpos[7:] = rng.uniform(-0.2, 0.2, model.nq - 7)
         qvel = np.zeros(model.nv)
         qvel[:2] = rng.uniform(-12.0, 12.0, 2) * rng.uniform(0.0, 1.0)  # horizontal, slow to fast
-        data.qpos[:], data.qvel[:] = qpos, qvel
-        mujoco.mj_forward(model, data)
-        with theirs.physics.reset_context():
-            theirs.physics.data.qpos[:] = qpos
-            theirs.physics.data.qvel[:] = qvel
-        action = rng.uniform(-1, 1, model.nu)
-        reward = ours.step(action)[1]
-        expected = theirs.step(action).reward
+        reward, expected = rewards_from(ours, theirs, qpos, qvel, rng.uniform(-1, 1, model.nu))
         assert abs(reward - expected) <= 1e-12 * max(1.0, abs(expected)), (qpos, qvel, reward, expected)
         paid.append(reward)
     assert len({round(r, 6) for r in paid if r > 0.05}) > 10, paid
