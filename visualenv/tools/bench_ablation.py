@@ -3,9 +3,9 @@ in turn at the same states (``visualenv bench --phases``).
 
 The parts: the ``floor`` (flat meshes: a plane has no thickness), the ``skybox`` (the world, where it is more than one
 uniform Background node) and the ``bodies`` (every other mesh). A copy shares the env's meshes, lights, cameras and
-materials but has objects of its own (so its material slots can differ), posed from the env's objects before each
-render; the control copy changes nothing. Plain: a Diffuse BSDF of the material's viewport colour; a world of one
-Background node of the world's colour.
+materials but has objects of its own, posed from the env's objects before each render; the control copy changes
+nothing. Plain: the part's meshes copied with a Diffuse BSDF of each material's viewport colour (every user of a mesh
+takes the copy, so what Cycles draws as an instance stays one); a world of one Background node of the world's colour.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ class SceneCopy:
     name: str
     scene: Any
     pairs: list[tuple[Any, Any]]  # (original object, its copy)
-    made: list[Any] = field(default_factory=list)  # materials and worlds made for it
+    made: list[Any] = field(default_factory=list)  # materials, worlds and meshes made for it
 
     def state(self) -> list[tuple[Any, bool]]:
         """Where the originals stand now: each one's local transform and whether it is hidden."""
@@ -62,7 +62,10 @@ class SceneCopy:
             bpy.data.objects.remove(copy)
         bpy.data.scenes.remove(self.scene)
         for block in self.made:
-            (bpy.data.worlds if block.bl_rna.identifier == "World" else bpy.data.materials).remove(block)
+            kind = block.bl_rna.identifier
+            (bpy.data.worlds if kind == "World" else bpy.data.meshes if kind == "Mesh" else bpy.data.materials).remove(
+                block
+            )
 
 
 def is_flat(obj: Any) -> bool:
@@ -82,7 +85,8 @@ def plain_world(world: Any) -> bool:
 
 def parts_of(scene: Any, layer: Any) -> dict[str, list[Any]]:
     """The objects (for the skybox: the world) of each part present in `scene`'s render layer; absent parts left out."""
-    meshes = [obj for obj in layer.objects if obj.type == "MESH" and len(obj.material_slots)]
+    # a mesh's second user (scaled to nothing, unseen: scene/mjcf.keep_instanced) is made plain with the mesh
+    meshes = [obj for obj in layer.objects if obj.type == "MESH" and len(obj.material_slots) and obj.visible_camera]
     found = {
         "floor": [obj for obj in meshes if is_flat(obj)],
         "skybox": [] if plain_world(scene.world) else [scene.world],
@@ -150,14 +154,22 @@ def copy_scene(
         copy.world = _world(scene.world, made)
     elif chosen:
         plain_of: dict[str, Any] = {}
-        for original in chosen:
-            duplicate = copies[original.name]
-            for slot in duplicate.material_slots:
-                key = slot.material.name if slot.material is not None else ""
+        # each chosen mesh copied with plain materials, for all its users: object-level material slots, or users that
+        # disagree, would keep Cycles from drawing the mesh as an instance (scene/mjcf.keep_instanced)
+        users: dict[int, list[Any]] = {}
+        for original, duplicate in pairs:
+            if original.type == "MESH":
+                users.setdefault(original.data.as_pointer(), []).append(duplicate)
+        for mesh in {original.data for original in chosen}:
+            plain_mesh = mesh.copy()
+            made.append(plain_mesh)
+            for i, material in enumerate(plain_mesh.materials):
+                key = material.name if material is not None else ""
                 if key not in plain_of:
-                    plain_of[key] = _diffuse(slot.material, made)
-                slot.link = "OBJECT"
-                slot.material = plain_of[key]
+                    plain_of[key] = _diffuse(material, made)
+                plain_mesh.materials[i] = plain_of[key]
+            for duplicate in users[mesh.as_pointer()]:
+                duplicate.data = plain_mesh
     return SceneCopy(name, copy, pairs, made)
 
 

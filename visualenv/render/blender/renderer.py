@@ -26,7 +26,7 @@ from visualenv.render.blender.runtime.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.look.distraction_scene import DistractionRig
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
-from visualenv.render.blender.scene.mjcf import build_physics_objects, show_model_sky
+from visualenv.render.blender.scene.mjcf import build_physics_objects, keep_instanced, show_model_sky
 from visualenv.render.blender.look.mujoco import ambient, backdrop, light_scene, raw_images
 from visualenv.render.blender.scene.build import BuiltScene, DataTracker, build_scene, remove_ids
 from visualenv.render.blender.look.segmentation import (
@@ -125,6 +125,8 @@ class BlenderRenderer(BindingSetters, Renderer):
                 light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))
             self._check_names(built)
             self._setup(built, settings.threads)
+            if self._poses is not None:  # after a batch's copies: they share the meshes (no second user needed)
+                keep_instanced(built.scene)
         except BaseException:
             remove_ids(tracker.new())
             self._output.close()

@@ -116,6 +116,30 @@ class PoseWriter:
             draw_tendon(tendon, cylinders, xpos, xquat)
 
 
+#: the name suffix of a mesh's second user (:func:`keep_instanced`)
+SECOND_USER = " (instanced)"
+
+
+def keep_instanced(scene: Any) -> None:
+    """Give each mesh of `scene` whose data has one user a second user no ray can hit (scaled to nothing, seen by
+    shadow rays only), so that Cycles draws every mesh as an instance of its own acceleration structure.
+
+    Cycles applies the transform of a mesh used once to its vertices and builds the mesh into the scene's top-level
+    structure, which it builds anew whenever anything moves: each step then rebuilds every such mesh, moving or not.
+    An instanced mesh keeps its own structure and only the top level is rebuilt (``visualenv bench --phases``,
+    column bvh). An object seen by no ray at all is not handed to Cycles, hence the shadow rays.
+    """
+    for obj in list(scene.objects):
+        if obj.type != "MESH" or obj.data.users != 1 or obj.hide_render:
+            continue
+        second = bpy.data.objects.new(obj.name + SECOND_USER, obj.data)
+        second.scale = (0.0, 0.0, 0.0)
+        second.visible_camera = second.visible_diffuse = second.visible_glossy = False
+        second.visible_transmission = second.visible_volume_scatter = False
+        for collection in obj.users_collection:
+            collection.objects.link(second)
+
+
 def draw_tendon(tendon: TendonShape, cylinders: list[Any], xpos: np.ndarray, xquat: np.ndarray) -> None:
     """The tendon's path from its sites' bodies' poses (:func:`~visualenv.physics.tendons.tendon_path`), a cylinder
     stretched along each segment; the cylinders a shorter path leaves over are shrunk to nothing at its end."""

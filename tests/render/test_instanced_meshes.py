@@ -1,0 +1,51 @@
+"""Every mesh of a MuJoCo scene is drawn as an instance (``scene/mjcf.keep_instanced``): each gets a second user that
+no camera sees, so Cycles keeps its acceleration structure between steps rather than rebuild it.
+
+Real renders: a cheetah episode rendered with the second users and again, from the same seed and actions, with them
+hidden (each mesh then drawn as Cycles draws a mesh used once) shows the same frames but for a few edge pixels, and
+the frames change as the cheetah runs (the test would see a second user that a camera could see).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("mujoco")
+
+import visualenv  # noqa: E402
+
+pytestmark = pytest.mark.blender
+
+
+def _episode(env, actions: np.ndarray) -> np.ndarray:
+    obs, _ = env.reset(seed=3)
+    frames = [obs]
+    for action in actions:
+        obs, *_ = env.step(action)
+        frames.append(obs)
+    return np.array(frames, dtype=np.int16)
+
+
+def test_each_mesh_of_a_mujoco_scene_has_a_second_user_that_changes_no_frame() -> None:
+    from visualenv.render.blender.scene.mjcf import SECOND_USER
+
+    env = visualenv.make("DMC-cheetah-run-v0", max_episode_steps=20)
+    try:
+        scene = env.unwrapped.renderer.scene
+        meshes = [o for o in scene.objects if o.type == "MESH" and not o.hide_render]
+        seconds = [o for o in meshes if o.name.endswith(SECOND_USER)]
+        drawn = [o for o in meshes if not o.name.endswith(SECOND_USER)]
+        assert drawn and len(seconds) == len(drawn)
+        assert all(o.data.users >= 2 for o in drawn)
+        assert all(tuple(o.scale) == (0.0, 0.0, 0.0) and not o.visible_camera for o in seconds)
+        actions = np.random.default_rng(0).uniform(-1, 1, (8, *env.action_space.shape)).astype(np.float32)
+        instanced = _episode(env, actions)
+        for second in seconds:
+            second.hide_render = True
+        used_once = _episode(env, actions)
+    finally:
+        env.close()
+    assert np.abs(instanced[0] - instanced[-1]).mean() > 1.0  # the cheetah moved in view
+    difference = np.abs(instanced - used_once)
+    assert difference.mean() < 0.01 and (difference > 1).mean() < 1e-4, (difference.mean(), difference.max())
