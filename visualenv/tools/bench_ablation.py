@@ -61,11 +61,9 @@ class SceneCopy:
         for _, copy in self.pairs:
             bpy.data.objects.remove(copy)
         bpy.data.scenes.remove(self.scene)
+        kinds = {"World": bpy.data.worlds, "Mesh": bpy.data.meshes}
         for block in self.made:
-            kind = block.bl_rna.identifier
-            (bpy.data.worlds if kind == "World" else bpy.data.meshes if kind == "Mesh" else bpy.data.materials).remove(
-                block
-            )
+            kinds.get(block.bl_rna.identifier, bpy.data.materials).remove(block)
 
 
 def is_flat(obj: Any) -> bool:
@@ -128,6 +126,34 @@ def _world(original: Any, made: list[Any]) -> Any:
     return world
 
 
+def _make_plain(chosen: list[Any], pairs: list[tuple[Any, Any]], made: list[Any]) -> None:
+    """The copies of `chosen` drawn with plain materials: each chosen mesh copied with them, for all its users
+    (object-level material slots, or users that disagree, would keep Cycles from drawing the mesh as an instance:
+    scene/mjcf.keep_instanced)."""
+    plain_of: dict[str, Any] = {}
+
+    def plain(material: Any) -> Any:
+        key = material.name if material is not None else ""
+        if key not in plain_of:
+            plain_of[key] = _diffuse(material, made)
+        return plain_of[key]
+
+    users: dict[int, list[Any]] = {}
+    for original, duplicate in pairs:
+        if original.type == "MESH":
+            users.setdefault(original.data.as_pointer(), []).append(duplicate)
+    for mesh in {original.data for original in chosen}:
+        plain_mesh = mesh.copy()
+        made.append(plain_mesh)
+        for i, material in enumerate(plain_mesh.materials):
+            plain_mesh.materials[i] = plain(material)
+        for duplicate in users[mesh.as_pointer()]:
+            duplicate.data = plain_mesh
+            for slot in duplicate.material_slots:  # a material linked to the object rather than its mesh
+                if slot.link == "OBJECT":
+                    slot.material = plain(slot.material)
+
+
 def copy_scene(
     scene: Any, layer: Any, name: str, plain: str | None = None, parts: dict[str, list] | None = None
 ) -> SceneCopy:
@@ -153,23 +179,7 @@ def copy_scene(
     if plain == "skybox" and chosen:
         copy.world = _world(scene.world, made)
     elif chosen:
-        plain_of: dict[str, Any] = {}
-        # each chosen mesh copied with plain materials, for all its users: object-level material slots, or users that
-        # disagree, would keep Cycles from drawing the mesh as an instance (scene/mjcf.keep_instanced)
-        users: dict[int, list[Any]] = {}
-        for original, duplicate in pairs:
-            if original.type == "MESH":
-                users.setdefault(original.data.as_pointer(), []).append(duplicate)
-        for mesh in {original.data for original in chosen}:
-            plain_mesh = mesh.copy()
-            made.append(plain_mesh)
-            for i, material in enumerate(plain_mesh.materials):
-                key = material.name if material is not None else ""
-                if key not in plain_of:
-                    plain_of[key] = _diffuse(material, made)
-                plain_mesh.materials[i] = plain_of[key]
-            for duplicate in users[mesh.as_pointer()]:
-                duplicate.data = plain_mesh
+        _make_plain(chosen, pairs, made)
     return SceneCopy(name, copy, pairs, made)
 
 
