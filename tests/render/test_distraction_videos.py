@@ -16,6 +16,7 @@ from PIL import Image
 
 import visualenv
 from visualenv.errors import SpecError, VisualEnvError
+from visualenv.render.blender.look import video_backdrop
 from visualenv.render.videos import DAVIS17_TRAINING_VIDEOS, DAVIS17_VALIDATION_VIDEOS
 
 from tests.render.test_distractions import segmented_cartpole
@@ -97,6 +98,36 @@ def test_a_dynamic_video_plays_a_frame_a_step_forward_and_back(tmp_path: Path) -
     finally:
         env.close()
     assert len(bpy.data.images) == images  # every frame's image removed with the renderer
+
+
+def test_a_long_dynamic_episode_shows_every_frame_as_drawn(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
+    """A new frame's image never shows an older one's pixels (Cycles knows an image by its address, and a removed
+    image's address comes back: a few frames in a hundred were stale), and letting Cycles' session go (every few
+    frames here) renders the same frames; the renderer's list of images to remove stays short."""
+    videos = davis_folder(tmp_path / "davis", DAVIS17_TRAINING_VIDEOS[:4], frames=20)
+    settings = {**BACKGROUND_ONLY, "dynamic": True, "background": {"videos": str(videos)}}
+
+    def episode(steps: int) -> list[bytes]:
+        env = visualenv.make(segmented_cartpole(tmp_path), distractions=settings)
+        try:
+            obs, _ = env.reset(seed=1)
+            frames = []
+            for _ in range(steps):
+                sky = obs["mask"][..., 0] == 0
+                assert (
+                    np.abs(obs["eye"][sky].astype(int) - shown(env.unwrapped._distractions.current.video_frame)).max()
+                    <= 2
+                )
+                frames.append(obs["eye"].tobytes())
+                obs = env.step(np.zeros(1, np.float32))[0]
+            assert len(env.unwrapped._renderer._ids) < 200  # the removed frames let go
+            return frames
+        finally:
+            env.close()
+
+    kept = episode(150)
+    monkeypatch.setattr(video_backdrop, "RETAINED_IMAGES", 4)
+    assert episode(40) == kept[:40]
 
 
 def test_a_batch_shows_each_envs_own_video(tmp_path: Path) -> None:

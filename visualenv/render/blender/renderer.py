@@ -28,7 +28,7 @@ from visualenv.render.blender.look.distraction_scene import DistractionRig
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene.mjcf import build_physics_objects, keep_instanced, show_model_sky
 from visualenv.render.blender.look.mujoco import ambient, backdrop, light_scene, raw_images
-from visualenv.render.blender.scene.build import BuiltScene, DataTracker, build_scene, remove_ids
+from visualenv.render.blender.scene.build import BuiltScene, DataTracker, build_scene, is_alive, remove_ids
 from visualenv.render.blender.look.segmentation import (
     SEGMENTATION_CONFIG,
     HiddenLights,
@@ -132,6 +132,7 @@ class BlenderRenderer(BindingSetters, Renderer):
             self._output.close()
             raise
         self._ids = tracker.new()
+        self._ids_kept = max(len(self._ids), 64)  # the list's length when removed ones were last let go
         self._closed = False
         track(self)  # closed at exit if the script leaves it open (at_exit.py: a quiet exit)
 
@@ -300,6 +301,17 @@ class BlenderRenderer(BindingSetters, Renderer):
         if self.profile is not None:
             self.profile.add("write", time.perf_counter() - start, start)
 
+    def _own(self, *datablocks: Any) -> None:
+        """Datablocks made after construction (cameras built at first use, a video's frames): removed with the scene at
+        close. Those removed since are let go once the list doubles, so that it holds about the live ones."""
+        ids = getattr(self, "_ids", None)
+        if ids is None:
+            return
+        ids.extend(datablocks)
+        if len(ids) > 2 * self._ids_kept:
+            ids[:] = [datablock for datablock in ids if is_alive(datablock)]
+            self._ids_kept = max(len(ids), 64)
+
     def _distract(self, distraction: Distraction) -> None:
         """Draw `distraction` in the next renders: observation cameras moved, colours shifted (:mod:`distractions`)."""
         if self._rig is None:
@@ -311,7 +323,7 @@ class BlenderRenderer(BindingSetters, Renderer):
                 floor_alpha=distraction.floor_alpha,
                 videos=distraction.video >= 0,
                 raw_colors=self._raw_colors,
-                own=self._ids.append,  # the frames' images, removed at close
+                own=self._own,  # the frames' images, removed at close
             )
             if self._rig.floor_faded:  # the floor's rays go on through it: transparent bounces
                 self._see_through = True

@@ -65,7 +65,7 @@ class BatchDistractions:
         #: whether the background is the suite's videos: each env's frame a tile of one image
         self.videos = on and isinstance(settings.background, VideoBackground)
         self._atlas: VideoAtlas | None = None
-        self._raw_colors, self._own = raw_colors, own
+        self._scene, self._raw_colors, self._own = scene, raw_colors, own
         #: whether the floor was made see-through (one floor material serves every env: the settings' alpha is theirs)
         self.floor_faded = on and fade_floor(scene, 1.0 if settings.floor_alpha is None else settings.floor_alpha)
         materials = distracted_materials(scene)
@@ -89,7 +89,7 @@ class BatchDistractions:
         """Each env's backdrop about its place (``(N, 3)``: where its rays start) for cameras whose far clip is
         `clip_end`, with its own numbers (:meth:`draw`). Returns the object that holds them."""
         if self.videos:
-            self._atlas = VideoAtlas(f"{collection.name} videos", len(places), self._raw_colors, self._own)
+            self._atlas = VideoAtlas(f"{collection.name} videos", len(places), self._scene, self._raw_colors, self._own)
         self._backdrops = make_backdrops(collection, f"{collection.name} backdrop", places, clip_end, self._atlas)
         return self._backdrops
 

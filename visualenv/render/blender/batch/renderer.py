@@ -481,12 +481,6 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
             camera.data.update_tag()  # an ID property change alone does not tell Cycles' persistent data to sync
             self.shader_updates += 1
 
-    def _own(self, *datablocks: Any) -> None:
-        """Datablocks made after construction (cameras built at first use): removed with the scene at close."""
-        ids = getattr(self, "_ids", None)
-        if ids is not None:
-            ids.extend(datablocks)
-
     def _render_alone(self, j: int, envs: Sequence[int]) -> np.ndarray:
         """The tiles of `envs` through observation camera j, one env-sized render each.
 

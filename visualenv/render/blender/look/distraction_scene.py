@@ -97,7 +97,7 @@ class DistractionRig:
         self._atlas = None
         if backdrop:
             first = next(iter(self.children.values()))
-            self._atlas = VideoAtlas(f"{first.name} videos", 1, raw_colors, own) if videos else None
+            self._atlas = VideoAtlas(f"{first.name} videos", 1, scene, raw_colors, own) if videos else None
             self.backdrop = make_backdrops(
                 scene.collection, f"{first.name} backdrop", np.zeros((1, 3)), first.data.clip_end, self._atlas
             )

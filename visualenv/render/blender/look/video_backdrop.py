@@ -5,10 +5,14 @@ The suite writes a frame, resized to a square, into MuJoCo's skybox texture, whi
 a cube about the camera (a square cube texture: one image for every face). Here each env's current frame is a tile
 of one image (:class:`VideoAtlas`, a tile per env of a batch), and the backdrop's shader looks it up where the ray's
 direction meets that cube (:func:`cube_lookup`): the tile the backdrop's instance names (an attribute), the same image
-on every face, fixed in the world as the skybox is. When an env's frame changes, the frames are written into a new
-image and the lookup turned to it: Cycles' persistent data never reloads an image whose pixels change, nor reliably
-one it was given a render or two before, but loads an image new to it. The images it no longer reads are removed
-:data:`RETIRED` changes later.
+on every face, fixed in the world as the skybox is.
+
+When an env's frame changes, the frames are written into a new image and the lookup turned to it. Cycles' persistent
+data never reloads an image it was given once (its pixels may change; it keeps them all), and it knows an image by its
+address: a new image made where a removed one lay would show the removed one's pixels. So an image is never made at an
+address Cycles was given, and once the images given pass :data:`RETAINED_BYTES` Cycles' session is let go (the scene's
+next render builds it afresh, the same frame), which frees them and lets those addresses be used again. The images
+the lookups no longer read are removed :data:`RETIRED` changes later.
 """
 
 from __future__ import annotations
@@ -28,6 +32,9 @@ VIDEO = "visualenv_background_video"
 ATLAS_SIDE = 2048
 #: how many images the lookups read before are kept (Cycles may still hold them) before they are removed
 RETIRED = 3
+#: the images (their pixels' bytes, their count) Cycles may keep before its session is let go: a single env's frame is
+#: 256 KiB; each render's sync walks all it keeps, and building the session anew costs about one DMC step
+RETAINED_BYTES, RETAINED_IMAGES = 64 * 2**20, 256
 
 
 class VideoAtlas:
@@ -35,16 +42,23 @@ class VideoAtlas:
     would pass :data:`ATLAS_SIDE`); :meth:`show` writes frames."""
 
     def __init__(
-        self, name: str, count: int, raw: bool = False, own: Callable[[Any], object] = lambda image: None
+        self,
+        name: str,
+        count: int,
+        scene: Any,
+        raw: bool = False,
+        own: Callable[[Any], object] = lambda image: None,
     ) -> None:
-        """`raw`: the scene writes colours as they are (MuJoCo's look, as MuJoCo shows a texture's bytes), else through
-        sRGB: either way a frame's pixel is shown as its bytes. `own` is given every image made, for the renderer to
-        remove at close."""
+        """`scene`: where the frames are rendered (its Cycles session is let go now and then). `raw`: the scene writes
+        colours as they are (MuJoCo's look, as MuJoCo shows a texture's bytes), else through sRGB: either way a frame's
+        pixel is shown as its bytes. `own` is given every image made, for the renderer to remove at close."""
         self.columns = math.ceil(math.sqrt(count))
         self.rows = math.ceil(count / self.columns)
         #: a tile's side in pixels
         self.side = side = min(FRAME_SIDE, ATLAS_SIDE // self.columns)
-        self._name, self._raw, self._own = name, raw, own
+        self._name, self._scene, self._raw, self._own = name, scene, raw, own
+        self._given: set[int] = set()  # the addresses of the images made since Cycles' session began
+        self._image_bytes = self.rows * self.columns * side * side * 4  # as Cycles keeps it: 4 bytes a pixel
         #: the image the lookups read now, and the nodes that read it (:func:`cube_lookup`)
         self.image = self._new_image()
         self.nodes: list[Any] = []
@@ -79,11 +93,32 @@ class VideoAtlas:
                 bpy.data.images.remove(self._retired.pop(0))
 
     def _new_image(self) -> Any:
+        """An image at an address Cycles' session has not seen (Cycles' session let go first where it holds enough)."""
         side = self.side
-        image = bpy.data.images.new(self._name, self.columns * side, self.rows * side, alpha=False)
-        image.colorspace_settings.name = RAW_COLORSPACE if self._raw else "sRGB"
-        self._own(image)
+        given = len(self._given)
+        if given >= RETAINED_IMAGES or given * self._image_bytes > RETAINED_BYTES:
+            self._let_cycles_go()
+        made = []
+        while True:
+            image = bpy.data.images.new(self._name, self.columns * side, self.rows * side, alpha=False)
+            image.colorspace_settings.name = RAW_COLORSPACE if self._raw else "sRGB"
+            self._own(image)
+            if image.as_pointer() not in self._given:
+                break
+            made.append(image)  # kept until another is made, so that it lies elsewhere
+        for unused in made:
+            bpy.data.images.remove(unused)
+        self._given.add(image.as_pointer())
         return image
+
+    def _let_cycles_go(self) -> None:
+        """Free Cycles' session (and every image it keeps): turning persistent data off frees it at once, and the
+        next render, with it on again, builds the scene anew."""
+        render = self._scene.render
+        if render.use_persistent_data:
+            render.use_persistent_data = False
+            render.use_persistent_data = True
+        self._given.clear()
 
 
 def cube_lookup(nodes: Any, links: Any, direction: Any, tile: Any, atlas: VideoAtlas) -> Any:

@@ -103,15 +103,18 @@ class DataTracker:
         return out
 
 
+def is_alive(datablock: Any) -> bool:
+    """Whether `datablock` was not removed (Blender invalidates the Python object of a removed one)."""
+    try:
+        datablock.name  # noqa: B018 - raises ReferenceError once removed
+    except ReferenceError:
+        return False
+    return True
+
+
 def remove_ids(ids: list[Any]) -> None:
     """Remove datablocks that still exist (scenes one by one, the rest in one batch)."""
-    alive = []
-    for datablock in ids:
-        try:
-            datablock.name  # noqa: B018 - raises ReferenceError once removed
-        except ReferenceError:
-            continue
-        alive.append(datablock)
+    alive = [datablock for datablock in ids if is_alive(datablock)]
     scenes = [d for d in alive if isinstance(d, bpy.types.Scene)]
     others = [d for d in alive if not isinstance(d, bpy.types.Scene)]
     for scene in scenes:
