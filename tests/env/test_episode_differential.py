@@ -42,6 +42,17 @@ BUNDLED = (
 )
 N = 4
 SEED = 20
+#: the DMC domains whose comparisons run in every suite (PlaNet's six tasks'); the rest run in the slow tier
+EVERY_RUN = {"cartpole_swingup", "cheetah_run", "walker_walk", "reacher_easy", "ball_in_cup_catch", "finger_spin"}
+
+
+def tiered(specs: list[Path]) -> list[Any]:
+    """`specs`, a DMC one outside :data:`EVERY_RUN` marked slow (each costs seconds: the suite stays under its bar)."""
+    return [
+        pytest.param(s, marks=pytest.mark.slow) if s.parent.name == "dmc" and s.stem not in EVERY_RUN else s
+        for s in specs
+    ]
+
 
 #: a state past float32 after four grows (float64 holds it: only the observation overflows), a milestone on the way
 OVERFLOW = """\
@@ -274,7 +285,7 @@ def random_actions(batch_space: Any, seed: int, nan_rate: float = 0.0) -> Callab
     return at
 
 
-@pytest.mark.parametrize("spec", BUNDLED, ids=lambda p: p.stem)
+@pytest.mark.parametrize("spec", tiered(BUNDLED), ids=lambda p: p.stem)
 def test_every_bundled_spec_runs_the_same_episodes_in_one_env_and_in_a_batch(spec: Path) -> None:
     loaded = load_spec(spec)
     steps = 120 if loaded.spec.physics is not None else 300  # MuJoCo steps cost more
@@ -283,7 +294,7 @@ def test_every_bundled_spec_runs_the_same_episodes_in_one_env_and_in_a_batch(spe
     assert counts["ended"] > 0 or loaded.spec.max_steps > steps, "no episode ended: autoreset went untested"
 
 
-@pytest.mark.parametrize("spec", sorted((SPECS / "dmc").glob("*.yaml")), ids=lambda p: p.stem)
+@pytest.mark.parametrize("spec", tiered(sorted((SPECS / "dmc").glob("*.yaml"))), ids=lambda p: p.stem)
 def test_a_batch_repeats_actions_as_one_env_does(spec: Path) -> None:
     """DeepMind Control's tasks at their own action repeat (4, 8...): each step() sums the repeated steps' rewards and
     ends where the episode ends, in a batch as alone."""

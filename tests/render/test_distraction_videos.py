@@ -16,7 +16,6 @@ from PIL import Image
 
 import visualenv
 from visualenv.errors import SpecError, VisualEnvError
-from visualenv.render.blender.look import video_backdrop
 from visualenv.render.videos import DAVIS17_TRAINING_VIDEOS, DAVIS17_VALIDATION_VIDEOS
 
 from tests.render.test_distractions import segmented_cartpole
@@ -124,6 +123,8 @@ def test_a_long_dynamic_episode_shows_every_frame_as_drawn(tmp_path: Path, monke
             return frames
         finally:
             env.close()
+
+    from visualenv.render.blender.look import video_backdrop
 
     kept = episode(150)
     monkeypatch.setattr(video_backdrop, "RETAINED_IMAGES", 4)

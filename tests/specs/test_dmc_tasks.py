@@ -94,7 +94,7 @@ def assert_same_reset(ours, theirs, where: str) -> None:
         )
 
 
-@pytest.mark.parametrize("seed", [0, 7])
+@pytest.mark.parametrize("seed", [0, pytest.param(7, marks=pytest.mark.slow)])  # a second seed: the slow tier's
 @pytest.mark.parametrize("ident", TASKS)
 def test_the_task_equals_dm_control_over_two_episodes(ident: str, seed: int) -> None:
     ours = visualenv.make(ident, render=False, action_repeat=1)

@@ -150,6 +150,7 @@ def test_a_broken_edit_shows_its_located_error_and_the_fix_clears_it(page, cartp
     page.wait_for_selector("#error", state="hidden", timeout=120_000)
 
 
+@pytest.mark.slow  # a minute: the shipped agent plays whole episodes in the page
 def test_the_pretrained_agent_plays_goalie_without_a_key(browser, tmp_path):
     with ViewerProcess(["Goalie-v0", "--model", "pretrained"]) as goalie:
         page = browser.new_page(viewport={"width": 1120, "height": 660})
