@@ -49,3 +49,27 @@ def test_each_mesh_of_a_mujoco_scene_has_a_second_user_that_changes_no_frame() -
     assert np.abs(instanced[0] - instanced[-1]).mean() > 1.0  # the cheetah moved in view
     difference = np.abs(instanced - used_once)
     assert difference.mean() < 0.01 and (difference > 1).mean() < 1e-4, (difference.mean(), difference.max())
+
+
+def test_a_batch_of_one_draws_its_env_as_one_env_does() -> None:
+    """A batch of one is drawn by one env's renderer (every mesh an instance, no instancers nor tiles camera, whose
+    instances of meshes used once Cycles would rebuild at every step): its observations are the env's own, bit for bit."""
+    from visualenv.render.blender.batch.renderer import BatchedBlenderRenderer
+    from visualenv.render.blender.scene.mjcf import SECOND_USER
+
+    batch = visualenv.make_vec("DMC-cheetah-run-v0", 1, batched=True)
+    alone = visualenv.make("DMC-cheetah-run-v0")
+    try:
+        tiles, _ = batch.reset(seed=4)
+        renderer = batch.unwrapped.renderer
+        assert not isinstance(renderer, BatchedBlenderRenderer)
+        assert any(o.name.endswith(SECOND_USER) for o in renderer.scene.objects)
+        frames = [alone.reset(seed=4)[0]]
+        assert np.array_equal(tiles[0], frames[0])
+        for action in np.random.default_rng(1).uniform(-1, 1, (6, *alone.action_space.shape)).astype(np.float32):
+            frames.append(alone.step(action)[0])
+            assert np.array_equal(batch.step(action[None])[0][0], frames[-1])
+        assert np.abs(frames[0].astype(int) - frames[-1].astype(int)).mean() > 1.0  # the cheetah moved in view
+    finally:
+        batch.close()
+        alone.close()

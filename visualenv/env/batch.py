@@ -3,7 +3,8 @@
 The dynamics of all envs step at once as numpy columns (the program's
 vectorised step, :mod:`visualenv.compiler.batch_step`), and one Cycles call per
 camera renders every env's observation as a tile of one image
-(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`). This module is the step; what the envs
+(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`; a batch of one renders as one env does).
+This module is the step; what the envs
 show (observations, the binding table, the human grid) is
 :class:`~visualenv.env.batch_observations.BatchObservations`'s.
 
@@ -61,7 +62,7 @@ from visualenv.spec.loader import LoadedSpec
 from visualenv.spec.options import distraction_settings, model_file
 
 #: the renderer class of a batch, as ``module:attribute`` (imported on first render, so state-only batches never load bpy)
-BATCH_BACKEND = "visualenv.render.blender.batch.renderer:BatchedBlenderRenderer"
+BATCH_BACKEND = "visualenv.render.blender.batch.renderer:batch_renderer"
 
 
 @dataclass

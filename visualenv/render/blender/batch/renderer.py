@@ -519,3 +519,14 @@ class BatchedBlenderRenderer(EnvCameras, BlenderRenderer):
 
 def _instanced(values: tuple) -> None:
     """The setter of a binding on an object drawn as instances: nothing to write per copy (dropped from the copies' setters)."""
+
+
+def batch_renderer(
+    plan: RenderPlan, options: RendererOptions = DEFAULT_OPTIONS, *, num_envs: int = 1
+) -> BlenderRenderer:
+    """The renderer of a batch of `num_envs` envs. A batch of one is drawn by one env's renderer
+    (:class:`BlenderRenderer`: its frames are the env's own, at one env's cost, without instancers or a tiles camera);
+    a larger one by a :class:`BatchedBlenderRenderer`, which also refuses what no batch renders."""
+    if type(num_envs) is int and num_envs == 1 and plan.settings.engine == "cycles":
+        return BlenderRenderer(plan, options)
+    return BatchedBlenderRenderer(plan, options, num_envs=num_envs)

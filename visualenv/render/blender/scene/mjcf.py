@@ -127,10 +127,11 @@ def keep_instanced(scene: Any) -> None:
     Cycles applies the transform of a mesh used once to its vertices and builds the mesh into the scene's top-level
     structure, which it builds anew whenever anything moves: each step then rebuilds every such mesh, moving or not.
     An instanced mesh keeps its own structure and only the top level is rebuilt (``visualenv bench --phases``,
-    column bvh). An object seen by no ray at all is not handed to Cycles, hence the shadow rays.
+    column bvh). An object seen by no ray at all is not handed to Cycles, hence the shadow rays. An object with
+    modifiers draws its own evaluated mesh (a batch's instancer draws instances): it is left as it is.
     """
     for obj in list(scene.objects):
-        if obj.type != "MESH" or obj.data.users != 1 or obj.hide_render:
+        if obj.type != "MESH" or obj.data.users != 1 or obj.hide_render or obj.modifiers:
             continue
         second = bpy.data.objects.new(obj.name + SECOND_USER, obj.data)
         second.scale = (0.0, 0.0, 0.0)
