@@ -126,7 +126,7 @@ def test_a_long_dynamic_episode_shows_every_frame_as_drawn(tmp_path: Path, monke
 
     from visualenv.render.blender.look import video_backdrop
 
-    kept = episode(150)
+    kept = episode(120)
     monkeypatch.setattr(video_backdrop, "RETAINED_IMAGES", 4)
     assert episode(40) == kept[:40]
 

@@ -3,7 +3,8 @@ no camera sees, so Cycles keeps its acceleration structure between steps rather 
 
 Real renders: a cheetah episode rendered with the second users and again, from the same seed and actions, with them
 hidden (each mesh then drawn as Cycles draws a mesh used once) shows the same frames but for a few edge pixels, and
-the frames change as the cheetah runs (the test would see a second user that a camera could see).
+the frames change as the cheetah runs (the test would see a second user that a camera could see). A batch of one is
+drawn so too, by one env's renderer, and shows the env's own frames.
 """
 
 from __future__ import annotations
@@ -52,8 +53,9 @@ def test_each_mesh_of_a_mujoco_scene_has_a_second_user_that_changes_no_frame() -
 
 
 def test_a_batch_of_one_draws_its_env_as_one_env_does() -> None:
-    """A batch of one is drawn by one env's renderer (every mesh an instance, no instancers nor tiles camera, whose
-    instances of meshes used once Cycles would rebuild at every step): its observations are the env's own, bit for bit."""
+    """A batch of one is drawn by one env's renderer, every mesh with its second user (a batch's instancers would draw
+    each body by one instance of a mesh used once, which Cycles rebuilds at every step): the env's own frames, bit for
+    bit."""
     from visualenv.render.blender.batch.renderer import BatchedBlenderRenderer
     from visualenv.render.blender.scene.mjcf import SECOND_USER
 

@@ -102,7 +102,17 @@ def test_the_frames_look_like_dm_controls_own_render_of_the_same_state() -> None
 
 @pytest.mark.parametrize(
     "task",
-    ["reacher", "cheetah", "finger", "ball_in_cup", "walker", "pendulum", "acrobot", "hopper", "humanoid", "quadruped"],
+    [
+        "reacher",
+        "cheetah",
+        "finger",
+        "ball_in_cup",
+        "walker",
+    ]  # PlaNet's domains in every run, the rest in the slow tier
+    + [
+        pytest.param(task, marks=pytest.mark.slow)
+        for task in ("pendulum", "acrobot", "hopper", "humanoid", "quadruped")
+    ],
 )
 def test_the_other_tasks_look_like_dm_controls_render_too(task: str) -> None:
     """The other tasks' models at one state (seed 1, 40 control steps): frames 1.8 to 5.3 levels apart on average

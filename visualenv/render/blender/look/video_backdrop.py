@@ -10,9 +10,9 @@ on every face, fixed in the world as the skybox is.
 When an env's frame changes, the frames are written into a new image and the lookup turned to it. Cycles' persistent
 data never reloads an image it was given once (its pixels may change; it keeps them all), and it knows an image by its
 address: a new image made where a removed one lay would show the removed one's pixels. So an image is never made at an
-address Cycles was given, and once the images given pass :data:`RETAINED_BYTES` Cycles' session is let go (the scene's
-next render builds it afresh, the same frame), which frees them and lets those addresses be used again. The images
-the lookups no longer read are removed :data:`RETIRED` changes later.
+address Cycles was given, and once those pass :data:`RETAINED_IMAGES` or :data:`RETAINED_BYTES` Cycles' session is let
+go (the scene's next render builds it afresh, the same frame), which frees them and lets those addresses be used
+again. The images the lookups no longer read are removed :data:`RETIRED` changes later.
 """
 
 from __future__ import annotations
