@@ -1,10 +1,11 @@
-"""A batch of one against one env: env-steps/s of ``make_vec(ID, 1, batched=True)`` and of ``make(ID)``.
+"""A batch of one against one env: env-steps/s of ``make_vec(ID, 1, batched=True)`` and of ``make(ID)``, and of two
+envs made in one process and stepped in turn (as gymnasium's SyncVectorEnv and SB3's DummyVecEnv step theirs).
 
     python benchmarks/batch_of_one.py [ID ...] [--rounds 3] [--steps 380]
 
-Each figure is its own process (two scenes rendered in turn in one process would each be synchronised afresh), the
-kinds alternated in each round, over the same seeded random actions after 20 untimed steps. For a before/after, run
-the script from each tree in turn (a ``git worktree`` of the commit before, the same venv).
+Each figure is its own process, the kinds alternated in each round, over the same seeded random actions after 20
+untimed steps. For a before/after, run the script from each tree in turn (a ``git worktree`` of the commit before,
+the same venv).
 """
 
 from __future__ import annotations
@@ -14,29 +15,31 @@ import subprocess
 import sys
 
 MEASURE = """
-import sys, time, numpy as np, visualenv
+import sys, time, visualenv
 ident, kind, steps = sys.argv[1], sys.argv[2], int(sys.argv[3])
 if kind == "batch":
-    env = visualenv.make_vec(ident, 1, batched=True)
-    shape = (1, *env.single_action_space.shape)
+    envs = [visualenv.make_vec(ident, 1, batched=True)]
 else:
-    env = visualenv.make(ident)
-    shape = env.action_space.shape
-env.reset(seed=0)
-actions = np.random.default_rng(0).uniform(-1, 1, (steps + 20, *shape)).astype(np.float32)
+    envs = [visualenv.make(ident) for _ in range(2 if kind == "in turn" else 1)]
+for k, env in enumerate(envs):
+    env.reset(seed=k)
+envs[0].action_space.seed(0)
+actions = [envs[0].action_space.sample() for _ in range(steps + 20)]
 for k, action in enumerate(actions):
     if k == 20:
         start = time.perf_counter()
-    out = env.step(action)
-    if kind == "single" and (out[2] or out[3]):
-        env.reset()
-print(steps / (time.perf_counter() - start))
-env.close()
+    for env in envs:
+        out = env.step(action)
+        if kind != "batch" and (out[2] or out[3]):
+            env.reset()
+print(steps * len(envs) / (time.perf_counter() - start))
+for env in envs:
+    env.close()
 """
 
 
 def rate(ident: str, kind: str, steps: int) -> float:
-    """Env-steps/s of one kind ("batch" or "single"), measured in a process of its own."""
+    """Env-steps/s of one kind ("batch", "single" or "in turn"), measured in a process of its own."""
     done = subprocess.run(
         [sys.executable, "-c", MEASURE, ident, kind, str(steps)], capture_output=True, text=True, check=True
     )
@@ -53,11 +56,10 @@ def main() -> None:
     args = parser.parse_args()
     for r in range(args.rounds):
         for ident in args.ids:
-            figures = {kind: rate(ident, kind, args.steps) for kind in ("batch", "single")}
-            ratio = figures["batch"] / figures["single"]
+            figures = {kind: rate(ident, kind, args.steps) for kind in ("batch", "single", "in turn")}
             print(
                 f"round {r + 1}  {ident:28s} batch of one {figures['batch']:6.1f}  one env {figures['single']:6.1f}  "
-                f"ratio {ratio:.2f}",
+                f"two envs in turn {figures['in turn']:6.1f}  (env-steps/s)",
                 flush=True,
             )
 
