@@ -100,20 +100,13 @@ def test_the_frames_look_like_dm_controls_own_render_of_the_same_state() -> None
         assert np.abs(a.astype(int) - b.astype(int)).mean() <= 4
 
 
-@pytest.mark.parametrize(
-    "task",
-    [
-        "reacher",
-        "cheetah",
-        "finger",
-        "ball_in_cup",
-        "walker",
-    ]  # PlaNet's domains in every run, the rest in the slow tier
-    + [
-        pytest.param(task, marks=pytest.mark.slow)
-        for task in ("pendulum", "acrobot", "hopper", "humanoid", "quadruped")
-    ],
-)
+#: the other domains: PlaNet's compared in every run, the rest in the slow tier (seconds each)
+OTHER_DOMAINS = ["reacher", "cheetah", "finger", "ball_in_cup", "walker"] + [
+    pytest.param(task, marks=pytest.mark.slow) for task in ("pendulum", "acrobot", "hopper", "humanoid", "quadruped")
+]
+
+
+@pytest.mark.parametrize("task", OTHER_DOMAINS)
 def test_the_other_tasks_look_like_dm_controls_render_too(task: str) -> None:
     """The other tasks' models at one state (seed 1, 40 control steps): frames 1.8 to 5.3 levels apart on average
     (measured), the sky and the floor (the world body's geoms) within 12 levels, the bodies in the same pixels. What
