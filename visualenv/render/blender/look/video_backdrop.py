@@ -101,13 +101,13 @@ class VideoAtlas:
         made = []
         while True:
             image = bpy.data.images.new(self._name, self.columns * side, self.rows * side, alpha=False)
-            image.colorspace_settings.name = RAW_COLORSPACE if self._raw else "sRGB"
-            self._own(image)
             if image.as_pointer() not in self._given:
                 break
             made.append(image)  # kept until another is made, so that it lies elsewhere
         for unused in made:
             bpy.data.images.remove(unused)
+        image.colorspace_settings.name = RAW_COLORSPACE if self._raw else "sRGB"
+        self._own(image)
         self._given.add(image.as_pointer())
         return image
 
