@@ -209,13 +209,14 @@ def differential(
     nan_rate: float = 0.0,
     mode: AutoresetMode = AutoresetMode.NEXT_STEP,
     repeat: int = 1,
+    n: int = N,
 ) -> dict[str, int]:
-    """Step a batch of N and N single envs with the same random actions; count what happened (episodes ended, faults).
+    """Step a batch of n and n single envs with the same random actions; count what happened (episodes ended, faults).
     `repeat`: the action repeat of both (DeepMind Control's tasks default to theirs: compared with 1, and with it apart)."""
     # trust_code: the hook case imports the test's own module (tests/fixtures/dynamics_hook.py)
-    batch = BatchedVectorEnv(loaded, N, render=False, autoreset_mode=mode, action_repeat=repeat, trust_code=True)
+    batch = BatchedVectorEnv(loaded, n, render=False, autoreset_mode=mode, action_repeat=repeat, trust_code=True)
     actions = random_actions(batch.action_space, SEED, nan_rate)
-    singles = [VisualEnv(loaded, render=False, action_repeat=repeat, trust_code=True) for _ in range(N)]
+    singles = [VisualEnv(loaded, render=False, action_repeat=repeat, trust_code=True) for _ in range(n)]
     names = batch.program.state_names
     counts = {"ended": 0, "errors": 0, "raised": 0}
     obs, info = batch.reset(seed=SEED)
@@ -273,11 +274,11 @@ def random_actions(batch_space: Any, seed: int, nan_rate: float = 0.0) -> Callab
     def at(t: int) -> np.ndarray:
         if t not in drawn:
             if batch_space.dtype.kind == "i":
-                drawn[t] = rng.integers(0, batch_space.nvec[0], N).astype(batch_space.dtype)
+                drawn[t] = rng.integers(0, batch_space.nvec[0], len(batch_space.nvec)).astype(batch_space.dtype)
             else:
                 low, high = batch_space.low, batch_space.high
                 action = rng.uniform(low, high).astype(batch_space.dtype)
-                for i in np.flatnonzero(rng.random(N) < nan_rate):
+                for i in np.flatnonzero(rng.random(len(action)) < nan_rate):
                     action[i, rng.integers(action.shape[1])] = np.nan
                 drawn[t] = action
         return drawn[t]
@@ -325,6 +326,15 @@ def test_a_fault_in_a_repeated_step_ends_it_without_reward_in_a_batch_as_alone()
     a batch's does the same."""
     counts = differential(load_spec_text(REPEATED_OVERFLOW, name="repeated.yaml"), 12, repeat=3)
     assert counts["errors"] >= N and counts["raised"] == 0, counts
+
+
+@pytest.mark.parametrize("mode", [AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP], ids=lambda m: m.name)
+def test_a_batch_of_one_steps_as_one_env_does(mode: AutoresetMode) -> None:
+    """A batch of one steps its env by its lane, which repeats the action itself: the same rewards, endings (a step
+    limit that is no multiple of the repeat) and faults as one env."""
+    assert differential(load_spec_text(FEATURES, name="features.yaml"), 200, mode=mode, n=1)["ended"] > 0
+    assert differential(load_spec_text(REPEATED_OVERFLOW, name="repeated.yaml"), 12, mode=mode, repeat=3, n=1)["errors"]
+    assert differential(load_spec(SPECS / "dmc" / "cartpole_swingup.yaml"), 340, mode=mode, repeat=3, n=1)["ended"]
 
 
 def test_every_function_of_the_language_gives_one_envs_value_in_a_batch() -> None:

@@ -3,7 +3,8 @@
 The dynamics of all envs step at once as numpy columns (the program's
 vectorised step, :mod:`visualenv.compiler.batch_step`), and one Cycles call per
 camera renders every env's observation as a tile of one image
-(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`; a batch of one renders as one env does).
+(:class:`~visualenv.render.blender.batch.renderer.BatchedBlenderRenderer`). A batch
+of one steps and renders as one env does: its lane steps it, and one env's renderer draws it.
 This module is the step; what the envs
 show (observations, the binding table, the human grid) is
 :class:`~visualenv.env.batch_observations.BatchObservations`'s.
@@ -40,7 +41,7 @@ from gymnasium.vector import AutoresetMode
 from gymnasium.vector.utils import batch_space
 
 from visualenv.compiler.physics import BEFORE
-from visualenv.compiler.program import Program
+from visualenv.compiler.program import BatchFunctions, Program
 from visualenv.compiler.render_plan import checked_options, observation_space
 from visualenv.compiler.batch_functions import float_errors
 from visualenv.env.batch_observations import BatchObservations
@@ -176,16 +177,19 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
         self.max_episode_steps = length.max_episode_steps
         #: the episode's endings, success, info and faults, as each env alone has them (visualenv.env.episode)
         self.rules = EpisodeRules(program, step_limit_, observes_state=not self.uses_camera and program.physics is None)
-        # the batch repeats
+        # the batch repeats the action; a batch of one steps as one env, by its lane, which repeats it
+        lane_steps, lane_repeat = (max_episode_steps, action_repeat) if n == 1 else (step_limit_, 1)
         self._lanes = [
-            VisualEnv(program, render=False, max_episode_steps=step_limit_, action_repeat=1) for _ in range(n)
+            VisualEnv(program, render=False, max_episode_steps=lane_steps, action_repeat=lane_repeat) for _ in range(n)
         ]
         #: a physics spec's simulations stepped and read together (None: each lane steps its own, or no physics)
         self._physics: Any = None
         self._pose_arrays: list[tuple] | None = None
         # what the pose arrays view: each env's MjData, or MuJoCo's batch's rows
         self._pose_sources: list[Any] | None = None
-        if program.physics is not None:
+        if n == 1:  # numpy's cost per column call is the same for one env as for a thousand: one env's step is cheaper
+            self._batch = BatchFunctions(None, None)
+        elif program.physics is not None:
             physics = program.physics.batch([lane.simulation for lane in self._lanes])
             self._batch = program.batch_functions(physics)
             if self._batch.step is not None:
@@ -325,6 +329,9 @@ class BatchedVectorEnv(BatchObservations, gym.vector.VectorEnv):
     def _repeat(self, actions: np.ndarray, stepping: np.ndarray, results: StepResults) -> None:
         """The action repeat: each stepping env's spec step ``action_repeat`` times with its action, its rewards summed,
         stopping where its episode ends; a step a fault ended has no reward (as one env's)."""
+        if self.num_envs == 1:  # its lane is the env alone, repeating the action itself
+            self._step_lane(0, actions[0], results)
+            return
         if self.action_repeat == 1:
             self._advance(actions, stepping, results)
             return
