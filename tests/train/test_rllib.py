@@ -104,9 +104,13 @@ def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
 
 
 def test_runner_env_stacks_four_scaled_frames():
+    """The driver's own env (a plain config, no remote worker index) stacks scaled frames and leaves the process's
+    cores alone: only Ray's remote EnvRunners claim one."""
     from visualenv.train.rllib_setup import make_rllib_env
 
+    ours = os.sched_getaffinity(0)
     env = make_rllib_env({"spec": "Goalie-v0", "frame_stack": 4})
+    assert os.sched_getaffinity(0) == ours
     try:
         assert env.observation_space.shape == (100, 100, 4) and env.observation_space.dtype == np.float32
         obs, _ = env.reset(seed=0)
@@ -120,6 +124,26 @@ def test_runner_env_stacks_four_scaled_frames():
         )  # the goalie moved: the newest frame differs from the oldest
     finally:
         env.close()
+
+
+REMOTE_RUNNER_ENV = """
+import os, sys
+from ray.rllib.env.env_context import EnvContext
+from visualenv.train.rllib_setup import make_rllib_env
+env = make_rllib_env(EnvContext({"spec": "VisualCartPole-v0", "frame_stack": 1}, worker_index=1))
+print(sorted(os.sched_getaffinity(0)))
+env.close()
+"""
+
+
+@pytest.mark.skipif(len(os.sched_getaffinity(0)) < 2, reason="confinement shows only where there are two cores")
+def test_a_remote_runners_env_confines_its_process_to_one_core(tmp_path):
+    env = {**os.environ, "TMPDIR": str(tmp_path)}  # the claims' lock files of this process alone
+    done = subprocess.run(
+        [sys.executable, "-c", REMOTE_RUNNER_ENV], capture_output=True, text=True, env=env, timeout=300
+    )
+    assert done.returncode == 0, done.stderr[-2000:]
+    assert len(json.loads(done.stdout.strip().splitlines()[-1])) == 1
 
 
 def test_observations_the_encoder_cannot_take_are_refused_before_anything_starts(tmp_path):

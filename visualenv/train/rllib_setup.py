@@ -79,7 +79,8 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
 
     `env_config` keys: ``spec`` (a path the runner's node can read), ``frame_stack``,
     ``render`` (False: the state vector, no Blender), ``threads`` (render threads), ``pin``
-    (confine the runner's process to a core of its node that no other runner has claimed),
+    (confine a remote runner's process to a core of its node that no other runner has claimed; the driver's
+    process, where a user's script and the learner run, is never confined),
     ``batched`` with ``num_envs`` (RLlib adds it when it calls the vector entry point): the runner's
     envs as one BatchedVectorEnv, frames stacked by :class:`VectorFrameStack`; ``trust_code``: the spec's
     ``dynamics.python`` may be imported (the driver's consent, carried to every runner).
@@ -89,7 +90,8 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
     from visualenv.env.make import make
     from visualenv.env.wrappers import VectorFrameStack
 
-    if getattr(env_config, "worker_index", 0) > 0:  # a remote EnvRunner: a process Ray started for the run's envs
+    remote = getattr(env_config, "worker_index", 0) > 0  # a remote EnvRunner: a process Ray started for the run's envs
+    if remote:
         apply_policy()  # freed memory kept for the next render call (visualenv.compat.glibc)
     spec, batched, n = env_config["spec"], env_config.get("batched", False), int(env_config.get("num_envs", 1))
     trust = bool(env_config.get("trust_code", False))
@@ -98,7 +100,7 @@ def make_rllib_env(env_config: dict[str, Any]) -> gym.Env | gym.vector.VectorEnv
             return BatchedVectorEnv(spec, n, render=False, trust_code=trust)
         return make(spec, render=False, trust_code=trust)
     threads, frame_stack = env_config.get("threads", 1), env_config.get("frame_stack", 4)
-    if env_config.get("pin", True) and threads == 1:
+    if remote and env_config.get("pin", True) and threads == 1:  # never the driver: its learner uses every core
         claim_core()  # before Blender starts, which sizes its thread pools to the cores it may use
     if not batched:
         return ScaledImage(make(spec, frame_stack=frame_stack, threads=threads, trust_code=trust))
