@@ -22,6 +22,7 @@ from visualenv.render.blender.runtime import settings as cfg
 from visualenv.render.blender.scene import user_file
 from visualenv.render.blender.binding_setters import BindingSetters, is_world, write_bindings
 from visualenv.render.blender.look.materials import depth_material, depth_world, see_through, world_writer
+from visualenv.render.blender.runtime import scene_turns
 from visualenv.render.blender.runtime.at_exit import track
 from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.look.distraction_scene import DistractionRig
@@ -403,6 +404,7 @@ class BlenderRenderer(BindingSetters, Renderer):
 
     def raw_render(self) -> None:
         """Blender's render call, with the scene as it is; the pixels wait in the capture buffer or the file."""
+        scene_turns.rendered(self._scene_name)
         if self._active_capture is not None:
             with self._active_capture:
                 bpy.ops.render.render(scene=self._scene_name)

@@ -5,4 +5,5 @@
 * :mod:`.log`: Blender's console output while a scene is built, kept aside
 * :mod:`.autorun`: scripts in a user's .blend never run
 * :mod:`.at_exit`: renderers left open closed before Blender tears itself down
+* :mod:`.scene_turns`: a one-time warning when envs of one process render in turn (each rebuilds Cycles' session)
 """
