@@ -40,6 +40,7 @@ def test_two_envs_stepped_in_turn_are_told_once(fresh_count):
         for env in envs:
             env.close()
     assert len(told) == 1 and "batched=True" in str(told[0].message)
+    assert told[0].filename == __file__  # the line of the caller's step(), not one inside visualenv or gymnasium
 
 
 def test_an_eval_env_rendered_now_and_then_beside_a_training_env_is_not_told(fresh_count):

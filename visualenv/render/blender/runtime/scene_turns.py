@@ -9,11 +9,16 @@ only a window of renders most of which follow another scene's is told.
 
 from __future__ import annotations
 
+import importlib.util
+import os
+import traceback
 import warnings
 
 #: renders counted before judging, and the share of them that followed another scene's render which is told
 WINDOW = 64
 SHARE = 0.5
+#: the packages between a user's ``step()`` and the render: the warning names the line that called into them
+THROUGH = ("visualenv", "gymnasium", "stable_baselines3", "ray")
 
 _last: str | None = None
 _renders = 0
@@ -39,5 +44,21 @@ def rendered(scene: str) -> None:
         return
     if _turns >= SHARE * WINDOW:
         _told = True
-        warnings.warn(MESSAGE, RuntimeWarning, stacklevel=4)
+        warnings.warn(MESSAGE, RuntimeWarning, stacklevel=_callers_level())
     _renders = _turns = 0
+
+
+def _callers_level() -> int:
+    """The ``stacklevel`` (counted from :func:`rendered`) of the first caller whose file lies outside :data:`THROUGH`."""
+    folders = []
+    for name in THROUGH:
+        found = importlib.util.find_spec(name)
+        if found is not None and found.origin:
+            folders.append(os.path.dirname(found.origin) + os.sep)
+    stack = traceback.extract_stack()[:-1]  # from the outermost call to rendered() (this function left out)
+    level = 1
+    for frame in reversed(stack):
+        if not frame.filename.startswith(tuple(folders)):
+            return level
+        level += 1
+    return 1
