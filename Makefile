@@ -24,7 +24,7 @@ browser: $(STAMP)  ## the headless Chromium of the viewer's browser tests, with 
 demo: setup  ## build a bundled spec and show its result
 	$(VENV)/bin/visualenv build specs/visual_cartpole.yaml
 
-test: setup  ## format check and lint (ruff), type-check (mypy), then run the test suite (all but the `slow` end-to-end runs and costlier comparisons: about 12 min on 2 cores)
+test: setup  ## format check and lint (ruff), type-check (mypy), then run the test suite (all but the `slow` end-to-end runs and costlier comparisons: 12-14 min on 2 cores)
 	$(VENV)/bin/ruff format --check visualenv tests
 	$(VENV)/bin/ruff check .
 	$(VENV)/bin/mypy
