@@ -127,7 +127,7 @@ def test_runner_env_stacks_four_scaled_frames():
 
 
 REMOTE_RUNNER_ENV = """
-import os, sys
+import os
 from ray.rllib.env.env_context import EnvContext
 from visualenv.train.rllib_setup import make_rllib_env
 env = make_rllib_env(EnvContext({"spec": "VisualCartPole-v0", "frame_stack": 1}, worker_index=1))
