@@ -286,3 +286,26 @@ def test_the_lit_colour_is_clamped_before_the_texture_multiplies_it(tmp_path: Pa
     image, mask, ids = frame(tmp_path, model)
     face = inside(mask == ids["block"])
     assert face.sum() >= 100 and np.abs(image[face] - level(0.5)).max() <= 1, np.unique(image[face])
+
+
+def test_no_surface_lights_another_at_any_bounce_count(tmp_path: Path) -> None:
+    """MuJoCo draws no light from one surface onto another: with bounces (the quality preset: 16 samples, 4 bounces),
+    the block's face toward the camera, which the model's light (toward +x and down) misses while it lights the floor
+    in front of it, stays rgba * (ambient + headlight), as at 1 sample without bounces."""
+    light = '<light name="sun" directional="true" dir="1 0 -1" diffuse=".9 .9 .9" castshadow="false"/>'
+    (tmp_path / "model.xml").write_text(BOX.format(a=0.1, d=0.4, s=0, on=1, lights=light), encoding="utf-8")
+    spec = tmp_path / "bounces.yaml"
+    spec.write_text(
+        SPEC.format(camera="eye", size=32, look="") + "render: {preset: quality}\n",
+        encoding="utf-8",
+    )
+    env = visualenv.make(spec)
+    try:
+        obs, _ = env.reset(seed=0)
+        ids = env.unwrapped.segmentation_ids
+    finally:
+        env.close()
+    face = inside(obs["mask"][..., 0] == ids["block"])
+    assert face.sum() >= 100
+    expected = [level(c * 0.5) for c in (0.8, 0.6, 0.4)]
+    assert np.abs(obs["eye"][face].astype(int) - expected).max() <= 1, (obs["eye"][face].max(axis=0), expected)

@@ -28,7 +28,7 @@ from visualenv.render.blender.capture import Capture, install as install_capture
 from visualenv.render.blender.look.distraction_scene import DistractionRig
 from visualenv.render.blender.readback import OutputFile, quiet_stdout
 from visualenv.render.blender.scene.mjcf import build_physics_objects, keep_instanced, show_model_sky
-from visualenv.render.blender.look.mujoco import ambient, backdrop, light_scene, raw_images
+from visualenv.render.blender.look.mujoco import ambient, backdrop, direct_light_only, light_scene, raw_images
 from visualenv.render.blender.scene.build import BuiltScene, DataTracker, build_scene, is_alive, remove_ids
 from visualenv.render.blender.look.segmentation import (
     SEGMENTATION_CONFIG,
@@ -124,6 +124,7 @@ class BlenderRenderer(BindingSetters, Renderer):
                 backdrop(built.scene.world)
                 # the spec's own objects as geoms
                 light_scene(built.scene, plan.physics.headlight, ambient(plan.physics))
+                direct_light_only(built.scene)
             self._check_names(built)
             self._setup(built, settings.threads)
             if self._poses is not None:  # after a batch's copies: they share the meshes (no second user needed)

@@ -24,7 +24,8 @@ or a world that lights, turns a body's pixels into a random choice among them
   Cycles' fall-off with distance), casting shadows where MuJoCo's cast them;
   their diffuse term is the material's diffuse (no specular lobe). With one such
   light, each pixel's one sample is exact;
-* the world lights nothing (only camera rays see it), as MuJoCo's skybox;
+* the world lights nothing (only camera rays see it), as MuJoCo's skybox, and no surface lights another (the meshes
+  are seen by camera and shadow rays only);
 * the spec's own objects (an object standing for a body, a .blend's meshes) are lit as geoms without a material;
 * colours are written raw (the 'Raw' view transform, images read as numbers),
   as OpenGL writes them.
@@ -91,7 +92,7 @@ def light_material(
     geometry = nodes.new("ShaderNodeNewGeometry")
     normal = _to_camera(nodes, links, geometry.outputs["Normal"], "NORMAL")
     # n.l: Cycles' camera space looks along +Z, the headlight shines back
-    toward = _math(nodes, links, "MULTIPLY", _z(nodes, links, normal), -1.0)
+    toward = _dot(nodes, links, normal, (0.0, 0.0, -1.0))
     facing = _math(nodes, links, "MAXIMUM", toward, 0.0)
     diffuse = [v if head_on else 0.0 for v in headlight.diffuse]
     base = tuple(a + emission for a in ambient_rgb)
@@ -102,20 +103,19 @@ def light_material(
     if max(highlight_rgb) > 0.0:
         eye = _to_camera(nodes, links, geometry.outputs["Incoming"], "VECTOR")
         half = _vector(nodes, links, "NORMALIZE", _vector(nodes, links, "ADD", eye, (0.0, 0.0, -1.0)))
-        cosine = nodes.new("ShaderNodeVectorMath")
-        cosine.operation = "DOT_PRODUCT"
-        links.new(normal, cosine.inputs[0])
-        links.new(half, cosine.inputs[1])
         power = _math(
-            nodes, links, "POWER", _math(nodes, links, "MAXIMUM", cosine.outputs["Value"], 0.0), 128.0 * shininess
+            nodes,
+            links,
+            "POWER",
+            _math(nodes, links, "MAXIMUM", _dot(nodes, links, normal, half), 0.0),
+            128.0 * shininess,
         )
         lit_side = _math(nodes, links, "GREATER_THAN", toward, 0.0)  # OpenGL: no highlight on a side the light misses
         highlight = _vector(nodes, links, "MULTIPLY", _math(nodes, links, "MULTIPLY", power, lit_side), highlight_rgb)
         lit = _vector(nodes, links, "ADD", lit, _vector(nodes, links, "MULTIPLY", highlight, texel))
     lit = _vector(nodes, links, "MINIMUM", lit, texel)  # texture * min(x, 1) = min(texture * x, texture)
-    # a ray Cycles sampled from another surface sees no emission: it lights nothing
-    path = nodes.new("ShaderNodeLightPath")
-    links.new(_vector(nodes, links, "MULTIPLY", lit, path.outputs["Is Camera Ray"]), bsdf.inputs["Emission Color"])
+    # only camera and shadow rays see a geom (direct_light_only): its emission lights nothing
+    links.new(lit, bsdf.inputs["Emission Color"])
     bsdf.inputs["Emission Strength"].default_value = 1.0
 
 
@@ -166,21 +166,22 @@ def _spot_shader(data: Any, light: LightInfo) -> None:
     data.use_nodes = True
     nodes, links = data.node_tree.nodes, data.node_tree.links
     emission = next(n for n in nodes if n.type == "EMISSION")
-    # strength 1: Constant = d^2, Linear = d (each cancels that much fall-off)
+    # Light Falloff's outputs: Constant = strength d^2, Linear = strength d (each cancels that much fall-off)
     falloff = nodes.new("ShaderNodeLightFalloff")
-    falloff.inputs["Strength"].default_value = 1.0
     falloff.inputs["Smooth"].default_value = 0.0
-    # a light's Normal: the direction of the ray leaving it, in its own frame (-Z: its axis)
+    # a light's Normal: the direction of the ray leaving it, in its own frame (-Z: its axis); Cycles lights only
+    # inside the cone, at most 90 degrees off the axis, so the cosine is not negative
     coords = nodes.new("ShaderNodeTexCoord")
-    along = _math(nodes, links, "MULTIPLY", _z(nodes, links, coords.outputs["Normal"]), -1.0)
-    cone = _math(nodes, links, "POWER", _math(nodes, links, "MAXIMUM", along, 0.0), light.exponent)
+    cone = _math(nodes, links, "POWER", _dot(nodes, links, coords.outputs["Normal"], (0.0, 0.0, -1.0)), light.exponent)
     a0, a1, a2 = light.attenuation
-    if (a0, a1, a2) == (1.0, 0.0, 0.0):
-        reach = falloff.outputs["Constant"]
-    else:
-        lin = _math(nodes, links, "MULTIPLY", falloff.outputs["Linear"], a1)
-        quad = _math(nodes, links, "MULTIPLY_ADD", falloff.outputs["Constant"], a2, lin)
-        reach = _math(nodes, links, "DIVIDE", falloff.outputs["Constant"], _math(nodes, links, "ADD", quad, a0))
+    if (a0, a1, a2) == (1.0, 0.0, 0.0):  # no attenuation: the cone is the fall-off's strength
+        links.new(cone, falloff.inputs["Strength"])
+        links.new(falloff.outputs["Constant"], emission.inputs["Strength"])
+        return
+    falloff.inputs["Strength"].default_value = 1.0
+    lin = _math(nodes, links, "MULTIPLY", falloff.outputs["Linear"], a1)
+    quad = _math(nodes, links, "MULTIPLY_ADD", falloff.outputs["Constant"], a2, lin)
+    reach = _math(nodes, links, "DIVIDE", falloff.outputs["Constant"], _math(nodes, links, "ADD", quad, a0))
     links.new(_math(nodes, links, "MULTIPLY", cone, reach), emission.inputs["Strength"])
 
 
@@ -191,6 +192,18 @@ def backdrop(world: Any) -> None:
     visibility = world.cycles_visibility
     visibility.diffuse = visibility.glossy = visibility.transmission = visibility.scatter = False
     world.cycles.sampling_method = "NONE"
+
+
+def direct_light_only(scene: Any) -> None:
+    """Every mesh of `scene` seen by camera and shadow rays only, as MuJoCo draws no light from one surface onto another.
+
+    Even at 0 bounces Cycles traces a bounce ray from each pixel's surface (for the emission it might hit) and shades
+    the surface it hits; with the meshes out of that ray's sight it reaches the world at once, which lights nothing
+    here: the frames do not change and a floor's pixel costs about a tenth less (results/benchmarks/light-cost.md).
+    """
+    for obj in scene.objects:
+        if obj.type == "MESH":
+            obj.visible_diffuse = obj.visible_glossy = obj.visible_transmission = obj.visible_volume_scatter = False
 
 
 def raw_images(scene: Any) -> None:
@@ -238,10 +251,8 @@ def _vector(nodes: Any, links: Any, operation: str, *inputs: Any) -> Any:
     return _operation(nodes, links, "ShaderNodeVectorMath", "Vector", operation, inputs)
 
 
-def _z(nodes: Any, links: Any, vector: Any) -> Any:
-    split = nodes.new("ShaderNodeSeparateXYZ")
-    links.new(vector, split.inputs[0])
-    return split.outputs["Z"]
+def _dot(nodes: Any, links: Any, a: Any, b: Any) -> Any:
+    return _operation(nodes, links, "ShaderNodeVectorMath", "Value", "DOT_PRODUCT", (a, b))
 
 
 def _to_camera(nodes: Any, links: Any, vector: Any, kind: str) -> Any:
