@@ -199,7 +199,8 @@ def direct_light_only(scene: Any) -> None:
 
     Even at 0 bounces Cycles traces a bounce ray from each pixel's surface (for the emission it might hit) and shades
     the surface it hits; with the meshes out of that ray's sight it reaches the world at once, which lights nothing
-    here: the frames do not change and a floor's pixel costs about a tenth less (results/benchmarks/light-cost.md).
+    here: at 0 bounces the frames do not change and a floor's pixel costs about a tenth less
+    (results/benchmarks/light-cost.md); with bounces, no light is thrown from one surface onto another.
     """
     for obj in scene.objects:
         if obj.type == "MESH":
