@@ -47,12 +47,15 @@ reward: 0.0
 
 
 def frame(
-    tmp_path: Path, model: str, *, camera: str = "eye", size: int = 32, look: str = ""
+    tmp_path: Path, model: str, *, camera: str = "eye", size: int = 32, look: str = "", extra: str = ""
 ) -> tuple[np.ndarray, np.ndarray, dict]:
-    """The first frame (ints) and segmentation mask of `model` seen through `camera`, and the mask's ids."""
+    """The first frame (ints) and segmentation mask of `model` seen through `camera`, and the mask's ids (`extra`: more
+    of the spec, appended)."""
     (tmp_path / "model.xml").write_text(model, encoding="utf-8")
     spec = tmp_path / "look.yaml"
-    spec.write_text(SPEC.format(camera=camera, size=size, look=f", look: {look}" if look else ""), encoding="utf-8")
+    spec.write_text(
+        SPEC.format(camera=camera, size=size, look=f", look: {look}" if look else "") + extra, encoding="utf-8"
+    )
     env = visualenv.make(spec)
     try:
         obs, _ = env.reset(seed=0)
@@ -226,25 +229,14 @@ def test_a_spec_object_standing_for_a_body_is_lit_as_a_geom(tmp_path: Path) -> N
     """An object the spec declares under the block's name (a cube of colour .2 .6 .4) stands for it and is lit as
     MuJoCo lights a geom without a material: its face toward the camera rgba * (ambient + diffuse), evenly (Blender's
     light alone left it black: the model has no light)."""
-    (tmp_path / "model.xml").write_text(BOX.format(a=0.2, d=0.5, s=0, on=1, lights=""), encoding="utf-8")
-    spec = tmp_path / "own.yaml"
-    spec.write_text(
-        SPEC.format(camera="eye", size=32, look="")
-        + """scene:
+    own = """scene:
   objects:
     block: {primitive: cube, size: [1, 1, 1], material: {color: [0.2, 0.6, 0.4]}}
-""",
-        encoding="utf-8",
-    )
-    env = visualenv.make(spec)
-    try:
-        obs, _ = env.reset(seed=0)
-        ids = env.unwrapped.segmentation_ids
-    finally:
-        env.close()
-    face = inside(obs["mask"][..., 0] == ids["block"])
+"""
+    image, mask, ids = frame(tmp_path, BOX.format(a=0.2, d=0.5, s=0, on=1, lights=""), extra=own)
+    face = inside(mask == ids["block"])
     assert face.sum() >= 100
-    assert np.abs(obs["eye"][face].astype(int) - [level(c * 0.7) for c in (0.2, 0.6, 0.4)]).max() <= 1
+    assert np.abs(image[face] - [level(c * 0.7) for c in (0.2, 0.6, 0.4)]).max() <= 1
 
 
 def test_a_planes_checks_lie_where_mujoco_draws_them(tmp_path: Path) -> None:
@@ -293,19 +285,10 @@ def test_no_surface_lights_another_at_any_bounce_count(tmp_path: Path) -> None:
     the block's face toward the camera, which the model's light (toward +x and down) misses while it lights the floor
     in front of it, stays rgba * (ambient + headlight), as at 1 sample without bounces."""
     light = '<light name="sun" directional="true" dir="1 0 -1" diffuse=".9 .9 .9" castshadow="false"/>'
-    (tmp_path / "model.xml").write_text(BOX.format(a=0.1, d=0.4, s=0, on=1, lights=light), encoding="utf-8")
-    spec = tmp_path / "bounces.yaml"
-    spec.write_text(
-        SPEC.format(camera="eye", size=32, look="") + "render: {preset: quality}\n",
-        encoding="utf-8",
+    image, mask, ids = frame(
+        tmp_path, BOX.format(a=0.1, d=0.4, s=0, on=1, lights=light), extra="render: {preset: quality}\n"
     )
-    env = visualenv.make(spec)
-    try:
-        obs, _ = env.reset(seed=0)
-        ids = env.unwrapped.segmentation_ids
-    finally:
-        env.close()
-    face = inside(obs["mask"][..., 0] == ids["block"])
+    face = inside(mask == ids["block"])
     assert face.sum() >= 100
     expected = [level(c * 0.5) for c in (0.8, 0.6, 0.4)]
-    assert np.abs(obs["eye"][face].astype(int) - expected).max() <= 1, (obs["eye"][face].max(axis=0), expected)
+    assert np.abs(image[face] - expected).max() <= 1, (image[face].max(axis=0), expected)
