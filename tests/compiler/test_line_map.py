@@ -109,3 +109,16 @@ def test_a_compiled_program_has_a_line_map_per_generated_function():
     assert program.line_maps["step"].find("dynamics.update.x").text == "x + u"
     assert program.line_maps["step"].find("reward").text == "x * 2"
     assert program.line_maps["bind"].sites == ()
+
+
+def test_builds_share_one_compiled_body_each_in_its_own_globals():
+    """A batch builds a set of functions per env: compiled once, each bound to its own env's names."""
+    fb = FunctionBuilder("g", [local("x")])
+    fb.assign("_r", ast.BinOp(name(local("x")), ast.Mult(), name("_scale")), FIRST)
+    fb.returns(name("_r"))
+    twice, thrice = (fb.build({**function_globals(), "_scale": k}) for k in (2.0, 3.0))
+    assert twice.__code__ is thrice.__code__
+    assert (twice(1.0), thrice(1.0)) == (2.0, 3.0)
+    del fb.body[-1]  # the compiler edits bodies directly (physics_reset wraps statements in loops): compiled again
+    fb.returns(const(0.0))
+    assert fb.build({**function_globals(), "_scale": 2.0})(1.0) == 0.0

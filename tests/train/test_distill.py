@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
 from visualenv.cli import main
-from visualenv.train.distill import DistillConfig, _fit, _shifted
+from visualenv.train.distill import DistillConfig, _fit, _shifted, _StateProbe
 
 
 def _images_and_labels(n: int, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -35,13 +35,42 @@ def test_the_student_learns_what_the_images_show(discrete):
     config = DistillConfig(spec="", teacher="", epochs=1, batch_size=32, shift=2)
     optimizer = torch.optim.Adam(student.parameters(), lr=1e-3)
     generator = np.random.default_rng(0)
-    first = _fit(student, optimizer, frames, labels, config, generator)
+    gathered = frames, labels, np.zeros((len(frames), 2), np.float32)
+    first = _fit(student, optimizer, gathered, config, generator)
     for _ in range(30):
-        last = _fit(student, optimizer, frames, labels, config, generator)
+        last = _fit(student, optimizer, gathered, config, generator)
     assert last < first / 5, (first, last)
     chosen = student.predict(frames, deterministic=True)[0]
     expected = labels if discrete else np.sign(labels)
     assert np.mean((chosen if discrete else np.sign(chosen)) == expected) == 1.0
+
+
+def test_the_state_loss_teaches_the_encoder_what_the_action_does_not_say():
+    """Every label is the same action, so only the probe's state (which side the square is on) can shape the features:
+    the encoder gets the probe's gradient, its loss falls, and the policy's own modules are all that is saved."""
+    torch.manual_seed(0)
+    frames, sides = _images_and_labels(64, discrete=False)
+    space = gym.spaces.Box(0, 255, (3, 36, 36), np.uint8)
+    student = ActorCriticCnnPolicy(space, gym.spaces.Box(-1, 1, (1,)), lambda _: 0.0)
+    saved_keys = set(student.state_dict())
+    probe = _StateProbe(student, 1)
+
+    def probe_loss() -> torch.Tensor:
+        with probe:
+            student.get_distribution(torch.from_numpy(frames).float())
+            return probe.loss(sides, sides.mean(axis=0), sides.std(axis=0))
+
+    probe_loss().backward()
+    assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in student.features_extractor.parameters())
+    student.zero_grad()
+    first = probe_loss().item()
+    optimizer = torch.optim.Adam([*student.parameters(), *probe.head.parameters()], lr=1e-3)
+    config = DistillConfig(spec="", teacher="", epochs=1, batch_size=32, shift=2, state_loss=1.0)
+    generator = np.random.default_rng(0)
+    for _ in range(30):
+        _fit(student, optimizer, (frames, np.zeros((64, 1), np.float32), sides), config, generator, probe)
+    assert probe_loss().item() < first / 5
+    assert set(student.state_dict()) == saved_keys and probe.features is None  # the hook is gone after each use
 
 
 def test_random_shift_moves_each_image_by_at_most_the_shift():

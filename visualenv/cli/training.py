@@ -259,6 +259,12 @@ def train(
     "--shift", default=DistillConfig.shift, type=click.IntRange(min=0), help="random shift of the frames in pixels"
 )
 @shown_option("--frame-stack", default=DistillConfig.frame_stack, type=click.IntRange(min=1))
+@shown_option(
+    "--state-loss",
+    default=DistillConfig.state_loss,
+    type=click.FloatRange(min=0),
+    help="weight of an auxiliary loss: the student's CNN features predict the teacher's state (a head not saved)",
+)
 @click.option(
     "--distractions",
     default=None,
@@ -296,6 +302,7 @@ def distill(
     learning_rate: float,
     shift: int,
     frame_stack: int,
+    state_loss: float,
     distractions: float | list[float] | None,
     eval_episodes: int,
     final_episodes: int,
@@ -322,6 +329,7 @@ def distill(
         learning_rate=learning_rate,
         shift=shift,
         frame_stack=frame_stack,
+        state_loss=state_loss,
         distractions=distractions,
         eval_episodes=eval_episodes,
         final_eval_episodes=final_episodes,

@@ -18,7 +18,7 @@ from __future__ import annotations
 import ast
 import copy
 from dataclasses import dataclass, field
-from types import TracebackType
+from types import CodeType, TracebackType
 from typing import Any, Callable, Mapping, Protocol
 
 from visualenv.expr.functions import FUNCTIONS
@@ -146,6 +146,10 @@ class FunctionBuilder:
     args: list[str]
     body: list[ast.stmt] = field(default_factory=list)
     sites: list[Site] = field(default_factory=list)
+    #: the body compiled once for every env's :meth:`build` (a batch builds a set of functions per env), and the
+    #: statements it was compiled from: the compiler also edits ``body`` directly (e.g. wraps statements in a loop)
+    _code: CodeType | None = field(default=None, init=False, repr=False)
+    _compiled_from: tuple[int, ...] = field(default=(), init=False, repr=False)
 
     @property
     def filename(self) -> str:
@@ -196,6 +200,15 @@ class FunctionBuilder:
         self._add(ast.Return(value), None)
 
     def build(self, env: dict[str, Any]) -> Callable[..., Any]:
+        """The function, its globals `env` (each env's random source and simulation): compiled once for all."""
+        statements = tuple(map(id, self.body))
+        if self._code is None or statements != self._compiled_from:
+            self._code, self._compiled_from = self._compile(), statements
+        namespace = dict(env)
+        exec(self._code, namespace)  # noqa: S102 - compiles a tree assembled from checked nodes
+        return namespace[self.name]
+
+    def _compile(self) -> CodeType:
         args = ast.arguments(
             posonlyargs=[], args=[ast.arg(a) for a in self.args], kwonlyargs=[], kw_defaults=[], defaults=[]
         )
@@ -203,10 +216,7 @@ class FunctionBuilder:
         module = ast.Module([fn], type_ignores=[])
         ast.fix_missing_locations(module)
         fn.lineno = _DEF_LINE
-        code = compile(module, self.filename, "exec")
-        namespace = dict(env)
-        exec(code, namespace)  # noqa: S102 - compiles a tree assembled from checked nodes
-        return namespace[self.name]
+        return compile(module, self.filename, "exec")
 
 
 def name(identifier: str) -> ast.Name:

@@ -22,6 +22,7 @@ best), ``final_model.safetensors`` and ``results.json`` (the best model on fresh
 
 from __future__ import annotations
 
+import contextlib
 import csv
 import hashlib
 import time
@@ -55,6 +56,9 @@ class DistillConfig:
     batch_size: int = 128
     learning_rate: float = 3e-4
     shift: int = 4  # random shift of the frames in pixels (0: none)
+    # weight of an auxiliary loss: a linear head on the student's CNN features predicts the teacher's state vector
+    # (standardised), so the encoder learns from the whole state, not only the action; the head is not saved (0: none)
+    state_loss: float = 0.0
     frame_stack: int = 3
     # the rounds' frames distracted (docs/distractions.md): a difficulty or [low, high] drawn per episode; the final
     # evaluation stays undistracted, as results.json is everywhere
@@ -145,10 +149,13 @@ def _rounds(
     from visualenv.train.evaluation import evaluate
     from visualenv.train.model_files import save_policy
 
-    optimizer = torch.optim.Adam(student.parameters(), lr=config.learning_rate)
+    probe = _StateProbe(student, teacher.observation_space.shape[0]) if config.state_loss > 0 else None
+    parameters = [*student.parameters(), *(probe.head.parameters() if probe else ())]
+    optimizer = torch.optim.Adam(parameters, lr=config.learning_rate)
     generator = np.random.default_rng(config.seed)
     frames: list[np.ndarray] = []
     labels: list[np.ndarray] = []
+    states: list[np.ndarray] = []
     best = -np.inf
     started = time.perf_counter()
     with folder.rounds.open("w", newline="") as f:
@@ -156,10 +163,12 @@ def _rounds(
         writer.writerow(ROUNDS_COLUMNS)
         for round_ in range(config.rounds):
             share = config.mixing ** (round_ + bool(config.student))  # a given student acts from the first round on
-            obs, act, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator)
+            obs, act, state, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator)
             frames.append(obs)
             labels.append(act)
-            loss = _fit(student, optimizer, np.concatenate(frames), np.concatenate(labels), config, generator)
+            states.append(state)
+            gathered = np.concatenate(frames), np.concatenate(labels), np.concatenate(states)
+            loss = _fit(student, optimizer, gathered, config, generator, probe)
             scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
             if scored > best:
                 best = scored
@@ -237,18 +246,20 @@ def _student(vec_env: Any, start: Any = None) -> Any:
 
 def _rollouts(
     vec_env: Any, teacher: Any, student: Any, teacher_share: float, episodes: int, generator: np.random.Generator
-) -> tuple[np.ndarray, np.ndarray, list[float]]:
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
     """`episodes` episodes, each step acted by the teacher with probability `teacher_share`, else by the student:
-    each frame and the teacher's action in its state."""
+    each frame, the teacher's action and the state it saw."""
     env = vec_env.unwrapped.envs[0].unwrapped
     discrete = getattr(env.action_space, "n", None)
     frames: list[np.ndarray] = []
     labels: list[np.ndarray] = []
+    states: list[np.ndarray] = []
     returns: list[float] = []
     obs = vec_env.reset()
     ret = 0.0
     while len(returns) < episodes:
-        label, _ = teacher.predict(env.state_observation()[None], deterministic=True)
+        states.append(np.asarray(env.state_observation(), dtype=np.float32))
+        label, _ = teacher.predict(states[-1][None], deterministic=True)
         frames.append(obs[0])
         labels.append(np.asarray(label[0], dtype=np.float32 if discrete is None else np.int64))
         action = label if generator.random() < teacher_share else student.predict(obs, deterministic=True)[0]
@@ -257,33 +268,66 @@ def _rollouts(
         if done[0]:
             returns.append(ret)
             ret = 0.0
-    return np.stack(frames), np.stack(labels), returns
+    return np.stack(frames), np.stack(labels), np.stack(states), returns
+
+
+class _StateProbe:
+    """A linear head on the student's CNN features (read by a forward hook as the policy computes them) that predicts
+    the teacher's state: an action is one number or a few, the state is all the frames hold for the task."""
+
+    def __init__(self, student: Any, state_size: int):
+        import torch
+
+        self.extractor = student.features_extractor
+        self.head = torch.nn.Linear(self.extractor.features_dim, state_size)
+        self.features: Any = None
+
+    def loss(self, states: np.ndarray, mean: np.ndarray, scale: np.ndarray) -> Any:
+        """The squared error of the last features' prediction of `states`, each standardised by `mean` and `scale`."""
+        import torch
+
+        return torch.nn.functional.mse_loss(self.head(self.features), torch.from_numpy((states - mean) / scale))
+
+    def __enter__(self) -> "_StateProbe":
+        self._hook = self.extractor.register_forward_hook(
+            lambda module, inputs, output: setattr(self, "features", output)
+        )
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self._hook.remove()
+        self.features = None
 
 
 def _fit(
     student: Any,
     optimizer: Any,
-    frames: np.ndarray,
-    labels: np.ndarray,
+    gathered: tuple[np.ndarray, np.ndarray, np.ndarray],
     config: DistillConfig,
     generator: np.random.Generator,
+    probe: _StateProbe | None = None,
 ) -> float:
-    """`config.epochs` passes of minibatches over every frame so far; the last pass's mean loss."""
+    """`config.epochs` passes of minibatches over every frame, label and state so far (the loss: the imitation loss,
+    plus `config.state_loss` times the probe's); the last pass's mean imitation loss."""
     import torch
 
+    frames, labels, states = gathered
+    mean, scale = states.mean(axis=0), np.maximum(states.std(axis=0), 1e-6).astype(np.float32)
     student.set_training_mode(True)
     updates = max(1, int(config.epochs * len(frames) / config.batch_size))
     losses = []
-    for _ in range(updates):
-        batch = generator.integers(0, len(frames), config.batch_size)
-        images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator).contiguous(
-            memory_format=torch.channels_last
-        )
-        loss = _imitation_loss(student.get_distribution(images).distribution, torch.from_numpy(labels[batch]))
-        optimizer.zero_grad()
-        loss.backward()
-        optimizer.step()
-        losses.append(loss.item())
+    with probe or contextlib.nullcontext():
+        for _ in range(updates):
+            batch = generator.integers(0, len(frames), config.batch_size)
+            images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator).contiguous(
+                memory_format=torch.channels_last
+            )
+            imitation = _imitation_loss(student.get_distribution(images).distribution, torch.from_numpy(labels[batch]))
+            loss = imitation + config.state_loss * probe.loss(states[batch], mean, scale) if probe else imitation
+            optimizer.zero_grad()
+            loss.backward()
+            optimizer.step()
+            losses.append(imitation.item())
     student.set_training_mode(False)
     last = losses[-max(1, len(frames) // config.batch_size) :]
     return float(np.mean(last))

@@ -93,6 +93,7 @@ SETTINGS: dict[str, Rule] = {
     "batch_size": Rule(int, 1, 2**20),
     "learning_rate": Rule(float, 0, 1, above_low=True),
     "shift": Rule(int, 0, 1024),
+    "state_loss": Rule(float, 0, 10**6),
     "distractions": Rule(list, optional=True),  # [difficulty] or [low, high]
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
@@ -105,7 +106,7 @@ KEYS: dict[str, tuple[str, ...]] = {
 ADDED: dict[str, dict[str, Any]] = {
     "sb3": {"pin": True, "batched": False, "workers": None, "render_device": None, "augment": None},
     "rllib": {"pin": True, "batched": False},
-    "distill": {"student": None, "distractions": None},
+    "distill": {"student": None, "distractions": None, "state_loss": 0.0},
 }
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
 RECORD_KEYS: dict[str, Rule] = {
