@@ -317,8 +317,36 @@ def test_eval_plays_an_agent_on_distracted_episodes(tmp_path: Path) -> None:
     unknown = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--distractions", "harder"])
     assert (
         unknown.exit_code == 2
-        and "expected a difficulty from 0 to 1, easy, medium, hard, or a range LOW:HIGH" in unknown.output
+        and "expected a difficulty from 0 to 1, easy, medium, hard, a range LOW:HIGH, or a distractions section"
+        in unknown.output
     ), unknown.output
+
+
+def test_eval_takes_a_distractions_section_as_a_mapping(tmp_path: Path) -> None:
+    """`--distractions '{...}'`: any section a spec may hold (e.g. DAVIS videos as the background), checked as a spec's."""
+    import json
+
+    from click.testing import CliRunner
+
+    from visualenv.cli import main
+
+    out, section = tmp_path / "eval.json", "{difficulty: 0.2, camera: false, dynamic: true}"
+    result = CliRunner().invoke(
+        main,
+        ["eval", "Goalie-v0", "--model", "pretrained", "--episodes", "1", "--distractions", section, "-o", str(out)],
+    )
+    assert result.exit_code == 0, result.output
+    assert 'distracted by {"difficulty": 0.2, "camera": false, "dynamic": true}' in result.output, result.output
+    assert json.loads(out.read_text())["distractions"] == {"difficulty": 0.2, "camera": False, "dynamic": True}
+    for bad, message in [
+        ("{difficulty: 0.2, colours: true}", "distractions.colours: unknown key 'colours' (did you mean 'colors'?"),
+        ("{difficulty: 2}", "distractions.difficulty: expected a value less than or equal to 1, got 2"),
+        ("{difficulty: [0.1}", "is not a YAML mapping"),
+    ]:
+        refused = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", "pretrained", "--distractions", bad])
+        assert refused.exit_code == 2 and message in refused.output and "Traceback" not in refused.output, (
+            refused.output
+        )
 
 
 TWO_NAMES = """id: TwoNames-v0

@@ -117,6 +117,7 @@ def teacher(tmp_path_factory):
 
 
 @pytest.mark.slow
+@pytest.mark.blender
 def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
     result = CliRunner().invoke(
         main,
@@ -181,14 +182,15 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
             "--frame-stack",
             "2",
             "--distractions",
-            "0.1:0.3",
+            "{difficulty: [0.1, 0.3], camera: false}",
             "--out",
             str(tmp_path / "again"),
         ],
     )
     assert again.exit_code == 0 and "(the teacher's share 50%)" in again.output, again.output
     second = next((tmp_path / "again" / "Goalie-v0").iterdir())
-    assert json.loads((second / "config.json").read_text())["config"]["distractions"] == [0.1, 0.3]
+    recorded = json.loads((second / "config.json").read_text())["config"]["distractions"]
+    assert recorded == {"difficulty": [0.1, 0.3], "camera": False}
     assert (
         json.loads((second / "config.json").read_text())["student"]["sha256"]
         == hashlib.sha256((run / "best_model.safetensors").read_bytes()).hexdigest()
@@ -223,11 +225,20 @@ def test_a_teacher_of_another_env_is_refused_before_anything_runs(teacher, tmp_p
     assert not (tmp_path / "Hover2D-v0").exists()
 
 
-@pytest.mark.parametrize("given", ["0.4:0.1", "hardest", "0.1:2"])
-def test_a_bad_distractions_option_is_refused_before_anything_runs(teacher, tmp_path, given):
+BAD_LEVELS = ("0.4:0.1", "hardest", "0.1:2")
+
+
+@pytest.mark.parametrize(
+    "given, message",
+    [
+        *[(given, "expected a difficulty from 0 to 1, easy, medium, hard, a range LOW:HIGH") for given in BAD_LEVELS],
+        ("{difficulty: 0.1, background: {video: x}}", "distractions.background.video: unknown key 'video'"),
+    ],
+)
+def test_a_bad_distractions_option_is_refused_before_anything_runs(teacher, tmp_path, given, message):
     result = CliRunner().invoke(
         main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--distractions", given, "--out", str(tmp_path)]
     )
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
-    assert "expected a difficulty from 0 to 1, easy, medium, hard, or a range LOW:HIGH" in result.output
+    assert message in result.output, result.output
     assert not (tmp_path / "Goalie-v0").exists()

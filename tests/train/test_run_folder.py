@@ -20,7 +20,7 @@ from visualenv.train.run_folder import (
     write_config,
     write_results,
 )
-from visualenv.train.run_settings import settings
+from visualenv.train.run_settings import SETTINGS, settings
 
 RESULTS = Path(__file__).resolve().parents[2] / "results"
 SB3_FIRST = {
@@ -171,6 +171,13 @@ def test_settings_out_of_bounds_are_refused_with_what_was_expected(tmp_path, cha
         read_config(tmp_path)
     with pytest.raises(RunFolderError, match=message):
         write_config(tmp_path, current(change))
+
+
+def test_a_distillations_distractions_are_a_list_or_a_section():
+    """config.json records `--distractions` as [difficulty], [low, high], or the section given as a mapping."""
+    rule = SETTINGS["distractions"]
+    assert rule.problem([0.1, 0.3]) is None and rule.problem({"difficulty": 0.2, "camera": False}) is None
+    assert rule.problem("hard") == "expected a list or a mapping, got str 'hard'"
 
 
 def test_broken_or_foreign_run_folders_are_refused(tmp_path):

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 from pathlib import Path
+from typing import Any
 
 import click
 import numpy as np
@@ -138,7 +139,8 @@ def play(
     callback=lambda ctx, param, value: difficulty(value),
     default=None,
     help="observations distracted at this difficulty, 0 to 1, easy, medium, hard (0.1, 0.2, 0.3), or LOW:HIGH (drawn per episode) (docs/distractions.md: "
-    "camera, colours, background, per episode); new episodes, not compared with results.json",
+    "camera, colours, background, per episode), or by a distractions section as a YAML mapping ('{difficulty: 0.3, "
+    "background: {videos: DIR}}'); new episodes, not compared with results.json",
 )
 @click.option("-o", "--out", "json_out", type=click.Path(dir_okay=False), help="also write the figures as JSON")
 @click.option(
@@ -156,7 +158,7 @@ def eval_command(
     algo: str | None,
     episodes: int | None,
     seed: int | None,
-    distractions: float | None,
+    distractions: float | list[float] | dict[str, Any] | None,
     json_out: str | None,
     write_results: bool,
     trust_code: bool,
@@ -208,7 +210,7 @@ def eval_command(
         click.echo(
             f"{model_path}: {results['episodes']} deterministic episodes, the first reset with seed {results['eval_seed']}"
             + (
-                f", distracted at difficulty {distractions} (not compared with results.json)"
+                f", distracted {_distracted(distractions)} (not compared with results.json)"
                 if distractions is not None
                 else ""
             )
@@ -384,3 +386,10 @@ def export_policy(model: str, out: str, trust_pickle: bool, algo: str, full: boo
     click.echo(
         f"wrote {path} ({path.stat().st_size / 1e6:.1f} MB, {'float32' if full else 'float16'} weights) and {path.with_suffix('.json').name}"
     )
+
+
+def _distracted(distractions: float | list[float] | dict[str, Any]) -> str:
+    """How the evaluation's observations are distracted, in words: at a difficulty, or by the section given."""
+    if isinstance(distractions, dict):
+        return f"by {json.dumps(distractions)}"
+    return f"at difficulty {distractions}"

@@ -134,22 +134,46 @@ def worker_counts(value: str, option: str = "--workers") -> tuple[int, ...]:
     return counts
 
 
-def difficulty(value: str | None, option: str = "--distractions") -> float | list[float] | None:
-    """--distractions: a difficulty in [0, 1], a Distracting Control Suite level by name, or a range LOW:HIGH (each
-    episode's difficulty drawn uniformly in it)."""
+def difficulty(value: str | None, option: str = "--distractions") -> float | list[float] | dict[str, Any] | None:
+    """--distractions: a difficulty in [0, 1], a Distracting Control Suite level by name, a range LOW:HIGH (each
+    episode's difficulty drawn uniformly in it), or a spec's ``distractions:`` section as a YAML mapping
+    (``{difficulty: 0.2, background: {videos: DIR}}``), checked here as the spec's section is."""
     from visualenv.spec.options import DISTRACTION_LEVELS
 
     if value is None:
         return None
     if value in DISTRACTION_LEVELS:
         return DISTRACTION_LEVELS[value]
+    if value.lstrip().startswith("{"):
+        return _distractions_section(value, option)
     try:
         bounds = [float(part) for part in value.split(":")]
     except ValueError:
         bounds = []
     if len(bounds) not in (1, 2) or not all(0.0 <= b <= 1.0 for b in bounds) or bounds != sorted(bounds):
         raise click.BadParameter(
-            f"{value!r}: expected a difficulty from 0 to 1, {', '.join(DISTRACTION_LEVELS)}, or a range LOW:HIGH",
+            f"{value!r}: expected a difficulty from 0 to 1, {', '.join(DISTRACTION_LEVELS)}, a range LOW:HIGH, "
+            "or a distractions section as a mapping ({difficulty: 0.2, ...})",
             param_hint=option,
         )
     return bounds[0] if len(bounds) == 1 else bounds
+
+
+def _distractions_section(value: str, option: str) -> dict[str, Any]:
+    """A ``distractions:`` section given as YAML flow text, refused with the spec's own messages if a spec would be."""
+    import yaml
+
+    from visualenv.spec.options import check_make_options
+
+    try:
+        section = yaml.safe_load(value)
+    except yaml.YAMLError as exc:
+        raise click.BadParameter(f"{value!r} is not a YAML mapping: {exc.problem}", param_hint=option) from None
+    if not isinstance(section, dict):
+        raise click.BadParameter(f"{value!r} is not a YAML mapping", param_hint=option)
+    try:
+        check_make_options(distractions=section)
+    except SpecError as exc:
+        problems = "; ".join(f"{d.path}: {d.message}" if d.path else d.message for d in exc.diagnostics)
+        raise click.BadParameter(problems, param_hint=option) from None
+    return section

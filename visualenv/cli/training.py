@@ -270,7 +270,8 @@ def train(
     default=None,
     callback=lambda ctx, param, value: difficulty(value),
     help="the rounds' frames (rollouts and selection) distracted at this difficulty, 0 to 1, easy, medium, hard, "
-    "or LOW:HIGH, drawn per episode (docs/distractions.md); the final evaluation stays undistracted",
+    "or LOW:HIGH, drawn per episode, or a distractions section as a YAML mapping ('{difficulty: 0.2, background: "
+    "{videos: DIR}}'; docs/distractions.md); the final evaluation stays undistracted",
 )
 @shown_option(
     "--eval-episodes",
@@ -303,7 +304,7 @@ def distill(
     shift: int,
     frame_stack: int,
     state_loss: float,
-    distractions: float | list[float] | None,
+    distractions: float | list[float] | dict[str, Any] | None,
     eval_episodes: int,
     final_episodes: int,
     seed: int,

@@ -60,9 +60,10 @@ class DistillConfig:
     # (standardised), so the encoder learns from the whole state, not only the action; the head is not saved (0: none)
     state_loss: float = 0.0
     frame_stack: int = 3
-    # the rounds' frames distracted (docs/distractions.md): a difficulty or [low, high] drawn per episode; the final
+    # the rounds' frames distracted (docs/distractions.md): a difficulty, [low, high] drawn per episode, or a spec's
+    # distractions section (e.g. with DAVIS videos as the background); the final
     # evaluation stays undistracted, as results.json is everywhere
-    distractions: float | list[float] | None = None
+    distractions: float | list[float] | dict[str, Any] | None = None
     eval_episodes: int = 10  # per round, on the selection seeds
     final_eval_episodes: int = 100
     seed: int = 0

@@ -89,7 +89,7 @@ def make_eval_env(
     frame_stack: int,
     render: bool = True,
     transpose: bool = True,
-    distractions: float | str | list[float] | None = None,
+    distractions: float | str | list[float] | dict[str, Any] | None = None,
     trust_code: bool = False,
 ) -> Any:
     """One in-process env seeded `seed`, frames stacked and (`transpose`) images channels first, as SB3 does to the training env.
@@ -274,7 +274,7 @@ def evaluate_model(
     episodes: int | None = None,
     seed: int | None = None,
     trust_pickle: bool = False,
-    distractions: float | str | None = None,
+    distractions: float | str | list[float] | dict[str, Any] | None = None,
     trust_code: bool = False,
 ) -> tuple[dict[str, Any], RecordedEvaluation | None]:
     """`visualenv eval`: the model's deterministic evaluation on `spec`, and what its run recorded (if found beside it).
@@ -282,7 +282,8 @@ def evaluate_model(
     Unset arguments take the run's values (config.json and results.json beside the model),
     else PPO, 100 episodes and :data:`FRESH_SEED`; the run's final evaluation is replayed when the
     seed is the run's. `trust_pickle`: a pickle-based model may load (:func:`~visualenv.train.model_files.load_model`).
-    `distractions`: the observations distracted at this difficulty (the results say so in ``distractions``).
+    `distractions`: the observations distracted at this difficulty, or by this distractions section (the results
+    say so in ``distractions``).
     `trust_code`: the spec's ``dynamics.python`` may be imported (docs/security.md).
     """
     from gymnasium import spaces

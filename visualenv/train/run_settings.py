@@ -30,7 +30,7 @@ class RunFolderError(ConfigError):
 class Rule:
     """What a setting may be: a value of `kind` from `low` to `high`, one of `choices`, or None where `optional`."""
 
-    kind: type
+    kind: type | tuple[type, ...]
     low: float | None = None
     high: float | None = None
     choices: tuple[str, ...] = ()
@@ -44,14 +44,18 @@ class Rule:
         number = isinstance(value, (int, float)) and not isinstance(value, bool)
         of_kind = isinstance(value, self.kind) and (self.kind is bool) == isinstance(value, bool)
         if not (number if self.kind is float else of_kind):
-            return f"expected {_NAMES[self.kind]}, got {type(value).__name__} {value!r}"
+            return f"expected {self._kind_name()}, got {type(value).__name__} {value!r}"
         if self.choices and value not in self.choices:
             return f"expected one of {', '.join(self.choices)}, got {value!r}"
         if number and not (math.isfinite(value) and self._within(value)):
-            return f"expected {_NAMES[self.kind]}{self._bounds()}, got {value!r}"
+            return f"expected {self._kind_name()}{self._bounds()}, got {value!r}"
         if self.kind is str and not value:
             return "expected a non-empty text"
         return None
+
+    def _kind_name(self) -> str:
+        kinds = self.kind if isinstance(self.kind, tuple) else (self.kind,)
+        return " or ".join(_NAMES[k] for k in kinds)
 
     def _within(self, value: float) -> bool:
         above = self.low is None or (value > self.low if self.above_low else value >= self.low)
@@ -94,7 +98,7 @@ SETTINGS: dict[str, Rule] = {
     "learning_rate": Rule(float, 0, 1, above_low=True),
     "shift": Rule(int, 0, 1024),
     "state_loss": Rule(float, 0, 10**6),
-    "distractions": Rule(list, optional=True),  # [difficulty] or [low, high]
+    "distractions": Rule((list, dict), optional=True),  # [difficulty], [low, high], or a distractions section
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
 #: each backend's settings: those of its first format, then (with the value an older run takes) those added since
