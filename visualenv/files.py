@@ -108,6 +108,26 @@ def read_json(path: Path, max_bytes: int | None = None, max_depth: int | None = 
         raise FileSizeError("lists and objects nested too deeply to be read") from None
 
 
+def read_json_as(path: Path, error: type[Exception], max_bytes: int | None = None) -> Any:
+    """:func:`read_json`, its failures raised as `error` with the file's name: it cannot be read (OSError), or it is
+    not JSON (too large, too deep, not UTF-8, not JSON: the ValueErrors)."""
+    try:
+        return read_json(path, max_bytes=max_bytes)
+    except OSError as exc:
+        raise error(f"{path}: cannot read it ({exc.strerror or exc})") from None
+    except ValueError as exc:
+        raise error(f"{path}: not JSON ({exc})") from None
+
+
+def check_format(record: Any, path: Path, what: str, format: str, version: int, error: type[Exception]) -> dict:
+    """`record` (JSON read from `path`) if it is `what` of visualenv (``"format": format``) in `version`, else `error`."""
+    if not isinstance(record, dict) or record.get("format") != format:
+        raise error(f'{path}: not {what} of visualenv (no "format": "{format}")')
+    if record.get("format_version") != version:
+        raise error(f"{path}: format_version {record.get('format_version')!r}; this visualenv reads version {version}")
+    return record
+
+
 #: a JSON string, escapes included
 _JSON_STRING = re.compile(rb'"[^"\\]*(?:\\.[^"\\]*)*"', re.DOTALL)
 

@@ -35,7 +35,7 @@ import numpy as np
 
 from visualenv.compat.sb3 import episode_window, set_training_counters, state_names, training_counters
 from visualenv.errors import ConfigError, VisualEnvError
-from visualenv.files import read_json
+from visualenv.files import check_format, read_json_as
 from visualenv.train.model_files import PickleRefused
 from visualenv.train.policy_format import weights_of
 from visualenv.spec.loader import spec_identity
@@ -251,19 +251,8 @@ def load_state(model: Any, checkpoint: Path, algorithm: str) -> None:
 
 
 def _read_state(path: Path) -> dict[str, Any]:
-    try:
-        state = read_json(path, max_bytes=MAX_STATE_JSON)
-    except OSError as exc:
-        raise CheckpointError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-    except ValueError as exc:  # too large, too deep (FileSizeError), not UTF-8 or not JSON
-        raise CheckpointError(f"{path}: not JSON ({type(exc).__name__}: {str(exc)[:200]})") from None
-    if not isinstance(state, dict) or state.get("format") != FORMAT:
-        raise CheckpointError(f'{path}: not a checkpoint of visualenv (no "format": "{FORMAT}")')
-    if state.get("format_version") != FORMAT_VERSION:
-        raise CheckpointError(
-            f"{path}: format_version {state.get('format_version')!r}; this visualenv reads version {FORMAT_VERSION}"
-        )
-    return state
+    state = read_json_as(path, CheckpointError, max_bytes=MAX_STATE_JSON)
+    return check_format(state, path, "a checkpoint", FORMAT, FORMAT_VERSION, CheckpointError)
 
 
 def _most_bytes(model: Any) -> int:

@@ -29,7 +29,7 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.files import read_json
+from visualenv.files import check_format, read_json_as
 from visualenv.train.policy_check import check_against, check_arguments, check_finite, check_space_size, on_meta
 from visualenv.train.policy_kinds import PolicyFileError, build_rllib_module, build_sb3_policy, rllib_kind, sb3_kind
 
@@ -245,16 +245,9 @@ def read_meta(path: str | Path) -> dict[str, Any]:
     )
     if not meta_path.is_file():
         raise PolicyFileError(missing.format(meta_path))
-    try:
-        meta = read_json(meta_path)
-    except (OSError, UnicodeDecodeError, ValueError) as exc:
-        raise PolicyFileError(f"{meta_path}: not JSON ({exc})") from None
-    if not isinstance(meta, dict) or meta.get("format") != FORMAT:
-        raise PolicyFileError(f'{meta_path}: not a policy file of visualenv (no "format": "{FORMAT}")')
-    if meta.get("format_version") != FORMAT_VERSION:
-        raise PolicyFileError(
-            f"{meta_path}: format_version {meta.get('format_version')!r}; this visualenv reads version {FORMAT_VERSION}"
-        )
+    meta = check_format(
+        read_json_as(meta_path, PolicyFileError), meta_path, "a policy file", FORMAT, FORMAT_VERSION, PolicyFileError
+    )
     if not weights_path.is_file():
         raise PolicyFileError(missing.format(weights_path))
     return meta

@@ -40,7 +40,7 @@ from typing import Any
 
 import numpy as np
 
-from visualenv.files import read_json
+from visualenv.files import read_json_as
 from visualenv.train.policy_format import WEIGHTS
 from visualenv.train.run_settings import (
     ADDED,
@@ -203,15 +203,6 @@ def _folder(run: str | Path | RunFolder) -> RunFolder:
 # -- reading and writing --------------------------------------------------------------------------------------------
 
 
-def _read_json(path: Path) -> Any:
-    try:
-        return read_json(path)
-    except OSError as exc:
-        raise RunFolderError(f"{path}: cannot read it ({exc.strerror or exc})") from None
-    except ValueError as exc:
-        raise RunFolderError(f"{path}: not JSON ({exc})") from None
-
-
 def _write_json(path: Path, value: dict[str, Any]) -> None:
     path.write_text(json.dumps(value, indent=2) + "\n", encoding="utf-8")
 
@@ -231,7 +222,7 @@ def read_config(run: str | Path | RunFolder) -> dict[str, Any]:
         raise RunFolderError(
             f"{folder.path} is not a run folder of `visualenv train` nor `visualenv distill` (no {folder.config.name})"
         )
-    record = migrate(_read_json(folder.config), where=str(folder.config)).record
+    record = migrate(read_json_as(folder.config, RunFolderError), where=str(folder.config)).record
     assert record is not None
     return record
 
@@ -295,8 +286,8 @@ class Run:
 def read_run(run: str | Path | RunFolder) -> Run:
     """The config.json and results.json of `run` that exist, migrated to the current format and checked."""
     folder = _folder(run)
-    record = _read_json(folder.config) if folder.is_run() else None
-    results = _read_json(folder.results) if folder.results.is_file() else None
+    record = read_json_as(folder.config, RunFolderError) if folder.is_run() else None
+    results = read_json_as(folder.results, RunFolderError) if folder.results.is_file() else None
     return migrate(record, results, folder, where=str(folder.path))
 
 
