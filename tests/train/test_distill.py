@@ -183,14 +183,16 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
             "2",
             "--distractions",
             "{difficulty: [0.1, 0.3], camera: false}",
+            "--state-loss",
+            "0.5",
             "--out",
             str(tmp_path / "again"),
         ],
     )
     assert again.exit_code == 0 and "(the teacher's share 50%)" in again.output, again.output
     second = next((tmp_path / "again" / "Goalie-v0").iterdir())
-    recorded = json.loads((second / "config.json").read_text())["config"]["distractions"]
-    assert recorded == {"difficulty": [0.1, 0.3], "camera": False}
+    recorded = json.loads((second / "config.json").read_text())["config"]
+    assert recorded["distractions"] == {"difficulty": [0.1, 0.3], "camera": False} and recorded["state_loss"] == 0.5
     assert (
         json.loads((second / "config.json").read_text())["student"]["sha256"]
         == hashlib.sha256((run / "best_model.safetensors").read_bytes()).hexdigest()

@@ -150,7 +150,8 @@ def _rounds(
     from visualenv.train.evaluation import evaluate
     from visualenv.train.model_files import save_policy
 
-    probe = _StateProbe(student, teacher.observation_space.shape[0]) if config.state_loss > 0 else None
+    state_size = int(np.prod(teacher.observation_space.shape))
+    probe = _StateProbe(student, state_size) if config.state_loss > 0 else None
     parameters = [*student.parameters(), *(probe.head.parameters() if probe else ())]
     optimizer = torch.optim.Adam(parameters, lr=config.learning_rate)
     generator = np.random.default_rng(config.seed)
@@ -259,8 +260,9 @@ def _rollouts(
     obs = vec_env.reset()
     ret = 0.0
     while len(returns) < episodes:
-        states.append(np.asarray(env.state_observation(), dtype=np.float32))
-        label, _ = teacher.predict(states[-1][None], deterministic=True)
+        state = np.asarray(env.state_observation(), dtype=np.float32)
+        label, _ = teacher.predict(state[None], deterministic=True)
+        states.append(state.ravel())
         frames.append(obs[0])
         labels.append(np.asarray(label[0], dtype=np.float32 if discrete is None else np.int64))
         action = label if generator.random() < teacher_share else student.predict(obs, deterministic=True)[0]
