@@ -3,8 +3,8 @@
 The tests mirror the package (``tests/render/`` tests ``visualenv/render/``, ...). A test that renders with
 Blender, reads a .blend or starts a process that does is marked ``blender`` where it lives: its module sets
 ``pytestmark = pytest.mark.blender``, or the test carries ``@pytest.mark.blender``. ``pytest -m "not blender"``
-then runs the bpy-free core in seconds. The mark cannot rot: a test not marked ``blender`` that is the first to
-import bpy in this process (in its fixtures or its body) fails and says so.
+then runs the bpy-free core without Blender. The mark cannot rot: the unmarked tests run first, so one that
+imports bpy (in its fixtures or its body) is the first in its process to do so, and fails and says so.
 """
 
 from __future__ import annotations
@@ -18,6 +18,12 @@ import pytest
 
 CORPUS_SCRIPT = Path(__file__).parent / "fixtures" / "blend_corpus.py"
 HAD_BPY = pytest.StashKey[bool]()
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """The unmarked tests first (each group in its collected order): no `blender` test has imported bpy before an
+    unmarked test runs, so the check below sees every unmarked test that imports it, not only the first."""
+    items.sort(key=lambda item: item.get_closest_marker("blender") is not None)
 
 
 @pytest.hookimpl(wrapper=True)

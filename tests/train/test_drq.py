@@ -311,3 +311,53 @@ def test_a_checkpoint_keeps_the_final_frames_of_timeouts(tmp_path):
     )
     with pytest.raises(CheckpointError, match="expected at most 32 frames"):
         load_state(make(), folder.latest_dir, "sac")
+
+
+def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it():
+    """``policy_kwargs: {features_extractor_class: visualenv.train.encoders.DrQEncoder}``: DrQ's own encoder (four 3x3
+    convolutions, the first of stride 2; linear, LayerNorm, tanh), shared as DrQ shares it, named in the policy file."""
+    from stable_baselines3 import SAC
+
+    from visualenv.train.encoders import DrQEncoder
+    from visualenv.train.policy_kinds import build_sb3_policy, sb3_kind
+    from visualenv.train.sb3 import algorithm_kwargs
+
+    name = "visualenv.train.encoders.DrQEncoder"
+    kwargs = algorithm_kwargs(
+        "sac", {"policy_kwargs": {"features_extractor_class": name, "features_extractor_kwargs": {"features_dim": 50}}}
+    )
+    policy, extra = model_arguments("sac", "shift", "CnnPolicy")
+    model = SAC(
+        policy, _Frames(), buffer_size=64, learning_starts=8, batch_size=8, seed=0, device="cpu", **kwargs, **extra
+    )
+    model.learn(12)  # a few updates through it
+    encoder = model.policy.actor.features_extractor
+    assert isinstance(encoder, DrQEncoder) and model.policy.critic.features_extractor is encoder
+    convolutions = [layer for layer in encoder.convolutions if isinstance(layer, torch.nn.Conv2d)]
+    assert [(c.out_channels, c.kernel_size, c.stride) for c in convolutions] == [(32, (3, 3), (2, 2))] + 3 * [
+        (32, (3, 3), (1, 1))
+    ]
+    assert encoder.head[0].in_features == 32 * 13 * 13  # 40x40: 19x19 after the stride 2, 13x13 after three more
+    features = encoder(torch.rand(5, 3, 40, 40) * 100)
+    assert features.shape == (5, 50) and features.abs().max() < 1  # tanh
+
+    # DrQ's initialisation: only each convolution's centre tap is set, orthogonal columns of norm sqrt(2)
+    fresh = DrQEncoder(spaces.Box(0, 255, (9, 84, 84), np.uint8))
+    for conv in [layer for layer in fresh.convolutions if isinstance(layer, torch.nn.Conv2d)]:
+        weight = conv.weight.detach()
+        centre, others = weight[:, :, 1, 1], weight.clone()
+        others[:, :, 1, 1] = 0
+        assert not others.any() and not conv.bias.any()
+        assert torch.allclose(centre.T @ centre, 2 * torch.eye(centre.shape[1]), atol=1e-5)
+
+    kind, arguments = sb3_kind(model.policy)  # what policy.json records
+    assert arguments["features_extractor_class"] == name and kind == "visualenv.train.drq.DrQSACPolicy"
+    rebuilt = build_sb3_policy(kind, arguments, model.policy.observation_space, model.policy.action_space)
+    rebuilt.load_state_dict(model.policy.state_dict())
+    frame = torch.rand(2, 3, 40, 40)
+    assert torch.equal(rebuilt.actor.features_extractor(frame), encoder(frame))
+
+    with pytest.raises(ConfigError, match="policy_kwargs.features_extractor_class 'DrQ' is not one visualenv builds; "):
+        algorithm_kwargs("sac", {"policy_kwargs": {"features_extractor_class": "DrQ"}})
+    with pytest.raises(ConfigError, match="needs images of at least 15x15"):
+        DrQEncoder(spaces.Box(0, 255, (3, 12, 12), np.uint8))

@@ -190,19 +190,31 @@ def redraw_loop(
     where = ("physics", "reset", "redraw")
     mark = len(fb.body)
     targets = entries(c, fb, redraw.values, (*where, "values"), scope, writable)
-    fb.add(
-        phys.call_statement(phys.WRITE_REDRAW, targets),
-        Site("physics.reset.redraw", "the redrawn values, written to the model"),
-    )
-    until_used = _until_or_fail(c, fb, "redraw", redraw.until, scope, phys.REDRAW_FAILED)
-    body, fail_stmt = fb.body[mark:-1], fb.body[-1]
-    del fb.body[mark:]
+    body, fail_stmt, until_used = _one_try(c, fb, mark, "redraw", targets, redraw.until, scope)
     restore = [ast.Assign([ast.Name(local(t), ast.Store())], name(BASE_PREFIX + t)) for t in targets]
     for t in targets:  # each try starts from the values physics.reset.values left
         fb.add(ast.Assign([ast.Name(BASE_PREFIX + t, ast.Store())], name(local(t))))
     loop = ast.For(ast.Name("_try", ast.Store()), name(phys.REDRAW_TRIES), [*restore, *body], [fail_stmt])
     fb.body.append(loop)
     return targets, until_used
+
+
+def _one_try(
+    c: ResetCompiler, fb: FunctionBuilder, mark: int, kind: str, targets: list[str], until: Expr, scope: dict[str, Type]
+) -> tuple[list[ast.stmt], ast.stmt, set[str]]:
+    """A try's statements from `mark` on (write `targets` and forward, read, `until` or break), taken out of the body,
+    with the ``else`` that fails apart; and until's names. `kind` is ``redraw`` or ``search``."""
+    write, failed, done = {
+        "redraw": (phys.WRITE_REDRAW, phys.REDRAW_FAILED, "redrawn"),
+        "search": (phys.WRITE_SEARCH, phys.SEARCH_FAILED, "searched"),
+    }[kind]
+    fb.add(
+        phys.call_statement(write, targets), Site(f"physics.reset.{kind}", f"the {done} values, written to the model")
+    )
+    until_used = _until_or_fail(c, fb, kind, until, scope, failed)
+    body, fail_stmt = fb.body[mark:-1], fb.body[-1]
+    del fb.body[mark:]
+    return body, fail_stmt, until_used
 
 
 def search_loop(
@@ -219,13 +231,7 @@ def search_loop(
     targets = entries(c, fb, search.step, (*where, "step"), scope, writable)
     step = fb.body[mark:]
     del fb.body[mark:]
-    fb.add(
-        phys.call_statement(phys.WRITE_SEARCH, targets),
-        Site("physics.reset.search", "the searched values, written to the model"),
-    )
-    until_used = _until_or_fail(c, fb, "search", search.until, scope, phys.SEARCH_FAILED)
-    body, fail_stmt = fb.body[mark:-1], fb.body[-1]
-    del fb.body[mark:]
+    body, fail_stmt, until_used = _one_try(c, fb, mark, "search", targets, search.until, scope)
     fb.body.append(ast.For(ast.Name("_try", ast.Store()), name(phys.SEARCH_TRIES), [*body, *step], [fail_stmt]))
     return targets, until_used
 

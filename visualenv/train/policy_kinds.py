@@ -14,7 +14,7 @@ import inspect
 from typing import Any, Callable
 
 from visualenv.compat.sb3 import constructor_parameters
-from visualenv.errors import VisualEnvError
+from visualenv.errors import ConfigError, VisualEnvError
 
 #: SB3 constructor arguments a policy file leaves out: the spaces have their own keys, and the optimizer (its class,
 #: settings and learning rate) only trains, which a policy file does not do
@@ -92,13 +92,14 @@ def activations() -> dict[str, type]:
 
 
 def features_extractors() -> dict[str, type]:
-    """SB3's own features extractors (a custom one is code: export refuses it)."""
+    """SB3's own features extractors and visualenv's (:mod:`visualenv.train.encoders`); any other is code: export
+    refuses it."""
     from stable_baselines3.common import torch_layers
 
-    return {
-        dotted(cls): cls
-        for cls in (torch_layers.NatureCNN, torch_layers.FlattenExtractor, torch_layers.CombinedExtractor)
-    }
+    from visualenv.train.encoders import DrQEncoder
+
+    kinds = (torch_layers.NatureCNN, torch_layers.FlattenExtractor, torch_layers.CombinedExtractor, DrQEncoder)
+    return {dotted(cls): cls for cls in kinds}
 
 
 #: SB3 arguments that are classes, and the table each is named from
@@ -106,6 +107,22 @@ CLASS_ARGUMENTS: dict[str, Callable[[], dict[str, type]]] = {
     "activation_fn": activations,
     "features_extractor_class": features_extractors,
 }
+
+
+def named_classes(policy_kwargs: Any) -> Any:
+    """A training config's ``policy_kwargs`` with the classes it names by keys of the tables above
+    (``features_extractor_class: visualenv.train.encoders.DrQEncoder``) looked up, as a policy file's are."""
+    if not isinstance(policy_kwargs, dict):
+        return policy_kwargs
+    try:
+        return {
+            key: chosen(CLASS_ARGUMENTS[key](), value, f"policy_kwargs.{key}")
+            if key in CLASS_ARGUMENTS and isinstance(value, str)
+            else value
+            for key, value in policy_kwargs.items()
+        }
+    except PolicyFileError as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def rllib_modules() -> dict[str, type]:

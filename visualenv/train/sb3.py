@@ -40,6 +40,7 @@ from visualenv.train.checkpoints import load_state, resume_checkpoint, save_stat
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
 from visualenv.train.stopping import StopRequest
 from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
+from visualenv.train.policy_kinds import named_classes
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
 SET_BY_TRAIN = ("policy", "env", "seed", "verbose", "tensorboard_log", "_init_setup_model")  # not hyperparameters
@@ -107,7 +108,7 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
                     f"{key}: expected a number or a linear schedule such as lin_3e-4 (from 3e-4 down to 0), got {text!r}"
                 )
             value = LinearSchedule(start, 0.0, 1.0)
-        kwargs[key] = value
+        kwargs[key] = named_classes(value) if key == "policy_kwargs" else value
     return kwargs
 
 
