@@ -313,7 +313,7 @@ def test_a_checkpoint_keeps_the_final_frames_of_timeouts(tmp_path):
         load_state(make(), folder.latest_dir, "sac")
 
 
-def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it():
+def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it(tmp_path):
     """``policy_kwargs: {features_extractor_class: visualenv.train.encoders.DrQEncoder}``: DrQ's own encoder (four 3x3
     convolutions, the first of stride 2; linear, LayerNorm, tanh), shared as DrQ shares it, named in the policy file."""
     from stable_baselines3 import SAC
@@ -359,5 +359,10 @@ def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it():
 
     with pytest.raises(ConfigError, match="policy_kwargs.features_extractor_class 'DrQ' is not one visualenv builds; "):
         algorithm_kwargs("sac", {"policy_kwargs": {"features_extractor_class": "DrQ"}})
+    out = tmp_path / "runs"
+    args = ["train", "LunarLanding-v0", "--algo", "sac", "--augment", "shift", "--out", str(out), "--set"]
+    result = CliRunner().invoke(main, [*args, 'policy_kwargs={"features_extractor_class": "DrQ"}'])
+    assert result.exit_code != 0 and "allowed: stable_baselines3.common.torch_layers.NatureCNN" in result.output
+    assert name in result.output and "Traceback" not in result.output and not out.exists()
     with pytest.raises(ConfigError, match="needs images of at least 15x15"):
         DrQEncoder(spaces.Box(0, 255, (3, 12, 12), np.uint8))
