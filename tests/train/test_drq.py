@@ -247,7 +247,12 @@ def test_the_dmc_preset_builds_drqs_sac():
 
     preset = yaml.safe_load((Path(__file__).parents[2] / "examples/hyperparams/dmc_drq.yaml").read_text())
     kwargs = algorithm_kwargs("sac", {**preset, "buffer_size": 100})  # the preset's 100k frames: 5.9 GiB
-    assert preset["buffer_size"] == 100_000 and preset["ent_coef"] == "auto_0.1" and preset["tau"] == 0.005 and preset["target_update_interval"] == 1
+    assert (
+        preset["buffer_size"] == 100_000
+        and preset["ent_coef"] == "auto_0.1"
+        and preset["tau"] == 0.005
+        and preset["target_update_interval"] == 1
+    )
 
     class Pixels(_Frames):
         observation_space = spaces.Box(0, 255, (84, 84, 9), np.uint8)  # 3 stacked RGB frames
