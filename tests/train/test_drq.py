@@ -324,7 +324,8 @@ def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it(tmp_path):
     from stable_baselines3 import SAC
 
     from visualenv.train.encoders import DrQEncoder
-    from visualenv.train.policy_kinds import build_sb3_policy, sb3_kind
+    from visualenv.train.model_files import load_model, save_policy
+    from visualenv.train.policy_format import read_meta
     from visualenv.train.sb3 import algorithm_kwargs
 
     name = "visualenv.train.encoders.DrQEncoder"
@@ -355,11 +356,15 @@ def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it(tmp_path):
         assert not others.any() and not conv.bias.any()
         assert torch.allclose(centre.T @ centre, 2 * torch.eye(centre.shape[1]), atol=1e-5)
 
-    kind, arguments = sb3_kind(model.policy)  # what policy.json records
-    assert arguments["features_extractor_class"] == name and kind == "visualenv.train.drq.DrQSACPolicy"
-    rebuilt = build_sb3_policy(kind, arguments, model.policy.observation_space, model.policy.action_space)
-    rebuilt.load_state_dict(model.policy.state_dict())
+    # a policy file names it, and reading the file back (checked on torch's meta device first) rebuilds it
+    save_policy(model, tmp_path / "policy.safetensors", half=False)
+    meta = read_meta(tmp_path / "policy.safetensors")
+    assert (
+        meta["arguments"]["features_extractor_class"] == name and meta["policy"] == "visualenv.train.drq.DrQSACPolicy"
+    )
+    rebuilt = load_model(tmp_path / "policy.json")
     frame = torch.rand(2, 3, 40, 40)
+    assert isinstance(rebuilt.actor.features_extractor, DrQEncoder)
     assert torch.equal(rebuilt.actor.features_extractor(frame), encoder(frame))
 
     with pytest.raises(ConfigError, match="policy_kwargs.features_extractor_class 'DrQ' is not one visualenv builds; "):
