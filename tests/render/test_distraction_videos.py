@@ -102,33 +102,43 @@ def test_a_dynamic_video_plays_a_frame_a_step_forward_and_back(tmp_path: Path) -
 def test_a_long_dynamic_episode_shows_every_frame_as_drawn(tmp_path: Path, monkeypatch: pytest.MonkeyPatch) -> None:
     """A new frame's image never shows an older one's pixels (Cycles knows an image by its address, and a removed
     image's address comes back: a few frames in a hundred were stale), and letting Cycles' session go (every few
-    frames here) renders the same frames; the renderer's list of images to remove stays short."""
+    frames here) renders the same frames; the frames' images alive stay within the bound, and the renderer's list of
+    datablocks lets the removed ones go."""
+    from visualenv.render.blender.look import video_backdrop
+
     videos = davis_folder(tmp_path / "davis", DAVIS17_TRAINING_VIDEOS[:4], frames=20)
     settings = {**BACKGROUND_ONLY, "dynamic": True, "background": {"videos": str(videos)}}
+    before = len(bpy.data.images)
 
-    def episode(steps: int) -> list[bytes]:
+    def episode(steps: int) -> tuple[list[bytes], int, int]:
+        """The episode's frames, the most images alive at once and the renderer's list's length at the end."""
         env = visualenv.make(segmented_cartpole(tmp_path), distractions=settings)
         try:
             obs, _ = env.reset(seed=1)
-            frames = []
-            for _ in range(steps):
+            frames, most = [], 0
+            for step in range(steps):
                 sky = obs["mask"][..., 0] == 0
-                assert (
-                    np.abs(obs["eye"][sky].astype(int) - shown(env.unwrapped._distractions.current.video_frame)).max()
-                    <= 2
+                want = shown(env.unwrapped._distractions.current.video_frame)
+                off = np.abs(obs["eye"][sky].astype(int) - want).max()
+                assert off <= 2, (
+                    f"step {step}: the sky is {obs['eye'][sky][0]} where the frame is {want} (the whole frame black: "
+                    f"{not obs['eye'].any()}; {len(bpy.data.images)} images alive)"
                 )
                 frames.append(obs["eye"].tobytes())
+                most = max(most, sum(" videos" in image.name for image in bpy.data.images))  # the atlas's
                 obs = env.step(np.zeros(1, np.float32))[0]
-            assert len(env.unwrapped._renderer._ids) < 200  # the removed frames let go
-            return frames
+            return frames, most, len(env.unwrapped._renderer._ids)
         finally:
             env.close()
 
-    from visualenv.render.blender.look import video_backdrop
-
-    kept = episode(120)
+    kept, most, _ = episode(120)
+    # every frame's image kept while the session lives (and the one read when it was last let go)
+    assert 100 < most <= video_backdrop.RETAINED_IMAGES + 1
     monkeypatch.setattr(video_backdrop, "RETAINED_IMAGES", 4)
-    assert episode(40) == kept[:40]
+    frames, most, listed = episode(40)
+    assert frames == kept[:40]
+    assert most <= 4 + 1 and listed < 100  # the images removed when the session was let go, and let go by the list
+    assert len(bpy.data.images) == before  # and every one removed with the renderer
 
 
 def test_a_batch_shows_each_envs_own_video(tmp_path: Path) -> None:

@@ -9,10 +9,10 @@ on every face, fixed in the world as the skybox is.
 
 When an env's frame changes, the frames are written into a new image and the lookup turned to it. Cycles' persistent
 data never reloads an image it was given once (its pixels may change; it keeps them all), and it knows an image by its
-address: a new image made where a removed one lay would show the removed one's pixels. So an image is never made at an
-address Cycles was given, and once those pass :data:`RETAINED_IMAGES` or :data:`RETAINED_BYTES` Cycles' session is let
-go (the scene's next render builds it afresh, the same frame), which frees them and lets those addresses be used
-again. The images the lookups no longer read are removed :data:`RETIRED` changes later.
+address: a new image made where a removed one lay would show the removed one's pixels, and a removed image it still
+holds is memory freed under it. So no image Cycles' session was given is removed while that session lives: once they
+pass :data:`RETAINED_IMAGES` or :data:`RETAINED_BYTES` the session is let go (the scene's next render builds it afresh,
+the same frame), and only then are the images the lookups no longer read removed.
 """
 
 from __future__ import annotations
@@ -30,10 +30,9 @@ from visualenv.render.videos import FRAME_SIDE, load_frame
 VIDEO = "visualenv_background_video"
 #: the atlas's largest side in pixels: a batch of more than 64 envs gets smaller tiles (N = 256: 128 pixels)
 ATLAS_SIDE = 2048
-#: how many images the lookups read before are kept (Cycles may still hold them) before they are removed
-RETIRED = 3
-#: the images (their pixels' bytes, their count) Cycles may keep before its session is let go: a single env's frame is
-#: 256 KiB; each render's sync walks all it keeps, and building the session anew costs about one DMC step
+#: the images (their pixels' bytes, their count) Cycles' session may be given before it is let go: a single env's frame
+#: is 256 KiB, held twice until then (Blender's image and Cycles' copy); each render's sync walks all Cycles keeps, and
+#: building the session anew costs about one DMC step
 RETAINED_BYTES, RETAINED_IMAGES = 64 * 2**20, 256
 
 
@@ -57,12 +56,12 @@ class VideoAtlas:
         #: a tile's side in pixels
         self.side = side = min(FRAME_SIDE, ATLAS_SIDE // self.columns)
         self._name, self._scene, self._raw, self._own = name, scene, raw, own
-        self._given: set[int] = set()  # the addresses of the images made since Cycles' session began
+        self._given = 0  # the images made since Cycles' session began
         self._image_bytes = self.rows * self.columns * side * side * 4  # as Cycles keeps it: 4 bytes a pixel
         #: the image the lookups read now, and the nodes that read it (:func:`cube_lookup`)
+        self._retired: list[Any] = []  # images the lookups read before: removed once Cycles' session is let go
         self.image = self._new_image()
         self.nodes: list[Any] = []
-        self._retired: list[Any] = []
         self._pixels = np.ones((self.rows * side, self.columns * side, 4), dtype=np.float32)
         self._shown = [""] * count
 
@@ -83,42 +82,36 @@ class VideoAtlas:
             self._shown[k] = file
             changed = True
         if changed:
+            image = self._new_image()
+            image.pixels.foreach_set(self._pixels.ravel())
+            image.update()
             self._retired.append(self.image)
-            self.image = self._new_image()
-            self.image.pixels.foreach_set(self._pixels.ravel())
-            self.image.update()
+            self.image = image
             for node in self.nodes:
-                node.image = self.image
-            while len(self._retired) > RETIRED:
-                bpy.data.images.remove(self._retired.pop(0))
+                node.image = image
 
     def _new_image(self) -> Any:
-        """An image at an address Cycles' session has not seen (Cycles' session let go first where it holds enough)."""
+        """A new image for the lookups (Cycles' session let go first where it was given enough)."""
         side = self.side
-        given = len(self._given)
-        if given >= RETAINED_IMAGES or given * self._image_bytes > RETAINED_BYTES:
+        if self._given >= RETAINED_IMAGES or self._given * self._image_bytes > RETAINED_BYTES:
             self._let_cycles_go()
-        made = []
-        while True:
-            image = bpy.data.images.new(self._name, self.columns * side, self.rows * side, alpha=False)
-            if image.as_pointer() not in self._given:
-                break
-            made.append(image)  # kept until another is made, so that it lies elsewhere
-        for unused in made:
-            bpy.data.images.remove(unused)
+        image = bpy.data.images.new(self._name, self.columns * side, self.rows * side, alpha=False)
         image.colorspace_settings.name = RAW_COLORSPACE if self._raw else "sRGB"
         self._own(image)
-        self._given.add(image.as_pointer())
+        self._given += 1
         return image
 
     def _let_cycles_go(self) -> None:
-        """Free Cycles' session (and every image it keeps): turning persistent data off frees it at once, and the
-        next render, with it on again, builds the scene anew."""
+        """Free Cycles' session (and every image it keeps; turning persistent data off frees it at once, and the next
+        render, with it on again, builds the scene anew), then the images no lookup reads."""
         render = self._scene.render
         if render.use_persistent_data:
             render.use_persistent_data = False
             render.use_persistent_data = True
-        self._given.clear()
+        for image in self._retired:
+            bpy.data.images.remove(image)
+        self._retired.clear()
+        self._given = 0
 
 
 def cube_lookup(nodes: Any, links: Any, direction: Any, tile: Any, atlas: VideoAtlas) -> Any:
