@@ -10,6 +10,7 @@ import pytest
 from click.testing import CliRunner
 
 from visualenv.cli import main
+from visualenv.errors import SpecError
 from visualenv.train.evaluation import final_seed, seed_purpose, selection_seed
 
 pytestmark = [pytest.mark.blender, pytest.mark.slow]
@@ -522,6 +523,26 @@ def test_images_too_small_for_the_cnn_are_located_before_anything_starts(tmp_pat
         and "observation.cameras.side.resolution: 32x24 is too small for the CNN policy" in result.output
     )
     assert not (tmp_path / "runs").exists()
+
+
+def test_images_too_small_for_drqs_encoder_are_located_and_larger_ones_pass_its_check(tmp_path):
+    """DrQ's encoder takes images down to 15x15 (NatureCNN 36): a config that names it is checked by its own size."""
+    from visualenv.spec import load_spec
+    from visualenv.train.encoders import DrQEncoder
+    from visualenv.train.sb3 import check_cnn_input
+
+    drq = 'policy_kwargs={"features_extractor_class": "visualenv.train.encoders.DrQEncoder"}'
+    spec = multi_camera_cartpole(tmp_path, "[12, 20]")
+    out = tmp_path / "runs"
+    result = CliRunner().invoke(main, ["train", spec, "--algo", "sac", "--set", drq, "--out", str(out)])
+    assert result.exit_code == 2, result.output
+    assert "observation.cameras.side.resolution: 12x20 is too small for the CNN policy" in result.output
+    assert "(DrQEncoder): it needs at least 15x15" in result.output and "front" not in result.output
+    assert not out.exists()
+    larger = load_spec(multi_camera_cartpole(tmp_path, "[24, 20]"))
+    check_cnn_input(larger, {"features_extractor_class": DrQEncoder})  # passes: NatureCNN's check refuses it
+    with pytest.raises(SpecError, match="20 is too small for the CNN policy of `visualenv train` .SB3's NatureCNN."):
+        check_cnn_input(larger, None)
 
 
 def test_state_only_training_runs_without_warnings(tmp_path):

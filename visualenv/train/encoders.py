@@ -30,6 +30,9 @@ class DrQEncoder(BaseFeaturesExtractor):
     it arrives (``normalized_image`` as SB3's NatureCNN).
     """
 
+    #: the smallest image side it encodes: 15 -> 7 after the stride-2 layer, 1 after the three others
+    min_side = 15
+
     def __init__(self, observation_space: spaces.Box, features_dim: int = 50, normalized_image: bool = False) -> None:
         if not is_image_space(observation_space, check_channels=False, normalized_image=normalized_image):
             raise ConfigError(f"DrQEncoder encodes images (a channel-first Box of uint8), not {observation_space}")
@@ -48,7 +51,9 @@ class DrQEncoder(BaseFeaturesExtractor):
         )
         size = ((height - 3) // 2 + 1 - 6, (width - 3) // 2 + 1 - 6)  # after the stride-2 and three stride-1 layers
         if min(size) < 1:
-            raise ConfigError(f"DrQEncoder needs images of at least 15x15, not {width}x{height}")
+            raise ConfigError(
+                f"DrQEncoder needs images of at least {self.min_side}x{self.min_side}, not {width}x{height}"
+            )
         self.head = nn.Sequential(
             nn.Linear(32 * size[0] * size[1], features_dim), nn.LayerNorm(features_dim), nn.Tanh()
         )

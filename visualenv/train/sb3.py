@@ -322,25 +322,24 @@ def _finish(
 NATURE_CNN_MIN_SIZE = 36
 
 
-def check_cnn_input(loaded: Any, hyperparams: dict[str, Any]) -> None:
-    """Observations too small for SB3's default CNN are a located error, not a torch RuntimeError at the first update."""
+def check_cnn_input(loaded: Any, policy_kwargs: dict[str, Any] | None) -> None:
+    """Observations too small for the run's image encoder (SB3's NatureCNN, or a listed one with a ``min_side``) are a
+    located error before any run folder, not a torch RuntimeError at the first update."""
+    encoder = (policy_kwargs or {}).get("features_extractor_class")
+    smallest = NATURE_CNN_MIN_SIZE if encoder is None else getattr(encoder, "min_side", None)
     observation = loaded.spec.observation
-    if observation is None or "features_extractor_class" in (hyperparams.get("policy_kwargs") or {}):
+    if observation is None or smallest is None:
         return
+    name = "SB3's NatureCNN" if encoder is None else encoder.__name__
     problems = []
     for key, view in observation.views().items():
         width, height = view.resolution
-        if min(width, height) < NATURE_CNN_MIN_SIZE:
-            path = (
-                ("observation", "resolution")
-                if observation.cameras is None
-                else ("observation", "cameras", key, "resolution")
-            )
+        if min(width, height) < smallest:
+            where = ("cameras", key) if observation.cameras is not None else ()
+            message = f"{width}x{height} is too small for the CNN policy of `visualenv train` ({name}): it needs"
             problems.append(
                 loaded.source.diagnostic(
-                    path,
-                    f"{width}x{height} is too small for the CNN policy of `visualenv train` "
-                    f"(SB3's NatureCNN): it needs at least {NATURE_CNN_MIN_SIZE}x{NATURE_CNN_MIN_SIZE}",
+                    ("observation", *where, "resolution"), f"{message} at least {smallest}x{smallest}"
                 )
             )
     if problems:
@@ -357,7 +356,7 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     check_torch_device({**kwargs, **changed}.get("device", "auto"))
     loaded = load_spec(resolve(config.spec))
     if config.render:
-        check_cnn_input(loaded, config.hyperparams)
+        check_cnn_input(loaded, {**kwargs, **changed}.get("policy_kwargs"))
     check_augment(config.augment, config.algo, config.render, loaded)
     check_replay_buffer(config, {**kwargs, **changed}, loaded)
     return kwargs, changed
