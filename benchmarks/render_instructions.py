@@ -15,7 +15,7 @@ Default: the env resets and steps 5 times with zero actions (6 renders), then Bl
 (``PathTraceWorkCPU::render_samples_full_pipeline``) are counted. Prints the count per render and per pixel.
 
 ``--step``: every instruction of three processes that differ only at their end: the env steps ``--steps`` seeded
-random actions (resetting where an episode ends) or none, or steps them and then renders each step's binding values
+random actions (resetting where an episode ends) or none, or steps them and then renders each step's state
 again with Blender's render call alone (``bench``'s moved floor). Their differences give a step's instructions and
 the render call's; what a step runs outside that call (physics, bindings, readback, Python; a reset's render counted
 as a render) is printed against the call, as ``bench`` prints the time.
@@ -76,16 +76,16 @@ def step(ident: str, steps: int, floor: bool) -> None:
     env.action_space.seed(0)
     actions = [env.action_space.sample() for _ in range(steps)]
     base = env.unwrapped
-    values, resets = [], 0
+    states, resets = [], 0
     for action in actions:
         _, _, terminated, truncated, _ = env.step(action)
-        values.append(base.binding_values())
+        states.append(base.frames().copy())
         if terminated or truncated:
             env.reset()
             resets += 1
     if floor:
-        for value in values:
-            base.renderer.apply(value)
+        for frames in states:
+            base.renderer.write(frames)
             bpy.ops.render.render(scene=base.renderer.scene.name)
     print(f"resets {resets}")
     env.close()

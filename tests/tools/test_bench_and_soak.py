@@ -167,6 +167,35 @@ def test_bad_arguments_are_refused_before_anything_runs(tmp_path):
         assert result.exit_code == 2 and "is not in the range" in result.output, args
 
 
+def test_the_moved_floor_writes_each_steps_state_mujocos_bodies_included():
+    """bench's moved floor renders each step's state again: a kept copy of an earlier state (MuJoCo's poses are live
+    views of the simulation) draws that step's observation, and writing it alone puts the cart where it was then."""
+    import numpy as np
+
+    env = visualenv.make("DMC-cartpole-swingup-v0")
+    try:
+        obs, _ = env.reset(seed=0)
+        base = env.unwrapped
+        kept, first = base.frames().copy(), obs
+        objects = list(base.renderer.scene.objects)
+
+        def places() -> list[tuple[float, ...]]:
+            return [(*o.location, *o.rotation_quaternion) for o in objects]  # what the poses write
+
+        where = places()
+        for _ in range(12):
+            later = env.step(np.ones(1, np.float32))[0]
+        assert np.abs(later.astype(int) - first.astype(int)).max() > 30  # the cart moved on
+        moved = [k for k, (a, b) in enumerate(zip(where, places())) if a != b]
+        assert moved  # MuJoCo's bodies, placed by the poses (no binding moves them)
+        base.renderer.write(kept)
+        assert [places()[k] for k in moved] == [where[k] for k in moved]
+        again = base.renderer.render(kept)[0]
+        assert np.array_equal(again, first)  # the earlier state's frame, bit for bit
+    finally:
+        env.close()
+
+
 def test_step_times_pairs_each_step_with_its_render_calls():
     env = StepTimes(visualenv.make("VisualCartPole-v0"))
     try:

@@ -466,15 +466,16 @@ class VisualEnv(PicklingEnv):
         assert self._fns.observe is not None, "not a physics spec"
         return np.array(self._fns.observe(self._state, self._steps), dtype=np.float64)
 
-    def _frames(self) -> Frames:
-        """What the renderer draws of this state: its binding values, MuJoCo's poses, the episode's distraction."""
+    def frames(self) -> Frames:
+        """What the renderer draws of this state: its binding values, MuJoCo's poses (live views of the simulation:
+        :meth:`Frames.copy` keeps them), the episode's distraction."""
         poses = None if self._sim is None else (self.program.physics.poses(self._sim.data),)  # type: ignore[union-attr]
         drawn = self._distractions.current if self._distractions is not None else None
         return Frames((self._bind(),), poses, None if drawn is None else (drawn,))
 
     def _view(self) -> np.ndarray:
         """The high-resolution view of the current state."""
-        return self.renderer.render_view(self._frames())[0]
+        return self.renderer.render_view(self.frames())[0]
 
     def _show(self, reward: float | None, info: dict[str, Any]) -> None:
         """render_mode="human": the observation, the values and the view (called only when shown) on the display."""
@@ -486,7 +487,7 @@ class VisualEnv(PicklingEnv):
 
     def _observe(self) -> Any:
         if self.uses_camera:
-            frames = self.renderer.render(self._frames())
+            frames = self.renderer.render(self.frames())
             obs = frames[0] if isinstance(frames, np.ndarray) else {key: value[0] for key, value in frames.items()}
             self._last_obs = self.apply_sensors(obs) if self._sensors else obs
             return self._last_obs

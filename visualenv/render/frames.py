@@ -44,3 +44,9 @@ class Frames:
     def n(self) -> int:
         """How many envs these frames hold."""
         return len(self.values)
+
+    def copy(self) -> Frames:
+        """These frames with their own copy of each array (poses are live views of MjData: a copy keeps this state)."""
+        values = self.values.copy() if isinstance(self.values, np.ndarray) else tuple(map(tuple, self.values))
+        poses = None if self.poses is None else [tuple(None if a is None else a.copy() for a in p) for p in self.poses]
+        return Frames(values, poses, self.distractions, self.envs)  # type: ignore[arg-type]

@@ -6,9 +6,10 @@ One run measures, on the same built scene:
   and the framework overhead: the step's time minus the raw render floor, as a
   share of the step (everything that is not Blender rendering);
 * the raw floor: Blender's render call alone (no file written, no readback);
-* the same floor with the bound objects moved before each call: what Blender's
-  update of a changed scene (depsgraph, Cycles sync, BVH) adds, which any
-  implementation pays and which the framework overhead therefore includes;
+* the same floor with the scene moved before each call as in an episode (bound
+  objects, MuJoCo's bodies, cameras and lights): what Blender's update of a
+  changed scene (depsgraph, Cycles sync, BVH) adds, which any implementation
+  pays and which the framework overhead therefore includes;
 * a naive implementation: render to a PNG on disk and load it with Pillow;
 * resident memory (peak and final), and optionally a long soak;
 * N parallel envs (one Blender process each) through AsyncVectorEnv: the same
@@ -72,7 +73,7 @@ class Figures:
             f"  step time (median)        {self.step_ms_median:8.2f} ms",
             f"  render call (median/p99)  {self.render_ms_median:8.2f} / {self.render_ms_p99:.2f} ms",
             f"  raw render floor (median) {self.floor_ms_median:8.2f} ms   (render call alone, same scene and settings)",
-            f"    with objects moved      {self.moved_floor_ms_median:8.2f} ms   (the same, the bound objects moved first: Blender's scene update)",
+            f"    with objects moved      {self.moved_floor_ms_median:8.2f} ms   (the same, the scene moved first as in an episode: Blender's update)",
             f"  naive PNG round trip      {self.naive_ms_median:8.2f} ms   (render, write PNG to disk, load it)",
             (
                 f"  framework overhead        {100 * self.overhead_share:8.1f} %    of a step (step - raw floor; "
@@ -291,17 +292,18 @@ def bench_scaling(
 
 
 def _moved_floor(env: Any, actions: list[Any], seed: int) -> list[float]:
-    """Blender's render call alone after the bound objects moved as in an episode (moves and readback not timed)."""
+    """Blender's render call alone after the scene was written as in an episode (bound objects, MuJoCo's bodies and
+    cameras moved; the writes and a readback not timed)."""
     base: Any = env.unwrapped  # the VisualEnv under the wrappers
     renderer = base.renderer
     env.reset(seed=seed)
-    values = []
-    for action in actions:  # the binding values of real steps (these renders are not timed)
+    frames = []
+    for action in actions:  # the states of real steps (these renders are not timed)
         _, _, terminated, truncated, _ = env.step(action)
-        values.append(base.binding_values())
+        frames.append(base.frames().copy())
         if terminated or truncated:
             env.reset()
-    return render_call_times(renderer.scene.name, len(values), lambda i: renderer.apply(values[i]))
+    return render_call_times(renderer.scene.name, len(frames), lambda i: renderer.write(frames[i]))
 
 
 def render_call_times(scene_name: str, n: int, before: Callable[[int], None] | None = None) -> list[float]:

@@ -272,7 +272,7 @@ class BlenderRenderer(BindingSetters, Renderer):
 
     def render(self, frames: Frames) -> np.ndarray | dict[str, np.ndarray]:
         """The observation cameras for the one env of `frames`, ``(1, H, W, C)`` (views of the image just read)."""
-        self._take(frames)
+        self.write(frames)
         if self.plan.single:
             if not self._views:
                 raise RenderError("the spec has no observation camera")
@@ -286,11 +286,13 @@ class BlenderRenderer(BindingSetters, Renderer):
             raise RenderError(
                 "the spec has no camera to render a view with (add an 'observation' or 'render.view.camera')"
             )
-        self._take(frames)
+        self.write(frames)
         return self._render(self._view)[None]
 
-    def _take(self, frames: Frames) -> None:
-        """Pose, distract and bind the scene as the one env of `frames` is (a renderer of one env refuses more)."""
+    def write(self, frames: Frames) -> None:
+        """Pose, distract and bind the scene as the one env of `frames` is, without rendering: what the next render
+        call draws (``visualenv bench``'s floor renders it with Blender's call alone). A renderer of one env refuses
+        more."""
         self._check_open()
         if len(frames.values) != 1:
             raise ValueError(f"this renderer draws one env, got binding values for {len(frames.values)}")
