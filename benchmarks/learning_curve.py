@@ -1,10 +1,10 @@
 """A run's learning curve in frames beside published points: the periodic evaluations of a `visualenv train` run
 folder (evaluations.npz), each env step counted as the spec's action repeat of frames, as DMC papers count them.
 
-    python benchmarks/learning_curve.py RUN_DIR OUT_DIR [--published drq]
+    python benchmarks/learning_curve.py RUN_DIR OUT_DIR [--published drq] [--beside CURVE_CSV=LABEL ...]
 
 Writes OUT_DIR/curve.png (mean return of each evaluation, its standard deviation shaded, the published points with
-their error bars) and OUT_DIR/curve.csv (steps, frames, mean, std, episodes, the run's wall-clock seconds at that
+their error bars, and each `--beside` curve.csv of an earlier run under its label) and OUT_DIR/curve.csv (steps, frames, mean, std, episodes, the run's wall-clock seconds at that
 evaluation where the progress log has them).
 """
 
@@ -54,6 +54,7 @@ def main() -> None:
     parser.add_argument("run_dir", type=Path)
     parser.add_argument("out_dir", type=Path)
     parser.add_argument("--published", default="drq", choices=sorted(PUBLISHED))
+    parser.add_argument("--beside", action="append", default=[], help="an earlier run's curve.csv=LABEL to draw too")
     args = parser.parse_args()
     config = json.loads((args.run_dir / "config.json").read_text())
     spec_id = config["spec"]["id"]
@@ -76,6 +77,11 @@ def main() -> None:
     figure, axes = plt.subplots(figsize=(6, 4))
     axes.plot(frames, means, marker="o", label="visualenv train --algo sac --augment shift")
     axes.fill_between(frames, means - stds, means + stds, alpha=0.2)
+    for given in args.beside:
+        path, _, label = given.partition("=")
+        with open(path, newline="") as f:
+            earlier = [(int(r["frames"]), float(r["mean_return"])) for r in csv.DictReader(f)]
+        axes.plot(*zip(*earlier), marker=".", linestyle="--", color="grey", label=label or path)
     published = PUBLISHED[args.published].get(spec_id)
     if published:
         x, y, e = zip(*published["points"])
