@@ -219,7 +219,8 @@ def test_a_config_without_augment_reads_as_none(tmp_path):
 def test_the_refusal_of_a_buffer_too_big_names_a_size_that_fits(tmp_path):
     from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
-    from visualenv.train.sb3 import REPLAY_MEMORY_SHARE, TrainConfig, check_replay_buffer, replay_buffer_bytes
+    from visualenv.train.config_checks import REPLAY_MEMORY_SHARE, check_replay_buffer, replay_buffer_bytes
+    from visualenv.train.sb3 import TrainConfig
 
     import psutil
     import re
@@ -234,6 +235,30 @@ def test_the_refusal_of_a_buffer_too_big_names_a_size_that_fits(tmp_path):
     fits = int(re.search(r"set buffer_size=([\d,]+) or less", str(refused.value)).group(1).replace(",", ""))
     assert 0 < fits * one <= REPLAY_MEMORY_SHARE * psutil.virtual_memory().total
     check_replay_buffer(config, {"buffer_size": fits // 2}, loaded)
+
+
+def test_a_sac_target_interval_that_sb3_would_not_keep_is_warned_of_with_the_tau_that_would(recwarn):
+    """SB3's SAC moves its target at gradient steps 0, k, 2k... of each update call: with one update a call an interval
+    of 2 moves it every update. `train` says so before any env starts, and says nothing where the interval holds."""
+    import warnings
+
+    from visualenv.train.config_checks import check_target_pace
+    from visualenv.train.sb3 import TrainConfig
+
+    def warned(algo: str = "sac", envs: int = 1, **kwargs) -> list[str]:
+        with warnings.catch_warnings(record=True) as caught:
+            warnings.simplefilter("always")
+            check_target_pace(TrainConfig(spec="DMC-cartpole-swingup-v0", algo=algo, envs=envs), kwargs)
+        return [str(w.message) for w in caught]
+
+    message = warned(target_update_interval=2, tau=0.01, gradient_steps=-1, train_freq=1)
+    assert len(message) == 1 and "counts updates within each update call (SB3 issue 2158)" in message[0]
+    assert "moves 1 time(s) in 1 updates, not once in 2" in message[0] and "tau=0.005" in message[0]
+    assert "moves 2 time(s) in 3 updates" in warned(target_update_interval=2, gradient_steps=3)[0]
+    assert "in 2 updates, not once in 4" in warned(target_update_interval=4, gradient_steps=-1, train_freq=(1, "step"), envs=2)[0]
+    assert warned(target_update_interval=2, gradient_steps=4) == []  # a multiple: the pace holds
+    assert warned(target_update_interval=1) == [] and warned("td3", target_update_interval=2) == []
+    assert warned(target_update_interval=2, train_freq=(1, "episode")) == []  # a call's updates vary: not judged
 
 
 def test_the_dmc_preset_builds_drqs_sac():

@@ -529,7 +529,7 @@ def test_images_too_small_for_drqs_encoder_are_located_and_larger_ones_pass_its_
     """DrQ's encoder takes images down to 15x15 (NatureCNN 36): a config that names it is checked by its own size."""
     from visualenv.spec import load_spec
     from visualenv.train.encoders import DrQEncoder
-    from visualenv.train.sb3 import check_cnn_input
+    from visualenv.train.config_checks import check_cnn_input
 
     drq = 'policy_kwargs={"features_extractor_class": "visualenv.train.encoders.DrQEncoder"}'
     spec = multi_camera_cartpole(tmp_path, "[12, 20]")
@@ -651,7 +651,8 @@ def test_an_image_replay_buffer_that_cannot_fit_is_refused_before_any_env_starts
     """SB3's default buffer (a million samples) of 4 stacked 100x100 frames, twice (obs and next obs), is 75 GiB."""
     from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
-    from visualenv.train.sb3 import TrainConfig, replay_buffer_bytes
+    from visualenv.train.config_checks import replay_buffer_bytes
+    from visualenv.train.sb3 import TrainConfig
 
     result = CliRunner().invoke(
         main, ["train", "LunarLanding-v0", "--algo", "sac", "--steps", "64", "--out", str(tmp_path / "runs")]

@@ -25,7 +25,7 @@ import numpy as np
 from stable_baselines3.common.callbacks import BaseCallback, EvalCallback
 
 from visualenv.env.cores import usable_cores
-from visualenv.errors import ConfigError, SpecError, did_you_mean
+from visualenv.errors import ConfigError, did_you_mean
 from visualenv.train.evaluation import (
     declares_success,
     FINAL_EPISODES,
@@ -35,6 +35,12 @@ from visualenv.train.evaluation import (
     make_eval_env,
     selection_record,
     selection_seed,
+)
+from visualenv.train.config_checks import (
+    check_cnn_input,
+    check_replay_buffer,
+    check_target_pace,
+    check_torch_device,
 )
 from visualenv.train.checkpoints import load_state, resume_checkpoint, save_state, sb3_checkpoint
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
@@ -318,34 +324,6 @@ def _finish(
     return results
 
 
-# SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
-NATURE_CNN_MIN_SIZE = 36
-
-
-def check_cnn_input(loaded: Any, policy_kwargs: dict[str, Any] | None) -> None:
-    """Observations too small for the run's image encoder (SB3's NatureCNN, or a listed one with a ``min_side``) are a
-    located error before any run folder, not a torch RuntimeError at the first update."""
-    encoder = (policy_kwargs or {}).get("features_extractor_class")
-    smallest = NATURE_CNN_MIN_SIZE if encoder is None else getattr(encoder, "min_side", None)
-    observation = loaded.spec.observation
-    if observation is None or smallest is None:
-        return
-    name = "SB3's NatureCNN" if encoder is None else encoder.__name__
-    problems = []
-    for key, view in observation.views().items():
-        width, height = view.resolution
-        if min(width, height) < smallest:
-            where = ("cameras", key) if observation.cameras is not None else ()
-            message = f"{width}x{height} is too small for the CNN policy of `visualenv train` ({name}): it needs"
-            problems.append(
-                loaded.source.diagnostic(
-                    ("observation", *where, "resolution"), f"{message} at least {smallest}x{smallest}"
-                )
-            )
-    if problems:
-        raise SpecError(problems)
-
-
 def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> tuple[dict[str, Any], dict[str, Any]]:
     """What can be wrong with a run before any env starts; the algorithm's keyword arguments (all, and the changed ones)."""
     from visualenv.env.registration import resolve
@@ -353,92 +331,15 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     from visualenv.train.drq import check_augment
 
     kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})
-    check_torch_device({**kwargs, **changed}.get("device", "auto"))
+    both = {**kwargs, **changed}
+    check_torch_device(both.get("device", "auto"))
     loaded = load_spec(resolve(config.spec))
     if config.render:
-        check_cnn_input(loaded, {**kwargs, **changed}.get("policy_kwargs"))
+        check_cnn_input(loaded, both.get("policy_kwargs"))
     check_augment(config.augment, config.algo, config.render, loaded)
-    check_replay_buffer(config, {**kwargs, **changed}, loaded)
+    check_replay_buffer(config, both, loaded)
+    check_target_pace(config, both)
     return kwargs, changed
-
-
-def check_torch_device(device: Any) -> None:
-    """A device torch does not know, or a CUDA device where torch has none, is an error now, not a traceback once the
-    envs have started."""
-    import torch
-
-    if device == "auto":
-        return
-    try:
-        kind = torch.device(device).type
-    except (RuntimeError, TypeError):
-        raise ConfigError(f"device {device!r}: expected auto, cpu, cuda or cuda:N (a torch device)") from None
-    if kind != "cuda":
-        return
-
-    if not torch.cuda.is_available():
-        build = f"built for CUDA {torch.version.cuda}" if torch.version.cuda else "a CPU-only build"
-        raise ConfigError(
-            f"device '{device}': torch {torch.__version__} ({build}) sees no CUDA device on this machine; "
-            "use --device cpu (or auto), or install a CUDA build of torch where a GPU is"
-        )
-
-
-#: the share of the available memory a replay buffer may take (the envs, the model and the evaluation need the rest)
-REPLAY_MEMORY_SHARE = 0.7
-
-
-def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> int | None:
-    """What an off-policy algorithm's replay buffer will hold at most, in bytes; None for an on-policy algorithm.
-
-    SB3 stores each observation and the next one (``optimize_memory_usage`` and ``--augment``'s buffer keep
-    one: consecutive samples share it), as uint8 images (frames stacked) or float32 states.
-    """
-    import inspect
-
-    from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
-
-    algo = algorithm_class(config.algo)
-    if not issubclass(algo, OffPolicyAlgorithm):
-        return None
-    defaults = inspect.signature(algo.__init__).parameters
-    size = int(kwargs.get("buffer_size", defaults["buffer_size"].default))
-    optimized = bool(config.augment or kwargs.get("optimize_memory_usage", defaults["optimize_memory_usage"].default))
-    observation = loaded.spec.observation
-    if config.render and observation is not None:
-        channels = {"rgb": 3, "grayscale": 1, "depth": 1}
-        per_sample = sum(
-            w * h * channels[v.color] * max(1, config.frame_stack)
-            for v in observation.views().values()
-            for w, h in [v.resolution]
-        )
-    else:
-        per_sample = 4 * sum(1 for var in loaded.spec.state.values() if var.observe)
-    return size * per_sample * (1 if optimized else 2)
-
-
-def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> None:
-    """A replay buffer of image stacks that cannot fit in memory is refused before any env starts (SB3 would only warn, then fail hours later)."""
-    import psutil
-
-    need = replay_buffer_bytes(config, kwargs, loaded)
-    if need is None:
-        return
-    free = psutil.virtual_memory().available
-    if need > REPLAY_MEMORY_SHARE * free:
-        fits = int(
-            REPLAY_MEMORY_SHARE * free // (replay_buffer_bytes(config, {**kwargs, "buffer_size": 1}, loaded) or 1)
-        )
-        raise ConfigError(
-            f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
-            f"are available: set buffer_size={fits:,} or less (--set buffer_size={fits})"
-            + (
-                ""
-                if config.augment
-                else ", or optimize_memory_usage=true (one copy of each observation; SB3 then needs "
-                "replay_buffer_kwargs: {handle_timeout_termination: false})"
-            )
-        )
 
 
 class _ResumableEval(EvalCallback):
