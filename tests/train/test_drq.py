@@ -253,9 +253,12 @@ def test_a_sac_target_interval_that_sb3_would_not_keep_is_warned_of_with_the_tau
 
     message = warned(target_update_interval=2, tau=0.01, gradient_steps=-1, train_freq=1)
     assert len(message) == 1 and "counts updates within each update call (SB3 issue 2158)" in message[0]
-    assert "moves 1 time(s) in 1 updates, not once in 2" in message[0] and "tau=0.005" in message[0]
-    assert "moves 2 time(s) in 3 updates" in warned(target_update_interval=2, gradient_steps=3)[0]
-    assert "in 2 updates, not once in 4" in warned(target_update_interval=4, gradient_steps=-1, train_freq=(1, "step"), envs=2)[0]
+    assert "moves 1 time(s) in each call's 1 update(s), not once every 2" in message[0] and "tau=0.005" in message[0]
+    assert "moves 2 time(s) in each call's 3 update(s)" in warned(target_update_interval=2, gradient_steps=3)[0]
+    assert (
+        "call's 2 update(s), not once every 4"
+        in warned(target_update_interval=4, gradient_steps=-1, train_freq=(1, "step"), envs=2)[0]
+    )
     assert warned(target_update_interval=2, gradient_steps=4) == []  # a multiple: the pace holds
     assert warned(target_update_interval=1) == [] and warned("td3", target_update_interval=2) == []
     assert warned(target_update_interval=2, train_freq=(1, "episode")) == []  # a call's updates vary: not judged

@@ -142,8 +142,8 @@ def check_target_pace(config: TrainConfig, kwargs: dict[str, Any]) -> None:
     tau = float(kwargs.get("tau", 0.005))
     warnings.warn(
         f"SAC's target_update_interval={interval} counts updates within each update call (SB3 issue 2158), and each "
-        f"call here makes {per_call}: the target network moves {math.ceil(per_call / interval)} time(s) in "
-        f"{per_call} updates, not once in {interval}. For that pace set target_update_interval=1 and "
+        f"call here makes {per_call}: the target network moves {math.ceil(per_call / interval)} time(s) in each "
+        f"call's {per_call} update(s), not once every {interval}. For that pace set target_update_interval=1 and "
         f"tau={tau / interval:g}.",
         stacklevel=3,  # check_config's caller
     )
