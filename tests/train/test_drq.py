@@ -143,36 +143,46 @@ def _params(module):
     return [p.detach().clone() for p in module.parameters()]
 
 
-def test_the_encoder_is_shared_and_learns_from_the_critics_loss_only():
+def test_the_convolutions_are_shared_and_learn_from_the_critics_loss_only():
+    """DrQ's sharing: one set of convolutions for actor and critic, trained by the critic's loss; each has its own head
+    on them (the actor's trained by the actor's loss, on the convolutions' output detached); the target its own copy."""
     model = _sac()
     policy = model.policy
     assert isinstance(policy, DrQSACPolicy)
-    encoder = policy.actor.features_extractor
-    assert policy.critic.features_extractor is encoder and policy.critic_target.features_extractor is not encoder
+    actor, critic = policy.actor.features_extractor, policy.critic.features_extractor
+    convolutions = critic.cnn  # SB3's NatureCNN: convolutions (cnn), then the head (linear)
+    assert actor.cnn is convolutions and actor.linear is not critic.linear
+    assert policy.critic_target.features_extractor.cnn is not convolutions
     in_actor = {id(p) for group in policy.actor.optimizer.param_groups for p in group["params"]}
     in_critic = {id(p) for group in policy.critic.optimizer.param_groups for p in group["params"]}
-    assert all(id(p) in in_critic and id(p) not in in_actor for p in encoder.parameters())
+    assert all(id(p) in in_critic and id(p) not in in_actor for p in convolutions.parameters())
+    assert all(id(p) in in_actor and id(p) not in in_critic for p in actor.linear.parameters())
 
-    # an actor loss (the policy's, as SAC computes it) puts no gradient on the encoder; a critic loss does
+    # an actor loss (the policy's, as SAC computes it) puts no gradient on the convolutions, and one on the actor's
+    # head; a critic loss puts one on the convolutions
     batch = model.replay_buffer.sample(8)
-    encoder.zero_grad(set_to_none=True)
+    policy.zero_grad(set_to_none=True)
     actions, log_prob = policy.actor.action_log_prob(batch.observations)
     q = torch.cat(policy.critic(batch.observations, actions), dim=1).min(dim=1).values
     (0.1 * log_prob - q).mean().backward()
-    assert all(p.grad is None or not p.grad.any() for p in encoder.parameters())
+    assert all(p.grad is None or not p.grad.any() for p in convolutions.parameters())
+    assert all(p.grad is None or not p.grad.any() for p in critic.linear.parameters())
+    assert any(p.grad is not None and p.grad.any() for p in actor.linear.parameters())
     assert any(p.grad is not None and p.grad.any() for p in policy.actor.mu.parameters())
     sum(q.pow(2).mean() for q in policy.critic(batch.observations, batch.actions)).backward()
-    assert all(p.grad is not None for p in encoder.parameters()) and any(p.grad.any() for p in encoder.parameters())
+    assert all(p.grad is not None for p in convolutions.parameters())
+    assert any(p.grad.any() for p in convolutions.parameters())
 
-    # one SAC train step moves the encoder; with the critic's optimizer stilled, the actor's step leaves it be
-    before = _params(encoder)
+    # one SAC train step moves the convolutions; with the critic's optimizer stilled, the actor's step leaves them be
+    # and moves its own head
+    before = _params(convolutions)
     model.train(gradient_steps=1, batch_size=8)
-    assert any(not torch.equal(a, b) for a, b in zip(before, _params(encoder)))
-    before, actor_before = _params(encoder), _params(policy.actor.mu)
+    assert any(not torch.equal(a, b) for a, b in zip(before, _params(convolutions)))
+    before, head_before = _params(convolutions), _params(actor.linear)
     policy.critic.optimizer.step = lambda *args, **kwargs: None
     model.train(gradient_steps=1, batch_size=8)
-    assert all(torch.equal(a, b) for a, b in zip(before, _params(encoder)))
-    assert any(not torch.equal(a, b) for a, b in zip(actor_before, _params(policy.actor.mu)))
+    assert all(torch.equal(a, b) for a, b in zip(before, _params(convolutions)))
+    assert any(not torch.equal(a, b) for a, b in zip(head_before, _params(actor.linear)))
 
 
 def test_augment_is_refused_where_it_cannot_apply(tmp_path):
@@ -366,7 +376,9 @@ def test_a_config_names_drqs_encoder_and_a_policy_file_rebuilds_it(tmp_path):
     )
     model.learn(12)  # a few updates through it
     encoder = model.policy.actor.features_extractor
-    assert isinstance(encoder, DrQEncoder) and model.policy.critic.features_extractor is encoder
+    critic = model.policy.critic.features_extractor
+    assert isinstance(encoder, DrQEncoder) and isinstance(critic, DrQEncoder)
+    assert critic.convolutions is encoder.convolutions and critic.head is not encoder.head  # DrQ's sharing
     convolutions = [layer for layer in encoder.convolutions if isinstance(layer, torch.nn.Conv2d)]
     assert [(c.out_channels, c.kernel_size, c.stride) for c in convolutions] == [(32, (3, 3), (2, 2))] + 3 * [
         (32, (3, 3), (1, 1))

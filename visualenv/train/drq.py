@@ -3,8 +3,9 @@
 * :func:`random_shift`: each image padded by 4 pixels (its edge pixels repeated) and cropped back at a random
   offset, drawn per sample (DrQ, Kostrikov et al. 2020);
 * SAC: :class:`DrQReplayBuffer` keeps each frame once (uint8) and shifts the observations and the next observations of
-  every sampled batch independently; :class:`DrQSACPolicy` shares one encoder between actor and critic, trained by
-  the critic's loss only (DrQ's recipe: the actor reads the encoder's features detached);
+  every sampled batch independently; :class:`DrQSACPolicy` shares the encoder's convolutions between actor and
+  critic, trained by the critic's loss only, and gives the actor its own head on their detached output (DrQ ties the
+  convolutions alone: ``copy_conv_weights_from``);
 * PPO: :class:`ShiftedRolloutBuffer` shifts the observations of each minibatch (as RAD and DrAC do).
 """
 
@@ -17,11 +18,13 @@ import torch as th
 from gymnasium import spaces
 from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
 from stable_baselines3.common.policies import ContinuousCritic
-from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first
+from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first, preprocess_obs
+from stable_baselines3.common.torch_layers import NatureCNN
 from stable_baselines3.common.type_aliases import ReplayBufferSamples, RolloutBufferSamples
 from stable_baselines3.sac.policies import Actor, CnnPolicy
 
 from visualenv.errors import ConfigError
+from visualenv.train.encoders import DrQEncoder
 
 AUGMENTS = ("shift",)
 PAD = 4  # DrQ's padding: shifts of up to 4 pixels each way on 84x84 frames
@@ -200,11 +203,42 @@ def buffer_memory(buffer_size: int, observation_space: spaces.Space, action_spac
     )
 
 
+#: each listed encoder's convolutions (shared by the actor and the critic) and its head (one each), by attribute
+ENCODER_PARTS: dict[type, tuple[str, str]] = {NatureCNN: ("cnn", "linear"), DrQEncoder: ("convolutions", "head")}
+
+
+def _part_names(encoder: Any) -> tuple[str, str] | None:
+    return next((parts for kind, parts in ENCODER_PARTS.items() if isinstance(encoder, kind)), None)
+
+
+def encoder_parts(encoder: Any) -> tuple[Any, Any] | None:
+    """An encoder's convolutions and head, where its kind is known (:data:`ENCODER_PARTS`); None for any other, which
+    the actor and the critic share whole."""
+    names = _part_names(encoder)
+    return None if names is None else (getattr(encoder, names[0]), getattr(encoder, names[1]))
+
+
+def on_the_same_convolutions(encoder: Any, other: Any) -> Any:
+    """`other` (an encoder of `encoder`'s kind) with `encoder`'s convolutions in place of its own: a head of its own on
+    shared convolutions. The convolutions; `encoder` itself where its parts are not known."""
+    names = _part_names(encoder)
+    if names is None:
+        return encoder
+    setattr(other, names[0], getattr(encoder, names[0]))
+    return getattr(encoder, names[0])
+
+
 class DrQActor(Actor):
-    """SB3's SAC actor reading the shared encoder's features detached: the actor's loss does not train the encoder."""
+    """SB3's SAC actor on the shared convolutions' output, detached, through its own head: the actor's loss trains its
+    head and not the convolutions (an encoder of another kind is read whole, detached)."""
 
     def extract_features(self, obs: Any, features_extractor: Any) -> th.Tensor:  # type: ignore[override]
-        return super().extract_features(obs, features_extractor).detach()
+        parts = encoder_parts(features_extractor)
+        if parts is None:
+            return super().extract_features(obs, features_extractor).detach()
+        convolutions, head = parts
+        images = preprocess_obs(obs, self.observation_space, normalize_images=self.normalize_images)
+        return head(convolutions(images).detach())
 
 
 class DrQCritic(ContinuousCritic):
@@ -220,9 +254,10 @@ class DrQCritic(ContinuousCritic):
 
 
 class DrQSACPolicy(CnnPolicy):
-    """SB3's SAC CnnPolicy built as DrQ's: one encoder (NatureCNN, or the features extractor the config names) shared by
-    actor and critic, in the critic's optimizer and not in the actor's; the target critic has its own copy, updated
-    with the Q heads by SB3's soft update (`tau`). ``share_features_extractor`` is not read: the encoder is shared."""
+    """SB3's SAC CnnPolicy built as DrQ's: the encoder's convolutions (NatureCNN's, or those of the encoder the config
+    names) shared by actor and critic, in the critic's optimizer and not in the actor's; the actor and the critic each
+    with their own head on them (DrQ's linear layer and LayerNorm); the target critic with its own copy of all of it,
+    updated with the Q heads by SB3's soft update (`tau`). ``share_features_extractor`` is not read."""
 
     def make_actor(self, features_extractor: Any = None) -> Actor:
         return DrQActor(**self.with_encoder(self.actor_kwargs, features_extractor)).to(self.device)
@@ -238,12 +273,14 @@ class DrQSACPolicy(CnnPolicy):
     def _build(self, lr_schedule: Any) -> None:
         self.actor = self.make_actor()
         encoder = self.actor.features_extractor
-        self.critic = self.make_critic(features_extractor=encoder)
+        critic_encoder = self.make_features_extractor() if encoder_parts(encoder) else encoder
+        shared = on_the_same_convolutions(encoder, critic_encoder)  # the critic's head on the actor's convolutions
+        self.critic = self.make_critic(features_extractor=critic_encoder)
         self.critic_target = self.make_critic(features_extractor=None)
         self.critic_target.load_state_dict(self.critic.state_dict())
-        shared = {id(p) for p in encoder.parameters()}
+        in_common = {id(p) for p in shared.parameters()}
         self.actor.optimizer = self.optimizer_class(
-            [p for p in self.actor.parameters() if id(p) not in shared],
+            [p for p in self.actor.parameters() if id(p) not in in_common],
             lr=lr_schedule(1),  # type: ignore[call-arg]
             **self.optimizer_kwargs,
         )
