@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import math
 import warnings
-from typing import TYPE_CHECKING, Any
+from typing import Any
 
 from visualenv.errors import ConfigError, SpecError
 from visualenv.train.model_files import algorithm_class
 
-if TYPE_CHECKING:
-    from visualenv.train.sb3 import TrainConfig
+#: a run's :class:`visualenv.train.sb3.TrainConfig` (not imported: sb3 imports these checks)
+TrainConfig = Any
 
 # SB3's NatureCNN: 8x8 stride 4, 4x4 stride 2, 3x3 convolutions leave nothing of smaller images
 NATURE_CNN_MIN_SIZE = 36
