@@ -218,16 +218,6 @@ def encoder_parts(encoder: Any) -> tuple[Any, Any] | None:
     return None if names is None else (getattr(encoder, names[0]), getattr(encoder, names[1]))
 
 
-def on_the_same_convolutions(encoder: Any, other: Any) -> Any:
-    """`other` (an encoder of `encoder`'s kind) with `encoder`'s convolutions in place of its own: a head of its own on
-    shared convolutions. The convolutions; `encoder` itself where its parts are not known."""
-    names = _part_names(encoder)
-    if names is None:
-        return encoder
-    setattr(other, names[0], getattr(encoder, names[0]))
-    return getattr(encoder, names[0])
-
-
 class DrQActor(Actor):
     """SB3's SAC actor on the shared convolutions' output, detached, through its own head: the actor's loss trains its
     head and not the convolutions (an encoder of another kind is read whole, detached)."""
@@ -273,8 +263,12 @@ class DrQSACPolicy(CnnPolicy):
     def _build(self, lr_schedule: Any) -> None:
         self.actor = self.make_actor()
         encoder = self.actor.features_extractor
-        critic_encoder = self.make_features_extractor() if encoder_parts(encoder) else encoder
-        shared = on_the_same_convolutions(encoder, critic_encoder)  # the critic's head on the actor's convolutions
+        names = _part_names(encoder)
+        if names is None:  # an encoder of another kind: shared whole
+            critic_encoder = shared = encoder
+        else:  # the critic's own head on the actor's convolutions
+            critic_encoder, shared = self.make_features_extractor(), getattr(encoder, names[0])
+            setattr(critic_encoder, names[0], shared)
         self.critic = self.make_critic(features_extractor=critic_encoder)
         self.critic_target = self.make_critic(features_extractor=None)
         self.critic_target.load_state_dict(self.critic.state_dict())
