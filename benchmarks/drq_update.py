@@ -2,7 +2,8 @@
 preset's) against DrQ's own encoder (`visualenv.train.encoders.DrQEncoder`), on 3 stacked 84x84 RGB frames.
 
 No env renders: the replay buffer is filled with random frames, and each figure is the median of `--updates` calls of
-SAC's ``train(gradient_steps=1)`` after two unmeasured ones, the encoders alternated round by round.
+DrQ's SAC's ``train(gradient_steps=2)`` (the preset's schedule: the critic at each update, the actor at one of two),
+halved, after one unmeasured call, the encoders alternated round by round.
 
     python benchmarks/drq_update.py --batch-sizes 128,512 --updates 10 --rounds 3
 """
@@ -21,6 +22,7 @@ import yaml
 from gymnasium import spaces
 
 from visualenv.train.drq import model_arguments
+from visualenv.train.model_files import algorithm_class
 from visualenv.train.sb3 import algorithm_kwargs
 
 PRESET = Path(__file__).parents[1] / "examples/hyperparams/dmc_drq.yaml"
@@ -42,14 +44,16 @@ class Frames(gym.Env):
 
 
 def model(encoder: str | None, batch_size: int):
-    from stable_baselines3 import SAC
-
     preset = yaml.safe_load(PRESET.read_text())
     if encoder is not None:
         preset["policy_kwargs"] = {**preset["policy_kwargs"], "features_extractor_class": encoder}
-    kwargs = algorithm_kwargs("sac", {**preset, "buffer_size": 2 * batch_size, "learning_starts": 2 * batch_size - 1})
+    kwargs = algorithm_kwargs(
+        "sac", {**preset, "buffer_size": 2 * batch_size, "learning_starts": 2 * batch_size - 1}, "shift"
+    )
     policy, extra = model_arguments("sac", "shift", "CnnPolicy")
-    sac = SAC(policy, Frames(), seed=0, device="cpu", **{**kwargs, "batch_size": batch_size}, **extra)
+    sac = algorithm_class("sac", "shift")(
+        policy, Frames(), seed=0, device="cpu", **{**kwargs, "batch_size": batch_size}, **extra
+    )
     sac.learn(2 * batch_size - 1)  # fills the buffer, no update yet
     return sac
 
@@ -57,10 +61,10 @@ def model(encoder: str | None, batch_size: int):
 def update_ms(sac, batch_size: int, updates: int) -> float:
     sac.train(gradient_steps=2, batch_size=batch_size)  # warm-up: allocations, oneDNN's first calls
     times = []
-    for _ in range(updates):
+    for _ in range(updates):  # in pairs: DrQ's actor trains at one update of two (the preset's actor_update_interval)
         start = time.perf_counter()
-        sac.train(gradient_steps=1, batch_size=batch_size)
-        times.append(time.perf_counter() - start)
+        sac.train(gradient_steps=2, batch_size=batch_size)
+        times.append((time.perf_counter() - start) / 2)
     return 1000 * statistics.median(times)
 
 

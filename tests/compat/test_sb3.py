@@ -60,3 +60,25 @@ def test_an_algorithms_training_state_is_named_as_sb3_saves_it():
     compat.set_training_counters(ppo, {**counters, "num_timesteps": 5, "_n_updates": 2})
     assert ppo.num_timesteps == 5 and compat.training_counters(ppo)["_n_updates"] == 2
     assert compat.episode_window(ppo) == 7
+
+
+def test_an_update_loop_of_ones_own_reads_what_sacs_train_reads():
+    """What DrQ's SAC's ``train`` takes from SB3: the learning rate its schedule gives now, a batch sampled as SB3
+    samples it, its discounts, and the update count SB3 logs and a checkpoint restores."""
+    from stable_baselines3 import SAC
+
+    sac = SAC("MlpPolicy", gym.make("Pendulum-v1"), buffer_size=64, learning_starts=8, learning_rate=1e-3, device="cpu")
+    sac.learn(8)
+    sac.policy.set_training_mode(False)
+    for group in sac.actor.optimizer.param_groups:
+        group["lr"] = 0.5
+    compat.start_updates(sac, [sac.actor.optimizer])
+    assert sac.policy.training and [g["lr"] for g in sac.actor.optimizer.param_groups] == [1e-3]
+    batch = compat.sample_batch(sac, 5)
+    assert batch.observations.shape == (5, 3) and batch.rewards.shape == (5, 1)
+    assert compat.batch_discounts(batch, 0.99) == 0.99  # a one-step buffer: gamma
+    n_step = batch._replace(discounts=torch.full((5, 1), 0.5)) if "discounts" in batch._fields else batch
+    assert compat.batch_discounts(n_step, 0.99) is n_step.discounts or "discounts" not in batch._fields
+    assert compat.updates_made(sac) == 0
+    compat.count_updates(sac, 3)
+    assert compat.updates_made(sac) == 3 == compat.training_counters(sac)["_n_updates"]

@@ -15,11 +15,13 @@ from visualenv.errors import ConfigError
 from visualenv.train.drq import (
     PAD,
     DrQReplayBuffer,
+    DrQSAC,
     DrQSACPolicy,
     ShiftedRolloutBuffer,
     model_arguments,
     random_shift,
 )
+from visualenv.train.model_files import algorithm_class
 
 
 def _pattern(n: int, c: int = 2, h: int = 20, w: int = 24) -> torch.Tensor:
@@ -130,11 +132,12 @@ class _Frames(gym.Env):
         return self.observation_space.sample(), float(action[0] > 0), False, False, {}
 
 
-def _sac():
-    from stable_baselines3 import SAC
-
+def _sac(**kwargs):
+    """DrQ's SAC as `train --algo sac --augment shift` builds it, its buffer filled, no update made yet."""
     policy, extra = model_arguments("sac", "shift", "CnnPolicy")
-    model = SAC(policy, _Frames(), buffer_size=64, learning_starts=16, batch_size=8, seed=0, device="cpu", **extra)
+    model = algorithm_class("sac", "shift")(
+        policy, _Frames(), buffer_size=64, learning_starts=16, batch_size=8, seed=0, device="cpu", **kwargs, **extra
+    )
     model.learn(16)  # fills the buffer
     return model
 
@@ -183,6 +186,43 @@ def test_the_convolutions_are_shared_and_learn_from_the_critics_loss_only():
     model.train(gradient_steps=1, batch_size=8)
     assert all(torch.equal(a, b) for a, b in zip(before, _params(convolutions)))
     assert any(not torch.equal(a, b) for a, b in zip(head_before, _params(actor.linear)))
+
+
+def test_drqs_sac_trains_the_actor_and_moves_the_target_on_drqs_schedule_across_update_calls():
+    """DrQ's schedule (``DRQAgent.update``): the critic at every update; the actor and the temperature, and the target
+    critic's move, at updates 0, 2, 4... counted across train() calls (SB3's SAC, one update a call, counts each call
+    from 0 and would move the target at every one: SB3 issue 2158)."""
+    model = _sac(actor_update_interval=2, target_update_interval=2, tau=0.01)
+    assert isinstance(model, DrQSAC) and model.actor_update_interval == 2
+    policy = model.policy
+    parts = {
+        "critic": policy.critic,
+        "actor": policy.actor.mu,
+        "target": policy.critic_target,
+        "temperature": [model.log_ent_coef],
+    }
+
+    def values():
+        return {name: [p.detach().clone() for p in _parameters(part)] for name, part in parts.items()}
+
+    moved: dict[str, list[bool]] = {name: [] for name in parts}
+    for _ in range(5):
+        before = values()
+        model.train(gradient_steps=1, batch_size=8)
+        after = values()
+        for name in parts:
+            moved[name].append(any(not torch.equal(a, b) for a, b in zip(before[name], after[name])))
+    assert moved["critic"] == [True] * 5
+    assert moved["actor"] == moved["temperature"] == moved["target"] == [True, False, True, False, True]
+    logged = model.logger.name_to_value
+    assert logged["train/n_updates"] == 5 and "train/critic_loss" in logged
+
+    with pytest.raises(ValueError, match="actor_update_interval: expected 1 or more"):
+        _sac(actor_update_interval=0)
+
+
+def _parameters(part):
+    return list(part.parameters()) if hasattr(part, "parameters") else list(part)
 
 
 def test_augment_is_refused_where_it_cannot_apply(tmp_path):
@@ -272,6 +312,11 @@ def test_a_sac_target_interval_that_sb3_would_not_keep_is_warned_of_with_the_tau
     assert warned(target_update_interval=2, gradient_steps=4) == []  # a multiple: the pace holds
     assert warned(target_update_interval=1) == [] and warned("td3", target_update_interval=2) == []
     assert warned(target_update_interval=2, train_freq=(1, "episode")) == []  # a call's updates vary: not judged
+    drq = TrainConfig(spec="DMC-cartpole-swingup-v0", algo="sac", augment="shift")
+    with warnings.catch_warnings(record=True) as caught:  # DrQ's SAC counts across calls: its interval holds
+        warnings.simplefilter("always")
+        check_target_pace(drq, {"target_update_interval": 2, "gradient_steps": -1})
+    assert caught == []
 
 
 def test_the_dmc_preset_builds_drqs_sac():
@@ -279,24 +324,24 @@ def test_the_dmc_preset_builds_drqs_sac():
     from pathlib import Path
 
     import yaml
-    from stable_baselines3 import SAC
 
     from visualenv.train.sb3 import algorithm_kwargs
 
     preset = yaml.safe_load((Path(__file__).parents[2] / "examples/hyperparams/dmc_drq.yaml").read_text())
-    kwargs = algorithm_kwargs("sac", {**preset, "buffer_size": 100})  # the preset's 100k frames: 5.9 GiB
-    assert (
-        preset["buffer_size"] == 100_000
-        and preset["ent_coef"] == "auto_0.1"
-        and preset["tau"] == 0.005
-        and preset["target_update_interval"] == 1
-    )
+    kwargs = algorithm_kwargs("sac", {**preset, "buffer_size": 100}, "shift")  # the preset's 100k frames: 5.9 GiB
+    assert preset["buffer_size"] == 100_000 and preset["ent_coef"] == "auto_0.1"
+    assert preset["tau"] == 0.01 and preset["target_update_interval"] == 2 and preset["actor_update_interval"] == 2
+    with pytest.raises(
+        ConfigError, match="actor_update_interval is a hyperparameter of DrQ's SAC: train with --augment"
+    ):
+        algorithm_kwargs("sac", preset)  # without --augment: SB3's SAC, which has no actor delay
 
     class Pixels(_Frames):
         observation_space = spaces.Box(0, 255, (84, 84, 9), np.uint8)  # 3 stacked RGB frames
 
     policy, extra = model_arguments("sac", "shift", "CnnPolicy")
-    model = SAC(policy, Pixels(), seed=0, device="cpu", **kwargs, **extra)
+    model = DrQSAC(policy, Pixels(), seed=0, device="cpu", **kwargs, **extra)
+    assert model.actor_update_interval == 2 and model.target_update_interval == 2
     assert model.policy.actor.features_extractor.features_dim == 50
     assert [layer.out_features for layer in model.policy.critic.q_networks[0] if hasattr(layer, "out_features")] == [
         1024,
@@ -307,11 +352,12 @@ def test_the_dmc_preset_builds_drqs_sac():
 
 def test_a_resumed_model_keeps_drqs_policy_and_buffers(tmp_path):
     """`train --resume` loads checkpoints/latest.zip with the algorithm's class: DrQ's classes come back with it."""
-    from stable_baselines3 import PPO, SAC
+    from stable_baselines3 import PPO
 
     policy, extra = model_arguments("sac", "shift", "CnnPolicy")
-    SAC(policy, _Frames(), buffer_size=32, device="cpu", **extra).save(tmp_path / "sac.zip")
-    back = SAC.load(tmp_path / "sac.zip", env=_Frames(), device="cpu")
+    DrQSAC(policy, _Frames(), buffer_size=32, device="cpu", actor_update_interval=2, **extra).save(tmp_path / "sac.zip")
+    back = algorithm_class("sac", "shift").load(tmp_path / "sac.zip", env=_Frames(), device="cpu")
+    assert isinstance(back, DrQSAC) and back.actor_update_interval == 2
     assert isinstance(back.policy, DrQSACPolicy) and isinstance(back.replay_buffer, DrQReplayBuffer)
     policy, extra = model_arguments("ppo", "shift", "CnnPolicy")
     PPO(policy, _Frames(), n_steps=8, batch_size=8, device="cpu", **extra).save(tmp_path / "ppo.zip")
@@ -320,15 +366,13 @@ def test_a_resumed_model_keeps_drqs_policy_and_buffers(tmp_path):
 
 def test_a_checkpoint_keeps_the_final_frames_of_timeouts(tmp_path):
     """`train --resume`'s data checkpoint (visualenv.train.checkpoints) saves the frames the buffer keeps aside."""
-    from stable_baselines3 import SAC
-
     from visualenv.train.checkpoints import CheckpointError, load_state, save_state
     from visualenv.train.run_folder import STATE_REPLAY, RunFolder
 
     def make():
         policy, extra = model_arguments("sac", "shift", "CnnPolicy")
         env = gym.wrappers.TimeLimit(_Frames(), 3)  # every episode cut by its time limit
-        return SAC(policy, env, buffer_size=32, learning_starts=32, seed=0, device="cpu", **extra)
+        return DrQSAC(policy, env, buffer_size=32, learning_starts=32, seed=0, device="cpu", **extra)
 
     trained = make()
     trained.learn(12)

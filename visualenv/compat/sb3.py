@@ -9,6 +9,11 @@ data. SB3 keeps that record in ``BaseModel._get_constructor_parameters()``, whic
 ``env_method`` and ``env_is_wrapped`` (None: every env; an int: that env; else the envs listed), read as SB3's own
 VecEnvs read it, through ``VecEnv._get_indices``.
 
+**An update loop of one's own** (:func:`start_updates`, :func:`sample_batch`, :func:`batch_discounts`): what a
+subclass that replaces SAC's ``train`` (``visualenv.train.drq.DrQSAC``) does as SB3's ``train`` does: the learning
+rates of ``_update_learning_rate``, the replay buffer sampled with ``_vec_normalize_env``, and the n-step batches'
+``discounts`` (SB3 2.7 and later; before, gamma).
+
 **An algorithm's training state** (:func:`state_names`, :func:`training_counters`, :func:`set_training_counters`,
 :func:`episode_window`): what ``train --resume`` saves as data where SB3's ``save`` pickles it. The torch objects are
 those ``BaseAlgorithm._get_torch_save_params()`` names (state dicts of the policy and the optimizers, and tensors
@@ -81,3 +86,31 @@ def set_training_counters(model: Any, counters: dict[str, int | float]) -> None:
 def episode_window(model: Any) -> int:
     """How many recent episodes SB3 keeps for its ``rollout/ep_rew_mean`` (``stats_window_size``)."""
     return int(model._stats_window_size)
+
+
+def start_updates(model: Any, optimizers: list[Any]) -> None:
+    """What SB3's off-policy ``train`` does before its updates: the policy in training mode, `optimizers` at the
+    learning rate its schedule gives now."""
+    model.policy.set_training_mode(True)
+    model._update_learning_rate(optimizers)
+
+
+def sample_batch(model: Any, batch_size: int) -> Any:
+    """A batch of `model`'s replay buffer, its rewards normalised as SB3's ``train`` normalises them (VecNormalize)."""
+    return model.replay_buffer.sample(batch_size, env=model._vec_normalize_env)
+
+
+def batch_discounts(samples: Any, gamma: float) -> Any:
+    """The discount of each transition of `samples`: an n-step buffer's own (SB3 2.7 and later), else `gamma`."""
+    discounts = getattr(samples, "discounts", None)
+    return gamma if discounts is None else discounts
+
+
+def updates_made(model: Any) -> int:
+    """How many gradient updates `model` has made (SB3's ``train/n_updates``; a resumed run's checkpoint restores it)."""
+    return int(model._n_updates)
+
+
+def count_updates(model: Any, updates: int) -> None:
+    """Add `updates` to the count :func:`updates_made` reads, as SB3's ``train`` does after its updates."""
+    model._n_updates += updates

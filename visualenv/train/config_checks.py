@@ -127,9 +127,9 @@ def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
 def check_target_pace(config: TrainConfig, kwargs: dict[str, Any]) -> None:
     """Warn where SAC's ``target_update_interval`` will not set the pace it says: SB3 counts it within each update
     call (``gradient_step % target_update_interval``, SB3 issue 2158), so with G updates a call the target moves
-    ceil(G / interval) times per G updates, not once per interval."""
+    ceil(G / interval) times per G updates, not once per interval. DrQ's SAC (``--augment``) counts across calls."""
     interval = int(kwargs.get("target_update_interval", 1))
-    if config.algo != "sac" or interval <= 1:
+    if config.algo != "sac" or config.augment is not None or interval <= 1:
         return
     steps, frequency = kwargs.get("gradient_steps", 1), kwargs.get("train_freq", 1)
     if isinstance(frequency, (list, tuple)):

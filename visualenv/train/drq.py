@@ -5,7 +5,8 @@
 * SAC: :class:`DrQReplayBuffer` keeps each frame once (uint8) and shifts the observations and the next observations of
   every sampled batch independently; :class:`DrQSACPolicy` shares the encoder's convolutions between actor and
   critic, trained by the critic's loss only, and gives the actor its own head on their detached output (DrQ ties the
-  convolutions alone: ``copy_conv_weights_from``);
+  convolutions alone: ``copy_conv_weights_from``); :class:`DrQSAC` updates them on DrQ's schedule (the actor and the
+  target every few critic updates, counted across SB3's update calls);
 * PPO: :class:`ShiftedRolloutBuffer` shifts the observations of each minibatch (as RAD and DrAC do).
 """
 
@@ -16,13 +17,17 @@ from typing import Any
 import numpy as np
 import torch as th
 from gymnasium import spaces
+import torch.nn.functional as F
+from stable_baselines3 import SAC
 from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
 from stable_baselines3.common.policies import ContinuousCritic
 from stable_baselines3.common.preprocessing import is_image_space, is_image_space_channels_first, preprocess_obs
 from stable_baselines3.common.torch_layers import NatureCNN
 from stable_baselines3.common.type_aliases import ReplayBufferSamples, RolloutBufferSamples
+from stable_baselines3.common.utils import polyak_update
 from stable_baselines3.sac.policies import Actor, CnnPolicy
 
+from visualenv.compat.sb3 import batch_discounts, count_updates, sample_batch, start_updates, updates_made
 from visualenv.errors import ConfigError
 from visualenv.train.encoders import DrQEncoder
 
@@ -284,6 +289,88 @@ class DrQSACPolicy(CnnPolicy):
             **self.optimizer_kwargs,
         )
         self.critic_target.set_training_mode(False)
+
+
+class DrQSAC(SAC):
+    """SB3's SAC on DrQ's update schedule (``DRQAgent.update``): each update trains the critic on a batch; every
+    `actor_update_interval`-th update then trains the actor and the temperature on the same batch, and every
+    `target_update_interval`-th moves the target critic by `tau`. Updates are counted across SB3's update calls
+    (its SAC counts the target's interval within each call: SB3 issue 2158), so DrQ's ``tau: 0.01`` every 2 updates
+    and an actor every 2 updates are set as DrQ sets them. The losses are SB3's SAC's (the temperature learns its
+    log, as SB3's does)."""
+
+    def __init__(self, *args: Any, actor_update_interval: int = 1, **kwargs: Any) -> None:
+        if isinstance(actor_update_interval, bool) or not isinstance(actor_update_interval, int):
+            raise ValueError(f"actor_update_interval: expected a whole number, got {actor_update_interval!r}")
+        if actor_update_interval < 1:
+            raise ValueError(f"actor_update_interval: expected 1 or more, got {actor_update_interval}")
+        self.actor_update_interval = actor_update_interval
+        super().__init__(*args, **kwargs)
+
+    def train(self, gradient_steps: int, batch_size: int = 64) -> None:
+        optimizers = [self.actor.optimizer, self.critic.optimizer]
+        if self.ent_coef_optimizer is not None:
+            optimizers.append(self.ent_coef_optimizer)
+        start_updates(self, optimizers)
+        logged: dict[str, list[float]] = {"critic_loss": [], "actor_loss": [], "ent_coef": [], "ent_coef_loss": []}
+        for _ in range(gradient_steps):
+            update = updates_made(self)
+            batch = sample_batch(self, batch_size)
+            ent_coef = self._temperature()
+            logged["ent_coef"].append(ent_coef.item())
+            logged["critic_loss"].append(self._train_critic(batch, ent_coef))
+            if update % self.actor_update_interval == 0:
+                logged["actor_loss"].append(self._train_actor(batch, ent_coef, logged["ent_coef_loss"]))
+            if update % self.target_update_interval == 0:
+                polyak_update(self.critic.parameters(), self.critic_target.parameters(), self.tau)
+                polyak_update(self.batch_norm_stats, self.batch_norm_stats_target, 1.0)
+            count_updates(self, 1)
+        self.logger.record("train/n_updates", updates_made(self), exclude="tensorboard")
+        for name, values in logged.items():
+            if values:
+                self.logger.record(f"train/{name}", float(np.mean(values)))
+
+    def _temperature(self) -> th.Tensor:
+        """SAC's entropy coefficient now, out of any graph."""
+        if self.log_ent_coef is not None:
+            return th.exp(self.log_ent_coef.detach())
+        return self.ent_coef_tensor
+
+    def _train_critic(self, batch: ReplayBufferSamples, ent_coef: th.Tensor) -> float:
+        """One step of the critic (its encoder's convolutions included) toward the soft Bellman target."""
+        if self.use_sde:
+            self.actor.reset_noise()
+        with th.no_grad():
+            next_actions, next_log_prob = self.actor.action_log_prob(batch.next_observations)
+            next_q = th.cat(self.critic_target(batch.next_observations, next_actions), dim=1).min(dim=1, keepdim=True)[
+                0
+            ]
+            next_q = next_q - ent_coef * next_log_prob.reshape(-1, 1)
+            target = batch.rewards + (1 - batch.dones) * batch_discounts(batch, self.gamma) * next_q
+        current = self.critic(batch.observations, batch.actions)
+        loss = 0.5 * sum(F.mse_loss(q, target) for q in current)
+        self.critic.optimizer.zero_grad()
+        loss.backward()  # type: ignore[union-attr]
+        self.critic.optimizer.step()
+        return float(loss.item())  # type: ignore[union-attr]
+
+    def _train_actor(self, batch: ReplayBufferSamples, ent_coef: th.Tensor, ent_coef_losses: list[float]) -> float:
+        """One step of the actor (on the critic's features, detached) and of the temperature, on the critic just
+        trained."""
+        actions, log_prob = self.actor.action_log_prob(batch.observations)
+        log_prob = log_prob.reshape(-1, 1)
+        q = th.cat(self.critic(batch.observations, actions), dim=1).min(dim=1, keepdim=True)[0]
+        loss = (ent_coef * log_prob - q).mean()
+        self.actor.optimizer.zero_grad()
+        loss.backward()
+        self.actor.optimizer.step()
+        if self.ent_coef_optimizer is not None and self.log_ent_coef is not None:
+            ent_coef_loss = -(self.log_ent_coef * (log_prob + float(self.target_entropy)).detach()).mean()
+            self.ent_coef_optimizer.zero_grad()
+            ent_coef_loss.backward()
+            self.ent_coef_optimizer.step()
+            ent_coef_losses.append(float(ent_coef_loss.item()))
+        return float(loss.item())
 
 
 # -- PPO: RAD / DrAC ------------------------------------------------------------------------------------------------

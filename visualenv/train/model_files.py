@@ -34,13 +34,18 @@ class PickleRefused(VisualEnvError):
     """A pickle-based model file, loaded without trust_pickle: loading it could run code."""
 
 
-def algorithm_class(name: str) -> Any:
-    """The SB3 algorithm `train` and `play` name (``ppo``, ``a2c``, ``dqn``, ``sac``)."""
+def algorithm_class(name: str, augment: str | None = None) -> Any:
+    """The SB3 algorithm `train` and `play` name (``ppo``, ``a2c``, ``dqn``, ``sac``); with `augment`, SAC is DrQ's
+    (:class:`~visualenv.train.drq.DrQSAC`: DrQ's update schedule)."""
     import stable_baselines3 as sb3
 
     classes = {"ppo": sb3.PPO, "a2c": sb3.A2C, "dqn": sb3.DQN, "sac": sb3.SAC}
     if name not in classes:
         raise ValueError(f"unknown algorithm '{name}': expected one of {', '.join(classes)}")
+    if name == "sac" and augment is not None:
+        from visualenv.train.drq import DrQSAC
+
+        return DrQSAC
     return classes[name]
 
 

@@ -81,7 +81,7 @@ class TrainConfig:
         return "CnnPolicy" if self.render else "MlpPolicy"
 
 
-def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
+def algorithm_kwargs(algo: str, hyperparams: dict[str, Any], augment: str | None = None) -> dict[str, Any]:
     """`hyperparams` as keyword arguments of the SB3 algorithm, checked before any env starts.
 
     A misspelt name is an error listing the algorithm's names (SB3's ``load``
@@ -92,11 +92,17 @@ def algorithm_kwargs(algo: str, hyperparams: dict[str, Any]) -> dict[str, Any]:
 
     from stable_baselines3.common.utils import LinearSchedule
 
-    parameters = inspect.signature(algorithm_class(algo).__init__).parameters
-    known = [n for n in parameters if n != "self" and n not in SET_BY_TRAIN]
+    algorithm = algorithm_class(algo, augment)
+    parameters = {
+        **inspect.signature(algorithm_class(algo).__init__).parameters,
+        **inspect.signature(algorithm.__init__).parameters,  # DrQ's SAC: SAC's and its own
+    }
+    known = [n for n in parameters if n not in ("self", "args", "kwargs") and n not in SET_BY_TRAIN]
     kwargs: dict[str, Any] = {}
     for key, value in hyperparams.items():
         if key not in known:
+            if augment is None and key in inspect.signature(algorithm_class(algo, "shift").__init__).parameters:
+                raise ConfigError(f"{key} is a hyperparameter of DrQ's {algo.upper()}: train with --augment shift")
             raise ConfigError(f"{algo.upper()} has no hyperparameter '{key}'" + did_you_mean(key, known))
         default = parameters[key].default
         if isinstance(value, str) and isinstance(default, (int, float)) and key not in SCHEDULES:
@@ -233,7 +239,7 @@ def _make_model(
 ) -> Any:
     """A new model; for a resumed run, with the checkpoint's state loaded into it (the run's hyperparameters, changes
     included, build it), or an older run's trusted zip with the changed hyperparameters set before it is built."""
-    algo = algorithm_class(config.algo)
+    algo = algorithm_class(config.algo, config.augment)
     if checkpoint is not None and not checkpoint.is_dir():
         try:
             return algo.load(checkpoint, env=train_env, **changed_kwargs)
@@ -330,7 +336,10 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     from visualenv.spec import load_spec
     from visualenv.train.drq import check_augment
 
-    kwargs, changed = algorithm_kwargs(config.algo, config.hyperparams), algorithm_kwargs(config.algo, changes or {})
+    kwargs, changed = (
+        algorithm_kwargs(config.algo, config.hyperparams, config.augment),
+        algorithm_kwargs(config.algo, changes or {}, config.augment),
+    )
     both = {**kwargs, **changed}
     check_torch_device(both.get("device", "auto"))
     loaded = load_spec(resolve(config.spec))
