@@ -5,7 +5,10 @@ No env renders: the replay buffer is filled with random frames, and each figure 
 DrQ's SAC's ``train(gradient_steps=2)`` (the preset's schedule: the critic at each update, the actor at one of two),
 halved, after one unmeasured call, the encoders alternated round by round.
 
-    python benchmarks/drq_update.py --batch-sizes 128,512 --updates 10 --rounds 3
+    python benchmarks/drq_update.py --batch-sizes 128,512 --updates 10 --rounds 3 [--layouts]
+
+`train` lays out the policy's convolutions channels-last (`visualenv.train.encoders.channels_last`); `--layouts` also
+times each encoder with them contiguous (channel-first), as before it did, alternated in the same rounds.
 """
 
 from __future__ import annotations
@@ -22,6 +25,7 @@ import yaml
 from gymnasium import spaces
 
 from visualenv.train.drq import model_arguments
+from visualenv.train.encoders import channels_last
 from visualenv.train.model_files import algorithm_class
 from visualenv.train.sb3 import algorithm_kwargs
 
@@ -43,7 +47,7 @@ class Frames(gym.Env):
         return self.observation_space.sample(), 0.0, False, False, {}
 
 
-def model(encoder: str | None, batch_size: int):
+def model(encoder: str | None, batch_size: int, layout: str = "channels-last"):
     preset = yaml.safe_load(PRESET.read_text())
     if encoder is not None:
         preset["policy_kwargs"] = {**preset["policy_kwargs"], "features_extractor_class": encoder}
@@ -54,6 +58,8 @@ def model(encoder: str | None, batch_size: int):
     sac = algorithm_class("sac", "shift")(
         policy, Frames(), seed=0, device="cpu", **{**kwargs, "batch_size": batch_size}, **extra
     )
+    if layout == "channels-last":
+        channels_last(sac.policy)  # as train's model
     sac.learn(2 * batch_size - 1)  # fills the buffer, no update yet
     return sac
 
@@ -73,16 +79,22 @@ def main() -> None:
     parser.add_argument("--batch-sizes", default="128,512")
     parser.add_argument("--updates", type=int, default=10)
     parser.add_argument("--rounds", type=int, default=3)
+    parser.add_argument("--layouts", action="store_true", help="also time contiguous (channel-first) convolutions")
     args = parser.parse_args()
+    layouts = ("channels-last", "contiguous") if args.layouts else ("channels-last",)
     print(f"torch {torch.__version__}, {torch.get_num_threads()} threads")
     for batch_size in [int(b) for b in args.batch_sizes.split(",")]:
-        models = {name: model(encoder, batch_size) for name, encoder in ENCODERS.items()}
-        figures: dict[str, list[float]] = {name: [] for name in ENCODERS}
+        models = {
+            f"{name} {layout}": model(encoder, batch_size, layout)
+            for name, encoder in ENCODERS.items()
+            for layout in layouts
+        }
+        figures: dict[str, list[float]] = {name: [] for name in models}
         for _ in range(args.rounds):
             for name, sac in models.items():
                 figures[name].append(update_ms(sac, batch_size, args.updates))
         for name, rounds in figures.items():
-            print(f"batch {batch_size:4d}  {name:10s}  {' / '.join(f'{ms:7.1f}' for ms in rounds)} ms an update")
+            print(f"batch {batch_size:4d}  {name:24s}  {' / '.join(f'{ms:7.1f}' for ms in rounds)} ms an update")
 
 
 if __name__ == "__main__":

@@ -235,6 +235,8 @@ def _student(vec_env: Any, start: Any = None) -> Any:
     import torch
     from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
+    from visualenv.train.encoders import channels_last
+
     student = ActorCriticCnnPolicy(vec_env.observation_space, vec_env.action_space, lambda _: 0.0)
     if start is not None:
         if start.observation_space != vec_env.observation_space or start.action_space != vec_env.action_space:
@@ -243,7 +245,7 @@ def _student(vec_env: Any, start: Any = None) -> Any:
                 f"this env's stacked frames are {vec_env.observation_space} and its actions {vec_env.action_space}"
             )
         student.load_state_dict(start.state_dict())
-    return student.to(memory_format=torch.channels_last)  # type: ignore[call-overload]  # torch takes it; its stubs do not say
+    return channels_last(student)
 
 
 def _rollouts(

@@ -44,16 +44,11 @@ def random_shift(images: th.Tensor, pad: int = PAD, *, channels_first: bool = Tr
         return images
     batch = images if channels_first else images.permute(0, 3, 1, 2)
     n, c, h, w = batch.shape
-    device = batch.device
-    dy, dx = th.randint(-pad, pad + 1, (2, n), device=device)
-    rows = (th.arange(h, device=device)[None, :] + dy[:, None]).clamp_(0, h - 1)  # (N, H): the padded image's rows
-    cols = (th.arange(w, device=device)[None, :] + dx[:, None]).clamp_(0, w - 1)
-    shifted = batch[
-        th.arange(n, device=device)[:, None, None, None],
-        th.arange(c, device=device)[None, :, None, None],
-        rows[:, None, :, None],
-        cols[:, None, None, :],
-    ]
+    dy, dx = th.randint(-pad, pad + 1, (2, n), device=batch.device)
+    padded = F.pad(batch, (pad, pad, pad, pad), mode="replicate")
+    shifted = th.empty((n, c, h, w), dtype=batch.dtype, device=batch.device)
+    for i, (top, left) in enumerate(zip((dy + pad).tolist(), (dx + pad).tolist())):  # a crop each: a copy of rows
+        shifted[i] = padded[i, :, top : top + h, left : left + w]
     return shifted if channels_first else shifted.permute(0, 2, 3, 1)
 
 

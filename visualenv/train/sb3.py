@@ -239,13 +239,17 @@ def _make_model(
 ) -> Any:
     """A new model; for a resumed run, with the checkpoint's state loaded into it (the run's hyperparameters, changes
     included, build it), or an older run's trusted zip with the changed hyperparameters set before it is built."""
+    from visualenv.train.drq import model_arguments
+    from visualenv.train.encoders import channels_last
+
     algo = algorithm_class(config.algo, config.augment)
     if checkpoint is not None and not checkpoint.is_dir():
         try:
-            return algo.load(checkpoint, env=train_env, **changed_kwargs)
+            model = algo.load(checkpoint, env=train_env, **changed_kwargs)
         except Exception as exc:  # SB3 raises whatever its unpickling met
             raise ConfigError(f"cannot resume from {checkpoint}: {type(exc).__name__}: {exc}") from None
-    from visualenv.train.drq import model_arguments
+        channels_last(model.policy)
+        return model
 
     policy, extra = model_arguments(config.algo, config.augment, config.policy(train_env.observation_space))
     try:
@@ -254,6 +258,7 @@ def _make_model(
         raise ConfigError(
             f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}"
         ) from None
+    channels_last(model.policy)  # before a checkpoint's state: its weights are copied into this layout
     if checkpoint is not None:
         load_state(model, checkpoint, config.algo)
     return model
