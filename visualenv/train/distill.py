@@ -232,7 +232,6 @@ def _student(vec_env: Any, start: Any = None) -> Any:
     """SB3's PPO CNN policy on the env's stacked, channels-first frames (`start`'s weights: a policy of the same
     spaces), laid out channels last: oneDNN's convolutions on a CPU fit it more than twice as fast so
     (results/benchmarks/code-choices.md)."""
-    import torch
     from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
     from visualenv.train.encoders import channels_last
