@@ -60,6 +60,26 @@ def test_the_shift_moves_each_image_by_at_most_4_pixels_its_edges_repeated_and_d
         _shift_of(frames[i].permute(2, 0, 1).numpy(), moved[i].permute(2, 0, 1).numpy(), PAD)
 
 
+def test_the_shift_draws_the_offsets_drqs_gather_would_and_moves_the_same_pixels():
+    """The pad-and-copy shift against a gather of clamped rows and columns (an image's edge repeated), from the same
+    random draws, for uint8 and float frames."""
+    for dtype in (torch.uint8, torch.float32):
+        images = (torch.rand(16, 9, 20, 24) * 255).to(dtype)
+        torch.manual_seed(3)
+        shifted = random_shift(images)
+        torch.manual_seed(3)
+        dy, dx = torch.randint(-PAD, PAD + 1, (2, 16))
+        rows = (torch.arange(20)[None] + dy[:, None]).clamp(0, 19)
+        cols = (torch.arange(24)[None] + dx[:, None]).clamp(0, 23)
+        gathered = images[
+            torch.arange(16)[:, None, None, None],
+            torch.arange(9)[None, :, None, None],
+            rows[:, None, :, None],
+            cols[:, None, None, :],
+        ]
+        assert torch.equal(shifted, gathered)
+
+
 IMAGE = spaces.Box(0, 255, (3, 40, 40), np.uint8)  # channel-first, as SB3 transposes it
 ACTION = spaces.Box(-1.0, 1.0, (2,), np.float32)
 
