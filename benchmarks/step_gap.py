@@ -62,9 +62,7 @@ def main() -> None:
     env = visualenv.make(args.id)
     base = env.unwrapped
     renderer = base.renderer
-    capture = renderer._capture  # the renderer's own in-memory readback (render/blender/capture.py)
-    view = renderer._views[0]
-    env.reset(seed=0)
+    env.reset(seed=0)  # renders: the in-memory readback is armed for the observation camera from here on
     env.action_space.seed(0)
     actions = [env.action_space.sample() for _ in range(args.steps)]
     states = []
@@ -87,18 +85,16 @@ def main() -> None:
     def captured() -> None:
         for frames in states:
             renderer.write(frames)
-            with capture.arm(view.width, view.height):
-                bpy.ops.render.render(scene=scene)
+            renderer.raw_render()  # Blender's call, the pass copied out
 
     conversions: list[float] = []
 
     def converted() -> None:
         for frames in states:
             renderer.write(frames)
-            with capture.arm(view.width, view.height):
-                bpy.ops.render.render(scene=scene)
+            renderer.raw_render()
             start = time.perf_counter()
-            renderer._read_capture(view, capture)
+            renderer.read_again()
             conversions.append(time.perf_counter() - start)
 
     kinds = {"step": steps, "floor": floor, "captured": captured, "conversion": converted}

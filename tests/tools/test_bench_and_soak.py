@@ -264,3 +264,32 @@ def test_a_measuring_process_that_dies_is_reported_not_waited_for():
     child = context.Process(target=os._exit, args=(3,))
     child.start()
     assert _result_of(child, queue, 64) == {"envs": 64, "error": "the measuring process died (exit code 3)"}
+
+
+def test_blenders_render_call_alone_then_read_again_gives_that_states_observation():
+    """step_gap.py's public hooks: a written state, Blender's render call alone (raw_render) and the readback alone
+    (read_again) give the frame a step gave for that state; with the file readback there is nothing to read again."""
+    import numpy as np
+
+    from visualenv.errors import RenderError
+
+    env = visualenv.make("VisualCartPole-v0")
+    try:
+        first, _ = env.reset(seed=0)
+        base = env.unwrapped
+        kept = base.frames().copy()
+        for _ in range(8):
+            later = env.step(1)[0]
+        assert np.abs(later.astype(int) - first.astype(int)).max() > 30  # the cart moved
+        base.renderer.write(kept)
+        base.renderer.raw_render()
+        assert np.array_equal(base.renderer.read_again(), first)
+    finally:
+        env.close()
+    env = visualenv.make("VisualCartPole-v0", readback="file")
+    try:
+        env.reset(seed=0)
+        with pytest.raises(RenderError, match="no in-memory render to read again"):
+            env.unwrapped.renderer.read_again()
+    finally:
+        env.close()

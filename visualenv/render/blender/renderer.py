@@ -394,6 +394,14 @@ class BlenderRenderer(BindingSetters, Renderer):
             return None
         return self._active_capture.linear()
 
+    def read_again(self) -> np.ndarray:
+        """The first observation camera's pixels converted again from the last render's pass, with no render: what a
+        step's readback costs alone (``benchmarks/step_gap.py``). Needs an in-memory readback (Cycles)."""
+        self._check_open()
+        if self._active_capture is None or not self._views:
+            raise RenderError("no in-memory render to read again: render an observation with Cycles first")
+        return self._read_capture(self._views[0], self._active_capture)
+
     def _read_capture(self, view: View, capture: Capture) -> np.ndarray:
         if view.color in ("depth", "segmentation"):
             return capture.raw()
