@@ -89,7 +89,8 @@ max_steps: 4
 def test_drq_sac_learns_a_small_pixel_task(tmp_path):
     """Only the frame tells the side (left or right, drawn per episode) to push to: an agent blind to it scores about
     0 an episode, one that sees it up to 4. Every episode is cut by its time limit, so the buffer's kept final frames
-    are used. DrQ's SAC learns it in 400 steps (about 3 min on 2 busy cores)."""
+    are used. DrQ's SAC learns it in 600 steps (2.25-2.65 on seeds 0-3; at 400 steps one seed in four had not yet,
+    and which one moves with float rounding, so with the CPU: the margin is kept wide)."""
     spec = tmp_path / "side.yaml"
     spec.write_text(SIDE)
     run, output = _run(
@@ -102,7 +103,7 @@ def test_drq_sac_learns_a_small_pixel_task(tmp_path):
         "--frame-stack",
         "1",
         "--steps",
-        "400",
+        "600",
         "--set",
         "learning_starts=50",
         "--set",
