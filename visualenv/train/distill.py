@@ -348,12 +348,11 @@ def _imitation_loss(distribution: Any, labels: Any) -> Any:
 
 
 def _shifted(images: Any, shift: int, generator: np.random.Generator) -> Any:
-    """Each image moved by up to `shift` pixels each way, its edge pixels repeated (DrQ's random shift)."""
-    import torch
+    """Each image moved by up to `shift` pixels each way, its edge pixels repeated (DrQ's random shift), the offsets
+    drawn from the run's `generator`."""
+    from visualenv.train.drq import crop_padded
 
     if shift == 0:
         return images
-    n, _, h, w = images.shape
-    padded = torch.nn.functional.pad(images.float(), (shift, shift, shift, shift), mode="replicate").to(images.dtype)
-    dy, dx = generator.integers(0, 2 * shift + 1, (2, n))
-    return torch.stack([padded[i, :, y : y + h, x : x + w] for i, (y, x) in enumerate(zip(dy, dx))])
+    dy, dx = generator.integers(0, 2 * shift + 1, (2, images.shape[0]))
+    return crop_padded(images, shift, dy.tolist(), dx.tolist())

@@ -12,7 +12,7 @@
 
 from __future__ import annotations
 
-from typing import Any
+from typing import Any, Sequence
 
 import numpy as np
 import torch as th
@@ -43,13 +43,20 @@ def random_shift(images: th.Tensor, pad: int = PAD, *, channels_first: bool = Tr
     if pad == 0 or images.shape[0] == 0:
         return images
     batch = images if channels_first else images.permute(0, 3, 1, 2)
-    n, c, h, w = batch.shape
-    dy, dx = th.randint(-pad, pad + 1, (2, n), device=batch.device)
-    padded = F.pad(batch, (pad, pad, pad, pad), mode="replicate")
-    shifted = th.empty((n, c, h, w), dtype=batch.dtype, device=batch.device)
-    for i, (top, left) in enumerate(zip((dy + pad).tolist(), (dx + pad).tolist())):  # a crop each: a copy of rows
-        shifted[i] = padded[i, :, top : top + h, left : left + w]
+    dy, dx = th.randint(-pad, pad + 1, (2, batch.shape[0]), device=batch.device)
+    shifted = crop_padded(batch, pad, (dy + pad).tolist(), (dx + pad).tolist())
     return shifted if channels_first else shifted.permute(0, 2, 3, 1)
+
+
+def crop_padded(images: th.Tensor, pad: int, tops: Sequence[int], lefts: Sequence[int]) -> th.Tensor:
+    """Each (C, H, W) image of `images` padded by `pad` pixels (its edge repeated) and cropped back to H x W with its
+    top-left corner at (tops[i], lefts[i]) of the padded image, each in [0, 2 pad]: one copy per crop."""
+    n, c, h, w = images.shape
+    padded = F.pad(images, (pad, pad, pad, pad), mode="replicate")
+    shifted = th.empty((n, c, h, w), dtype=images.dtype, device=images.device)
+    for i, (top, left) in enumerate(zip(tops, lefts)):
+        shifted[i] = padded[i, :, top : top + h, left : left + w]
+    return shifted
 
 
 def shift_observations(observations: th.Tensor, space: spaces.Space, pad: int = PAD) -> th.Tensor:
