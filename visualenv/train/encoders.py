@@ -23,8 +23,8 @@ from visualenv.errors import ConfigError
 
 def channels_last(module: nn.Module) -> nn.Module:
     """`module` with its convolutions' weights in channels-last layout (in place; the same parameters, which its
-    optimizers keep): on a CPU oneDNN convolves an image batch in that layout 1.3-2.7x faster, forward and backward
-    (``python benchmarks/drq_update.py --layouts``). The same arithmetic, summed in another order: a policy saved
+    optimizers keep): oneDNN's own layout, in which a CPU convolves an image batch faster, forward and backward
+    (results/benchmarks/drq-update-schedule-layout.md). The same arithmetic summed in another order: a policy saved
     from it (contiguous, as policy files are) acts in ``eval`` as it did in training but for float rounding."""
     return module.to(memory_format=th.channels_last)  # type: ignore[call-overload]  # torch takes it; its stubs do not say
 
