@@ -58,7 +58,8 @@ FIXED_ON_RESUME = ("frame_stack", "eval_every", "eval_episodes", "final_episodes
     "--augment",
     type=click.Choice(["shift"]),
     default=None,
-    help="sac, ppo: DrQ's random shift of the frames (pad 4, per sample); sac then trains DrQ's shared encoder",
+    help="sac, ppo: DrQ's random shift of the frames (pad 4, per sample); sac then trains as DrQ (shared convolutions, "
+    "DrQ's update schedule: --set actor_update_interval=N)",
 )
 @click.option(
     "--set",
