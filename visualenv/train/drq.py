@@ -16,8 +16,8 @@ from typing import Any, Sequence
 
 import numpy as np
 import torch as th
-from gymnasium import spaces
 import torch.nn.functional as F
+from gymnasium import spaces
 from stable_baselines3 import SAC
 from stable_baselines3.common.buffers import ReplayBuffer, RolloutBuffer
 from stable_baselines3.common.policies import ContinuousCritic
@@ -344,9 +344,7 @@ class DrQSAC(SAC):
             self.actor.reset_noise()
         with th.no_grad():
             next_actions, next_log_prob = self.actor.action_log_prob(batch.next_observations)
-            next_q = th.cat(self.critic_target(batch.next_observations, next_actions), dim=1).min(dim=1, keepdim=True)[
-                0
-            ]
+            next_q = th.cat(self.critic_target(batch.next_observations, next_actions), dim=1).amin(dim=1, keepdim=True)
             next_q = next_q - ent_coef * next_log_prob.reshape(-1, 1)
             target = batch.rewards + (1 - batch.dones) * batch_discounts(batch, self.gamma) * next_q
         current = self.critic(batch.observations, batch.actions)
@@ -361,7 +359,7 @@ class DrQSAC(SAC):
         trained."""
         actions, log_prob = self.actor.action_log_prob(batch.observations)
         log_prob = log_prob.reshape(-1, 1)
-        q = th.cat(self.critic(batch.observations, actions), dim=1).min(dim=1, keepdim=True)[0]
+        q = th.cat(self.critic(batch.observations, actions), dim=1).amin(dim=1, keepdim=True)
         loss = (ent_coef * log_prob - q).mean()
         self.actor.optimizer.zero_grad()
         loss.backward()
