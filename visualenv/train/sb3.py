@@ -243,23 +243,22 @@ def _make_model(
     from visualenv.train.encoders import channels_last
 
     algo = algorithm_class(config.algo, config.augment)
-    if checkpoint is not None and not checkpoint.is_dir():
+    pickled = checkpoint is not None and not checkpoint.is_dir()
+    if pickled:
         try:
             model = algo.load(checkpoint, env=train_env, **changed_kwargs)
         except Exception as exc:  # SB3 raises whatever its unpickling met
             raise ConfigError(f"cannot resume from {checkpoint}: {type(exc).__name__}: {exc}") from None
-        channels_last(model.policy)
-        return model
-
-    policy, extra = model_arguments(config.algo, config.augment, config.policy(train_env.observation_space))
-    try:
-        model = algo(policy, train_env, seed=config.seed, verbose=0, **kwargs, **extra)
-    except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
-        raise ConfigError(
-            f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}"
-        ) from None
-    channels_last(model.policy)  # before a checkpoint's state: its weights are copied into this layout
-    if checkpoint is not None:
+    else:
+        policy, extra = model_arguments(config.algo, config.augment, config.policy(train_env.observation_space))
+        try:
+            model = algo(policy, train_env, seed=config.seed, verbose=0, **kwargs, **extra)
+        except (TypeError, ValueError, AssertionError) as exc:  # SB3 checks its arguments with all three
+            raise ConfigError(
+                f"{config.algo.upper()} cannot take these hyperparameters ({config.hyperparams}): {exc}"
+            ) from None
+    channels_last(model.policy)  # before a data checkpoint's state: its weights are copied into this layout
+    if checkpoint is not None and not pickled:
         load_state(model, checkpoint, config.algo)
     return model
 

@@ -396,7 +396,8 @@ class BlenderRenderer(BindingSetters, Renderer):
 
     def read_again(self) -> np.ndarray:
         """The first observation camera's pixels converted again from the last render's pass, with no render: what a
-        step's readback costs alone (``benchmarks/step_gap.py``). Needs an in-memory readback (Cycles)."""
+        step's readback costs alone (``benchmarks/step_gap.py``). Needs an in-memory readback (Cycles). ``(H, W, C)``
+        as the pass holds it: one env's frame, or a batch's whole image of tiles (one call reads them all)."""
         self._check_open()
         if self._active_capture is None or not self._views:
             raise RenderError("no in-memory render to read again: render an observation with Cycles first")
