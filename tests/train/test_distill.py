@@ -12,7 +12,7 @@ from click.testing import CliRunner
 from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
 from visualenv.cli import main
-from visualenv.train.distill import DistillConfig, _fit, _shifted, _StateProbe
+from visualenv.train.distill import DistillConfig, _fit, _shifted, _StateProbe, _warped
 
 
 def _images_and_labels(n: int, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -26,13 +26,13 @@ def _images_and_labels(n: int, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
     return frames, labels
 
 
-@pytest.mark.parametrize("discrete", [False, True])
-def test_the_student_learns_what_the_images_show(discrete):
+@pytest.mark.parametrize("discrete, rotate", [(False, 0.0), (True, 0.0), (False, 10.0)])
+def test_the_student_learns_what_the_images_show(discrete, rotate):
     torch.manual_seed(0)
     frames, labels = _images_and_labels(64, discrete)
     actions = gym.spaces.Discrete(2) if discrete else gym.spaces.Box(-1, 1, (1,), np.float32)
     student = ActorCriticCnnPolicy(gym.spaces.Box(0, 255, (3, 36, 36), np.uint8), actions, lambda _: 0.0)
-    config = DistillConfig(spec="", teacher="", epochs=1, batch_size=32, shift=2)
+    config = DistillConfig(spec="", teacher="", epochs=1, batch_size=32, shift=2, rotate=rotate, zoom=rotate / 100)
     optimizer = torch.optim.Adam(student.parameters(), lr=1e-3)
     generator = np.random.default_rng(0)
     gathered = frames, labels, np.zeros((len(frames), 2), np.float32)
@@ -81,6 +81,35 @@ def test_random_shift_moves_each_image_by_at_most_the_shift():
     moved = {tuple(int(v) for v in np.argwhere(img[0].numpy() == 255)[0]) for img in shifted}
     assert moved == {(y, x) for y in range(2, 7) for x in range(2, 7)}  # every offset of -2..2 drawn, none further
     assert _shifted(images, 0, np.random.default_rng(0)) is images
+
+
+def _spot_polar(images: torch.Tensor) -> tuple[np.ndarray, np.ndarray]:
+    """The distance (pixels) and direction (degrees) of each image's bright spot from the image's centre."""
+    weights = images[:, 0].numpy()
+    height, width = weights.shape[1:]
+    ys, xs = np.mgrid[0:height, 0:width]
+    total = weights.sum(axis=(1, 2))
+    y = (weights * ys).sum(axis=(1, 2)) / total - (height - 1) / 2
+    x = (weights * xs).sum(axis=(1, 2)) / total - (width - 1) / 2
+    return np.hypot(x, y), np.degrees(np.arctan2(y, x))
+
+
+def test_warp_turns_and_scales_each_image_within_its_bounds_its_frames_alike():
+    # a wide image (the turn must stay rigid in pixels) with a spot 15 pixels right of its centre, in two frames
+    images = torch.zeros((300, 2, 41, 61), dtype=torch.uint8)
+    images[:, :, 19:22, 44:47] = 255
+
+    turned = _warped(images, 30, 0, np.random.default_rng(0))
+    assert torch.equal(turned[:, 0], turned[:, 1])  # the stacked frames warped alike
+    distance, direction = _spot_polar(turned)
+    assert np.allclose(distance, 15, atol=0.1)  # a turn: the same distance from the centre
+    assert -30 <= direction.min() < -25 and 25 < direction.max() <= 30  # every angle up to 30 degrees either way
+
+    scaled = _warped(images, 0, 0.25, np.random.default_rng(0))
+    distance, direction = _spot_polar(scaled)
+    assert np.allclose(direction, 0, atol=0.01)  # a scaling about the centre: the same direction
+    assert 15 / 1.25 - 0.1 < distance.min() < 12.5 and 19.5 < distance.max() < 15 / 0.75 + 0.1
+    assert _warped(images, 0, 0, np.random.default_rng(0)) is images
 
 
 @pytest.fixture(scope="module")

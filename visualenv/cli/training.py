@@ -259,6 +259,18 @@ def train(
 @shown_option(
     "--shift", default=DistillConfig.shift, type=click.IntRange(min=0), help="random shift of the frames in pixels"
 )
+@shown_option(
+    "--rotate",
+    default=DistillConfig.rotate,
+    type=click.FloatRange(0, 180),
+    help="each training image also turned by up to this many degrees either way (a camera's roll)",
+)
+@shown_option(
+    "--zoom",
+    default=DistillConfig.zoom,
+    type=click.FloatRange(0, 1, max_open=True),
+    help="each training image also scaled by a factor up to this far from 1 (a camera's zoom)",
+)
 @shown_option("--frame-stack", default=DistillConfig.frame_stack, type=click.IntRange(min=1))
 @shown_option(
     "--state-loss",
@@ -303,6 +315,8 @@ def distill(
     batch_size: int,
     learning_rate: float,
     shift: int,
+    rotate: float,
+    zoom: float,
     frame_stack: int,
     state_loss: float,
     distractions: float | list[float] | dict[str, Any] | None,
@@ -330,6 +344,8 @@ def distill(
         batch_size=batch_size,
         learning_rate=learning_rate,
         shift=shift,
+        rotate=rotate,
+        zoom=zoom,
         frame_stack=frame_stack,
         state_loss=state_loss,
         distractions=distractions,

@@ -7,7 +7,8 @@ It runs DAgger (Ross, Gordon and Bagnell, 2011): in round 0 the teacher acts; in
 it acts a step with probability mixing ** r, else the student does (DAgger's beta). The
 teacher labels every state visited with its own action, and after each round the student
 fits every label gathered so far (the squared error of its deterministic action, or the
-cross-entropy of a discrete one) on frames shifted at random by a few pixels (DrQ's augmentation).
+cross-entropy of a discrete one) on frames shifted at random by a few pixels (DrQ's augmentation),
+and, if asked, turned and scaled at random as a camera's roll and zoom would.
 
 The student is SB3's ``ActorCriticCnnPolicy`` (NatureCNN) on the stacked frames, so it
 ships, loads and evaluates like a PPO agent: ``visualenv eval``, ``play``, the policy file.
@@ -56,6 +57,10 @@ class DistillConfig:
     batch_size: int = 128
     learning_rate: float = 3e-4
     shift: int = 4  # random shift of the frames in pixels (0: none)
+    # each training image turned by up to `rotate` degrees and scaled by up to `zoom` either way (a camera's roll and
+    # zoom, which distractions' camera applies at evaluation), after the shift (0, 0: none)
+    rotate: float = 0.0
+    zoom: float = 0.0
     # weight of an auxiliary loss: a linear head on the student's CNN features predicts the teacher's state vector
     # (standardised), so the encoder learns from the whole state, not only the action; the head is not saved (0: none)
     state_loss: float = 0.0
@@ -323,7 +328,8 @@ def _fit(
     with probe or contextlib.nullcontext():
         for _ in range(updates):
             batch = generator.integers(0, len(frames), config.batch_size)
-            images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator).contiguous(
+            images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator)
+            images = _warped(images, config.rotate, config.zoom, generator).contiguous(
                 memory_format=torch.channels_last
             )
             imitation = _imitation_loss(student.get_distribution(images).distribution, torch.from_numpy(labels[batch]))
@@ -356,3 +362,26 @@ def _shifted(images: Any, shift: int, generator: np.random.Generator) -> Any:
         return images
     dy, dx = generator.integers(0, 2 * shift + 1, (2, images.shape[0]))
     return crop_padded(images, shift, dy.tolist(), dx.tolist())
+
+
+def _warped(images: Any, rotate: float, zoom: float, generator: np.random.Generator) -> Any:
+    """Each (C, H, W) image turned about its centre by an angle drawn in [-rotate, rotate] degrees and scaled by a
+    factor drawn in [1 - zoom, 1 + zoom] (above 1 its content shrinks, as a camera zooming out), all its stacked
+    frames alike, its edge pixels repeated; float pixels on the images' scale. The draws come from the run's
+    `generator`."""
+    import torch
+    import torch.nn.functional as F
+
+    if rotate == 0 and zoom == 0:
+        return images
+    n, _, height, width = images.shape
+    angles = np.radians(generator.uniform(-rotate, rotate, n))
+    scales = generator.uniform(1 - zoom, 1 + zoom, n)
+    cos, sin = torch.from_numpy(scales * np.cos(angles)).float(), torch.from_numpy(scales * np.sin(angles)).float()
+    # an output pixel's normalised coordinates mapped to the input's (F.affine_grid's map, built here by broadcasting,
+    # which is several times faster on the CPU); the aspect terms keep the turn rigid in pixels
+    xs = ((torch.arange(width, dtype=torch.float32) * 2 + 1) / width - 1).view(1, 1, width)
+    ys = ((torch.arange(height, dtype=torch.float32) * 2 + 1) / height - 1).view(1, height, 1)
+    cos, sin = cos.view(n, 1, 1), sin.view(n, 1, 1)
+    grid = torch.stack([cos * xs - sin * (height / width) * ys, sin * (width / height) * xs + cos * ys], dim=-1)
+    return F.grid_sample(images.float(), grid, mode="bilinear", padding_mode="border", align_corners=False)
