@@ -1,10 +1,11 @@
 """A run's learning curve in frames beside published points: the periodic evaluations of a `visualenv train` run
 folder (evaluations.npz), each env step counted as the spec's action repeat of frames, as DMC papers count them.
 
-    python benchmarks/learning_curve.py RUN_DIR OUT_DIR [--published drq] [--beside CURVE_CSV=LABEL ...]
+    python benchmarks/learning_curve.py RUN_DIR OUT_DIR [--published drq] [--beside CURVE_CSV=LABEL ...] [--final FILE]
 
 Writes OUT_DIR/curve.png (mean return of each evaluation, its standard deviation shaded, the published points with
-their error bars, and each `--beside` curve.csv of an earlier run under its label) and OUT_DIR/curve.csv (steps, frames, mean, std, episodes, the run's wall-clock seconds at that
+their error bars, each `--beside` curve.csv of an earlier run under its label, and with `--final` a `visualenv eval -o`
+file of the run's final model, drawn at the run's last step where no periodic evaluation fell) and OUT_DIR/curve.csv (steps, frames, mean, std, episodes, the run's wall-clock seconds at that
 evaluation where the progress log has them).
 """
 
@@ -55,6 +56,7 @@ def main() -> None:
     parser.add_argument("out_dir", type=Path)
     parser.add_argument("--published", default="drq", choices=sorted(PUBLISHED))
     parser.add_argument("--beside", action="append", default=[], help="an earlier run's curve.csv=LABEL to draw too")
+    parser.add_argument("--final", type=Path, help="`visualenv eval -o` figures of the run's final model")
     args = parser.parse_args()
     config = json.loads((args.run_dir / "config.json").read_text())
     spec_id = config["spec"]["id"]
@@ -62,6 +64,11 @@ def main() -> None:
 
     repeat = visualenv.make(spec_id, render=False).unwrapped.action_repeat
     steps, means, stds = evaluations(args.run_dir)
+    if args.final:  # the final model's evaluation, at the last step the run took
+        final = json.loads(args.final.read_text())
+        returns = np.asarray(final["per_episode"]["returns"], dtype=np.float64)
+        steps = np.append(steps, config["config"]["steps"])
+        means, stds = np.append(means, returns.mean()), np.append(stds, returns.std())
     frames = steps * repeat
     args.out_dir.mkdir(parents=True, exist_ok=True)
     with (args.out_dir / "curve.csv").open("w", newline="") as f:
