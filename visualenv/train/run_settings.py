@@ -98,6 +98,8 @@ SETTINGS: dict[str, Rule] = {
     "learning_rate": Rule(float, 0, 1, above_low=True),
     "shift": Rule(int, 0, 1024),
     "state_loss": Rule(float, 0, 10**6),
+    "rotate": Rule(float, 0, 180),
+    "zoom": Rule(float, 0, 1),
     "distractions": Rule((list, dict), optional=True),  # [difficulty], [low, high], or a distractions section
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
@@ -110,7 +112,7 @@ KEYS: dict[str, tuple[str, ...]] = {
 ADDED: dict[str, dict[str, Any]] = {
     "sb3": {"pin": True, "batched": False, "workers": None, "render_device": None, "augment": None},
     "rllib": {"pin": True, "batched": False},
-    "distill": {"student": None, "distractions": None, "state_loss": 0.0},
+    "distill": {"student": None, "distractions": None, "state_loss": 0.0, "rotate": 0.0, "zoom": 0.0},
 }
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
 RECORD_KEYS: dict[str, Rule] = {
