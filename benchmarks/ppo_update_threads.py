@@ -1,11 +1,13 @@
-"""How long one PPO update of SB3's CnnPolicy takes on 1 thread and on every core.
+"""How long one PPO update of SB3's CnnPolicy takes on 1 thread and on every core, with its convolutions in torch's
+default layout and channels-last (as `visualenv train` lays them out: `visualenv.train.encoders.channels_last`).
 
     .venv/bin/python benchmarks/ppo_update_threads.py [repeats]
 
 One update of the bundled hyperparameters (examples/hyperparams/: 512 samples,
 batch 128, 4 epochs) is 16 gradient steps on 128 stacked 4x100x100 frames.
 `visualenv train` runs torch on one thread while the Blender workers render
-and on every core during the update; this prints what the second half saves.
+and on every core during the update; this prints what the second half saves, and what the layout saves (the
+layouts alternate within each repeat).
 """
 
 from __future__ import annotations
@@ -37,10 +39,19 @@ def seconds_per_update(policy: ActorCriticCnnPolicy, threads: int, steps: int = 
 def main() -> None:
     repeats = int(sys.argv[1]) if len(sys.argv) > 1 else 2
     cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count() or 1
-    policy = ActorCriticCnnPolicy(gym.spaces.Box(0, 255, (4, 100, 100), np.uint8), gym.spaces.Discrete(4), lambda _: 2.5e-4)
+    from visualenv.train.encoders import channels_last
+
+    def policy() -> ActorCriticCnnPolicy:
+        torch.manual_seed(0)
+        space = gym.spaces.Box(0, 255, (4, 100, 100), np.uint8)
+        return ActorCriticCnnPolicy(space, gym.spaces.Discrete(4), lambda _: 2.5e-4)
+
+    policies = {"contiguous": policy(), "channels-last": channels_last(policy())}
     for _ in range(repeats):
         for threads in sorted({1, cores}):
-            print(f"{threads} thread(s): {seconds_per_update(policy, threads):.2f} s per update", flush=True)
+            for layout, chosen in policies.items():
+                seconds = seconds_per_update(chosen, threads)
+                print(f"{threads} thread(s), {layout}: {seconds:.2f} s per update", flush=True)
 
 
 if __name__ == "__main__":
