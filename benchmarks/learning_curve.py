@@ -4,9 +4,10 @@ folder (evaluations.npz), each env step counted as the spec's action repeat of f
     python benchmarks/learning_curve.py RUN_DIR OUT_DIR [--published drq] [--beside CURVE_CSV=LABEL ...] [--final FILE]
 
 Writes OUT_DIR/curve.png (mean return of each evaluation, its standard deviation shaded, the published points with
-their error bars, each `--beside` curve.csv of an earlier run under its label, and with `--final` a `visualenv eval -o`
-file of the run's final model, drawn at the run's last step where no periodic evaluation fell) and OUT_DIR/curve.csv (steps, frames, mean, std, episodes, the run's wall-clock seconds at that
-evaluation where the progress log has them).
+their error bars, each `--beside` curve.csv of an earlier run under its label, and with `--final` a `visualenv eval
+-o` file of the run's final model, drawn at the last step the run took: its results.json's `steps`) and
+OUT_DIR/curve.csv (steps, frames, mean, std, the run's wall-clock seconds at that evaluation where the progress log
+has them).
 """
 
 from __future__ import annotations
@@ -67,7 +68,7 @@ def main() -> None:
     if args.final:  # the final model's evaluation, at the last step the run took
         final = json.loads(args.final.read_text())
         returns = np.asarray(final["per_episode"]["returns"], dtype=np.float64)
-        steps = np.append(steps, config["config"]["steps"])
+        steps = np.append(steps, json.loads((args.run_dir / "results.json").read_text())["steps"])
         means, stds = np.append(means, returns.mean()), np.append(stds, returns.std())
     frames = steps * repeat
     args.out_dir.mkdir(parents=True, exist_ok=True)

@@ -378,8 +378,8 @@ def _warped(images: Any, rotate: float, zoom: float, generator: np.random.Genera
     angles = np.radians(generator.uniform(-rotate, rotate, n))
     scales = generator.uniform(1 - zoom, 1 + zoom, n)
     cos, sin = torch.from_numpy(scales * np.cos(angles)).float(), torch.from_numpy(scales * np.sin(angles)).float()
-    # an output pixel's normalised coordinates mapped to the input's (F.affine_grid's map, built here by broadcasting,
-    # which is several times faster on the CPU); the aspect terms keep the turn rigid in pixels
+    # an output pixel's normalised coordinates mapped to the input's (the map F.affine_grid builds, written out by
+    # broadcasting, which costs the CPU less); the aspect terms keep the turn rigid in pixels
     xs = ((torch.arange(width, dtype=torch.float32) * 2 + 1) / width - 1).view(1, 1, width)
     ys = ((torch.arange(height, dtype=torch.float32) * 2 + 1) / height - 1).view(1, height, 1)
     cos, sin = cos.view(n, 1, 1), sin.view(n, 1, 1)
