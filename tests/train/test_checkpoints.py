@@ -305,3 +305,28 @@ def test_a_folder_without_a_checkpoint_or_of_another_spec_is_refused(run, tmp_pa
     assert untouched(run) == before
     for result in (other, changed, none):
         assert "Traceback" not in result.output and isinstance(result.exception, SystemExit)
+
+
+@pytest.mark.blender
+def test_a_resumed_run_evaluates_at_the_runs_own_steps_and_counts_all_its_time(tmp_path):
+    """Evaluations fall every --eval-every steps from the run's start, a resumed segment's too, and once more at a last
+    step between them; results.json's time is the run's in all."""
+    out = tmp_path / "runs"
+    args = ["train", "VisualCartPole-v0", "--steps", "96", *TINY, "--set", "n_steps=16", "--set", "batch_size=32"]
+    result = CliRunner().invoke(main, [*args, "--out", str(out)])
+    assert result.exit_code == 0, result.output
+    (run,) = (out / "VisualCartPole-v0").iterdir()
+    assert np.load(run / "evaluations.npz")["timesteps"].tolist() == [64, 96]  # 96 falls between evaluations
+    first = json.loads((run / "results.json").read_text())
+    assert "segment_wall_time_s" not in first
+    saved = json.loads((RunFolder(run).latest_dir / STATE_JSON).read_text())["wall_time_s"]
+    assert 0 < saved <= first["wall_time_s"]
+    resumed = CliRunner().invoke(
+        main, ["train", "VisualCartPole-v0", "--resume", str(run), "--steps", "192", "--no-progress"]
+    )
+    assert resumed.exit_code == 0, resumed.output
+    # 128 and 192, as a run never stopped; counted from the resume they would be 160 and 192
+    assert np.load(run / "evaluations.npz")["timesteps"].tolist() == [64, 96, 128, 192]
+    results = json.loads((run / "results.json").read_text())
+    assert results["wall_time_s"] == pytest.approx(saved + results["segment_wall_time_s"], abs=0.2)
+    assert f"192 steps in {results['wall_time_s']:.0f} s (" in resumed.output

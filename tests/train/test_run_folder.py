@@ -236,3 +236,11 @@ def test_the_logs_of_a_run_and_of_a_shipped_agent(tmp_path):
     for name in ("progress-1.csv", "progress.csv"):
         (shipped.path / name).write_text(name)
     assert [p.name for p in shipped.progress_parts()] == ["progress-1.csv", "progress.csv"]
+
+
+def test_a_bound_that_is_open_refuses_the_bound_itself():
+    """``--zoom`` scales by 1 - zoom, so config.json refuses zoom 1 as the CLI does (its range is open at 1)."""
+    rule = SETTINGS["zoom"]
+    assert rule.problem(0.999) is None and rule.problem(0.0) is None
+    assert rule.problem(1.0) == "expected a number from 0 below 1, got 1.0"
+    assert SETTINGS["learning_rate"].problem(0) == "expected a number above 0 to 1, got 0"

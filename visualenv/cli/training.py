@@ -535,4 +535,8 @@ def _report(results: dict[str, Any], run_dir: Path, succeeds: bool) -> None:
     )
     from visualenv.train.run_folder import RunFolder
 
-    click.echo(f"{results['steps']} steps in {results['wall_time_s']:.0f} s; plots in {RunFolder(run_dir).plots}")
+    segment = results.get("segment_wall_time_s")
+    since = f" ({segment:.0f} s since the resume)" if segment is not None else ""
+    click.echo(
+        f"{results['steps']} steps in {results['wall_time_s']:.0f} s{since}; plots in {RunFolder(run_dir).plots}"
+    )

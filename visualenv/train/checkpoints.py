@@ -8,7 +8,8 @@ keeps its own checkpoint), a folder swapped in whole, so a run killed while savi
   state (``policy.optimizer/state/<index>/exp_avg``, ...) and SAC's entropy coefficient (``variables/log_ent_coef``);
 * ``state.json``: :data:`FORMAT` and :data:`FORMAT_VERSION`, the algorithm, SB3's counters (``num_timesteps``,
   ``_n_updates``, ...), each optimizer's ``param_groups`` and any state that is not a tensor, the recent episodes
-  behind ``rollout/ep_rew_mean``, and the replay buffer's ``pos`` and ``full``;
+  behind ``rollout/ep_rew_mean``, the replay buffer's ``pos`` and ``full``, and the run's training time so far
+  (``wall_time_s``: a resumed run's results.json adds it to its own);
 * ``replay_buffer.npz`` (off-policy algorithms: SAC, DQN): the buffer's filled rows (observations, next
   observations unless ``optimize_memory_usage``, actions, rewards, dones, timeouts), read with ``allow_pickle=False``;
   ``--augment``'s buffer adds the final frames of episodes cut by a timeout (``final_observations``, ``final_slots``).
@@ -115,8 +116,9 @@ def check_resumed_spec(folder: RunFolder, spec_path: str | Path) -> None:
 # -- saving -----------------------------------------------------------------------------------------------------------
 
 
-def save_state(model: Any, folder: RunFolder, algorithm: str) -> Path:
-    """Write `model`'s training state to ``checkpoints/latest/`` (the module's docstring lists it)."""
+def save_state(model: Any, folder: RunFolder, algorithm: str, *, wall_time_s: float | None = None) -> Path:
+    """Write `model`'s training state to ``checkpoints/latest/`` (the module's docstring lists it); `wall_time_s`: the
+    run's training time up to now."""
     import torch
     from safetensors.torch import save_file
 
@@ -151,6 +153,7 @@ def save_state(model: Any, folder: RunFolder, algorithm: str) -> Path:
         "episodes": [_scalars(entry) for entry in model.ep_info_buffer or []],
         "successes": [bool(s) for s in model.ep_success_buffer or []],
         "replay_buffer": None if buffer is None else {"pos": int(buffer.pos), "full": bool(buffer.full)},
+        "wall_time_s": None if wall_time_s is None else round(wall_time_s, 1),
     }
     latest = folder.latest_dir
     fresh, old = latest.with_name(latest.name + ".saving"), latest.with_name(latest.name + ".old")
@@ -248,6 +251,15 @@ def load_state(model: Any, checkpoint: Path, algorithm: str) -> None:
         )
     _load_counters(model, state, checkpoint / STATE_JSON)
     _load_replay(model, state.get("replay_buffer"), checkpoint)
+
+
+def saved_wall_time(checkpoint: Path) -> float:
+    """The training time a data checkpoint recorded (seconds); 0 for a pickled one, or one saved before it was
+    recorded."""
+    if not checkpoint.is_dir():
+        return 0.0
+    value: Any = _read_state(checkpoint / STATE_JSON).get("wall_time_s")
+    return max(float(value), 0.0) if _finite_number(value) else 0.0
 
 
 def _read_state(path: Path) -> dict[str, Any]:

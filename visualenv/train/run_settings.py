@@ -36,6 +36,7 @@ class Rule:
     choices: tuple[str, ...] = ()
     optional: bool = False
     above_low: bool = False  # low itself excluded
+    below_high: bool = False  # high itself excluded
 
     def problem(self, value: Any) -> str | None:
         """Why `value` breaks the rule, or None."""
@@ -59,11 +60,15 @@ class Rule:
 
     def _within(self, value: float) -> bool:
         above = self.low is None or (value > self.low if self.above_low else value >= self.low)
-        return above and (self.high is None or value <= self.high)
+        return above and (self.high is None or (value < self.high if self.below_high else value <= self.high))
 
     def _bounds(self) -> str:
         low = "" if self.low is None else f" {'above' if self.above_low else 'from'} {_number(self.low)}"
-        high = "" if self.high is None else f" {'to' if low else 'up to'} {_number(self.high)}"
+        high = (
+            ""
+            if self.high is None
+            else f" {'below' if self.below_high else 'to' if low else 'up to'} {_number(self.high)}"
+        )
         return low + high or " (finite)"
 
 
@@ -99,7 +104,7 @@ SETTINGS: dict[str, Rule] = {
     "shift": Rule(int, 0, 1024),
     "state_loss": Rule(float, 0, 10**6),
     "rotate": Rule(float, 0, 180),
-    "zoom": Rule(float, 0, 1),
+    "zoom": Rule(float, 0, 1, below_high=True),  # a scale of 1 - zoom must stay above 0
     "distractions": Rule((list, dict), optional=True),  # [difficulty], [low, high], or a distractions section
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
@@ -177,6 +182,7 @@ RESULT_RULES: dict[str, Rule] = {
     **dict.fromkeys(("per_episode", "evaluated"), Rule(dict)),
     **dict.fromkeys(("machine", "selection"), Rule(dict, optional=True)),
     **dict.fromkeys(("std_reward", "mean_length", "wall_time_s"), Rule(float, 0)),
+    "segment_wall_time_s": Rule(float, 0),
     "episodes": EPISODES,
     "mean_reward": Rule(float),
     "success_rate": Rule(float, 0, 1),

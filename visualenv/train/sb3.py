@@ -8,6 +8,12 @@ evaluation on fresh seeds and the periodic evaluation that selected it (see :mod
 
 Stopping a run early (Ctrl-C, or ``kill`` with SIGTERM) ends training at the next
 step and still saves, evaluates and plots what was learnt so far.
+
+A run evaluates every ``eval_every`` steps counted from its start, a resumed one too, and once more at its last step
+when that falls between evaluations, so the curve ends where training did and the final model can be the best.
+results.json's ``wall_time_s`` is the run's training time in all: a resumed run adds the time its checkpoint had
+recorded (the time after that checkpoint, redone on resuming, is not counted) and gives its own segment's as
+``segment_wall_time_s``.
 """
 
 from __future__ import annotations
@@ -42,7 +48,7 @@ from visualenv.train.config_checks import (
     check_target_pace,
     check_torch_device,
 )
-from visualenv.train.checkpoints import load_state, resume_checkpoint, save_state, sb3_checkpoint
+from visualenv.train.checkpoints import load_state, resume_checkpoint, save_state, saved_wall_time, sb3_checkpoint
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
 from visualenv.train.stopping import StopRequest
 from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
@@ -191,17 +197,17 @@ def train(
     if resume:
         folder.keep_earlier_progress()
     train_env, eval_env = _make_envs(config, spec_path, folder, resume, trust_code)
-    started = time.perf_counter()
+    clock = RunClock(earlier=saved_wall_time(checkpoint) if checkpoint is not None else 0.0)
     stopper = _StopOnSignal()
     try:
         model = _make_model(config, train_env, checkpoint, kwargs, changed_kwargs)
-        _learn(model, config, eval_env, folder, stopper, resume)
+        _learn(model, config, eval_env, folder, stopper, resume, clock)
     except BaseException:
         eval_env.close()
         raise
     finally:
         train_env.close()
-    return _finish(model, config, eval_env, folder, wall=time.perf_counter() - started, stopped_early=stopper.requested)
+    return _finish(model, config, eval_env, folder, clock=clock, resumed=resume, stopped_early=stopper.requested)
 
 
 def _make_envs(
@@ -270,29 +276,27 @@ def _learn(
     folder: RunFolder,
     stopper: _StopOnSignal,
     resume: bool,
+    clock: RunClock,
 ) -> None:
-    """Learn up to config.steps with periodic evaluation, checkpoints and the progress bar; save the latest and final models."""
+    """Learn up to config.steps with periodic evaluation, checkpoints and the progress bar; evaluate the last step's
+    model where no periodic evaluation fell; save the latest and final models."""
     from stable_baselines3.common.callbacks import CallbackList
     from stable_baselines3.common.logger import configure
 
     model.set_logger(configure(str(folder.logs), ["csv", "tensorboard"]))
     per_env = max(1, config.eval_every // config.envs)
-    callbacks = [
-        _ResumableEval(
-            eval_env,
-            n_eval_episodes=config.eval_episodes,
-            eval_freq=per_env,
-            log_path=str(folder.path),
-            best_model_save_path=str(folder.path),
-            deterministic=True,
-            verbose=0,
-            callback_after_eval=None if config.progress else _EvalLine(declares_success(config.spec)),
-            callback_on_new_best=_BestPolicy(folder, config.algo),
-        ),
-        _LatestCheckpoint(folder, config.algo, every=per_env),
-        _PhaseThreads(),
-        stopper,
-    ]
+    evaluation = _ResumableEval(
+        eval_env,
+        n_eval_episodes=config.eval_episodes,
+        eval_freq=per_env,
+        log_path=str(folder.path),
+        best_model_save_path=str(folder.path),
+        deterministic=True,
+        verbose=0,
+        callback_after_eval=None if config.progress else _EvalLine(declares_success(config.spec)),
+        callback_on_new_best=_BestPolicy(folder, config.algo),
+    )
+    callbacks = [evaluation, _LatestCheckpoint(folder, config.algo, per_env, clock), _PhaseThreads(), stopper]
     done = model.num_timesteps if resume else 0
     if config.progress:
         callbacks.append(_ProgressBar(config.steps, done))
@@ -304,13 +308,22 @@ def _learn(
             callback=CallbackList(callbacks),
             reset_num_timesteps=not resume,
         )
-    save_state(model, folder, config.algo)
+    if not stopper.requested:
+        evaluation.evaluate_last()
+    save_state(model, folder, config.algo, wall_time_s=clock.elapsed())
     model.save(folder.final_zip)
     save_policy(model, folder.final_policy, half=False, algorithm=config.algo, run_dir=folder.path)
 
 
 def _finish(
-    model: Any, config: TrainConfig, eval_env: Any, folder: RunFolder, *, wall: float, stopped_early: bool
+    model: Any,
+    config: TrainConfig,
+    eval_env: Any,
+    folder: RunFolder,
+    *,
+    clock: RunClock,
+    resumed: bool,
+    stopped_early: bool,
 ) -> dict[str, Any]:
     """The best policy file's final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
@@ -324,11 +337,13 @@ def _finish(
         {
             "selection": selection_record(folder.path, selection_seed(config.seed)),
             "steps": int(model.num_timesteps),
-            "wall_time_s": round(wall, 1),
+            "wall_time_s": round(clock.elapsed(), 1),
             "model": evaluated.name,
             "stopped_early": stopped_early,
         }
     )
+    if resumed:
+        results["segment_wall_time_s"] = round(clock.segment(), 1)
     write_results(folder, results)
     training_plots(folder.path)
     return results
@@ -355,13 +370,45 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     return kwargs, changed
 
 
+@dataclass
+class RunClock:
+    """A run's training time: `earlier` seconds recorded by the checkpoint it resumed from, and this segment's."""
+
+    earlier: float = 0.0
+    started: float = field(default_factory=time.perf_counter)
+
+    def segment(self) -> float:
+        return time.perf_counter() - self.started
+
+    def elapsed(self) -> float:
+        return self.earlier + self.segment()
+
+
+def _count_from_run_start(callback: BaseCallback) -> None:
+    """Set `callback`'s call count to the vector steps the run has taken, so a resumed run's periodic work falls at
+    the steps an uninterrupted run's does (SB3 counts calls from each ``learn``)."""
+    callback.n_calls = callback.model.num_timesteps // callback.training_env.num_envs
+
+
 class _ResumableEval(EvalCallback):
-    """SB3's EvalCallback that, in a resumed run, carries on the earlier evaluations.
+    """SB3's EvalCallback that, in a resumed run, carries on the earlier evaluations at the run's own steps.
 
     Without this a resumed run would forget its history (evaluations.npz is
     rewritten from scratch) and its best score, so the first evaluation after a
     resume would overwrite a better best_model.zip.
     """
+
+    def _on_training_start(self) -> None:
+        _count_from_run_start(self)
+
+    def evaluate_last(self) -> None:
+        """Evaluate the model as learning left it, unless the last periodic evaluation was at this step."""
+        done = self.model.num_timesteps
+        if self.eval_freq <= 0 or (self.evaluations_timesteps and self.evaluations_timesteps[-1] == done):
+            return
+        self.num_timesteps = done
+        self.n_calls = (self.n_calls // self.eval_freq + 1) * self.eval_freq  # due now
+        self._on_step()
 
     def _init_callback(self) -> None:
         super()._init_callback()
@@ -404,13 +451,16 @@ class _LatestCheckpoint(BaseCallback):
     """Replace the one checkpoint (data, :func:`~visualenv.train.checkpoints.save_state`), so a killed run resumes from
     its last save."""
 
-    def __init__(self, folder: RunFolder, algorithm: str, every: int):
+    def __init__(self, folder: RunFolder, algorithm: str, every: int, clock: RunClock):
         super().__init__()
-        self.folder, self.algorithm, self.every = folder, algorithm, every
+        self.folder, self.algorithm, self.every, self.clock = folder, algorithm, every, clock
+
+    def _on_training_start(self) -> None:
+        _count_from_run_start(self)
 
     def _on_step(self) -> bool:
         if self.n_calls % self.every == 0:
-            save_state(self.model, self.folder, self.algorithm)
+            save_state(self.model, self.folder, self.algorithm, wall_time_s=self.clock.elapsed())
         return True
 
 
