@@ -202,7 +202,10 @@ def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
         ConfigError, match=r"cannot resume .*does not fit this run's model.*size mismatch for pi.net.mlp.0.weight"
     ):
         _restore(OtherModel(), tmp_path)
-    assert _restore(type("Fits", (), {"restore_from_path": lambda self, path: None})(), tmp_path) == 1024
+    fits = type("Fits", (), {"restore_from_path": lambda self, path: None})()
+    assert _restore(fits, tmp_path) == (1024, 0.0)  # a checkpoint from before the time was recorded
+    (latest / "visualenv.json").write_text('{"steps": 1024, "wall_time_s": 61.5}')
+    assert _restore(fits, tmp_path) == (1024, 61.5)
 
 
 def test_a_resumed_run_keeps_its_backend(tmp_path):
@@ -410,6 +413,7 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
         assert (run / name).exists(), name
     results = json.loads((run / "results.json").read_text())
     assert results["stopped_early"] is True and results["episodes"] == 2 and 64 <= results["steps"] < 100000
+    assert "segment_wall_time_s" not in results  # a run of one segment
     assert json.loads((run / "config.json").read_text())["backend"] == "rllib"
     # the best model was picked on one seed stream and is reported on another, as in the SB3 backend
     assert results["selection"]["eval_seed"] == selection_seed(0) and results["eval_seed"] == final_seed(0)
@@ -468,6 +472,8 @@ def test_rllib_run_stops_on_sigterm_saves_and_resumes(tmp_path):
         assert later["timesteps"].tolist()[: len(evaluated)] == evaluated and len(later["timesteps"]) > len(
             evaluated
         )  # history kept
+        assert later["timesteps"][-1] == results["steps"]  # and the model as training left it evaluated
+    assert results["wall_time_s"] > results["segment_wall_time_s"] > 0  # the stopped segment's time counted too
     steps = [int(line.split(",")[0]) for line in (run / "logs" / "progress.csv").read_text().splitlines()[1:]]
     assert steps == sorted(steps) and steps[-1] == results["steps"]  # the resumed run carried on the step count
 

@@ -23,7 +23,6 @@ import csv
 import json
 import shutil
 import sys
-import time
 from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, field
@@ -33,7 +32,7 @@ from typing import Any
 import numpy as np
 
 from visualenv.train.evaluation import FINAL_EPISODES, declares_success, evaluation_line
-from visualenv.train.run_folder import CHECKPOINT_STEPS, RunFolder, record_run, write_results
+from visualenv.train.run_folder import CHECKPOINT_STEPS, RunClock, RunFolder, record_run, write_results
 from visualenv.train.stopping import StopRequest
 
 BACKEND = "rllib"
@@ -117,12 +116,14 @@ def ray_cluster(address: str | None, cpus: int) -> Iterator[None]:
         ray.shutdown()
 
 
-def save_checkpoint(algo: Any, path: Path, steps: int) -> None:
-    """Save to a sibling folder, then swap it in: a run killed while saving keeps its previous checkpoint."""
+def save_checkpoint(algo: Any, path: Path, steps: int, wall_time_s: float | None = None) -> None:
+    """Save to a sibling folder, then swap it in: a run killed while saving keeps its previous checkpoint.
+    `wall_time_s`: the run's training time so far, which a resumed run adds to its own."""
     fresh, old = path.with_name(path.name + ".saving"), path.with_name(path.name + ".old")
     shutil.rmtree(fresh, ignore_errors=True)
     algo.save_to_path(str(fresh.resolve()))
-    (fresh / CHECKPOINT_STEPS).write_text(json.dumps({"steps": int(steps)}) + "\n")
+    record = {"steps": int(steps)} | ({} if wall_time_s is None else {"wall_time_s": round(wall_time_s, 1)})
+    (fresh / CHECKPOINT_STEPS).write_text(json.dumps(record) + "\n")
     if path.exists():
         shutil.rmtree(old, ignore_errors=True)
         path.rename(old)
@@ -278,9 +279,9 @@ def train(
         with ray_cluster(address, cpus):
             algo = algo_config.build_algo()
             try:
-                steps = _restore(algo, run_dir) if resume else 0
+                steps, earlier = _restore(algo, run_dir) if resume else (0, 0.0)
                 record_run(folder, config, str(resolve(config.spec)), backend=BACKEND, resume=resume, changes=changes)
-                results = _train_loop(config, folder, algo, eval_env, stop, steps)
+                results = _train_loop(config, folder, algo, eval_env, stop, steps, RunClock(earlier))
             finally:
                 algo.stop()
         model = folder.best_policy if folder.best_policy.exists() else folder.final_policy
@@ -291,6 +292,8 @@ def train(
         eval_env.close()
     results["model"] = model.name
     results["selection"] = selection_record(run_dir, selection_seed(config.seed))
+    if not resume:
+        del results["segment_wall_time_s"]
     results = {
         k: results[k]
         for k in (
@@ -307,22 +310,25 @@ def train(
             "selection",
             "steps",
             "wall_time_s",
+            "segment_wall_time_s",
             "model",
             "stopped_early",
         )
+        if k in results
     }
     write_results(folder, results)
     training_plots(run_dir)
     return results
 
 
-def _restore(algo: Any, run_dir: Path) -> int:
-    """Load the run's latest checkpoint into `algo`; the steps it had trained. A checkpoint of another model is refused."""
+def _restore(algo: Any, run_dir: Path) -> tuple[int, float]:
+    """Load the run's latest checkpoint into `algo`; the steps it had trained and the time it took (0 where an older
+    checkpoint did not record it). A checkpoint of another model is refused."""
     from visualenv.errors import ConfigError
 
     earlier = latest_checkpoint(run_dir)
     if earlier is None:
-        return 0
+        return 0, 0.0
     try:
         algo.restore_from_path(str(earlier.resolve()))
     # RLlib raises whatever torch or its unpickling met; a model of another shape is the usual one
@@ -332,12 +338,21 @@ def _restore(algo: Any, run_dir: Path) -> int:
             f"cannot resume {run_dir}: its checkpoint does not fit this run's model (saved by another version of "
             f"visualenv or with other settings?): {detail}"
         ) from None
-    return int(json.loads((earlier / CHECKPOINT_STEPS).read_text())["steps"])
+    record = json.loads((earlier / CHECKPOINT_STEPS).read_text())
+    return int(record["steps"]), float(record.get("wall_time_s", 0.0))
 
 
 def _train_loop(
-    config: RLlibTrainConfig, folder: RunFolder, algo: Any, eval_env: Any, stop: StopRequest, steps: int
+    config: RLlibTrainConfig,
+    folder: RunFolder,
+    algo: Any,
+    eval_env: Any,
+    stop: StopRequest,
+    steps: int,
+    clock: RunClock,
 ) -> dict[str, Any]:
+    """Train to config.steps, evaluating every `eval_every` steps and at a last step between evaluations (as the SB3
+    backend does); save the latest, best and final checkpoints."""
     from tqdm import tqdm
 
     from visualenv.train.model_files import save_rllib_module
@@ -348,7 +363,17 @@ def _train_loop(
     last_eval = evaluations.timesteps[-1] if evaluations.timesteps else steps
     latest = folder.latest_dir
     latest.parent.mkdir(exist_ok=True)
-    started = time.perf_counter()
+
+    def evaluate() -> None:
+        returns, lengths, successes = _episodes(RLlibPolicy(algo.get_module()), eval_env, config.eval_episodes)
+        improved = float(np.mean(returns)) > evaluations.best
+        evaluations.add(steps, returns, lengths, successes)
+        if not config.progress:
+            print(evaluation_line(steps, returns, successes if succeeds else None), flush=True)
+        if improved:
+            save_checkpoint(algo, folder.best_dir, steps)
+            save_rllib_module(algo.get_module(), folder.best_policy, half=False, run_dir=folder.path)
+
     bar = tqdm(total=config.steps, initial=steps, unit="step", dynamic_ncols=True, disable=not config.progress)
     with stop.listening(), bar:
         while steps < config.steps and not stop.requested:
@@ -356,7 +381,7 @@ def _train_loop(
             sampled = int(result.get("env_runners", {}).get("num_env_steps_sampled", 0))
             steps += sampled
             _count_nodes(folder.env_steps_by_node, result)
-            row = _progress_row(result, steps, time.perf_counter() - started, sampled)
+            row = _progress_row(result, steps, clock.segment(), sampled)
             _append_progress(folder.progress, row)
             bar.update(steps - bar.n)
             reward = row["rollout/ep_rew_mean"]
@@ -366,18 +391,18 @@ def _train_loop(
             )
             if steps - last_eval >= config.eval_every:
                 last_eval = steps
-                returns, lengths, successes = _episodes(RLlibPolicy(algo.get_module()), eval_env, config.eval_episodes)
-                improved = float(np.mean(returns)) > evaluations.best
-                evaluations.add(steps, returns, lengths, successes)
-                if not config.progress:
-                    print(evaluation_line(steps, returns, successes if succeeds else None), flush=True)
-                if improved:
-                    save_checkpoint(algo, folder.best_dir, steps)
-                    save_rllib_module(algo.get_module(), folder.best_policy, half=False, run_dir=folder.path)
-                save_checkpoint(algo, latest, steps)
+                evaluate()
+                save_checkpoint(algo, latest, steps, clock.elapsed())
     if stop.requested:
         print(f"stopped early at {steps} steps", file=sys.stderr)
-    save_checkpoint(algo, latest, steps)
-    save_checkpoint(algo, folder.final_dir, steps)
+    elif steps > 0 and (not evaluations.timesteps or evaluations.timesteps[-1] != steps):
+        evaluate()
+    save_checkpoint(algo, latest, steps, clock.elapsed())
+    save_checkpoint(algo, folder.final_dir, steps, clock.elapsed())
     save_rllib_module(algo.get_module(), folder.final_policy, half=False, run_dir=folder.path)
-    return {"steps": steps, "wall_time_s": round(time.perf_counter() - started, 1), "stopped_early": stop.requested}
+    return {
+        "steps": steps,
+        "wall_time_s": round(clock.elapsed(), 1),
+        "segment_wall_time_s": round(clock.segment(), 1),
+        "stopped_early": stop.requested,
+    }

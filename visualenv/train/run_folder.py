@@ -32,8 +32,9 @@ import itertools
 import json
 import shlex
 import sys
+import time
 import zipfile
-from dataclasses import asdict, dataclass, is_dataclass
+from dataclasses import asdict, dataclass, field, is_dataclass
 from datetime import datetime
 from pathlib import Path
 from typing import Any
@@ -57,7 +58,7 @@ LEGACY_EVAL_OFFSET = 10_000  # runs before the seed bands picked and reported on
 MAX_EVALUATIONS_BYTES = 2**28  # evaluations.npz's arrays, their size read from its zip directory before decompressing
 LOGS, PROGRESS = "logs", "progress.csv"
 SHIPPED_POLICY = "policy" + WEIGHTS
-CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained
+CHECKPOINT_STEPS = "visualenv.json"  # in each RLlib checkpoint folder: the env steps it had trained, and the time
 STATE_WEIGHTS, STATE_JSON, STATE_REPLAY = "weights.safetensors", "state.json", "replay_buffer.npz"  # SB3's checkpoint
 
 
@@ -225,6 +226,21 @@ def read_config(run: str | Path | RunFolder) -> dict[str, Any]:
     record = migrate(read_json_as(folder.config, RunFolderError), where=str(folder.config)).record
     assert record is not None
     return record
+
+
+@dataclass
+class RunClock:
+    """A run's training time (results.json's ``wall_time_s``): `earlier` seconds its checkpoint recorded, for a
+    resumed run (the time after that checkpoint, redone on resuming, is not counted), and this segment's."""
+
+    earlier: float = 0.0
+    started: float = field(default_factory=time.perf_counter)
+
+    def segment(self) -> float:
+        return time.perf_counter() - self.started
+
+    def elapsed(self) -> float:
+        return self.earlier + self.segment()
 
 
 def write_results(run: str | Path | RunFolder, results: dict[str, Any]) -> Path:

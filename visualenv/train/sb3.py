@@ -51,7 +51,7 @@ from visualenv.train.config_checks import (
 from visualenv.train.checkpoints import load_state, resume_checkpoint, save_state, saved_wall_time, sb3_checkpoint
 from visualenv.train.model_files import algorithm_class, load_model, save_policy
 from visualenv.train.stopping import StopRequest
-from visualenv.train.run_folder import RunFolder, read_config, record_run, write_results
+from visualenv.train.run_folder import RunClock, RunFolder, read_config, record_run, write_results
 from visualenv.train.policy_kinds import named_classes
 
 SCHEDULES = ("learning_rate", "clip_range", "clip_range_vf")  # hyperparameters SB3 takes as a number or a schedule
@@ -368,20 +368,6 @@ def check_config(config: TrainConfig, changes: dict[str, Any] | None = None) -> 
     check_replay_buffer(config, both, loaded)
     check_target_pace(config, both)
     return kwargs, changed
-
-
-@dataclass
-class RunClock:
-    """A run's training time: `earlier` seconds recorded by the checkpoint it resumed from, and this segment's."""
-
-    earlier: float = 0.0
-    started: float = field(default_factory=time.perf_counter)
-
-    def segment(self) -> float:
-        return time.perf_counter() - self.started
-
-    def elapsed(self) -> float:
-        return self.earlier + self.segment()
 
 
 def _count_from_run_start(callback: BaseCallback) -> None:
