@@ -20,6 +20,10 @@ again with Blender's render call alone (``bench``'s moved floor). Their differen
 the render call's; what a step runs outside that call (physics, bindings, readback, Python; a reset's render counted
 as a render) is printed against the call, as ``bench`` prints the time.
 
+``--functions N``: the default count, then the N functions of Cycles' tracing that run the most instructions,
+each with what it calls (callgrind_annotate, inclusive), as shares of the tracing: where a frame's tracing goes
+(the surface shaders, the light's sample and its shader, shadow rays, random numbers), in counts and not time.
+
 ``--timed``: the default loop without valgrind, after 10 untimed calls: the median call (ms), for a before/after that
 alternates processes (a ``git worktree`` of the commit before, the same venv).
 """
@@ -91,28 +95,64 @@ def step(ident: str, steps: int, floor: bool) -> None:
     env.close()
 
 
-def callgrind(args: list[str], toggle: str | None = None) -> tuple[int, str]:
-    """The instructions callgrind counts in a child run with `args` (only inside `toggle` when given), and its output."""
+def callgrind(args: list[str], toggle: str | None = None, functions: int = 0) -> tuple[int, str, str]:
+    """The instructions callgrind counts in a child run with `args` (only inside `toggle` when given), its output, and
+    with `functions` the rows of :func:`function_rows`."""
     with tempfile.TemporaryDirectory() as folder:
         options = ["--collect-atstart=no", f"--toggle-collect={toggle}"] if toggle else []
+        out = Path(folder) / "out"
         done = subprocess.run(
-            ["valgrind", "--tool=callgrind", *options, f"--callgrind-out-file={Path(folder) / 'out'}",
+            ["valgrind", "--tool=callgrind", *options, f"--callgrind-out-file={out}",
              sys.executable, __file__, "--child", *args],
             capture_output=True, text=True, check=True, env={**os.environ, "PYTHONHASHSEED": "0"},
         )  # fmt: skip
-    return int(re.search(r"Collected : (\d+)", done.stderr).group(1)), done.stdout  # type: ignore[union-attr]
+        table = function_rows(out, functions) if functions else ""
+    return int(re.search(r"Collected : (\d+)", done.stderr).group(1)), done.stdout, table  # type: ignore[union-attr]
 
 
-def trace_row(ident: str, renders: int) -> str:
-    collected, out = callgrind([ident, "--renders", str(renders)], TRACING)
+#: a row of ``callgrind_annotate --inclusive=yes``: the count, its share, then ``file:function [object]``
+ANNOTATED = re.compile(r"^\s*([\d,]+) \(\s*([\d.]+)%\)\s+\S*?:(.+?)(?: \[[^\]]*\])?\s*$")
+
+
+def function_rows(out: Path, most: int) -> str:
+    """The `most` functions below the megakernel that run the most instructions (with what they call), as table rows."""
+    annotated = subprocess.run(
+        ["callgrind_annotate", "--inclusive=yes", str(out)], capture_output=True, text=True, check=True
+    ).stdout
+    rows, below = [], False
+    for line in annotated.splitlines():
+        found = ANNOTATED.match(line)
+        if found is None:
+            continue
+        count, share, name = found.groups()
+        below = below or "integrator_megakernel" in name
+        if below and "integrator_megakernel" not in name and not name.startswith("0x"):
+            rows.append(f"| | {_short(name)} | {int(count.replace(',', '')) / 1e6:.1f} | {share} % |")
+    return "\n".join(rows[:most])
+
+
+def _short(name: str) -> str:
+    """A C++ name without its return type and parameters, with only its first template argument, which tells apart
+    the instances of one template (``ccl::svm_eval_nodes<16779195u>``: the surface shaders' node features)."""
+    first = re.match(r"[^<(]*<([^,<>]*)", name)
+    while "<" in name:
+        name = re.sub(r"<[^<>]*>", "", name)
+    name = re.sub(r"\(.*$", "", name)
+    name = name.split()[-1] if name.split() else name
+    return f"{name}<{first.group(1)}>" if first else name
+
+
+def trace_row(ident: str, renders: int, functions: int = 0) -> str:
+    collected, out, table = callgrind([ident, "--renders", str(renders)], TRACING, functions)
     per_render, pixels = collected // (FIRST_RENDERS + renders), int(re.search(r"pixels (\d+)", out).group(1))  # type: ignore[union-attr]
-    return f"| {ident} | {pixels} | {per_render / 1e6:.2f} | {per_render / pixels:,.0f} |"
+    row = f"| {ident} | {pixels} | {per_render / 1e6:.2f} | {per_render / pixels:,.0f} |"
+    return row + ("\n" + table if table else "")
 
 
 def step_row(ident: str, steps: int) -> str:
-    none, _ = callgrind([ident, "--step", "--steps", "0"])
-    stepped, out = callgrind([ident, "--step", "--steps", str(steps)])
-    floored, _ = callgrind([ident, "--step", "--steps", str(steps), "--floor"])
+    none, _, _ = callgrind([ident, "--step", "--steps", "0"])
+    stepped, out, _ = callgrind([ident, "--step", "--steps", str(steps)])
+    floored, _, _ = callgrind([ident, "--step", "--steps", str(steps), "--floor"])
     resets = int(re.search(r"resets (\d+)", out).group(1))  # type: ignore[union-attr]
     call = (floored - stepped) / steps
     outside = (stepped - none - (steps + resets) * call) / steps
@@ -126,6 +166,7 @@ def main() -> None:
     parser.add_argument("--step", action="store_true", help="a whole step against the render call")
     parser.add_argument("--steps", type=int, default=100)
     parser.add_argument("--timed", action="store_true", help="time the calls in this process instead")
+    parser.add_argument("--functions", type=int, default=0, metavar="N", help="and the N costliest functions")
     parser.add_argument("--floor", action="store_true", help=argparse.SUPPRESS)
     parser.add_argument("--child", action="store_true", help=argparse.SUPPRESS)
     args = parser.parse_args()
@@ -139,6 +180,13 @@ def main() -> None:
         print("| --- | ---: | ---: | ---: | ---: | ---: |")
         for ident in args.ids:
             print(step_row(ident, args.steps), flush=True)
+    elif args.functions:
+        print(
+            "| id, then a function and what it calls | pixels | instructions (M: per render, then all renders) | per pixel, then share |"
+        )
+        print("| --- | --- | ---: | ---: |")
+        for ident in args.ids:
+            print(trace_row(ident, args.renders or 10, args.functions), flush=True)
     else:
         print("| id | pixels | instructions per render (M) | per pixel |")
         print("| --- | ---: | ---: | ---: |")

@@ -328,6 +328,8 @@ def _finish(
     """The best policy file's final evaluation (closing the eval env), results.json and the plots."""
     from visualenv.train.plots import training_plots
 
+    wall, segment = clock.elapsed(), clock.segment()  # training's time, without the final evaluation
+
     evaluated = folder.best_policy if folder.best_policy.exists() else folder.final_policy
     try:
         results = final_evaluation(load_model(evaluated), eval_env, config.final_eval_episodes, final_seed(config.seed))
@@ -337,13 +339,13 @@ def _finish(
         {
             "selection": selection_record(folder.path, selection_seed(config.seed)),
             "steps": int(model.num_timesteps),
-            "wall_time_s": round(clock.elapsed(), 1),
+            "wall_time_s": round(wall, 1),
             "model": evaluated.name,
             "stopped_early": stopped_early,
         }
     )
     if resumed:
-        results["segment_wall_time_s"] = round(clock.segment(), 1)
+        results["segment_wall_time_s"] = round(segment, 1)
     write_results(folder, results)
     training_plots(folder.path)
     return results
