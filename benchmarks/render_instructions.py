@@ -134,6 +134,7 @@ def function_rows(out: Path, most: int) -> str:
 def _short(name: str) -> str:
     """A C++ name without its return type and parameters, with only its first template argument, which tells apart
     the instances of one template (``ccl::svm_eval_nodes<16779195u>``: the surface shaders' node features)."""
+    name = name.replace("(anonymous namespace)::", "")
     first = re.match(r"[^<(]*<([^,<>]*)", name)
     while "<" in name:
         name = re.sub(r"<[^<>]*>", "", name)
