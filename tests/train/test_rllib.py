@@ -206,6 +206,8 @@ def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
     assert _restore(fits, tmp_path) == (1024, 0.0)  # a checkpoint from before the time was recorded
     (latest / "visualenv.json").write_text('{"steps": 1024, "wall_time_s": 61.5}')
     assert _restore(fits, tmp_path) == (1024, 61.5)
+    (latest / "visualenv.json").write_text('{"steps": 1024, "wall_time_s": "a minute"}')
+    assert _restore(fits, tmp_path) == (1024, 0.0)  # an edited time counts as none, not a traceback
 
 
 def test_a_resumed_run_keeps_its_backend(tmp_path):

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import csv
 import json
+import math
 import shutil
 import sys
 from collections.abc import Iterator
@@ -339,7 +340,9 @@ def _restore(algo: Any, run_dir: Path) -> tuple[int, float]:
             f"visualenv or with other settings?): {detail}"
         ) from None
     record = json.loads((earlier / CHECKPOINT_STEPS).read_text())
-    return int(record["steps"]), float(record.get("wall_time_s", 0.0))
+    wall = record.get("wall_time_s")
+    known = isinstance(wall, (int, float)) and not isinstance(wall, bool) and math.isfinite(wall) and wall >= 0
+    return int(record["steps"]), float(wall) if known else 0.0
 
 
 def _train_loop(
