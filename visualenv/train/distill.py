@@ -110,6 +110,7 @@ def distill(
         student.to(memory_format=torch.contiguous_format)  # safetensors stores contiguous tensors
         save_policy(student, folder.final_policy, half=False, algorithm="dagger", run_dir=run_dir)
         best_path = folder.best_policy
+        wall = time.perf_counter() - started  # the rounds' time, without the final evaluation, as train's
     finally:
         rollouts.close()
         evaluator.close()
@@ -130,7 +131,7 @@ def distill(
                 "episodes": config.eval_episodes,
             },
             "frames": frames,
-            "wall_time_s": round(time.perf_counter() - started, 1),
+            "wall_time_s": round(wall, 1),
             "model": best_path.name,
         }
     )
