@@ -40,7 +40,15 @@ from visualenv.files import check_format, read_json_as
 from visualenv.train.model_files import PickleRefused
 from visualenv.train.policy_format import weights_of
 from visualenv.spec.loader import spec_identity
-from visualenv.train.run_folder import STATE_JSON, STATE_REPLAY, STATE_WEIGHTS, RunFolder, RunFolderError, read_config
+from visualenv.train.run_folder import (
+    STATE_JSON,
+    STATE_REPLAY,
+    STATE_WEIGHTS,
+    RunFolder,
+    RunFolderError,
+    read_config,
+    recorded_seconds,
+)
 
 FORMAT = "visualenv-sb3-checkpoint"
 FORMAT_VERSION = 1
@@ -258,8 +266,7 @@ def saved_wall_time(checkpoint: Path) -> float:
     recorded."""
     if not checkpoint.is_dir():
         return 0.0
-    value: Any = _read_state(checkpoint / STATE_JSON).get("wall_time_s")
-    return max(float(value), 0.0) if _finite_number(value) else 0.0
+    return recorded_seconds(_read_state(checkpoint / STATE_JSON).get("wall_time_s"))
 
 
 def _read_state(path: Path) -> dict[str, Any]:

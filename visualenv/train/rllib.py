@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import csv
 import json
-import math
 import shutil
 import sys
 from collections.abc import Iterator
@@ -33,7 +32,14 @@ from typing import Any
 import numpy as np
 
 from visualenv.train.evaluation import FINAL_EPISODES, declares_success, evaluation_line
-from visualenv.train.run_folder import CHECKPOINT_STEPS, RunClock, RunFolder, record_run, write_results
+from visualenv.train.run_folder import (
+    CHECKPOINT_STEPS,
+    RunClock,
+    RunFolder,
+    record_run,
+    recorded_seconds,
+    write_results,
+)
 from visualenv.train.stopping import StopRequest
 
 BACKEND = "rllib"
@@ -293,8 +299,7 @@ def train(
         eval_env.close()
     results["model"] = model.name
     results["selection"] = selection_record(run_dir, selection_seed(config.seed))
-    if not resume:
-        del results["segment_wall_time_s"]
+    segment = results.pop("segment_wall_time_s")
     results = {
         k: results[k]
         for k in (
@@ -311,12 +316,12 @@ def train(
             "selection",
             "steps",
             "wall_time_s",
-            "segment_wall_time_s",
             "model",
             "stopped_early",
         )
-        if k in results
     }
+    if resume:
+        results["segment_wall_time_s"] = segment
     write_results(folder, results)
     training_plots(run_dir)
     return results
@@ -340,9 +345,7 @@ def _restore(algo: Any, run_dir: Path) -> tuple[int, float]:
             f"visualenv or with other settings?): {detail}"
         ) from None
     record = json.loads((earlier / CHECKPOINT_STEPS).read_text())
-    wall = record.get("wall_time_s")
-    known = isinstance(wall, (int, float)) and not isinstance(wall, bool) and math.isfinite(wall) and wall >= 0
-    return int(record["steps"]), float(wall) if known else 0.0
+    return int(record["steps"]), recorded_seconds(record.get("wall_time_s"))
 
 
 def _train_loop(

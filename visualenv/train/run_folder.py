@@ -30,6 +30,7 @@ from __future__ import annotations
 import csv
 import itertools
 import json
+import math
 import shlex
 import sys
 import time
@@ -241,6 +242,13 @@ class RunClock:
 
     def elapsed(self) -> float:
         return self.earlier + self.segment()
+
+
+def recorded_seconds(value: Any) -> float:
+    """A training time a checkpoint recorded, in seconds: 0 where it recorded none or something other than a finite
+    number from 0 (a checkpoint from before the time was kept, or an edited one), never an error."""
+    number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
+    return max(float(value), 0.0) if number else 0.0
 
 
 def write_results(run: str | Path | RunFolder, results: dict[str, Any]) -> Path:

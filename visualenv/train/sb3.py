@@ -392,7 +392,7 @@ class _ResumableEval(EvalCallback):
     def evaluate_last(self) -> None:
         """Evaluate the model as learning left it, unless the last periodic evaluation was at this step."""
         done = self.model.num_timesteps
-        if self.eval_freq <= 0 or (self.evaluations_timesteps and self.evaluations_timesteps[-1] == done):
+        if self.evaluations_timesteps and self.evaluations_timesteps[-1] == done:
             return
         self.num_timesteps = done
         self.n_calls = (self.n_calls // self.eval_freq + 1) * self.eval_freq  # due now
