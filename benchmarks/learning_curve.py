@@ -59,8 +59,11 @@ def main() -> None:
     parser.add_argument("--beside", action="append", default=[], help="an earlier run's curve.csv=LABEL to draw too")
     parser.add_argument("--final", type=Path, help="`visualenv eval -o` figures of the run's final model")
     args = parser.parse_args()
-    config = json.loads((args.run_dir / "config.json").read_text())
-    spec_id = config["spec"]["id"]
+    from visualenv.train.run_folder import read_run
+
+    run = read_run(args.run_dir)
+    assert run.record is not None, f"{args.run_dir}: not a run folder (no config.json)"
+    spec_id = run.record["spec"]["id"]
     import visualenv
 
     repeat = visualenv.make(spec_id, render=False).unwrapped.action_repeat
@@ -68,7 +71,8 @@ def main() -> None:
     if args.final:  # the final model's evaluation, at the last step the run took
         final = json.loads(args.final.read_text())
         returns = np.asarray(final["per_episode"]["returns"], dtype=np.float64)
-        steps = np.append(steps, json.loads((args.run_dir / "results.json").read_text())["steps"])
+        assert run.results is not None, f"{args.run_dir}: --final needs the run's results.json (its steps)"
+        steps = np.append(steps, run.results["steps"])
         means, stds = np.append(means, returns.mean()), np.append(stds, returns.std())
     frames = steps * repeat
     args.out_dir.mkdir(parents=True, exist_ok=True)
