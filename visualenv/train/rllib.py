@@ -357,8 +357,9 @@ def _train_loop(
     steps: int,
     clock: RunClock,
 ) -> dict[str, Any]:
-    """Train to config.steps, evaluating every `eval_every` steps and at a last step between evaluations (as the SB3
-    backend does); save the latest, best and final checkpoints."""
+    """Train to config.steps, evaluating at the first iteration past each multiple of `eval_every` (counted from the
+    run's start, a resumed run's too) and at a last step between evaluations (as the SB3 backend does); save the
+    latest, best and final checkpoints."""
     from tqdm import tqdm
 
     from visualenv.train.model_files import save_rllib_module
@@ -395,7 +396,7 @@ def _train_loop(
                 reward=f"{reward:.1f}" if reward != "" else "-",
                 runners=result.get("fault_tolerance", {}).get("num_healthy_workers", "?"),
             )
-            if steps - last_eval >= config.eval_every:
+            if steps // config.eval_every > last_eval // config.eval_every:  # crossed a multiple: no drift
                 last_eval = steps
                 evaluate()
                 save_checkpoint(algo, latest, steps, clock.elapsed())
