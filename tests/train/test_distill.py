@@ -3,6 +3,7 @@
 import csv
 import hashlib
 import json
+from types import SimpleNamespace
 
 import gymnasium as gym
 import numpy as np
@@ -12,7 +13,10 @@ from click.testing import CliRunner
 from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
 from visualenv.cli import main
-from visualenv.train.distill import DistillConfig, _fit, _shifted, _StateProbe, _warped
+from visualenv.errors import ConfigError
+from visualenv.train.distill import DistillConfig, _fit, _shifted, _StateProbe, _student, _warped
+from visualenv.train.encoders import DrQEncoder
+from visualenv.train.model_files import load_policy_file, save_policy
 
 
 def _images_and_labels(n: int, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -71,6 +75,22 @@ def test_the_state_loss_teaches_the_encoder_what_the_action_does_not_say():
         _fit(student, optimizer, (frames, np.zeros((64, 1), np.float32), sides), config, generator, probe)
     assert probe_loss().item() < first / 5
     assert set(student.state_dict()) == saved_keys and probe.features is None  # the hook is gone after each use
+
+
+def test_the_students_encoder_is_kept_in_its_policy_file_and_a_start_of_another_encoder_is_refused(tmp_path):
+    spaces = SimpleNamespace(
+        observation_space=gym.spaces.Box(0, 255, (6, 36, 36), np.uint8), action_space=gym.spaces.Box(-1, 1, (1,))
+    )
+    student = _student(spaces, encoder="drq")
+    assert type(student.features_extractor) is DrQEncoder and student.features_extractor.features_dim == 50
+    student.to(memory_format=torch.contiguous_format)
+    save_policy(student, tmp_path / "drq.safetensors", half=False, algorithm="dagger")
+    loaded = load_policy_file(tmp_path / "drq.safetensors", "distill")
+    assert type(loaded.features_extractor) is DrQEncoder
+    again = _student(spaces, loaded, "drq")  # a later segment of the same encoder starts from its weights
+    assert all(torch.equal(a, b) for a, b in zip(again.state_dict().values(), loaded.state_dict().values()))
+    with pytest.raises(ConfigError, match="encodes its frames with DrQEncoder; --encoder nature is NatureCNN"):
+        _student(spaces, loaded, "nature")
 
 
 def test_random_shift_moves_each_image_by_at_most_the_shift():
@@ -245,6 +265,26 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
         and "Traceback" not in refused.output
     ), refused.output
     assert not (tmp_path / "refused" / "Goalie-v0").exists()
+    # a student with DrQ's encoder: recorded in config.json and the policy file, which eval replays
+    drq = CliRunner().invoke(
+        main,
+        [
+            "distill",
+            "Goalie-v0",
+            "--teacher",
+            str(teacher),
+            "--encoder",
+            "drq",
+            *("--rounds", "1", "--episodes", "1", "--eval-episodes", "1", "--final-episodes", "1"),
+            *("--frame-stack", "2", "--out", str(tmp_path / "drq")),
+        ],
+    )
+    assert drq.exit_code == 0, drq.output
+    third = next((tmp_path / "drq" / "Goalie-v0").iterdir())
+    assert json.loads((third / "config.json").read_text())["config"]["encoder"] == "drq"
+    assert "DrQEncoder" in (third / "best_model.json").read_text()
+    replay = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(third / "best_model.safetensors")])
+    assert replay.exit_code == 0 and "reproduces its run's results.json" in replay.output, replay.output
 
 
 def test_a_teacher_of_another_env_is_refused_before_anything_runs(teacher, tmp_path):

@@ -273,6 +273,12 @@ def train(
 )
 @shown_option("--frame-stack", default=DistillConfig.frame_stack, type=click.IntRange(min=1))
 @shown_option(
+    "--encoder",
+    default=DistillConfig.encoder,
+    type=click.Choice(["nature", "drq"]),
+    help="the student's image encoder: SB3's NatureCNN, or DrQ's (four 3x3 convolutions: more arithmetic per frame)",
+)
+@shown_option(
     "--state-loss",
     default=DistillConfig.state_loss,
     type=click.FloatRange(min=0),
@@ -318,6 +324,7 @@ def distill(
     rotate: float,
     zoom: float,
     frame_stack: int,
+    encoder: str,
     state_loss: float,
     distractions: float | list[float] | dict[str, Any] | None,
     eval_episodes: int,
@@ -347,6 +354,7 @@ def distill(
         rotate=rotate,
         zoom=zoom,
         frame_stack=frame_stack,
+        encoder=encoder,
         state_loss=state_loss,
         distractions=distractions,
         eval_episodes=eval_episodes,

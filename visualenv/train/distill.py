@@ -10,7 +10,7 @@ fits every label gathered so far (the squared error of its deterministic action,
 cross-entropy of a discrete one) on frames shifted at random by a few pixels (DrQ's augmentation),
 and, if asked, turned and scaled at random as a camera's roll and zoom would.
 
-The student is SB3's ``ActorCriticCnnPolicy`` (NatureCNN) on the stacked frames, so it
+The student is SB3's ``ActorCriticCnnPolicy`` (NatureCNN, or DrQ's encoder) on the stacked frames, so it
 ships, loads and evaluates like a PPO agent: ``visualenv eval``, ``play``, the policy file.
 Its value head is untrained. A distilled agent's returns are not reinforcement learning's
 returns at so many env steps: docs/distill.md says how to report them.
@@ -64,6 +64,9 @@ class DistillConfig:
     # weight of an auxiliary loss: a linear head on the student's CNN features predicts the teacher's state vector
     # (standardised), so the encoder learns from the whole state, not only the action; the head is not saved (0: none)
     state_loss: float = 0.0
+    # the student's image encoder: SB3's NatureCNN ('nature'), or DrQ's ('drq': four 3x3 convolutions, 50 features;
+    # visualenv.train.encoders.DrQEncoder), which does several times NatureCNN's arithmetic per frame
+    encoder: str = "nature"
     frame_stack: int = 3
     # the rounds' frames distracted (docs/distractions.md): a difficulty, [low, high] drawn per episode, or a spec's
     # distractions section (e.g. with DAVIS videos as the background); the final
@@ -99,7 +102,8 @@ def distill(
     rollouts = make_eval_env(spec_path, seed=config.seed, **options)
     evaluator = make_eval_env(spec_path, seed=selection_seed(config.seed), **options)
     try:
-        student = _student(rollouts, load_policy_file(config.student, "distill") if config.student else None)
+        start = load_policy_file(config.student, "distill") if config.student else None
+        student = _student(rollouts, start, config.encoder)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
         folder = RunFolder(run_dir)
         log(f"run folder: {run_dir}")
@@ -234,20 +238,29 @@ def _check_teacher(teacher: Any, spec_path: str, trust_code: bool = False) -> No
         )
 
 
-def _student(vec_env: Any, start: Any = None) -> Any:
-    """SB3's PPO CNN policy on the env's stacked, channels-first frames (`start`'s weights: a policy of the same
-    spaces), laid out channels last: oneDNN's convolutions on a CPU fit it more than twice as fast so
-    (results/benchmarks/code-choices.md)."""
+def _student(vec_env: Any, start: Any = None, encoder: str = "nature") -> Any:
+    """SB3's PPO CNN policy on the env's stacked, channels-first frames, its frames read by `encoder` (`start`'s
+    weights: a policy of the same spaces and encoder), laid out channels last: oneDNN's convolutions on a CPU fit it
+    more than twice as fast so (results/benchmarks/code-choices.md)."""
     from stable_baselines3.common.policies import ActorCriticCnnPolicy
+    from stable_baselines3.common.torch_layers import NatureCNN
 
-    from visualenv.train.encoders import channels_last
+    from visualenv.train.encoders import DrQEncoder, channels_last
 
-    student = ActorCriticCnnPolicy(vec_env.observation_space, vec_env.action_space, lambda _: 0.0)
+    extractor = {"nature": NatureCNN, "drq": DrQEncoder}[encoder]
+    student = ActorCriticCnnPolicy(
+        vec_env.observation_space, vec_env.action_space, lambda _: 0.0, features_extractor_class=extractor
+    )
     if start is not None:
         if start.observation_space != vec_env.observation_space or start.action_space != vec_env.action_space:
             raise ConfigError(
                 f"the student to start from sees {start.observation_space} and acts in {start.action_space}; "
                 f"this env's stacked frames are {vec_env.observation_space} and its actions {vec_env.action_space}"
+            )
+        if type(start.features_extractor) is not extractor:
+            raise ConfigError(
+                f"the student to start from encodes its frames with {type(start.features_extractor).__name__}; "
+                f"--encoder {encoder} is {extractor.__name__}: give --encoder as its run did (its config.json)"
             )
         student.load_state_dict(start.state_dict())
     return channels_last(student)

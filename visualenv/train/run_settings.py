@@ -106,6 +106,7 @@ SETTINGS: dict[str, Rule] = {
     "rotate": Rule(float, 0, 180),
     "zoom": Rule(float, 0, 1, below_high=True),  # a scale of 1 - zoom must stay above 0
     "distractions": Rule((list, dict), optional=True),  # [difficulty], [low, high], or a distractions section
+    "encoder": Rule(str, choices=("nature", "drq")),
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
 #: each backend's settings: those of its first format, then (with the value an older run takes) those added since
@@ -117,7 +118,14 @@ KEYS: dict[str, tuple[str, ...]] = {
 ADDED: dict[str, dict[str, Any]] = {
     "sb3": {"pin": True, "batched": False, "workers": None, "render_device": None, "augment": None},
     "rllib": {"pin": True, "batched": False},
-    "distill": {"student": None, "distractions": None, "state_loss": 0.0, "rotate": 0.0, "zoom": 0.0},
+    "distill": {
+        "student": None,
+        "distractions": None,
+        "state_loss": 0.0,
+        "rotate": 0.0,
+        "zoom": 0.0,
+        "encoder": "nature",
+    },
 }
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
 RECORD_KEYS: dict[str, Rule] = {
