@@ -89,6 +89,19 @@ def test_the_image_model_is_sb3s_nature_cnn_initialised_as_sb3_does():
         assert torch.allclose(gram, 2 * torch.eye(len(gram)), atol=1e-4)  # orthogonal, gain sqrt(2)
 
 
+def test_evaluations_fall_at_the_first_iteration_past_each_multiple_of_eval_every():
+    from visualenv.train.rllib import evaluation_due
+
+    evaluated, last = [], 0
+    for steps in range(100, 1001, 100):  # iterations of 100 steps, evaluations every 128
+        if evaluation_due(last, steps, 128):
+            evaluated.append(steps)
+            last = steps
+    # one at the first iteration past each of 128, 256, ..., 896 (every 128 steps since the last one: 200, 400, ...)
+    assert evaluated == [200, 300, 400, 600, 700, 800, 900]
+    assert not evaluation_due(300, 380, 128) and evaluation_due(300, 384, 128)  # a resumed run's count goes on
+
+
 def test_default_ppo_is_sb3s_and_the_hyperparameter_file_says_so(tmp_path):
     """RLlib's own PPO clips the value loss at 10 and adds a KL penalty; the backend runs SB3's PPO, and its file says so."""
     import yaml

@@ -348,6 +348,13 @@ def _restore(algo: Any, run_dir: Path) -> tuple[int, float]:
     return int(record["steps"]), recorded_seconds(record.get("wall_time_s"))
 
 
+def evaluation_due(last_eval: int, steps: int, every: int) -> bool:
+    """Whether an iteration that brought the run to `steps` passed a multiple of `every` the last evaluation (at
+    `last_eval`) had not: evaluations at the first iteration past each multiple, never drifting off them, however
+    many steps an iteration samples."""
+    return steps // every > last_eval // every
+
+
 def _train_loop(
     config: RLlibTrainConfig,
     folder: RunFolder,
@@ -396,7 +403,7 @@ def _train_loop(
                 reward=f"{reward:.1f}" if reward != "" else "-",
                 runners=result.get("fault_tolerance", {}).get("num_healthy_workers", "?"),
             )
-            if steps // config.eval_every > last_eval // config.eval_every:  # crossed a multiple: no drift
+            if evaluation_due(last_eval, steps, config.eval_every):
                 last_eval = steps
                 evaluate()
                 save_checkpoint(algo, latest, steps, clock.elapsed())
