@@ -221,6 +221,9 @@ def test_a_checkpoint_of_another_model_is_refused_with_one_line(tmp_path):
     assert _restore(fits, tmp_path) == (1024, 61.5)
     (latest / "visualenv.json").write_text('{"steps": 1024, "wall_time_s": "a minute"}')
     assert _restore(fits, tmp_path) == (1024, 0.0)  # an edited time counts as none, not a traceback
+    for edited in ("1e999", "-5", "1" + "0" * 400):  # infinite, negative, an integer no float holds
+        (latest / "visualenv.json").write_text(f'{{"steps": 1024, "wall_time_s": {edited}}}')
+        assert _restore(fits, tmp_path) == (1024, 0.0), edited
 
 
 def test_a_resumed_run_keeps_its_backend(tmp_path):

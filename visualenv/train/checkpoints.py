@@ -49,6 +49,7 @@ from visualenv.train.run_folder import (
     read_config,
     recorded_seconds,
 )
+from visualenv.train.run_settings import finite_number
 
 FORMAT = "visualenv-sb3-checkpoint"
 FORMAT_VERSION = 1
@@ -357,14 +358,10 @@ def _optimizer_state(optimizer: Any, saved: dict[str, Any], record: Any, where: 
         state.setdefault(index, {})[parts[2]] = tensor
     for text, entries in _mapping(record.get("state", {}), f"{where}: state").items():
         for name, value in _mapping(entries, f"{where}: state.{text}").items():
-            if not text.isdigit() or int(text) not in shapes or not _finite_number(value):
+            if not text.isdigit() or int(text) not in shapes or not finite_number(value):
                 raise CheckpointError(f"{where}: state.{text}.{name}: expected a number of a parameter's state")
             state.setdefault(int(text), {})[name] = value
     return {"state": state, "param_groups": param_groups}
-
-
-def _finite_number(value: Any) -> bool:
-    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
 def _conform(saved: Any, like: Any, where: str) -> Any:
@@ -383,7 +380,7 @@ def _conform(saved: Any, like: Any, where: str) -> Any:
     if like is None or isinstance(like, bool):
         ok = saved is None or isinstance(saved, bool)
     elif isinstance(like, (int, float)):
-        ok = _finite_number(saved) and (isinstance(saved, int) or not isinstance(like, int))
+        ok = finite_number(saved) and (isinstance(saved, int) or not isinstance(like, int))
     else:
         ok = isinstance(saved, str) and isinstance(like, str)
     if not ok:
@@ -400,7 +397,7 @@ def _load_counters(model: Any, state: dict[str, Any], where: Path) -> None:
         raise CheckpointError(f"{where}: counters: expected {sorted(current)}, got {sorted(counters)}")
     for name, value in counters.items():
         integer = isinstance(current[name], int) and not isinstance(current[name], bool)
-        if not _finite_number(value) or (integer and not (isinstance(value, int) and 0 <= value <= MAX_COUNTER)):
+        if not finite_number(value) or (integer and not (isinstance(value, int) and 0 <= value <= MAX_COUNTER)):
             raise CheckpointError(
                 f"{where}: counters.{name}: expected {'a count' if integer else 'a number'}, got {value!r:.80}"
             )
@@ -416,7 +413,7 @@ def _load_counters(model: Any, state: dict[str, Any], where: Path) -> None:
 def _episode(entry: Any) -> bool:
     """An entry of SB3's recent episodes (Monitor's ``r``, ``l``, ``t`` and the like): texts to numbers or flags."""
     return isinstance(entry, dict) and all(
-        isinstance(k, str) and (_finite_number(v) or isinstance(v, (bool, str))) for k, v in entry.items()
+        isinstance(k, str) and (finite_number(v) or isinstance(v, (bool, str))) for k, v in entry.items()
     )
 
 

@@ -30,7 +30,6 @@ from __future__ import annotations
 import csv
 import itertools
 import json
-import math
 import shlex
 import sys
 import time
@@ -52,6 +51,7 @@ from visualenv.train.run_settings import (
     RunFolderError,
     check_record,
     check_results,
+    finite_number,
 )
 
 LEGACY_EVAL_OFFSET = 10_000  # runs before the seed bands picked and reported on one stream: the run's seed + this
@@ -247,8 +247,7 @@ class RunClock:
 def recorded_seconds(value: Any) -> float:
     """A training time a checkpoint recorded, in seconds: 0 where it recorded none or something other than a finite
     number from 0 (a checkpoint from before the time was kept, or an edited one), never an error."""
-    number = isinstance(value, (int, float)) and not isinstance(value, bool) and math.isfinite(value)
-    return max(float(value), 0.0) if number else 0.0
+    return max(float(value), 0.0) if finite_number(value) else 0.0
 
 
 def write_results(run: str | Path | RunFolder, results: dict[str, Any]) -> Path:

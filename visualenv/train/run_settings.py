@@ -76,6 +76,17 @@ def _number(x: float) -> str:
     return str(int(x)) if float(x).is_integer() else f"{x:g}"
 
 
+def finite_number(value: Any) -> bool:
+    """Whether a value read from JSON is a number (not true/false) a float holds finitely: not NaN, not infinite, not
+    an integer beyond a float's range (JSON's integers have no bound)."""
+    if isinstance(value, bool) or not isinstance(value, (int, float)):
+        return False
+    try:
+        return math.isfinite(value)
+    except OverflowError:
+        return False
+
+
 _NAMES = {int: "an integer", float: "a number", bool: "true or false", str: "a text", dict: "a mapping", list: "a list"}
 
 COUNT = Rule(int, 1, 2**16)  # envs, runners, workers
