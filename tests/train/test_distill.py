@@ -14,9 +14,10 @@ from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
 from visualenv.cli import main
 from visualenv.errors import ConfigError
-from visualenv.train.distill import DistillConfig, _fit, _shifted, _StateProbe, _student, _warped
+from visualenv.train.distill import STUDENT_ENCODERS, DistillConfig, _fit, _shifted, _StateProbe, _student, _warped
 from visualenv.train.encoders import DrQEncoder
 from visualenv.train.model_files import load_policy_file, save_policy
+from visualenv.train.run_settings import SETTINGS
 
 
 def _images_and_labels(n: int, discrete: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -91,6 +92,7 @@ def test_the_students_encoder_is_kept_in_its_policy_file_and_a_start_of_another_
     assert all(torch.equal(a, b) for a, b in zip(again.state_dict().values(), loaded.state_dict().values()))
     with pytest.raises(ConfigError, match="encodes its frames with DrQEncoder; --encoder nature is NatureCNN"):
         _student(spaces, loaded, "nature")
+    assert SETTINGS["encoder"].choices == STUDENT_ENCODERS  # config.json takes the names --encoder does
 
 
 def test_random_shift_moves_each_image_by_at_most_the_shift():

@@ -21,7 +21,7 @@ from visualenv.cli.group import (
 )
 from visualenv.compat.mkl import compatible_mode
 from visualenv.errors import ConfigError
-from visualenv.train.distill import DistillConfig
+from visualenv.train.distill import STUDENT_ENCODERS, DistillConfig
 from visualenv.train.run_settings import MAX_TRAIN_SEED
 
 
@@ -275,7 +275,7 @@ def train(
 @shown_option(
     "--encoder",
     default=DistillConfig.encoder,
-    type=click.Choice(["nature", "drq"]),
+    type=click.Choice(STUDENT_ENCODERS),
     help="the student's image encoder: SB3's NatureCNN, or DrQ's (four 3x3 convolutions: more arithmetic per frame)",
 )
 @shown_option(

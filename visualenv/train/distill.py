@@ -39,6 +39,8 @@ from visualenv.train.run_folder import RunFolder, new_run_dir, record_run, write
 from visualenv.train.stopping import StopRequest
 
 ROUNDS_COLUMNS = ("round", "frames", "rollout_return", "loss", "eval_return", "wall_s")
+#: the student's image encoders (`--encoder`): SB3's NatureCNN, DrQ's (:class:`visualenv.train.encoders.DrQEncoder`)
+STUDENT_ENCODERS = ("nature", "drq")
 
 
 @dataclass
@@ -247,7 +249,7 @@ def _student(vec_env: Any, start: Any = None, encoder: str = "nature") -> Any:
 
     from visualenv.train.encoders import DrQEncoder, channels_last
 
-    extractor = {"nature": NatureCNN, "drq": DrQEncoder}[encoder]
+    extractor = dict(zip(STUDENT_ENCODERS, (NatureCNN, DrQEncoder)))[encoder]
     student = ActorCriticCnnPolicy(
         vec_env.observation_space, vec_env.action_space, lambda _: 0.0, features_extractor_class=extractor
     )

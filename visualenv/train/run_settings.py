@@ -117,7 +117,7 @@ SETTINGS: dict[str, Rule] = {
     "rotate": Rule(float, 0, 180),
     "zoom": Rule(float, 0, 1, below_high=True),  # a scale of 1 - zoom must stay above 0
     "distractions": Rule((list, dict), optional=True),  # [difficulty], [low, high], or a distractions section
-    "encoder": Rule(str, choices=("nature", "drq")),
+    "encoder": Rule(str, choices=("nature", "drq")),  # distill.STUDENT_ENCODERS (distill imports this module)
 }
 _COMMON = ("spec", "algo", "frame_stack", "eval_episodes", "final_eval_episodes", "seed", "render", "progress")
 #: each backend's settings: those of its first format, then (with the value an older run takes) those added since
