@@ -306,7 +306,7 @@ def train(
 )
 @shown_option("--seed", default=0, type=click.IntRange(0, MAX_TRAIN_SEED))
 @shown_option("-o", "--out", "out_root", default="runs", type=click.Path(file_okay=False))
-@click.option("--no-progress", is_flag=True)
+@click.option("--no-progress", is_flag=True, help="no bar over each round's episodes (the line per round stays)")
 @trust_code_option
 @friendly
 @compatible_mode()  # MKL_CBWR=COMPATIBLE before torch loads: the final evaluation replays in `visualenv eval` on any CPU

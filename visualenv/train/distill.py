@@ -177,7 +177,8 @@ def _rounds(
         writer.writerow(ROUNDS_COLUMNS)
         for round_ in range(config.rounds):
             share = config.mixing ** (round_ + bool(config.student))  # a given student acts from the first round on
-            obs, act, state, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator)
+            with _episode_bar(config, round_) as bar:
+                obs, act, state, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator, bar)
             frames.append(obs)
             labels.append(act)
             states.append(state)
@@ -198,11 +199,10 @@ def _rounds(
             )
             writer.writerow(row)
             f.flush()
-            if config.progress:
-                log(
-                    f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
-                    f"loss {loss:.4f}, evaluation {scored:.1f}"
-                )
+            log(  # with or without the bar, as train's line per evaluation: a run's log shows its rounds
+                f"round {round_}: {row[1]} frames, rollouts {row[2]:.1f} (the teacher's share {share:.0%}), "
+                f"loss {loss:.4f}, evaluation {scored:.1f}"
+            )
             if stop.requested:
                 break
     return best, sum(len(x) for x in frames)
@@ -268,11 +268,24 @@ def _student(vec_env: Any, start: Any = None, encoder: str = "nature") -> Any:
     return channels_last(student)
 
 
+def _episode_bar(config: DistillConfig, round_: int) -> Any:
+    """A tqdm bar over a round's rollout episodes (a round takes minutes), off with `progress` off."""
+    from tqdm import tqdm
+
+    return tqdm(total=config.episodes, desc=f"round {round_}", unit="episode", leave=False, disable=not config.progress)
+
+
 def _rollouts(
-    vec_env: Any, teacher: Any, student: Any, teacher_share: float, episodes: int, generator: np.random.Generator
+    vec_env: Any,
+    teacher: Any,
+    student: Any,
+    teacher_share: float,
+    episodes: int,
+    generator: np.random.Generator,
+    bar: Any = None,
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
     """`episodes` episodes, each step acted by the teacher with probability `teacher_share`, else by the student:
-    each frame, the teacher's action and the state it saw."""
+    each frame, the teacher's action and the state it saw. `bar` (a tqdm bar) advances by one per episode."""
     env = vec_env.unwrapped.envs[0].unwrapped
     discrete = getattr(env.action_space, "n", None)
     frames: list[np.ndarray] = []
@@ -293,6 +306,8 @@ def _rollouts(
         if done[0]:
             returns.append(ret)
             ret = 0.0
+            if bar is not None:
+                bar.update(1)
     return np.stack(frames), np.stack(labels), np.stack(states), returns
 
 
