@@ -14,7 +14,17 @@ from stable_baselines3.common.policies import ActorCriticCnnPolicy
 
 from visualenv.cli import main
 from visualenv.errors import ConfigError
-from visualenv.train.distill import STUDENT_ENCODERS, DistillConfig, _fit, _shifted, _StateProbe, _student, _warped
+from visualenv.train.distill import (
+    STUDENT_ENCODERS,
+    DistillConfig,
+    _FeatureTap,
+    _fit,
+    _replay,
+    _shifted,
+    _StateProbe,
+    _student,
+    _warped,
+)
 from visualenv.train.encoders import DrQEncoder
 from visualenv.train.model_files import load_policy_file, save_policy
 from visualenv.train.run_settings import SETTINGS
@@ -61,9 +71,9 @@ def test_the_state_loss_teaches_the_encoder_what_the_action_does_not_say():
     probe = _StateProbe(student, 1)
 
     def probe_loss() -> torch.Tensor:
-        with probe:
+        with _FeatureTap(student) as features:
             student.get_distribution(torch.from_numpy(frames).float())
-            return probe.loss(sides, sides.mean(axis=0), sides.std(axis=0))
+            return probe.loss(features.output, sides, sides.mean(axis=0), sides.std(axis=0))
 
     probe_loss().backward()
     assert all(p.grad is not None and p.grad.abs().sum() > 0 for p in student.features_extractor.parameters())
@@ -75,7 +85,54 @@ def test_the_state_loss_teaches_the_encoder_what_the_action_does_not_say():
     for _ in range(30):
         _fit(student, optimizer, (frames, np.zeros((64, 1), np.float32), sides), config, generator, probe)
     assert probe_loss().item() < first / 5
-    assert set(student.state_dict()) == saved_keys and probe.features is None  # the hook is gone after each use
+    assert set(student.state_dict()) == saved_keys
+    assert not student.features_extractor._forward_hooks  # the tap's hook is gone after each use
+
+
+def test_the_consistency_loss_draws_a_distracted_frames_features_to_its_clean_twins():
+    """The same images with and without a random bar drawn over them, fitted with and without the consistency loss
+    from the same start: with it, each distracted image's features end nearer its clean twin's, measured against the
+    spread of the features over the images (a loss that shrank every feature alike would not count)."""
+    frames, labels = _images_and_labels(64, discrete=False)
+    distracted = frames.copy()
+    generator = np.random.default_rng(1)
+    for image, row in zip(distracted, generator.integers(0, 30, len(frames))):
+        image[:, row : row + 6, :] = generator.integers(0, 256, (3, 1, 1))  # a bar of a random colour
+    space = gym.spaces.Box(0, 255, (3, 36, 36), np.uint8)
+
+    def distance_after(consistency: float) -> float:
+        torch.manual_seed(0)
+        student = ActorCriticCnnPolicy(space, gym.spaces.Box(-1, 1, (1,)), lambda _: 0.0)
+        optimizer = torch.optim.Adam(student.parameters(), lr=1e-3)
+        config = DistillConfig(spec="", teacher="", epochs=1, batch_size=32, shift=2, consistency=consistency)
+        rng = np.random.default_rng(0)
+        for _ in range(30):
+            _fit(student, optimizer, (distracted, labels, np.zeros((64, 1), np.float32)), config, rng, clean=frames)
+        with torch.no_grad():
+            seen, twin = (
+                student.extract_features(torch.from_numpy(x), student.features_extractor) for x in (distracted, frames)
+            )
+        return (torch.nn.functional.mse_loss(seen, twin) / twin.var(dim=0).mean()).item()
+
+    assert distance_after(1.0) < distance_after(0.0) / 2  # 2.8-3.6 times nearer with seeds 0-2
+
+
+def test_the_twin_replays_an_episode_and_refuses_one_whose_state_it_does_not_reach():
+    """The twin steps through the episode's actions, each of its frames kept once its state is the episode's."""
+    at = {"state": np.zeros(2, np.float32)}
+
+    def step(action):
+        at["state"] = at["state"] + action
+        return (np.full((1, 1), at["state"][0]),)
+
+    env = SimpleNamespace(state_observation=lambda: at["state"])
+    twin = SimpleNamespace(unwrapped=SimpleNamespace(envs=[SimpleNamespace(unwrapped=env)]), step=step)
+    actions = [np.ones(2, np.float32), np.full(2, 2, np.float32)]
+    cleans: list = []
+    last = _replay(twin, np.zeros((1, 1)), actions, [np.zeros(2), np.ones(2)], cleans)
+    assert [c.item() for c in cleans] == [0.0, 1.0] and last.item() == 3.0
+    with pytest.raises(ConfigError, match="undistracted twin's state left the distracted env's"):
+        _replay(twin, last, actions, [np.full(2, 3.0), np.zeros(2)], [])
 
 
 def test_the_students_encoder_is_kept_in_its_policy_file_and_a_start_of_another_encoder_is_refused(tmp_path):
@@ -236,6 +293,8 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
             "{difficulty: [0.1, 0.3], camera: false}",
             "--state-loss",
             "0.5",
+            "--consistency",
+            "0.5",
             "--out",
             str(tmp_path / "again"),
         ],
@@ -244,6 +303,7 @@ def test_distill_writes_a_run_that_eval_replays(teacher, tmp_path):
     second = next((tmp_path / "again" / "Goalie-v0").iterdir())
     recorded = json.loads((second / "config.json").read_text())["config"]
     assert recorded["distractions"] == {"difficulty": [0.1, 0.3], "camera": False} and recorded["state_loss"] == 0.5
+    assert recorded["consistency"] == 0.5  # its clean twins rendered by a second env, which replayed each episode
     assert (
         json.loads((second / "config.json").read_text())["student"]["sha256"]
         == hashlib.sha256((run / "best_model.safetensors").read_bytes()).hexdigest()
@@ -314,4 +374,13 @@ def test_a_bad_distractions_option_is_refused_before_anything_runs(teacher, tmp_
     )
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     assert message in result.output, result.output
+    assert not (tmp_path / "Goalie-v0").exists()
+
+
+def test_the_consistency_loss_without_distractions_is_refused_before_anything_runs(teacher, tmp_path):
+    result = CliRunner().invoke(
+        main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--consistency", "1", "--out", str(tmp_path)]
+    )
+    assert result.exit_code != 0 and "Traceback" not in result.output, result.output
+    assert "give --distractions too" in result.output, result.output
     assert not (tmp_path / "Goalie-v0").exists()

@@ -284,6 +284,13 @@ def train(
     type=click.FloatRange(min=0),
     help="weight of an auxiliary loss: the student's CNN features predict the teacher's state (a head not saved)",
 )
+@shown_option(
+    "--consistency",
+    default=DistillConfig.consistency,
+    type=click.FloatRange(min=0),
+    help="weight of a loss pulling the features of each distracted frame toward those of the same state without "
+    "distractions (rendered by a twin env; needs --distractions)",
+)
 @click.option(
     "--distractions",
     default=None,
@@ -326,6 +333,7 @@ def distill(
     frame_stack: int,
     encoder: str,
     state_loss: float,
+    consistency: float,
     distractions: float | list[float] | dict[str, Any] | None,
     eval_episodes: int,
     final_episodes: int,
@@ -356,6 +364,7 @@ def distill(
         frame_stack=frame_stack,
         encoder=encoder,
         state_loss=state_loss,
+        consistency=consistency,
         distractions=distractions,
         eval_episodes=eval_episodes,
         final_eval_episodes=final_episodes,

@@ -8,7 +8,8 @@ it acts a step with probability mixing ** r, else the student does (DAgger's bet
 teacher labels every state visited with its own action, and after each round the student
 fits every label gathered so far (the squared error of its deterministic action, or the
 cross-entropy of a discrete one) on frames shifted at random by a few pixels (DrQ's augmentation),
-and, if asked, turned and scaled at random as a camera's roll and zoom would.
+and, if asked, turned and scaled at random as a camera's roll and zoom would; with distracted
+frames, its features may also be drawn to those of the same states rendered clean (``consistency``).
 
 The student is SB3's ``ActorCriticCnnPolicy`` (NatureCNN, or DrQ's encoder) on the stacked frames, so it
 ships, loads and evaluates like a PPO agent: ``visualenv eval``, ``play``, the policy file.
@@ -23,7 +24,6 @@ best), ``final_model.safetensors`` and ``results.json`` (the best model on fresh
 
 from __future__ import annotations
 
-import contextlib
 import csv
 import hashlib
 import time
@@ -66,6 +66,10 @@ class DistillConfig:
     # weight of an auxiliary loss: a linear head on the student's CNN features predicts the teacher's state vector
     # (standardised), so the encoder learns from the whole state, not only the action; the head is not saved (0: none)
     state_loss: float = 0.0
+    # weight of a loss pulling the student's features of each distracted frame toward its features (held fixed) of the
+    # same state rendered without distractions, by a twin env stepped with the same actions (SODA's idea: features
+    # that the distractions do not move); needs `distractions` (0: none, and no twin)
+    consistency: float = 0.0
     # the student's image encoder: SB3's NatureCNN ('nature'), or DrQ's ('drq': four 3x3 convolutions, 50 features;
     # visualenv.train.encoders.DrQEncoder), which does several times NatureCNN's arithmetic per frame
     encoder: str = "nature"
@@ -94,6 +98,8 @@ def distill(
     from visualenv.train.model_files import load_model, load_policy_file, save_policy
 
     spec_path = str(resolve(config.spec))
+    if config.consistency > 0 and config.distractions is None:
+        raise ConfigError("--consistency compares distracted frames with clean ones: give --distractions too")
     mkl.pin()  # before the student is built, as `visualenv eval` does: its final evaluation replays there
     teacher = load_policy_file(config.teacher, "distill")
     _check_teacher(teacher, spec_path, trust_code)
@@ -103,6 +109,10 @@ def distill(
         options["distractions"] = config.distractions
     rollouts = make_eval_env(spec_path, seed=config.seed, **options)
     evaluator = make_eval_env(spec_path, seed=selection_seed(config.seed), **options)
+    # the rollouts' states again without distractions: the same seed and actions give the same physics
+    twin = None
+    if config.consistency > 0:
+        twin = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack, trust_code=trust_code)
     try:
         start = load_policy_file(config.student, "distill") if config.student else None
         student = _student(rollouts, start, config.encoder)
@@ -112,14 +122,15 @@ def distill(
         _record_run(folder, config, spec_path)
         started = time.perf_counter()
         with StopRequest("this round").listening() as stop:
-            best_score, frames = _rounds(student, teacher, rollouts, evaluator, config, folder, log, stop)
+            best_score, frames = _rounds(student, teacher, rollouts, evaluator, config, folder, log, stop, twin)
         student.to(memory_format=torch.contiguous_format)  # safetensors stores contiguous tensors
         save_policy(student, folder.final_policy, half=False, algorithm="dagger", run_dir=run_dir)
         best_path = folder.best_policy
         wall = time.perf_counter() - started  # the rounds' time, without the final evaluation, as train's
     finally:
-        rollouts.close()
-        evaluator.close()
+        for env in (rollouts, evaluator, twin):
+            if env is not None:
+                env.close()
     final_env = make_eval_env(
         spec_path, seed=final_seed(config.seed), frame_stack=config.frame_stack, trust_code=trust_code
     )
@@ -154,9 +165,11 @@ def _rounds(
     folder: RunFolder,
     log: Callable[[str], None],
     stop: StopRequest,
+    twin: Any = None,
 ) -> tuple[float, int]:
     """The DAgger rounds, each a row of rounds.csv, until the last or a stop request: the best evaluation and the
-    frames. The best round's student is saved as it evaluates, so a stopped or killed run keeps it."""
+    frames. The best round's student is saved as it evaluates, so a stopped or killed run keeps it. `twin`: the
+    rollouts' env without distractions, whose frames the consistency loss compares."""
     import torch
 
     from visualenv.train.evaluation import evaluate
@@ -170,6 +183,7 @@ def _rounds(
     frames: list[np.ndarray] = []
     labels: list[np.ndarray] = []
     states: list[np.ndarray] = []
+    cleans: list[np.ndarray] = []
     best = -np.inf
     started = time.perf_counter()
     with folder.rounds.open("w", newline="") as f:
@@ -178,12 +192,18 @@ def _rounds(
         for round_ in range(config.rounds):
             share = config.mixing ** (round_ + bool(config.student))  # a given student acts from the first round on
             with _episode_bar(config, round_) as bar:
-                obs, act, state, returns = _rollouts(rollouts, teacher, student, share, config.episodes, generator, bar)
+                obs, act, state, returns, clean = _rollouts(
+                    rollouts, teacher, student, share, config.episodes, generator, bar, twin
+                )
             frames.append(obs)
             labels.append(act)
             states.append(state)
+            if clean is not None:
+                cleans.append(clean)
             gathered = np.concatenate(frames), np.concatenate(labels), np.concatenate(states)
-            loss = _fit(student, optimizer, gathered, config, generator, probe)
+            loss = _fit(
+                student, optimizer, gathered, config, generator, probe, np.concatenate(cleans) if cleans else None
+            )
             scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
             if scored > best:
                 best = scored
@@ -283,16 +303,22 @@ def _rollouts(
     episodes: int,
     generator: np.random.Generator,
     bar: Any = None,
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float]]:
+    twin: Any = None,
+) -> tuple[np.ndarray, np.ndarray, np.ndarray, list[float], np.ndarray | None]:
     """`episodes` episodes, each step acted by the teacher with probability `teacher_share`, else by the student:
-    each frame, the teacher's action and the state it saw. `bar` (a tqdm bar) advances by one per episode."""
+    each frame, the teacher's action, the state it saw and (given a `twin` env) the twin's frame of that state, the
+    twin stepping through each episode's actions once it ends (envs of one process that render in turn each step
+    cost several times more). `bar` (a tqdm bar) advances by one per episode."""
     env = vec_env.unwrapped.envs[0].unwrapped
     discrete = getattr(env.action_space, "n", None)
     frames: list[np.ndarray] = []
     labels: list[np.ndarray] = []
     states: list[np.ndarray] = []
     returns: list[float] = []
+    cleans: list[np.ndarray] = []
     obs = vec_env.reset()
+    clean: Any = twin.reset() if twin is not None else None
+    actions: list[np.ndarray] = []  # the episode's, for the twin
     ret = 0.0
     while len(returns) < episodes:
         state = np.asarray(env.state_observation(), dtype=np.float32)
@@ -301,42 +327,72 @@ def _rollouts(
         frames.append(obs[0])
         labels.append(np.asarray(label[0], dtype=np.float32 if discrete is None else np.int64))
         action = label if generator.random() < teacher_share else student.predict(obs, deterministic=True)[0]
+        actions.append(action)
         obs, reward, done, _ = vec_env.step(action)
         ret += float(reward[0])
         if done[0]:
             returns.append(ret)
             ret = 0.0
+            if twin is not None:
+                clean = _replay(twin, clean, actions, states[-len(actions) :], cleans)
+            actions = []
             if bar is not None:
                 bar.update(1)
-    return np.stack(frames), np.stack(labels), np.stack(states), returns
+    return np.stack(frames), np.stack(labels), np.stack(states), returns, np.stack(cleans) if cleans else None
 
 
-class _StateProbe:
-    """A linear head on the student's CNN features (read by a forward hook as the policy computes them) that predicts
-    the teacher's state: an action is one number or a few, the state is all the frames hold for the task."""
+def _replay(twin: Any, first: Any, actions: list[np.ndarray], states: list[np.ndarray], cleans: list) -> Any:
+    """An episode's `actions` stepped in the `twin` env from its observation `first`, each frame appended to `cleans`
+    once the twin's state is checked to be the episode's (`states`): the twin's next observation.
 
-    def __init__(self, student: Any, state_size: int):
-        import torch
+    Distractions draw from their own generator, so the same seed and actions give the same physics; a spec whose
+    dynamics differ with them would break that, and is refused."""
+    env = twin.unwrapped.envs[0].unwrapped
+    clean = first
+    for action, state in zip(actions, states):
+        if not np.array_equal(np.asarray(env.state_observation(), dtype=np.float32).ravel(), state):
+            raise ConfigError(
+                "--consistency needs the env's states to follow from its seed and actions alone, but the "
+                "undistracted twin's state left the distracted env's: this spec's dynamics differ with its distractions"
+            )
+        cleans.append(clean[0])
+        clean = twin.step(action)[0]
+    return clean
 
+
+class _FeatureTap:
+    """The student's features as its last forward pass computed them (a forward hook on its extractor, removed on
+    leaving), for the losses on them: the state probe's and the consistency loss."""
+
+    def __init__(self, student: Any):
         self.extractor = student.features_extractor
-        self.head = torch.nn.Linear(self.extractor.features_dim, state_size)
-        self.features: Any = None
+        self.output: Any = None
 
-    def loss(self, states: np.ndarray, mean: np.ndarray, scale: np.ndarray) -> Any:
-        """The squared error of the last features' prediction of `states`, each standardised by `mean` and `scale`."""
-        import torch
-
-        return torch.nn.functional.mse_loss(self.head(self.features), torch.from_numpy((states - mean) / scale))
-
-    def __enter__(self) -> "_StateProbe":
+    def __enter__(self) -> "_FeatureTap":
         self._hook = self.extractor.register_forward_hook(
-            lambda module, inputs, output: setattr(self, "features", output)
+            lambda module, inputs, output: setattr(self, "output", output)
         )
         return self
 
     def __exit__(self, *exc: object) -> None:
         self._hook.remove()
-        self.features = None
+        self.output = None
+
+
+class _StateProbe:
+    """A linear head on the student's CNN features that predicts the teacher's state: an action is one number or a
+    few, the state is all the frames hold for the task."""
+
+    def __init__(self, student: Any, state_size: int):
+        import torch
+
+        self.head = torch.nn.Linear(student.features_extractor.features_dim, state_size)
+
+    def loss(self, features: Any, states: np.ndarray, mean: np.ndarray, scale: np.ndarray) -> Any:
+        """The squared error of the prediction of `states` from `features`, each standardised by `mean` and `scale`."""
+        import torch
+
+        return torch.nn.functional.mse_loss(self.head(features), torch.from_numpy((states - mean) / scale))
 
 
 def _fit(
@@ -346,9 +402,12 @@ def _fit(
     config: DistillConfig,
     generator: np.random.Generator,
     probe: _StateProbe | None = None,
+    clean: np.ndarray | None = None,
 ) -> float:
     """`config.epochs` passes of minibatches over every frame, label and state so far (the loss: the imitation loss,
-    plus `config.state_loss` times the probe's); the last pass's mean imitation loss."""
+    plus `config.state_loss` times the probe's; given `clean` twins of the frames, those too are fitted, and
+    `config.consistency` times the squared distance between each frame's features and its twin's is added); the last
+    pass's mean imitation loss."""
     import torch
 
     frames, labels, states = gathered
@@ -356,15 +415,24 @@ def _fit(
     student.set_training_mode(True)
     updates = max(1, int(config.epochs * len(frames) / config.batch_size))
     losses = []
-    with probe or contextlib.nullcontext():
+    with _FeatureTap(student) as features:
         for _ in range(updates):
             batch = generator.integers(0, len(frames), config.batch_size)
-            images = _shifted(torch.from_numpy(frames[batch]), config.shift, generator)
-            images = _warped(images, config.rotate, config.zoom, generator).contiguous(
-                memory_format=torch.channels_last
-            )
-            imitation = _imitation_loss(student.get_distribution(images).distribution, torch.from_numpy(labels[batch]))
-            loss = imitation + config.state_loss * probe.loss(states[batch], mean, scale) if probe else imitation
+            images = torch.from_numpy(frames[batch])
+            if clean is not None:  # both views shifted and warped alike: stacked as one image's channels
+                images = torch.cat([images, torch.from_numpy(clean[batch])], dim=1)
+            images = _warped(_shifted(images, config.shift, generator), config.rotate, config.zoom, generator)
+            views = len(images.split(frames.shape[1], dim=1))  # then one batch: the distracted views, the clean ones
+            images = torch.cat(images.split(frames.shape[1], dim=1)).contiguous(memory_format=torch.channels_last)
+            distribution = student.get_distribution(images).distribution
+            imitation = _imitation_loss(distribution, torch.from_numpy(np.concatenate([labels[batch]] * views)))
+            loss = imitation
+            if probe is not None:
+                seen = np.concatenate([states[batch]] * views)
+                loss = loss + config.state_loss * probe.loss(features.output, seen, mean, scale)
+            if views == 2:  # both ways: a target held fixed chases the features it moves
+                distracted, undistracted = features.output.chunk(2)
+                loss = loss + config.consistency * torch.nn.functional.mse_loss(distracted, undistracted)
             optimizer.zero_grad()
             loss.backward()
             optimizer.step()

@@ -114,6 +114,7 @@ SETTINGS: dict[str, Rule] = {
     "learning_rate": Rule(float, 0, 1, above_low=True),
     "shift": Rule(int, 0, 1024),
     "state_loss": Rule(float, 0, 10**6),
+    "consistency": Rule(float, 0, 10**6),
     "rotate": Rule(float, 0, 180),
     "zoom": Rule(float, 0, 1, below_high=True),  # a scale of 1 - zoom must stay above 0
     "distractions": Rule((list, dict), optional=True),  # [difficulty], [low, high], or a distractions section
@@ -136,6 +137,7 @@ ADDED: dict[str, dict[str, Any]] = {
         "rotate": 0.0,
         "zoom": 0.0,
         "encoder": "nature",
+        "consistency": 0.0,
     },
 }
 ALGORITHMS = {"sb3": ("ppo", "a2c", "dqn", "sac"), "rllib": ("ppo",), "distill": ("dagger",)}
