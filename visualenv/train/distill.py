@@ -66,9 +66,9 @@ class DistillConfig:
     # weight of an auxiliary loss: a linear head on the student's CNN features predicts the teacher's state vector
     # (standardised), so the encoder learns from the whole state, not only the action; the head is not saved (0: none)
     state_loss: float = 0.0
-    # weight of a loss pulling the student's features of each distracted frame toward its features (held fixed) of the
-    # same state rendered without distractions, by a twin env stepped with the same actions (SODA's idea: features
-    # that the distractions do not move); needs `distractions` (0: none, and no twin)
+    # weight of a loss drawing together the student's features of each distracted frame and of the same state
+    # rendered without distractions (by a twin env stepped with the same actions), which it fits too (SODA's idea:
+    # features that the distractions do not move); needs `distractions` (0: none, and no twin)
     consistency: float = 0.0
     # the student's image encoder: SB3's NatureCNN ('nature'), or DrQ's ('drq': four 3x3 convolutions, 50 features;
     # visualenv.train.encoders.DrQEncoder), which does several times NatureCNN's arithmetic per frame
@@ -422,8 +422,8 @@ def _fit(
             if clean is not None:  # both views shifted and warped alike: stacked as one image's channels
                 images = torch.cat([images, torch.from_numpy(clean[batch])], dim=1)
             images = _warped(_shifted(images, config.shift, generator), config.rotate, config.zoom, generator)
-            views = len(images.split(frames.shape[1], dim=1))  # then one batch: the distracted views, the clean ones
-            images = torch.cat(images.split(frames.shape[1], dim=1)).contiguous(memory_format=torch.channels_last)
+            parts = images.split(frames.shape[1], dim=1)  # then one batch: the distracted views, the clean ones
+            views, images = len(parts), torch.cat(parts).contiguous(memory_format=torch.channels_last)
             distribution = student.get_distribution(images).distribution
             imitation = _imitation_loss(distribution, torch.from_numpy(np.concatenate([labels[batch]] * views)))
             loss = imitation
