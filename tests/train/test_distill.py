@@ -86,7 +86,11 @@ def test_the_state_loss_teaches_the_encoder_what_the_action_does_not_say():
         _fit(student, optimizer, (frames, np.zeros((64, 1), np.float32), sides), config, generator, probe)
     assert probe_loss().item() < first / 5
     assert set(student.state_dict()) == saved_keys
-    assert not student.features_extractor._forward_hooks  # the tap's hook is gone after each use
+    with _FeatureTap(student) as tap:
+        student.get_distribution(torch.from_numpy(frames[:2]).float())
+        assert tap.output is not None
+    student.get_distribution(torch.from_numpy(frames[:2]).float())
+    assert tap.output is None  # its hook is gone on leaving
 
 
 def test_the_consistency_loss_draws_a_distracted_frames_features_to_its_clean_twins():
