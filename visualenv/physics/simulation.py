@@ -246,7 +246,3 @@ class Simulation:
             yield
         finally:
             self._replay, self._replay_blown = None, False
-
-    def body_poses(self) -> tuple[np.ndarray, np.ndarray]:
-        """Every body's world position (nbody x 3) and orientation quaternion w, x, y, z (nbody x 4): live views, no copy."""
-        return self.data.xpos, self.data.xquat

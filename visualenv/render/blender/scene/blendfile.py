@@ -122,8 +122,3 @@ def describe(path: str | Path, *, timeout: float = READ_TIMEOUT) -> dict[str, An
             raise BlendReadError(f"cannot read {path} as a .blend file: {answer['error']}")
         _answers[key] = answer["ok"]
     return _answers[key]
-
-
-def close_reader() -> None:
-    """Stop the reader process (it is started again when needed)."""
-    _reader.close()
