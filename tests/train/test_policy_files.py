@@ -239,6 +239,28 @@ def test_each_shipped_agent_is_a_float16_policy_file_and_nothing_under_results_i
     assert pretrained_model(env_id).name == "policy.safetensors"
 
 
+def test_pretrained_colon_name_is_an_agent_shipped_beside_the_main_one_and_an_unknown_name_lists_those_there_are():
+    from visualenv.errors import VisualEnvError
+    from visualenv.viewer.app import load_agent
+
+    folder = REPO / "results" / "DMC-cartpole-swingup-v0"
+    assert pretrained_model("DMC-cartpole-swingup-v0", "pretrained:robust") == folder / "robust" / "policy.safetensors"
+    assert pretrained_model("DMC-cartpole-swingup-v0", "pretrained") == folder / "policy.safetensors"
+    for unknown in ("pretrained:nosuch", "pretrained:../../results/Goalie-v0", "pretrained:drq"):  # drq/ has no agent
+        with pytest.raises(VisualEnvError) as caught:
+            pretrained_model("DMC-cartpole-swingup-v0", unknown)
+        assert str(caught.value) == (
+            f"{unknown}: no such shipped agent of DMC-cartpole-swingup-v0; there are pretrained, pretrained:robust, "
+            "pretrained:teacher"
+        )
+    with pytest.raises(VisualEnvError, match="pretrained:robust: no such shipped agent of Goalie-v0; there is only"):
+        pretrained_model("Goalie-v0", "pretrained:robust")
+    agent = load_agent(REPO / "specs" / "dmc" / "cartpole_swingup.yaml", "pretrained:robust")  # play's and view's way
+    assert agent.path == str(folder / "robust" / "policy.safetensors")
+    refused = CliRunner().invoke(main, ["eval", "DMC-cartpole-swingup-v0", "--model", "pretrained:nosuch"])
+    assert refused.exit_code == 1 and "pretrained:nosuch: no such shipped agent" in refused.output, refused.output
+
+
 def test_no_pickle_based_file_ships():
     suffixes = {".pt", ".pth", ".pkl", ".pickle", ".zip", ".ckpt"}
     tracked = subprocess.run(["git", "ls-files", "results"], cwd=REPO, capture_output=True, text=True).stdout.split()

@@ -304,7 +304,7 @@ def _write_results(results: dict, model_path: str, spec: str) -> Path:
 @click.option(
     "--model",
     "model_path",
-    help="an agent plays: a trained model (as `play` takes), or 'pretrained': the shipped agent; default: you play with the keys",
+    help="an agent plays: a trained model (as `play` takes), or 'pretrained' ('pretrained:NAME'): a shipped agent; default: you play with the keys",
 )
 @shown_option("--algo", default="ppo", type=click.Choice(ALGORITHMS))
 @click.option(

@@ -21,15 +21,12 @@ ALGORITHMS = ("ppo", "a2c", "dqn", "sac")
 EXIT_INVALID = 2
 
 
-PRETRAINED = "pretrained"  # --model's name for the shipped agent
-
-
 RANDOM = "random"  # eval --model's name for uniform random actions (the baseline)
 
 
 MODEL_HELP = (
     "a policy file (policy.safetensors with its policy.json, as export-policy and train write) or 'pretrained' (the shipped "
-    "agent, results/<Id>/policy.safetensors){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle"
+    "agent, results/<Id>/policy.safetensors; 'pretrained:NAME': results/<Id>/NAME/'s){}; a .zip, .pt or RLlib checkpoint folder only with --trust-pickle"
 )
 
 
@@ -94,13 +91,14 @@ def main() -> None:
 
 
 def model_file(spec: str, value: str) -> str:
-    """--model: a model file or checkpoint folder, or 'pretrained' for the shipped agent of the spec's env (results/<Id>/policy.safetensors)."""
-    if value == PRETRAINED:
-        from visualenv.train.model_files import pretrained_model
+    """--model: a model file or checkpoint folder, or 'pretrained' ('pretrained:NAME') for a shipped agent of the spec's env."""
+    from visualenv.train.model_files import PRETRAINED, is_pretrained, pretrained_model
+
+    if is_pretrained(value):
         from visualenv.env.registration import resolve
         from visualenv.spec.loader import load_spec
 
-        return str(pretrained_model(load_spec(resolve(spec)).spec.id))
+        return str(pretrained_model(load_spec(resolve(spec)).spec.id, value))
     if not Path(value).exists():  # a file, or an RLlib checkpoint folder: load_model tells which it is not
         raise click.BadParameter(
             f"{value}: no such file (or '{PRETRAINED}' for the shipped agent)", param_hint="--model"

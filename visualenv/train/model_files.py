@@ -225,9 +225,30 @@ def run_record(run_dir: Path | None) -> dict[str, Any]:
     return record
 
 
-def pretrained_model(env_id: str) -> Path:
-    """The shipped agent of a bundled env: results/<Id>/policy.safetensors (with its policy.json) in the source checkout."""
-    path = RunFolder(RESULTS_DIR / env_id).shipped_policy
+#: ``--model``'s name for a bundled env's shipped agent; ``pretrained:NAME`` names another agent shipped beside it
+PRETRAINED = "pretrained"
+
+
+def is_pretrained(model: str) -> bool:
+    """Whether ``--model`` names a shipped agent (``pretrained`` or ``pretrained:NAME``) rather than a file."""
+    return model == PRETRAINED or model.startswith(PRETRAINED + ":")
+
+
+def pretrained_model(env_id: str, model: str = PRETRAINED) -> Path:
+    """The shipped agent of a bundled env: results/<Id>/policy.safetensors (with its policy.json) in the source checkout.
+
+    ``pretrained:NAME`` is the agent in results/<Id>/NAME/ (the DMC cartpole's student trained on distracted frames is
+    ``pretrained:robust``); an unknown name is an error listing the names there are.
+    """
+    folder = RESULTS_DIR / env_id
+    name = model.partition(":")[2]
+    path = RunFolder(folder / name if name else folder).shipped_policy
+    if name and (not name.replace("-", "").replace("_", "").isalnum() or not path.is_file()):
+        there = [f"{PRETRAINED}:{p.parent.name}" for p in sorted(folder.glob("*/" + path.name))]
+        raise VisualEnvError(
+            f"{model}: no such shipped agent of {env_id}; "
+            + (f"there are {', '.join([PRETRAINED, *there])}" if there else f"there is only {PRETRAINED}")
+        )
     if not path.is_file():
         raise VisualEnvError(
             f"no shipped model for {env_id}: {path} does not exist "

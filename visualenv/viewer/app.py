@@ -8,24 +8,23 @@ from typing import Callable
 
 from visualenv.env.registration import read_header, resolve
 from visualenv.errors import VisualEnvError
-from visualenv.train.model_files import load_model, pretrained_model
+from visualenv.train.model_files import PRETRAINED, is_pretrained, load_model, pretrained_model
 from visualenv.viewer.board import Board
 from visualenv.viewer.server import ViewerServer, allow_open_files, is_local
 from visualenv.viewer.session import DEFAULT_VIEW, Agent, Session, ViewOptions
 
 #: `visualenv view`'s port when none is given (any free one where it is taken)
 DEFAULT_PORT = 8765
-PRETRAINED = "pretrained"
 
 
 def load_agent(path: Path, model: str, algo: str = "ppo", *, trust_pickle: bool = False) -> Agent:
     """The agent of ``--model``: a policy file, 'pretrained' (the shipped agent of the spec's id), or with `trust_pickle`
     a pickle-based model (an SB3 .zip, a torch .pt, an RLlib checkpoint folder), as `play` loads them."""
-    if model == PRETRAINED:
+    if is_pretrained(model):
         env_id = read_header(path)[0]
         if not env_id:
             raise VisualEnvError(f"{path} has no top-level 'id': --model {PRETRAINED} names the shipped agent of an id")
-        file = str(pretrained_model(env_id))
+        file = str(pretrained_model(env_id, model))
     elif not Path(model).exists():
         raise VisualEnvError(f"--model {model}: no such file (or '{PRETRAINED}' for the shipped agent)")
     else:
