@@ -154,11 +154,13 @@ def test_eval_of_a_model_alone_and_its_refusals(run_dir, tmp_path):
     )
     missing = CliRunner().invoke(main, ["eval", "Goalie-v0", "--model", str(tmp_path / "none.zip")])
     assert missing.exit_code == 2 and "none.zip: no such file (or 'pretrained' for the shipped agent)" in missing.output
-    other_env = CliRunner().invoke(main, ["eval", "Hover2D-v0", "--model", str(alone)])
+    never = tmp_path / "figures" / "never.json"  # checked writable first, and not left behind empty by the refusal
+    other_env = CliRunner().invoke(main, ["eval", "Hover2D-v0", "--model", str(alone), "-o", str(never)])
     assert (
         other_env.exit_code == 1
         and "was trained on observations (4, 100, 100) and actions Discrete(2)" in other_env.output
     )
+    assert never.parent.is_dir() and not never.exists()
     unwritable = CliRunner().invoke(
         main, ["eval", "Goalie-v0", "--model", str(alone), "-o", str(alone.with_suffix(".json") / "eval.json")]
     )

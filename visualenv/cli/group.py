@@ -107,12 +107,17 @@ def model_file(spec: str, value: str) -> str:
 
 
 def check_writable(path: str, option: str) -> None:
-    """A figure file that cannot be written is refused now, not after minutes of measuring (its folder is made)."""
+    """A figure file that cannot be written is refused now, not after minutes of measuring (its folder is made).
+
+    A file that was not there is removed again, so a run that fails later leaves no empty file behind."""
     from visualenv.files import make_dir
 
     try:
         make_dir(Path(path).parent)
+        existed = Path(path).exists()
         Path(path).touch()
+        if not existed:
+            Path(path).unlink()
     except (OSError, VisualEnvError) as exc:
         raise click.BadParameter(
             f"cannot write {path}: {getattr(exc, 'strerror', None) or exc}", param_hint=option
