@@ -24,7 +24,7 @@ from visualenv.env.wrappers import FrameStack, subspaces
 from visualenv.errors import VisualEnvError
 from visualenv.train.policy_format import WEIGHTS, is_policy_file, read_meta, read_policy, write_policy
 from visualenv.spec.loader import spec_identity
-from visualenv.train.run_folder import RunFolder, RunFolderError, read_config
+from visualenv.train.run_folder import SHIPPED_POLICY, RunFolder, RunFolderError, read_config
 
 #: the shipped agents live in the source checkout: results/<Id>/policy.safetensors with its policy.json
 RESULTS_DIR = Path(__file__).resolve().parents[2] / "results"
@@ -242,13 +242,14 @@ def pretrained_model(env_id: str, model: str = PRETRAINED) -> Path:
     """
     folder = RESULTS_DIR / env_id
     name = model.partition(":")[2]
-    path = RunFolder(folder / name if name else folder).shipped_policy
-    if name and (not name.replace("-", "").replace("_", "").isalnum() or not path.is_file()):
-        there = [f"{PRETRAINED}:{p.parent.name}" for p in sorted(folder.glob("*/" + path.name))]
-        raise VisualEnvError(
-            f"{model}: no such shipped agent of {env_id}; "
-            + (f"there are {', '.join([PRETRAINED, *there])}" if there else f"there is only {PRETRAINED}")
-        )
+    if name:  # one of the folders beside the main agent that hold one: nothing else, so no path leads elsewhere
+        there = sorted(p.parent.name for p in folder.glob(f"*/{SHIPPED_POLICY}"))
+        if name not in there:
+            names = ", ".join([PRETRAINED, *(f"{PRETRAINED}:{n}" for n in there)])
+            listed = f"there are {names}" if there else f"there is only {PRETRAINED}"
+            raise VisualEnvError(f"{model}: no such shipped agent of {env_id}; {listed}")
+        folder = folder / name
+    path = RunFolder(folder).shipped_policy
     if not path.is_file():
         raise VisualEnvError(
             f"no shipped model for {env_id}: {path} does not exist "
