@@ -20,6 +20,7 @@ from visualenv.train.distill import (
     _FeatureTap,
     _fit,
     _replay,
+    _Rows,
     _shifted,
     _StateProbe,
     _student,
@@ -154,6 +155,19 @@ def test_the_students_encoder_is_kept_in_its_policy_file_and_a_start_of_another_
     with pytest.raises(ConfigError, match="encodes its frames with DrQEncoder; --encoder nature is NatureCNN"):
         _student(spaces, loaded, "nature")
     assert SETTINGS["encoder"].choices == STUDENT_ENCODERS  # config.json takes the names --encoder does
+
+
+def test_the_rounds_rows_read_as_their_concatenation_in_the_order_asked():
+    rng = np.random.default_rng(0)
+    parts = [rng.integers(0, 256, (n, 2, 3), dtype=np.uint8) for n in (5, 1, 7)]
+    rows = _Rows()
+    for part in parts:
+        rows.append(part)
+    whole = np.concatenate(parts)
+    asked = rng.integers(0, len(whole), 40)
+    assert len(rows) == 13 and rows.shape == (13, 2, 3)
+    np.testing.assert_array_equal(rows[asked], whole[asked])
+    np.testing.assert_array_equal(rows[np.array([12, 0, 5, 5, 6])], whole[[12, 0, 5, 5, 6]])
 
 
 def test_random_shift_moves_each_image_by_at_most_the_shift():
@@ -378,6 +392,15 @@ def test_a_bad_distractions_option_is_refused_before_anything_runs(teacher, tmp_
     )
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     assert message in result.output, result.output
+    assert not (tmp_path / "Goalie-v0").exists()
+
+
+def test_rounds_whose_frames_cannot_fit_in_memory_are_refused_before_anything_runs(teacher, tmp_path):
+    result = CliRunner().invoke(
+        main, ["distill", "Goalie-v0", "--teacher", str(teacher), "--episodes", "1000000000", "--out", str(tmp_path)]
+    )
+    assert result.exit_code != 0 and "Traceback" not in result.output, result.output
+    assert "GiB of frames, and" in result.output and "set --episodes" in result.output, result.output
     assert not (tmp_path / "Goalie-v0").exists()
 
 

@@ -114,6 +114,7 @@ def distill(
     if config.consistency > 0:
         twin = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack, trust_code=trust_code)
     try:
+        log(f"frames gathered: {_check_frame_memory(config, rollouts)}")
         start = load_policy_file(config.student, "distill") if config.student else None
         student = _student(rollouts, start, config.encoder)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
@@ -180,10 +181,9 @@ def _rounds(
     parameters = [*student.parameters(), *(probe.head.parameters() if probe else ())]
     optimizer = torch.optim.Adam(parameters, lr=config.learning_rate)
     generator = np.random.default_rng(config.seed)
-    frames: list[np.ndarray] = []
+    frames, cleans = _Rows(), _Rows()
     labels: list[np.ndarray] = []
     states: list[np.ndarray] = []
-    cleans: list[np.ndarray] = []
     best = -np.inf
     started = time.perf_counter()
     with folder.rounds.open("w", newline="") as f:
@@ -200,10 +200,8 @@ def _rounds(
             states.append(state)
             if clean is not None:
                 cleans.append(clean)
-            gathered = np.concatenate(frames), np.concatenate(labels), np.concatenate(states)
-            loss = _fit(
-                student, optimizer, gathered, config, generator, probe, np.concatenate(cleans) if cleans else None
-            )
+            gathered = frames, np.concatenate(labels), np.concatenate(states)
+            loss = _fit(student, optimizer, gathered, config, generator, probe, cleans if len(cleans) else None)
             scored = evaluate(student, evaluator, config.eval_episodes)["mean_reward"]
             if scored > best:
                 best = scored
@@ -211,7 +209,7 @@ def _rounds(
                 save_policy(student, folder.best_policy, half=False, algorithm="dagger", run_dir=folder.path)
             row = (
                 round_,
-                sum(len(x) for x in frames),
+                len(frames),
                 round(float(np.mean(returns)), 3),
                 round(loss, 6),
                 round(scored, 3),
@@ -225,7 +223,7 @@ def _rounds(
             )
             if stop.requested:
                 break
-    return best, sum(len(x) for x in frames)
+    return best, len(frames)
 
 
 def _record_run(folder: RunFolder, config: DistillConfig, spec_path: str) -> None:
@@ -293,6 +291,60 @@ def _episode_bar(config: DistillConfig, round_: int) -> Any:
     from tqdm import tqdm
 
     return tqdm(total=config.episodes, desc=f"round {round_}", unit="episode", leave=False, disable=not config.progress)
+
+
+#: the share of the available memory the rounds' frames may take (the envs, the student and its batches need the rest)
+FRAME_MEMORY_SHARE = 0.7
+
+
+def _check_frame_memory(config: DistillConfig, rollouts: Any) -> str:
+    """The most memory the rounds' frames can take, in words; refused before the run starts where it exceeds the
+    available memory's share (DAgger keeps every frame of every round, so a run of many episodes a round would
+    otherwise fail hours in)."""
+    import psutil
+
+    steps = rollouts.unwrapped.envs[0].unwrapped.max_episode_steps
+    views = 2 if config.consistency > 0 else 1  # the distracted frame and its clean twin
+    per_frame = int(np.prod(rollouts.observation_space.shape)) * rollouts.observation_space.dtype.itemsize * views
+    rows = config.rounds * config.episodes * steps
+    need, free = rows * per_frame, psutil.virtual_memory().available
+    if need > FRAME_MEMORY_SHARE * free:
+        fits = int(FRAME_MEMORY_SHARE * free // (config.rounds * steps * per_frame))
+        raise ConfigError(
+            f"{config.rounds} rounds of {config.episodes} episodes of up to {steps} steps would keep "
+            f"{need / 2**30:.1f} GiB of frames, and {free / 2**30:.1f} GiB of memory are available: "
+            + (f"set --episodes {fits} or less, or fewer --rounds" if fits else "set fewer --rounds")
+        )
+    return f"at most {rows:,} ({need / 2**30:.1f} GiB)"
+
+
+class _Rows:
+    """Arrays of rows gathered round by round, read as if concatenated but never copied into one: a run's frames are
+    most of its memory, and a copy each round would double it."""
+
+    def __init__(self) -> None:
+        self.parts: list[np.ndarray] = []
+        self.starts = np.zeros(1, dtype=np.int64)  # each part's first row, then the number of rows
+
+    def append(self, part: np.ndarray) -> None:
+        self.parts.append(part)
+        self.starts = np.append(self.starts, self.starts[-1] + len(part))
+
+    def __len__(self) -> int:
+        return int(self.starts[-1])
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        return (len(self), *self.parts[0].shape[1:])
+
+    def __getitem__(self, rows: np.ndarray) -> np.ndarray:
+        """The `rows` (indices into all rows) in their order, as one array."""
+        part = np.searchsorted(self.starts, rows, side="right") - 1
+        out = np.empty((len(rows), *self.parts[0].shape[1:]), dtype=self.parts[0].dtype)
+        for k in np.unique(part):
+            where = part == k
+            out[where] = self.parts[k][rows[where] - self.starts[k]]
+        return out
 
 
 def _rollouts(
@@ -398,11 +450,11 @@ class _StateProbe:
 def _fit(
     student: Any,
     optimizer: Any,
-    gathered: tuple[np.ndarray, np.ndarray, np.ndarray],
+    gathered: tuple[_Rows | np.ndarray, np.ndarray, np.ndarray],
     config: DistillConfig,
     generator: np.random.Generator,
     probe: _StateProbe | None = None,
-    clean: np.ndarray | None = None,
+    clean: _Rows | np.ndarray | None = None,
 ) -> float:
     """`config.epochs` passes of minibatches over every frame, label and state so far (the loss: the imitation loss,
     plus `config.state_loss` times the probe's; given `clean` twins of the frames, those too are fitted, and
