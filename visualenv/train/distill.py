@@ -114,7 +114,7 @@ def distill(
     if config.consistency > 0:
         twin = make_eval_env(spec_path, seed=config.seed, frame_stack=config.frame_stack, trust_code=trust_code)
     try:
-        log(f"frames gathered: {_check_frame_memory(config, rollouts)}")
+        log(f"the rounds keep {_check_frame_memory(config, rollouts)}")
         start = load_policy_file(config.student, "distill") if config.student else None
         student = _student(rollouts, start, config.encoder)
         run_dir = new_run_dir(out_root, load_spec(spec_path).spec.id)
@@ -315,7 +315,7 @@ def _check_frame_memory(config: DistillConfig, rollouts: Any) -> str:
             f"{need / 2**30:.1f} GiB of frames, and {free / 2**30:.1f} GiB of memory are available: "
             + (f"set --episodes {fits} or less, or fewer --rounds" if fits else "set fewer --rounds")
         )
-    return f"at most {rows:,} ({need / 2**30:.1f} GiB)"
+    return f"at most {rows:,} frames ({need / 2**30:.1f} GiB)"
 
 
 class _Rows:
