@@ -289,7 +289,7 @@ def test_a_config_without_augment_reads_as_none(tmp_path):
 def test_the_refusal_of_a_buffer_too_big_names_a_size_that_fits(tmp_path):
     from visualenv.env.registration import resolve
     from visualenv.spec import load_spec
-    from visualenv.train.config_checks import REPLAY_MEMORY_SHARE, check_replay_buffer, replay_buffer_bytes
+    from visualenv.train.config_checks import STORED_MEMORY_SHARE, check_replay_buffer, replay_buffer_bytes
     from visualenv.train.sb3 import TrainConfig
 
     import psutil
@@ -303,7 +303,7 @@ def test_the_refusal_of_a_buffer_too_big_names_a_size_that_fits(tmp_path):
     with pytest.raises(ConfigError) as refused:
         check_replay_buffer(config, {"buffer_size": huge}, loaded)
     fits = int(re.search(r"set buffer_size=([\d,]+) or less", str(refused.value)).group(1).replace(",", ""))
-    assert 0 < fits * one <= REPLAY_MEMORY_SHARE * psutil.virtual_memory().total
+    assert 0 < fits * one <= STORED_MEMORY_SHARE * psutil.virtual_memory().total
     check_replay_buffer(config, {"buffer_size": fits // 2}, loaded)
 
 

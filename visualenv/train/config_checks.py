@@ -67,8 +67,18 @@ def check_torch_device(device: Any) -> None:
         )
 
 
-#: the share of the available memory a replay buffer may take (the envs, the model and the evaluation need the rest)
-REPLAY_MEMORY_SHARE = 0.7
+#: the share of the available memory a run's stored observations may take (a replay buffer, distill's frames): the
+#: envs, the model and its batches need the rest
+STORED_MEMORY_SHARE = 0.7
+
+
+def memory_room() -> tuple[float, int]:
+    """The bytes a run's stored observations may take on this machine now (:data:`STORED_MEMORY_SHARE` of the
+    available memory), and the available bytes, for the message that refuses more."""
+    import psutil
+
+    available = int(psutil.virtual_memory().available)
+    return STORED_MEMORY_SHARE * available, available
 
 
 def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> int | None:
@@ -102,18 +112,15 @@ def replay_buffer_bytes(config: TrainConfig, kwargs: dict[str, Any], loaded: Any
 
 def check_replay_buffer(config: TrainConfig, kwargs: dict[str, Any], loaded: Any) -> None:
     """A replay buffer of image stacks that cannot fit in memory is refused before any env starts (SB3 would only warn, then fail hours later)."""
-    import psutil
-
     need = replay_buffer_bytes(config, kwargs, loaded)
     if need is None:
         return
-    free = psutil.virtual_memory().available
-    if need > REPLAY_MEMORY_SHARE * free:
-        fits = int(
-            REPLAY_MEMORY_SHARE * free // (replay_buffer_bytes(config, {**kwargs, "buffer_size": 1}, loaded) or 1)
-        )
+    room, available = memory_room()
+    if need > room:
+        fits = int(room // (replay_buffer_bytes(config, {**kwargs, "buffer_size": 1}, loaded) or 1))
         raise ConfigError(
-            f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and {free / 2**30:.1f} GiB of memory "
+            f"{config.algo.upper()}'s replay buffer would take {need / 2**30:.1f} GiB, and "
+            f"{available / 2**30:.1f} GiB of memory "
             f"are available: set buffer_size={fits:,} or less (--set buffer_size={fits})"
             + (
                 ""

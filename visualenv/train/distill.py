@@ -293,26 +293,22 @@ def _episode_bar(config: DistillConfig, round_: int) -> Any:
     return tqdm(total=config.episodes, desc=f"round {round_}", unit="episode", leave=False, disable=not config.progress)
 
 
-#: the share of the available memory the rounds' frames may take (the envs, the student and its batches need the rest)
-FRAME_MEMORY_SHARE = 0.7
-
-
 def _check_frame_memory(config: DistillConfig, rollouts: Any) -> str:
     """The most memory the rounds' frames can take, in words; refused before the run starts where it exceeds the
-    available memory's share (DAgger keeps every frame of every round, so a run of many episodes a round would
-    otherwise fail hours in)."""
-    import psutil
+    available memory's share (:func:`~visualenv.train.config_checks.memory_room`, as a replay buffer's): DAgger keeps
+    every frame of every round, so a run of many episodes a round would otherwise fail hours in."""
+    from visualenv.train.config_checks import memory_room
 
     steps = rollouts.unwrapped.envs[0].unwrapped.max_episode_steps
     views = 2 if config.consistency > 0 else 1  # the distracted frame and its clean twin
     per_frame = int(np.prod(rollouts.observation_space.shape)) * rollouts.observation_space.dtype.itemsize * views
     rows = config.rounds * config.episodes * steps
-    need, free = rows * per_frame, psutil.virtual_memory().available
-    if need > FRAME_MEMORY_SHARE * free:
-        fits = int(FRAME_MEMORY_SHARE * free // (config.rounds * steps * per_frame))
+    need, (room, available) = rows * per_frame, memory_room()
+    if need > room:
+        fits = int(room // (config.rounds * steps * per_frame))
         raise ConfigError(
             f"{config.rounds} rounds of {config.episodes} episodes of up to {steps} steps would keep "
-            f"{need / 2**30:.1f} GiB of frames, and {free / 2**30:.1f} GiB of memory are available: "
+            f"{need / 2**30:.1f} GiB of frames, and {available / 2**30:.1f} GiB of memory are available: "
             + (f"set --episodes {fits} or less, or fewer --rounds" if fits else "set fewer --rounds")
         )
     return f"at most {rows:,} frames ({need / 2**30:.1f} GiB)"
